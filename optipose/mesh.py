@@ -1,0 +1,67 @@
+"""Loading and checking part meshes; everything downstream is in metres (SPEC §1)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from optipose.errors import MeshError
+
+__all__ = ["load_mesh", "check_mesh", "UNIT_SCALE"]
+
+log = logging.getLogger(__name__)
+
+UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "in": 0.0254}
+_AUTO_MM_DIAGONAL = 2.0  # a part with a bounding-box diagonal over 2 "units" is taken to be in mm
+
+
+def load_mesh(path: str | Path, units: str = "auto"):
+    """Load a triangle mesh and return it in metres as a ``trimesh.Trimesh``.
+
+    units : ``auto`` | ``m`` | ``mm`` | ``in``. ``auto`` takes a mesh whose bounding-box diagonal is over
+    2 as millimetres and logs that choice.
+    """
+    import trimesh
+
+    path = Path(path)
+    if units not in (*UNIT_SCALE, "auto"):
+        raise MeshError(f"unknown units '{units}' (use auto, m, mm or in)")
+    if not path.is_file():
+        raise MeshError(f"mesh file not found: {path}")
+    if path.stat().st_size == 0:
+        raise MeshError(f"mesh file is empty: {path}")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise MeshError(f"cannot read mesh {path}: {type(exc).__name__}: {exc}".splitlines()[0]) from None
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise MeshError(f"cannot read mesh {path}: no triangles found")
+    check_mesh(mesh, str(path))
+    if units == "auto":
+        diagonal = float(np.linalg.norm(mesh.extents))
+        units = "mm" if diagonal > _AUTO_MM_DIAGONAL else "m"
+        if units == "mm":
+            log.info("%s: bounding-box diagonal %.4g > 2, taking units as millimetres", path.name, diagonal)
+    scale = UNIT_SCALE[units]
+    if scale != 1.0:
+        mesh.apply_scale(scale)
+    diagonal_m = float(np.linalg.norm(mesh.extents))
+    if not (1e-4 < diagonal_m < 20.0):
+        raise MeshError(
+            f"{path.name}: part is {diagonal_m:.3g} m across in '{units}' units; wrong --units?"
+        )
+    return mesh
+
+
+def check_mesh(mesh, name: str = "mesh") -> None:
+    """Raise :class:`MeshError` for a mesh the scanner cannot use: no faces, NaN/inf vertices, zero area."""
+    if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
+        raise MeshError(f"{name}: mesh has no triangles")
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise MeshError(f"{name}: mesh has NaN or infinite vertex coordinates")
+    if not float(mesh.area) > 0:
+        raise MeshError(f"{name}: mesh has zero surface area")
+    if not mesh.is_watertight:
+        log.warning("%s: mesh is not watertight; shadows and inside/outside tests may be wrong", name)

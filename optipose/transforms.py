@@ -1,0 +1,98 @@
+"""Rigid transforms and the orientation convention (SPEC §1).
+
+Roll, pitch, yaw are extrinsic rotations about x_O, y_O, z_O: ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
+Poses are 4×4 homogeneous matrices named by their frames, ``T_target_source`` maps points expressed in
+*source* into *target*.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from optipose.errors import PoseError
+
+__all__ = [
+    "rpy_to_matrix",
+    "matrix_to_rpy",
+    "make_T",
+    "invert_T",
+    "transform_points",
+    "validate_pose",
+    "part_motion",
+]
+
+
+def rpy_to_matrix(rpy: np.ndarray) -> np.ndarray:
+    """Rotation matrix from roll, pitch, yaw.
+
+    rpy : (3,) or (n, 3) float, radians.  Returns (3, 3) or (n, 3, 3).
+    """
+    return Rotation.from_euler("xyz", rpy).as_matrix()
+
+
+def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (radians) of a rotation matrix (3, 3) or (n, 3, 3); inverse of :func:`rpy_to_matrix`."""
+    return Rotation.from_matrix(R).as_euler("xyz")
+
+
+def make_T(R: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:
+    """4×4 pose from a rotation (3, 3) and a translation (3,) in metres."""
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = R
+    if t is not None:
+        T[:3, 3] = t
+    return T
+
+
+def invert_T(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4×4 transform (uses Rᵀ, not a general inverse)."""
+    R = T[:3, :3]
+    Ti = np.eye(4)
+    Ti[:3, :3] = R.T
+    Ti[:3, 3] = -R.T @ T[:3, 3]
+    return Ti
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a 4×4 transform to points (n, 3)."""
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def validate_pose(T: np.ndarray, name: str = "pose", tol: float = 1e-3) -> np.ndarray:
+    """Check that ``T`` is a proper rigid transform and return it re-orthonormalised (float64).
+
+    Hand-typed poses such as the paper's (0.7071 for √½) are accepted within ``tol`` and snapped to the
+    nearest rotation; a reflection, a scaled or sheared matrix, or a bad last row raises :class:`PoseError`.
+    """
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4):
+        raise PoseError(f"{name}: expected a 4x4 matrix, got shape {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise PoseError(f"{name}: matrix has NaN or infinite entries")
+    if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
+        raise PoseError(f"{name}: last row must be [0 0 0 1], got {T[3].tolist()}")
+    R = T[:3, :3]
+    det = np.linalg.det(R)
+    if det < 0:
+        raise PoseError(f"{name}: rotation part is a reflection (det = {det:.3f}); axes must be right-handed")
+    if not np.allclose(R.T @ R, np.eye(3), atol=tol):
+        raise PoseError(f"{name}: rotation part is not orthonormal (columns must be unit, perpendicular axes)")
+    U, _, Vt = np.linalg.svd(R)
+    out = T.copy()
+    out[:3, :3] = U @ Vt
+    return out
+
+
+def part_motion(rpy: np.ndarray, centre: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
+    """Pose of the part at an orientation, ``T_O_part``: rotate by ``rpy`` about ``centre``, then translate.
+
+    rpy : (3,) radians; centre : (3,) m; offset : (3,) m (e.g. a protocol's translation offset).
+    """
+    R = rpy_to_matrix(np.asarray(rpy, dtype=float))
+    c = np.asarray(centre, dtype=float)
+    t = c - R @ c
+    if offset is not None:
+        t = t + np.asarray(offset, dtype=float)
+    return make_T(R, t)

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# One-shot set-up on a fresh Debian machine (root): system library for Open3D, uv, and the locked .venv.
+# Idempotent: a second run only checks. Usage: bash scripts/setup.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+    echo "setup: installing libusb-1.0-0 (needed by Open3D)"
+    if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libusb-1.0-0 >/dev/null
+fi
+
+if ! command -v uv >/dev/null 2>&1; then
+    echo "setup: installing uv"
+    python3 -m pip install -q --disable-pip-version-check uv
+fi
+
+# The lock file pins every package; --frozen refuses to drift from it.
+uv sync --frozen --extra dev --extra bench -q
+echo "setup: ready (.venv/bin/optipose)"
