@@ -18,7 +18,7 @@ import numpy as np
 from optipose.errors import ConfigError
 from optipose.sensor import SensorModel
 
-__all__ = ["EMPTY", "profiles_to_points", "write_profiles", "read_profiles"]
+__all__ = ["EMPTY", "profiles_to_points", "heights_to_points", "ray_lines", "write_profiles", "read_profiles"]
 
 EMPTY = -9999.9999
 
@@ -40,13 +40,40 @@ def profiles_to_points(
     if len(shifts) != len(raw):
         raise ConfigError(f"{len(raw)} profiles but {len(shifts)} scan positions")
     prof, col = np.nonzero(raw > EMPTY + 1.0)
-    z = -raw[prof, col] * 1e-3
-    o_S, d_S = sensor.laser_rays()
-    t = (z - o_S[col, 2]) / d_S[col, 2]
-    p_S = o_S[col] + t[:, None] * d_S[col]
-    p_O = p_S @ T_O_S[:3, :3].T + T_O_S[:3, 3]
-    p_O[:, 0] -= np.asarray(shifts, dtype=np.float64)[prof]
-    return p_O, prof.astype(np.int32), col.astype(np.int32)
+    shift = np.asarray(shifts, dtype=np.float64)[prof]
+    points = heights_to_points(-raw[prof, col] * 1e-3, col, shift, ray_lines(*sensor.laser_rays()), T_O_S)
+    return points, prof.astype(np.int32), col.astype(np.int32)
+
+
+def ray_lines(o_S: np.ndarray, d_S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each column's laser ray as ``x_S = x0 + slope·z_S`` in the laser plane: x0 (n_col,), slope (n_col,).
+
+    o_S, d_S : (n_col, 3) ray origins and directions in S (:meth:`SensorModel.laser_rays`).
+    """
+    slope = d_S[:, 0] / d_S[:, 2]
+    return o_S[:, 0] - o_S[:, 2] * slope, slope
+
+
+def heights_to_points(
+    z_S: np.ndarray, col: np.ndarray, shift: np.ndarray, lines: tuple[np.ndarray, np.ndarray], T_O_S: np.ndarray
+) -> np.ndarray:
+    """Points in O (n, 3) from depths ``z_S`` (n,) m on the laser rays ``col`` (n,), motion undone.
+
+    lines : the columns' rays from :func:`ray_lines`.
+    shift : (n,) m, the part's travel along +x_O when each point was taken (paper eq. 4 undoes it).
+    """
+    x0, slope = lines
+    x_S = x0[col] + z_S * slope[col]
+    R, t = T_O_S[:3, :3], T_O_S[:3, 3]
+    p_O = np.empty((3, len(z_S))).T  # column-major: each coordinate is one contiguous 1-D pass
+    for i in range(3):
+        p_O[:, i] = t[i]
+        if R[i, 0] != 0.0:  # axis-aligned sensors skip the zero terms
+            p_O[:, i] += x_S * R[i, 0]
+        if R[i, 2] != 0.0:
+            p_O[:, i] += z_S * R[i, 2]
+    p_O[:, 0] -= shift
+    return p_O
 
 
 def write_profiles(path: str | Path, raw: np.ndarray, header: str = "") -> Path:

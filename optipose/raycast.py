@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "refine_hits", "BACKENDS"]
+__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "refine_hits", "BACKENDS"]
 
 
 class RayCaster(Protocol):
@@ -27,11 +27,14 @@ class RayCaster(Protocol):
         tfar : (n,) optional, hits beyond it count as misses.
         """
 
+    def first_triangle(self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray | None = None) -> np.ndarray:
+        """Triangle index (n,) int64 of the first hit, -1 on a miss: :meth:`first_hit` without distances."""
+
     def occluded(self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray) -> np.ndarray:
         """(n,) bool: something is hit on the ray between 0 and ``tfar`` (n,)."""
 
 
-def _threads() -> int:
+def default_threads() -> int:
     """Worker threads for one batch of rays: OPTIPOSE_RAY_THREADS, else every core this process may use."""
     env = os.environ.get("OPTIPOSE_RAY_THREADS")
     if env:
@@ -54,7 +57,7 @@ class EmbreeCaster:
 
         self._scene = rtcore_scene.EmbreeScene()
         TriangleMesh(self._scene, np.ascontiguousarray(vertices[faces], dtype=np.float32))
-        self.threads = threads or _threads()
+        self.threads = threads or default_threads()
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
     def _run(self, origins, directions, dists, **kw):
@@ -78,6 +81,9 @@ class EmbreeCaster:
         dist = np.concatenate([p["tfar"] for p in parts]).astype(np.float64)
         dist[tri < 0] = np.inf
         return dist, tri
+
+    def first_triangle(self, origins, directions, tfar=None):
+        return np.concatenate(self._run(origins, directions, tfar)).astype(np.int64)
 
     def occluded(self, origins, directions, tfar):
         parts = self._run(origins, directions, tfar, query="OCCLUDED")
@@ -114,6 +120,9 @@ class Open3DCaster:
         dist[miss] = np.inf
         return dist, tri
 
+    def first_triangle(self, origins, directions, tfar=None):
+        return self.first_hit(origins, directions, tfar)[1]
+
     def occluded(self, origins, directions, tfar):
         # test_occlusions takes one scalar tfar; scale directions so every segment ends at t = 1.
         d = directions * np.asarray(tfar, dtype=np.float64)[:, None]
@@ -126,12 +135,17 @@ BACKENDS = {"embreex": EmbreeCaster, "open3d": Open3DCaster}
 DEFAULT_BACKEND = "embreex"
 
 
-def make_caster(vertices: np.ndarray, faces: np.ndarray, backend: str = "auto") -> RayCaster:
-    """Build a caster once per mesh. ``backend``: ``auto`` (the measured-faster one), ``embreex``, ``open3d``."""
+def make_caster(
+    vertices: np.ndarray, faces: np.ndarray, backend: str = "auto", threads: int | None = None
+) -> RayCaster:
+    """Build a caster once per mesh. ``backend``: ``auto`` (the measured-faster one), ``embreex``, ``open3d``.
+
+    threads : embreex threads per batch (default: all cores); Open3D manages its own threads.
+    """
     name = DEFAULT_BACKEND if backend == "auto" else backend
     if name not in BACKENDS:
         raise ValueError(f"unknown ray-casting backend '{backend}' (use auto, embreex or open3d)")
-    return BACKENDS[name](vertices, faces)
+    return EmbreeCaster(vertices, faces, threads) if name == "embreex" else BACKENDS[name](vertices, faces)
 
 
 def face_planes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,19 +16,21 @@ through the same code that reads real raw profiles (:mod:`optipose.profiles`).
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from optipose.materials import Material, load_material
-from optipose.profiles import EMPTY, profiles_to_points
-from optipose.raycast import face_planes, make_caster, refine_hits
+from optipose.profiles import EMPTY, heights_to_points, ray_lines
+from optipose.raycast import default_threads, face_planes, make_caster
 from optipose.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
 __all__ = ["ScanMotion", "Scan", "Scanner"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
+_BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count
 
 
 @dataclass(frozen=True)
@@ -88,17 +90,35 @@ class Scanner:
     mesh : a ``trimesh.Trimesh`` in metres (or anything with ``vertices`` (v, 3) and ``faces`` (f, 3)).
     sensor, material : models or preset names.
     backend : ray-casting back-end, see :func:`optipose.raycast.make_caster`.
+    threads : worker threads for one scan (default: the cores this process may use, or
+        ``OPTIPOSE_RAY_THREADS``). Results do not depend on it.
     """
 
-    def __init__(self, mesh, sensor: SensorModel | str, material: Material | str, backend: str = "auto"):
+    def __init__(
+        self,
+        mesh,
+        sensor: SensorModel | str,
+        material: Material | str,
+        backend: str = "auto",
+        threads: int | None = None,
+    ):
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
         self.sensor = load_sensor(sensor)
         self.material = load_material(material)
-        self.caster = make_caster(self.vertices, self.faces, backend)
-        self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
+        self.caster = make_caster(self.vertices, self.faces, backend, threads=1)
+        self.threads = threads or default_threads()
+        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._normals, self._offsets = face_planes(self.vertices, self.faces)
         self._on_hull = _supporting_faces(mesh, self._normals, self._offsets)
+        self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
+        self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()
+        self._ray_lines = ray_lines(self._ray_o_S, self._ray_d_S)
+        s = self.sensor
+        self._t_max = ((s.z_far - s.window_z) / self._ray_d_S[:, 2]).astype(np.float32)
+        # intensity as a function of cos(AoI), tabulated once: one interp per hit instead of a formula
+        self._cos_grid = np.linspace(0.0, 1.0, 8193)
+        self._intensity_grid = self.material.intensity(np.arccos(self._cos_grid))
 
     # ------------------------------------------------------------------------------------------------
     def scan(
@@ -128,117 +148,138 @@ class Scanner:
 
         poses : list of 4×4 ``T_O_S`` (sensor poses in O at the nominal scan position).
         offset : (3,) m, an extra translation of the part (protocols with translation offsets).
-        rng : a Generator or a seed; ``noise=False`` gives exact surface points (still quantised to
-            the output resolution only when noise is on).
+        rng : a seed or a Generator (one draw is taken from it); the same seed gives the same clouds
+            whatever the thread count. ``noise=False`` gives exact, unquantised surface points.
         """
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
-        rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
         T_O_P = part_motion(np.asarray(rpy, float), np.asarray(centre, float), offset)
         shifts = motion.offsets()
-        R_PO = T_O_P[:3, :3].T  # rotation taking O directions into the part's frame
-        step_P = R_PO[:, 0]  # the +x_O motion, seen from the part
+        views = [_SensorView.build(self, T, T_O_P) for T in poses]
+        blocks = [
+            (j, k0, min(k0 + _BLOCK_PROFILES, len(shifts)))
+            for j in range(len(poses))
+            for k0 in range(0, len(shifts), _BLOCK_PROFILES)
+        ]
 
-        n_prof, n_col = len(shifts), self.sensor.points_per_profile
-        origins, dirs, receivers = [], [], []
-        for T_O_S in poses:
-            o_P = (self._ray_o_S @ T_O_S[:3, :3].T + T_O_S[:3, 3] - T_O_P[:3, 3]) @ R_PO.T  # at shift 0
-            d_P = self._ray_d_S @ (R_PO @ T_O_S[:3, :3]).T
-            origins.append(o_P[None, :, :] - shifts[:, None, None] * step_P)  # (n_prof, n_col, 3)
-            dirs.append(np.broadcast_to(d_P, (n_prof, n_col, 3)))
-            receivers.append(R_PO @ (T_O_S[:3, :3] @ self.sensor.receiver + T_O_S[:3, 3] - T_O_P[:3, 3]))
-        rays = _Rays(
-            origins=np.stack(origins).reshape(-1, 3),
-            dirs=np.stack(dirs).reshape(-1, 3),
-            receivers=np.asarray(receivers),
-            shifts_P=shifts[:, None] * step_P,
-            n_col=n_col,
-            n_prof=n_prof,
-        )
+        def work(block):
+            j, k0, k1 = block
+            block_rng = np.random.default_rng([seed, j, k0]) if noise else None
+            return self._scan_block(views[j], shifts, k0, k1, block_rng)
 
-        t_S = np.full(len(rays.origins), np.nan)  # distance along the ray from the window, NaN = empty
-        intensity = np.zeros(len(rays.origins), dtype=np.float32)
-        idx, t, inten = self._measure(rays)
-        if noise and len(idx):
-            sigma = self.sensor.noise_sigma / np.sqrt(np.clip(inten, self.sensor.detection_threshold, 1.0))
-            t = t + rng.normal(0.0, 1.0, len(idx)) * sigma
-        t_S[idx] = t
-        intensity[idx] = inten
-
-        per_sensor = n_prof * n_col
+        outputs = list(self._pool.map(work, blocks)) if self._pool else [work(b) for b in blocks]
         scans = []
         for j, T_O_S in enumerate(poses):
-            sl = slice(j * per_sensor, (j + 1) * per_sensor)
-            raw = self._to_raw(t_S[sl].reshape(n_prof, n_col), quantise=noise)
-            pts, prof, col = profiles_to_points(raw, self.sensor, T_O_S, shifts)
-            inten_j = intensity[sl].reshape(n_prof, n_col)[prof, col]
-            scans.append(Scan(pts, prof, col, inten_j, raw, T_O_S, np.asarray(rpy, float)))
+            mine = [out for (jj, _, _), out in zip(blocks, outputs) if jj == j]
+            raw, pts, prof, col, inten = (np.concatenate([o[i] for o in mine]) for i in range(5))
+            scans.append(Scan(pts, prof, col, inten, raw, T_O_S, np.asarray(rpy, float)))
         return scans
 
     # ------------------------------------------------------------------------------------------------
-    def _measure(self, rays: "_Rays") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Indices of measured rays (m,), their exact float64 distances from the window (m,) and
-        intensities (m,)."""
-        s = self.sensor
-        col = np.tile(np.arange(rays.n_col), len(rays.origins) // rays.n_col)
-        rate = self._ray_d_S[:, 2]  # d z_S / d t per column
-        t_max = (s.z_far - s.window_z) / rate[col]  # nothing past the far end of the range is measured
-        _, tri = self.caster.first_hit(rays.origins, rays.dirs, t_max)
+    def _scan_block(self, view: "_SensorView", shifts: np.ndarray, k0: int, k1: int, rng):
+        """Profiles k0..k1-1 of one sensor: raw heights (m, n_col), then points (n, 3) in O with their
+        profile (n,), column (n,) and intensity (n,).
+
+        Every ray of a view lies in the laser plane and starts on a line through the fan's apex, so the
+        float64 hit on triangle f along ray c at shift s reduces to per-face and per-column scalars:
+        ``T = (q_f + s·b_f) / (cos_c·nu_f + sin_c·nw_f)`` (distance from the apex). Only 1-D gathers
+        touch the hits; 3-vectors are formed only for the few hits that need a shadow ray.
+        """
+        s, n_col = self.sensor, self.sensor.points_per_profile
+        shift_b = shifts[k0:k1]
+        origins = (view.o_P32[None] - (shift_b[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
+        tri = self.caster.first_triangle(origins, np.tile(view.d_P32, (k1 - k0, 1)), np.tile(self._t_max, k1 - k0))
         idx = np.flatnonzero(tri >= 0)
         tri = tri[idx]
-        o, d = rays.origins[idx], rays.dirs[idx]
-        t, normal = refine_hits(o, d, tri, self._normals, self._offsets)
-        z = s.window_z + t * rate[col[idx]]
-        cos_aoi = -np.einsum("ij,ij->i", normal, d)
-        inten = self.material.intensity(np.arccos(np.clip(cos_aoi, -1.0, 1.0)))
-        keep = (z >= s.z_near) & (z <= s.z_far) & (cos_aoi > 0) & (inten >= s.detection_threshold)
+        prof, col = np.divmod(idx, n_col)  # profile within the block, column
+        shift = shift_b[prof]
+        c, sn = self._ray_cos[col], self._ray_sin[col]
+        den = c * view.nu[tri] + sn * view.nw[tri]  # n·d = -cos(AoI): negative where the face meets the laser
+        T = (view.q[tri] + shift * view.b[tri]) / den  # exact float64 distance from the apex
+        z = s.apex_z + T * c
+        intensity = np.interp(-den, self._cos_grid, self._intensity_grid)
+        # the receiver must be in front of the face: n·(receiver - p) = a_f - s·b_f > 0
+        keep = (z >= s.z_near) & (z <= s.z_far) & (den < 0) & (intensity >= s.detection_threshold)
+        keep &= view.a[tri] - shift * view.b[tri] > 0
         if s.saturation > 0:
-            keep &= inten <= s.saturation
-        idx, t, normal, inten, tri = idx[keep], t[keep], normal[keep], inten[keep], tri[keep]
+            keep &= intensity <= s.saturation
+        shadowed = np.flatnonzero(keep & ~self._on_hull[tri])
+        if len(shadowed):
+            keep[shadowed] = self._receiver_sees(view, T[shadowed], col[shadowed], shift[shadowed], tri[shadowed])
+        if not keep.all():
+            idx, prof, col, shift, z, c, intensity = (v[keep] for v in (idx, prof, col, shift, z, c, intensity))
 
-        p = rays.origins[idx] + t[:, None] * rays.dirs[idx]
-        visible = self._receiver_sees(p, normal, rays.receiver_of(idx), self._on_hull[tri])
-        return idx[visible], t[visible], inten[visible].astype(np.float32)
+        if rng is not None:
+            sigma = s.noise_sigma / np.sqrt(np.clip(intensity, s.detection_threshold, 1.0))
+            z = z + rng.standard_normal(len(z), dtype=np.float32) * (sigma * c)  # noise along the ray, in z_S
+            if s.z_resolution > 0:
+                z = np.round(z * (1.0 / s.z_resolution)) * s.z_resolution
+        raw = np.full((k1 - k0) * n_col, EMPTY)
+        raw[idx] = -1e3 * z
+        points = heights_to_points(z, col, shift, self._ray_lines, view.T_O_S)
+        return raw.reshape(-1, n_col), points, (prof + k0).astype(np.int32), col.astype(np.int32), intensity.astype(np.float32)
 
-    def _receiver_sees(
-        self, p: np.ndarray, normal: np.ndarray, receiver: np.ndarray, on_hull: np.ndarray
-    ) -> np.ndarray:
-        """(n,) bool: the segment from each hit ``p`` to the ``receiver`` (both (n, 3), part frame) is free.
+    def _receiver_sees(self, view, T, col, shift, tri) -> np.ndarray:
+        """(n,) bool: nothing blocks the segment from each hit to the receiver (no triangulation shadow).
 
-        A hit on a face that lies in a supporting plane of the part (``on_hull``) and faces the receiver
-        cannot be shadowed: the whole part is behind that plane. Only the other hits need a shadow ray.
+        Only hits on faces off the convex hull come here: a face in a supporting plane of the part that
+        faces the receiver cannot be shadowed, since the whole part lies behind that plane.
         """
-        front = np.einsum("ij,ij->i", receiver - p, normal) > 0
-        test = np.flatnonzero(front & ~on_hull)
-        visible = front.copy()
-        if len(test):
-            start = p[test] + _SHADOW_OFFSET * normal[test]
-            visible[test] = ~self.caster.occluded(start, receiver[test] - start, np.ones(len(test)))
-        return visible
-
-    def _to_raw(self, t: np.ndarray, quantise: bool) -> np.ndarray:
-        """Device-format heights (n_prof, n_col) in mm from ray distances (NaN = empty)."""
-        s = self.sensor
-        z = s.window_z + t * self._ray_d_S[:, 2]
-        if quantise and s.z_resolution > 0:
-            z = np.round(z / s.z_resolution) * s.z_resolution
-        return np.where(np.isnan(z), EMPTY, -z * 1e3)
+        step = shift[:, None] * view.step_P
+        p = view.apex_P + T[:, None] * view.d_P[col] - step
+        normal = self._normals[tri]
+        start = p + _SHADOW_OFFSET * normal
+        receiver = view.receiver_P - step
+        return ~self.caster.occluded(start, receiver - start, np.ones(len(T)))
 
 
-@dataclass
-class _Rays:
-    """All rays of one scan, sensor-major then profile then column, in the part's frame."""
+@dataclass(frozen=True)
+class _SensorView:
+    """One sensor's fan and receiver in the part's frame at shift 0, and per-face scalars for its hits.
 
-    origins: np.ndarray  # (n, 3)
-    dirs: np.ndarray  # (n, 3), unit
-    receivers: np.ndarray  # (n_sensors, 3), receiver position at shift 0
-    shifts_P: np.ndarray  # (n_prof, 3), the part's motion seen from the part
-    n_col: int
-    n_prof: int
+    For face f (unit normal n_f, plane n_f·x = offset_f): ``nu, nw`` = n_f along the fan's axis and along
+    the line; ``q`` = offset_f − n_f·apex; ``b`` = n_f·step (the part's +x_O motion seen from the part);
+    ``a`` = n_f·receiver − offset_f (receiver height above the face's plane at shift 0).
+    """
 
-    def receiver_of(self, idx: np.ndarray) -> np.ndarray:
-        """Receiver position (m, 3) for rays ``idx`` (m,) at the time of their profile."""
-        sensor, prof = np.divmod(idx // self.n_col, self.n_prof)
-        return self.receivers[sensor] - self.shifts_P[prof]
+    T_O_S: np.ndarray
+    apex_P: np.ndarray  # (3,)
+    d_P: np.ndarray  # (n_col, 3) unit ray directions
+    o_P32: np.ndarray  # (n_col, 3) ray origins on the window line, float32 for Embree
+    d_P32: np.ndarray
+    receiver_P: np.ndarray  # (3,)
+    step_P: np.ndarray  # (3,)
+    nu: np.ndarray  # (f,)
+    nw: np.ndarray
+    q: np.ndarray
+    b: np.ndarray
+    a: np.ndarray
+
+    @classmethod
+    def build(cls, scanner: "Scanner", T_O_S: np.ndarray, T_O_P: np.ndarray) -> "_SensorView":
+        R_PO, t_OP = T_O_P[:3, :3].T, T_O_P[:3, 3]
+        R_PS = R_PO @ T_O_S[:3, :3]
+        to_P = lambda p_S: R_PO @ (T_O_S[:3, :3] @ p_S + T_O_S[:3, 3] - t_OP)  # noqa: E731
+        apex_P = to_P(np.array([0.0, 0.0, scanner.sensor.apex_z]))
+        receiver_P = to_P(scanner.sensor.receiver)
+        o_P = scanner._ray_o_S @ R_PS.T + (to_P(np.zeros(3)))
+        d_P = scanner._ray_d_S @ R_PS.T
+        n, off = scanner._normals, scanner._offsets
+        step_P = R_PO[:, 0].copy()
+        return cls(
+            T_O_S=T_O_S,
+            apex_P=apex_P,
+            d_P=d_P,
+            o_P32=o_P.astype(np.float32),
+            d_P32=d_P.astype(np.float32),
+            receiver_P=receiver_P,
+            step_P=step_P,
+            nu=n @ R_PS[:, 2],
+            nw=n @ R_PS[:, 0],
+            q=off - n @ apex_P,
+            b=n @ step_P,
+            a=n @ receiver_P - off,
+        )
 
 
 def _supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
