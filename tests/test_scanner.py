@@ -1,0 +1,213 @@
+"""The virtual scanner against answers worked out by hand (SPEC §2–3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from optipose.materials import load_material
+from optipose.profiles import EMPTY, profiles_to_points, read_profiles, write_profiles
+from optipose.scanner import Scanner, ScanMotion
+from optipose.sensor import load_sensor
+from optipose.transforms import invert_T, part_motion, transform_points
+
+MM = 1e-3
+SENSOR = load_sensor("keyence-lj-x8080")
+# Looking straight down -z_O with the line along y_O: the paper's S2 (eq. 2) with R at the origin.
+T_DOWN = np.array([[0, 1, 0, 0], [1, 0, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1.0]])
+
+
+def box(lo_mm, hi_mm) -> trimesh.Trimesh:
+    lo, hi = np.asarray(lo_mm) * MM, np.asarray(hi_mm) * MM
+    m = trimesh.creation.box(hi - lo)
+    m.apply_translation((lo + hi) / 2)
+    return m
+
+
+def plate(top_mm: float = 0.0) -> trimesh.Trimesh:
+    """A 60 × 60 × 2 mm plate whose top face is at z = top_mm, wider than the laser line."""
+    return box([-30, -30, top_mm - 2], [30, 30, top_mm])
+
+
+def max_sigma(material: str) -> float:
+    """Largest noise σ (m) a point of this material can get: σ0 / sqrt(threshold)."""
+    return SENSOR.noise_sigma / np.sqrt(SENSOR.detection_threshold)
+
+
+def test_fan_matches_datasheet_widths_at_both_ends():
+    o, d = SENSOR.laser_rays()
+    for z, width in ((SENSOR.z_near, 30 * MM), (SENSOR.z_far, 39 * MM)):
+        x = o[:, 0] + (z - o[:, 2]) / d[:, 2] * d[:, 0]
+        assert x.min() == pytest.approx(-width / 2, abs=1e-12)
+        assert x.max() == pytest.approx(width / 2, abs=1e-12)
+    assert np.allclose(o[:, 2], -73 * MM)  # rays start on the emitter window
+
+
+def test_flat_plate_head_on_returns_every_point_at_the_exact_height():
+    scanner = Scanner(plate(0.0), SENSOR, "white-diffuse")
+    motion = ScanMotion(10 * MM)
+    scan = scanner.scan(T_DOWN, motion, rng=1)
+    assert len(scan) == motion.n_profiles * 3200  # 20 profiles, all 3200 columns
+    assert np.all(scan.raw > EMPTY)
+    # Height: 0 within noise (σ = 2 µm at full intensity, cos(6.3°) at the line's ends) and quantisation.
+    assert np.abs(scan.points[:, 2]).max() < 6 * 2e-6 / np.sqrt(0.99) + SENSOR.z_resolution
+    assert np.std(scan.points[:, 2]) == pytest.approx(2e-6, rel=0.1)
+    # Line width at R: the straight fan through 30 mm (near) and 39 mm (far) is 34.5 mm wide at Z = 0.
+    assert scan.points[:, 1].min() == pytest.approx(-17.25 * MM, abs=2e-6)
+    assert scan.points[:, 1].max() == pytest.approx(17.25 * MM, abs=2e-6)
+    # The motion is undone: profile k sits at x = -offset_k.
+    assert np.allclose(np.unique(scan.points[:, 0]), np.sort(-motion.offsets()))
+
+
+@pytest.mark.parametrize("top_mm", [-21.0, 21.0, -40.0])
+def test_plate_outside_the_z_range_returns_nothing(top_mm):
+    scanner = Scanner(plate(top_mm), SENSOR, "white-diffuse")
+    scan = scanner.scan(T_DOWN, ScanMotion(5 * MM))
+    assert len(scan) == 0
+    assert np.all(scan.raw == EMPTY)
+
+
+@pytest.mark.parametrize("top_mm", [-20.0, 20.0])
+def test_plate_just_inside_the_z_range_is_seen(top_mm):
+    scan = Scanner(plate(top_mm), SENSOR, "white-diffuse").scan(T_DOWN, ScanMotion(1 * MM), noise=False)
+    assert len(scan) == 2 * 3200
+    assert np.allclose(scan.points[:, 2], top_mm * MM, atol=1e-12)
+
+
+def test_step_casts_a_triangulation_shadow_of_the_predicted_width():
+    # Low floor at z = 0, a 10 mm high block from x = 2 mm on. The receiver sits 30 mm along +x_O
+    # (y_S = x_O) and 73 mm above the floor, so floor points closer to the step than h·b/d are hidden.
+    h, x0 = 10.0, 2.0
+    mesh = trimesh.util.concatenate([box([-20, -30, -5], [20, 30, 0]), box([x0, -30, 0], [20, 30, h])])
+    step = 0.02 * MM
+    scan = Scanner(mesh, SENSOR, "white-diffuse").scan(T_DOWN, ScanMotion(16 * MM, step), noise=False)
+    floor = scan.points[np.abs(scan.points[:, 2]) < 1e-9]
+    top = scan.points[np.abs(scan.points[:, 2] - h * MM) < 1e-9]
+    shadow_edge = x0 * MM - h * MM * SENSOR.baseline / SENSOR.reference_distance  # 2 - 4.11 mm
+    assert floor[:, 0].max() == pytest.approx(shadow_edge, abs=step)
+    assert top[:, 0].min() == pytest.approx(x0 * MM, abs=step)  # the laser itself reaches the step
+    # nothing was measured inside the shadow band
+    band = (scan.points[:, 0] > shadow_edge + step) & (scan.points[:, 0] < x0 * MM - step)
+    assert not band.any()
+
+
+def test_step_facing_away_from_the_receiver_casts_no_shadow():
+    # Mirror the step: the block is on the -x side, the receiver on +x looks away from it.
+    mesh = trimesh.util.concatenate([box([-20, -30, -5], [20, 30, 0]), box([-20, -30, 0], [-2, 30, 10])])
+    step = 0.05 * MM
+    scan = Scanner(mesh, SENSOR, "white-diffuse").scan(T_DOWN, ScanMotion(16 * MM, step), noise=False)
+    floor = scan.points[np.abs(scan.points[:, 2]) < 1e-9]
+    assert floor[:, 0].min() == pytest.approx(-2 * MM, abs=step)
+
+
+def test_tilted_plate_past_the_materials_aoi_limit_returns_nothing():
+    material = load_material("smooth-aluminium-ra0.8")
+    limit = np.rad2deg(material.max_aoi(SENSOR.detection_threshold))  # ≈ 47.5°
+    mesh = plate(0.0)
+    motion = ScanMotion(2 * MM)
+    # Pitch the plate about y_O through R: the laser meets it at AoI ≈ pitch (the fan's own spread is
+    # in the y-z plane and adds at most 6.3°, in quadrature).
+    past = Scanner(mesh, SENSOR, material).scan(T_DOWN, motion, rpy=np.deg2rad([0, limit + 3, 0]))
+    assert len(past) == 0
+    # The same geometry is measured when the material allows it, so it is the material that drops out.
+    assert len(Scanner(mesh, SENSOR, "white-diffuse").scan(T_DOWN, motion, rpy=np.deg2rad([0, limit + 3, 0]))) > 0
+    within = Scanner(mesh, SENSOR, material).scan(T_DOWN, motion, rpy=np.deg2rad([0, limit - 10, 0]))
+    assert len(within) > 0.9 * motion.n_profiles * 3200
+
+
+BRACKET_BOXES_MM = [([0, -20, 0], [40, -5, 15]), ([0, 5, 0], [40, 20, 15]), ([0, -5, 0], [40, 5, 5]), ([15, -2, 5], [25, 2, 25])]
+
+
+@pytest.fixture(scope="module")
+def bracket():
+    """A non-convex part: a block with a slot and a post, so shadows and occlusions happen."""
+    return trimesh.util.concatenate([box(lo, hi) for lo, hi in BRACKET_BOXES_MM])
+
+
+def distance_to_bracket(points: np.ndarray) -> np.ndarray:
+    """Exact float64 distance (n,) from points to the nearest face of the bracket's boxes."""
+    best = np.full(len(points), np.inf)
+    for lo, hi in BRACKET_BOXES_MM:
+        lo, hi = np.asarray(lo) * MM, np.asarray(hi) * MM
+        q = np.abs(points - (lo + hi) / 2) - (hi - lo) / 2  # box signed distance, component-wise
+        sdf = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(axis=1), 0)
+        best = np.minimum(best, np.abs(sdf))
+    return best
+
+
+T_DIAG = np.array(  # the paper's S1 (eq. 1), R moved onto the bracket
+    [[0, 1, 0, 0.020], [0.7071068, 0, 0.7071068, -0.012], [0.7071068, 0, -0.7071068, 0.012], [0, 0, 0, 1]]
+)
+
+
+@pytest.mark.parametrize("rpy_deg", [(0, 0, 0), (1.2, -2.0, 0.8)])
+def test_zero_noise_gives_exact_surface_points(bracket, rpy_deg):
+    scanner = Scanner(bracket, SENSOR, "white-diffuse")
+    rpy = np.deg2rad(rpy_deg)
+    centre = np.array([0.02, 0.0, 0.01])
+    scan = scanner.scan(T_DIAG, ScanMotion(40 * MM), rpy=rpy, centre=centre, noise=False)
+    assert len(scan) > 10_000
+    # back into the part's own frame, every point must lie on the CAD surface
+    local = transform_points(invert_T(part_motion(rpy, centre)), scan.points)
+    assert distance_to_bracket(local).max() < 1e-12
+
+
+def test_noisy_points_lie_on_the_surface_within_the_noise(bracket):
+    scanner = Scanner(bracket, SENSOR, "black-pla")
+    scan = scanner.scan(T_DIAG, ScanMotion(40 * MM), rng=7)
+    exact = scanner.scan(T_DIAG, ScanMotion(40 * MM), noise=False)
+    assert np.array_equal(scan.column, exact.column)  # noise moves points along their rays, never drops them
+    along_ray = np.linalg.norm(scan.points - exact.points, axis=1)
+    sigma = SENSOR.noise_sigma / np.sqrt(np.clip(scan.intensity, SENSOR.detection_threshold, 1))
+    assert np.median(along_ray / sigma) == pytest.approx(0.674, rel=0.05)  # median of |N(0, 1)|
+    # the distance to the surface is the along-ray error projected on the normal: never more
+    assert np.all(distance_to_bracket(scan.points) <= along_ray + 1e-12)
+    assert np.all(along_ray <= 6 * sigma + SENSOR.z_resolution)
+
+
+def test_same_seed_same_cloud_other_seed_other_cloud_any_thread_count(bracket):
+    motion = ScanMotion(20 * MM)
+    one = Scanner(bracket, SENSOR, "black-pla", threads=1).scan(T_DIAG, motion, rng=3)
+    two = Scanner(bracket, SENSOR, "black-pla", threads=2).scan(T_DIAG, motion, rng=3)
+    other = Scanner(bracket, SENSOR, "black-pla", threads=2).scan(T_DIAG, motion, rng=4)
+    assert np.array_equal(one.points, two.points)
+    assert np.array_equal(one.raw, two.raw)
+    assert len(other) == len(one) and not np.array_equal(one.points, other.points)
+
+
+def test_scan_many_equals_separate_scans(bracket):
+    scanner = Scanner(bracket, SENSOR, "white-diffuse")
+    motion = ScanMotion(10 * MM)
+    T2 = T_DOWN.copy()
+    T2[:3, 3] = [0.02, 0.0, 0.015]
+    both = scanner.scan_many([T_DIAG, T2], motion, noise=False)
+    assert np.array_equal(both[1].points, scanner.scan(T2, motion, noise=False).points)
+    assert np.array_equal(both[0].points, scanner.scan(T_DIAG, motion, noise=False).points)
+
+
+@pytest.mark.parametrize("backend", ["embreex", "open3d"])
+def test_backends_agree(bracket, backend):
+    motion = ScanMotion(10 * MM)
+    ref = Scanner(bracket, SENSOR, "white-diffuse", backend="embreex").scan(T_DIAG, motion, noise=False)
+    other = Scanner(bracket, SENSOR, "white-diffuse", backend=backend).scan(T_DIAG, motion, noise=False)
+    assert abs(len(other) - len(ref)) <= 0.001 * len(ref)  # float32 edge cases may differ on a few rays
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npy"])
+def test_raw_profiles_round_trip_to_the_same_cloud(bracket, tmp_path, suffix):
+    motion = ScanMotion(10 * MM)
+    scan = Scanner(bracket, SENSOR, "black-pla").scan(T_DIAG, motion, rng=2)
+    assert scan.raw.shape == (motion.n_profiles, 3200)
+    path = write_profiles(tmp_path / f"s1{suffix}", scan.raw)
+    raw = read_profiles(path, 3200)
+    points, profile, column = profiles_to_points(raw, SENSOR, T_DIAG, motion.offsets())
+    assert np.array_equal(profile, scan.profile) and np.array_equal(column, scan.column)
+    assert np.abs(points - scan.points).max() < 1e-9  # %.4f mm keeps the 1.6 µm grid exactly
+
+
+def test_empty_points_use_the_device_marker(tmp_path):
+    scan = Scanner(plate(-40), SENSOR, "white-diffuse").scan(T_DOWN, ScanMotion(1 * MM))
+    path = write_profiles(tmp_path / "empty.csv", scan.raw)
+    first = path.read_text().splitlines()[-1].split(",")
+    assert len(first) == 3200 and set(first) == {"-9999.9999"}
