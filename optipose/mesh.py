@@ -33,12 +33,13 @@ def load_mesh(path: str | Path, units: str = "auto"):
     if path.stat().st_size == 0:
         raise MeshError(f"mesh file is empty: {path}")
     try:
-        mesh = trimesh.load(path, force="mesh", process=True)
+        mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"cannot read mesh {path}: {type(exc).__name__}: {exc}".splitlines()[0]) from None
     if not isinstance(mesh, trimesh.Trimesh):
         raise MeshError(f"cannot read mesh {path}: no triangles found")
-    check_mesh(mesh, str(path))
+    check_mesh(mesh, path.name)
+    mesh.process(validate=False)  # merge duplicate vertices only after the raw data were checked
     if units == "auto":
         diagonal = float(np.linalg.norm(mesh.extents))
         units = "mm" if diagonal > _AUTO_MM_DIAGONAL else "m"
@@ -59,8 +60,9 @@ def check_mesh(mesh, name: str = "mesh") -> None:
     """Raise :class:`MeshError` for a mesh the scanner cannot use: no faces, NaN/inf vertices, zero area."""
     if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise MeshError(f"{name}: mesh has no triangles")
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise MeshError(f"{name}: mesh has NaN or infinite vertex coordinates")
+    bad = ~np.all(np.isfinite(mesh.vertices), axis=1)
+    if bad.any():
+        raise MeshError(f"{name}: mesh has {int(bad.sum())} vertices with NaN or infinite coordinates")
     if not float(mesh.area) > 0:
         raise MeshError(f"{name}: mesh has zero surface area")
     if not mesh.is_watertight:

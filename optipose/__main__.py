@@ -1,0 +1,3 @@
+from optipose.cli import main
+
+main()
