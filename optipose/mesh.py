@@ -38,8 +38,9 @@ def load_mesh(path: str | Path, units: str = "auto"):
         raise MeshError(f"cannot read mesh {path}: {type(exc).__name__}: {exc}".splitlines()[0]) from None
     if not isinstance(mesh, trimesh.Trimesh):
         raise MeshError(f"cannot read mesh {path}: no triangles found")
-    check_mesh(mesh, path.name)
+    check_mesh(mesh, path.name, watertight=False)
     mesh.process(validate=False)  # merge duplicate vertices only after the raw data were checked
+    check_mesh(mesh, path.name)
     if units == "auto":
         diagonal = float(np.linalg.norm(mesh.extents))
         units = "mm" if diagonal > _AUTO_MM_DIAGONAL else "m"
@@ -56,7 +57,7 @@ def load_mesh(path: str | Path, units: str = "auto"):
     return mesh
 
 
-def check_mesh(mesh, name: str = "mesh") -> None:
+def check_mesh(mesh, name: str = "mesh", watertight: bool = True) -> None:
     """Raise :class:`MeshError` for a mesh the scanner cannot use: no faces, NaN/inf vertices, zero area."""
     if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise MeshError(f"{name}: mesh has no triangles")
@@ -65,5 +66,5 @@ def check_mesh(mesh, name: str = "mesh") -> None:
         raise MeshError(f"{name}: mesh has {int(bad.sum())} vertices with NaN or infinite coordinates")
     if not float(mesh.area) > 0:
         raise MeshError(f"{name}: mesh has zero surface area")
-    if not mesh.is_watertight:
+    if watertight and not mesh.is_watertight:
         log.warning("%s: mesh is not watertight; shadows and inside/outside tests may be wrong", name)
