@@ -30,7 +30,10 @@ import numpy as np
 
 from optipose.sensor import SensorModel, load_sensor
 
-__all__ = ["DEFAULT_MARGIN", "Clearance", "ConvexSet", "CollisionModel", "collision_model", "clearance", "collides"]
+__all__ = [
+    "DEFAULT_MARGIN", "Clearance", "ConvexSet", "CollisionModel",
+    "collision_model", "clearance", "collides", "heads_clearance",
+]  # fmt: skip
 
 DEFAULT_MARGIN = 2e-3  # m
 _DEDUP_DECIMALS = 9
@@ -72,6 +75,13 @@ class ConvexSet:
         """An axis-aligned box, corners ``lo``, ``hi`` (3,) m."""
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         return cls._build(corners, np.eye(3), np.eye(3))
+
+    @classmethod
+    def head_of(cls, sensor: SensorModel, T_O_S: np.ndarray) -> "ConvexSet":
+        """The sensor's head box placed at ``T_O_S`` (4×4), in O."""
+        corners = sensor.head_box_corners() @ np.asarray(T_O_S, float)[:3, :3].T + T_O_S[:3, 3]
+        axes = np.asarray(T_O_S, float)[:3, :3].T  # rows: the box's axes
+        return cls._build(corners, axes, axes)
 
     @classmethod
     def _build(cls, vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray) -> "ConvexSet":
@@ -136,6 +146,18 @@ def clearance(part, sensor: SensorModel | str | None, T_O_S: np.ndarray) -> Clea
 def collides(part, sensor: SensorModel | str | None, T_O_S: np.ndarray, margin: float = DEFAULT_MARGIN) -> bool:
     """True when the sensor head at ``T_O_S`` comes within ``margin`` (m) of the swept part or a keep-out."""
     return collision_model(part, sensor).collides(T_O_S, margin)
+
+
+def heads_clearance(
+    sensor_a: SensorModel | str, T_O_Sa: np.ndarray, sensor_b: SensorModel | str, T_O_Sb: np.ndarray
+) -> float:
+    """Signed clearance (m) between two sensors' head boxes (negative: they overlap), for layouts of
+    several sensors; exact for the two boxes (SAT)."""
+    sb = load_sensor(sensor_b)
+    corners = sb.head_box_corners()
+    centre_S, half = 0.5 * (corners.min(axis=0) + corners.max(axis=0)), 0.5 * np.ptp(corners, axis=0)
+    axes = np.asarray(T_O_Sb, float)[:3, :3]
+    return _sat_gap(ConvexSet.head_of(load_sensor(sensor_a), T_O_Sa), axes @ centre_S + T_O_Sb[:3, 3], axes, half)
 
 
 def _sat_gap(convex: ConvexSet, centre: np.ndarray, axes: np.ndarray, half: np.ndarray) -> float:

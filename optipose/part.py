@@ -49,7 +49,7 @@ from optipose.mesh import load_mesh
 from optipose.scanner import ScanMotion
 from optipose.sensor import load_sensor
 
-__all__ = ["Part", "Keepout", "load_part", "list_parts", "PARTS_DIR", "DEFAULT_MATERIAL", "DEFAULT_SENSOR"]
+__all__ = ["Part", "Keepout", "load_part", "list_parts", "nominal_scans", "PARTS_DIR", "DEFAULT_MATERIAL", "DEFAULT_SENSOR"]
 
 PARTS_DIR = Path(__file__).resolve().parents[1] / "parts"
 DEFAULT_MATERIAL = "milled-aluminium-ra1.6"
@@ -245,3 +245,23 @@ def _layouts(tables, where: str) -> dict[str, Layout]:
         name: layout_from_table(table, name=name, where=f"{where} [layouts.{name}]")
         for name, table in tables.items()
     }
+
+
+def nominal_scans(part: Part, layout: str = "hand") -> dict:
+    """One scan per sensor of ``part.layouts[layout]`` at the nominal orientation: {sensor name: Scan}.
+
+    Each sensor uses its own model when the layout names one, else the part's.
+    """
+    from optipose.scanner import Scanner
+
+    if layout not in part.layouts:
+        have = ", ".join(part.layouts) or "none"
+        raise ConfigError(f"part '{part.name}' has no layout '{layout}' (layouts: {have})")
+    scanners: dict[str, Scanner] = {}
+    out = {}
+    for pose in part.layouts[layout].sensors:
+        model = pose.sensor or part.sensor
+        if model not in scanners:
+            scanners[model] = Scanner(part.mesh, model, part.material)
+        out[pose.name] = scanners[model].scan(pose.T_O_S, part.motion, centre=part.rotation_centre)
+    return out
