@@ -1,0 +1,93 @@
+"""Commands about parts: ``optipose parts``, ``optipose show PART``, ``optipose counts PART``.
+
+Plain functions; :mod:`optipose.cli` registers them as typer commands (and turns errors into exit codes).
+Imports are lazy so the CLI's ``--help`` stays instant.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["parts_command", "show_command", "counts_command", "counts_table"]
+
+
+def parts_command() -> None:
+    """List the shipped parts: size, material, scanning length, layouts and their sensor counts."""
+    from rich import box
+    from rich.table import Table
+
+    from optipose.part import list_parts, load_part
+
+    table = Table(title="Shipped parts (parts/)", box=box.SIMPLE_HEAD, pad_edge=False)
+    for column in ("part", "L x W x H mm", "material", "scan mm", "layouts", "keep-outs"):
+        table.add_column(column, no_wrap=True)
+    for name in list_parts():
+        part = load_part(name)
+        size = " x ".join(f"{v:.4g}" for v in part.size * 1e3)
+        layouts = ", ".join(f"{k}:{len(v)}" for k, v in part.layouts.items()) or "-"
+        keepouts = ", ".join(k.name for k in part.keepouts) or "-"
+        scan = f"{part.motion.length * 1e3:g}/{part.motion.step * 1e3:g}"
+        table.add_row(name, size, part.material, scan, layouts, keepouts)
+    table.caption = "scan: length/step; layouts: name:sensors; the part travels along +x"
+    _console().print(table)
+
+
+def show_command(part: str, out: Path | None = None, units: str = "auto", layout: str = "hand") -> Path:
+    """Save a PNG of the part, its sensors' heads, laser fans and nominal scan points; return its path.
+
+    out : the PNG to write; default ``<part name>.png`` in the current folder.
+    """
+    from optipose.part import load_part
+    from optipose.partview import render_part
+
+    loaded = load_part(part, units)
+    path = render_part(loaded, out or Path(f"{loaded.name}.png"), layout if layout in loaded.layouts else None)
+    _console().print(f"wrote {path}")
+    return path
+
+
+def counts_table(parts: list[str], layout: str = "hand") -> list[dict]:
+    """Nominal-scan point counts per sensor: rows {part, sensor, points, profiles, per_profile}."""
+    from optipose.part import load_part, nominal_scans
+
+    rows = []
+    for name in parts:
+        part = load_part(name)
+        if layout not in part.layouts:
+            continue
+        for sensor, scan in nominal_scans(part, layout).items():
+            n_prof = part.motion.n_profiles
+            rows.append({"part": part.name, "sensor": sensor, "points": len(scan),
+                         "profiles": n_prof, "per_profile": len(scan) / n_prof})  # fmt: skip
+    return rows
+
+
+def counts_command(part: str | None = None, layout: str = "hand", markdown: bool = False) -> list[dict]:
+    """Print nominal-scan point counts per sensor for one part (or every shipped part when None)."""
+    from rich.table import Table
+
+    from optipose.part import list_parts
+
+    rows = counts_table([part] if part else list_parts(), layout)
+    if markdown:  # for README tables
+        print("| part | sensor | points | profiles | points per profile |")
+        print("| --- | --- | ---: | ---: | ---: |")
+        for r in rows:
+            print(f"| {r['part']} | {r['sensor']} | {r['points']} | {r['profiles']} | {r['per_profile']:.0f} |")
+        return rows
+    table = Table(title=f"Nominal-scan point counts, layout '{layout}'")
+    for column in ("part", "sensor", "points", "profiles", "points / profile"):
+        table.add_column(column, justify="left" if column in ("part", "sensor") else "right")
+    for r in rows:
+        table.add_row(r["part"], r["sensor"], f"{r['points']:,}", str(r["profiles"]), f"{r['per_profile']:.0f}")
+    _console().print(table)
+    return rows
+
+
+def _console():
+    """A rich console; 100 columns when the output is not a terminal, so piped tables do not wrap."""
+    import sys
+
+    from rich.console import Console
+
+    return Console(width=None if sys.stdout.isatty() else 100)

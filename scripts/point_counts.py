@@ -1,0 +1,14 @@
+"""Print nominal-scan point counts per sensor for the shipped parts' hand layouts.
+
+Usage: ``.venv/bin/python scripts/point_counts.py [PART ...] [--markdown]`` (the README's Parts table is
+the ``--markdown`` output).
+"""
+
+import sys
+
+from optipose.cli_parts import counts_command
+
+if __name__ == "__main__":
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    for name in args or [None]:
+        counts_command(name, markdown="--markdown" in sys.argv)
