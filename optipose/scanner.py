@@ -66,6 +66,7 @@ class Scan:
     profile, column : (n,) int32, which profile and which of the sensor's columns each point came from.
     intensity : (n,) float32, relative returned intensity.
     raw : (n_profiles, points_per_profile) float64, device-format heights in mm (EMPTY where nothing).
+    face : (n,) int32, the mesh triangle each point lies on (see :meth:`Scanner.normals`).
     """
 
     points: np.ndarray
@@ -75,6 +76,8 @@ class Scan:
     raw: np.ndarray
     T_O_S: np.ndarray = field(repr=False)
     rpy: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    face: np.ndarray | None = field(default=None, repr=False)  # (n,) int32, the mesh triangle of each point
+    T_O_P: np.ndarray | None = field(default=None, repr=False)  # the part's pose (rotation about the centre)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -171,9 +174,13 @@ class Scanner:
         scans = []
         for j, T_O_S in enumerate(poses):
             mine = [out for (jj, _, _), out in zip(blocks, outputs) if jj == j]
-            raw, pts, prof, col, inten = (np.concatenate([o[i] for o in mine]) for i in range(5))
-            scans.append(Scan(pts, prof, col, inten, raw, T_O_S, np.asarray(rpy, float)))
+            raw, pts, prof, col, inten, face = (np.concatenate([o[i] for o in mine]) for i in range(6))
+            scans.append(Scan(pts, prof, col, inten, raw, T_O_S, np.asarray(rpy, float), face, T_O_P))
         return scans
+
+    def normals(self, scan: Scan) -> np.ndarray:
+        """Unit surface normals (n, 3) in O at a scan's points (outward, of the rotated part)."""
+        return self._normals[scan.face] @ scan.T_O_P[:3, :3].T
 
     # ------------------------------------------------------------------------------------------------
     def _scan_block(self, view: "_SensorView", shifts: np.ndarray, k0: int, k1: int, rng):
@@ -207,7 +214,7 @@ class Scanner:
         if len(shadowed):
             keep[shadowed] = self._receiver_sees(view, T[shadowed], col[shadowed], shift[shadowed], tri[shadowed])
         if not keep.all():
-            idx, prof, col, shift, z, c, intensity = (v[keep] for v in (idx, prof, col, shift, z, c, intensity))
+            idx, tri, prof, col, shift, z, c, intensity = (v[keep] for v in (idx, tri, prof, col, shift, z, c, intensity))
 
         if rng is not None:
             sigma = s.noise_sigma / np.sqrt(np.clip(intensity, s.detection_threshold, 1.0))
@@ -217,7 +224,10 @@ class Scanner:
         raw = np.full((k1 - k0) * n_col, EMPTY)
         raw[idx] = -1e3 * z
         points = heights_to_points(z, col, shift, self._ray_lines, view.T_O_S)
-        return raw.reshape(-1, n_col), points, (prof + k0).astype(np.int32), col.astype(np.int32), intensity.astype(np.float32)
+        return (
+            raw.reshape(-1, n_col), points, (prof + k0).astype(np.int32), col.astype(np.int32),
+            intensity.astype(np.float32), tri.astype(np.int32),
+        )  # fmt: skip
 
     def _receiver_sees(self, view, T, col, shift, tri) -> np.ndarray:
         """(n,) bool: nothing blocks the segment from each hit to the receiver (no triangulation shadow).

@@ -211,3 +211,12 @@ def test_empty_points_use_the_device_marker(tmp_path):
     path = write_profiles(tmp_path / "empty.csv", scan.raw)
     first = path.read_text().splitlines()[-1].split(",")
     assert len(first) == 3200 and set(first) == {"-9999.9999"}
+
+
+def test_normals_follow_the_rotated_part():
+    scanner = Scanner(plate(0.0), SENSOR, "white-diffuse")
+    rpy = np.deg2rad([1.5, -2.0, 0.5])
+    scan = scanner.scan(T_DOWN, ScanMotion(2 * MM), rpy=rpy, noise=False)
+    normals = scanner.normals(scan)
+    expected = part_motion(rpy, np.zeros(3))[:3, 2]  # the plate's +z, rotated
+    assert len(scan) > 0 and np.allclose(normals, expected, atol=1e-12)
