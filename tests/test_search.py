@@ -1,0 +1,139 @@
+"""The search: parameterisation, surrogate, NLopt driver and constraints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from optipose.objective import load_objective
+from optipose.part import load_part
+from optipose.poseparam import PoseSpace, params_from_pose, pose_from_params
+from optipose.search import PENALTY, SearchConfig, SurrogateProblem, _optimize, run_search
+from optipose.surrogate import Surrogate, predicted_stats, rotation_sigma
+
+PAPER_B = {  # SPEC §7: z_S of the paper's S1, S2, S3 and their (alpha, beta, psi) in this parameterisation
+    "S1": ((0, 0.7071068, -0.7071068), (0, -45, 0)),
+    "S2": ((0, 0, -1), (0, -90, 0)),
+    "S3": ((0, -0.7071068, -0.7071068), (0, -135, 0)),
+}
+
+
+@pytest.mark.parametrize("name", ["S1", "S2", "S3"])
+def test_paper_poses_have_the_documented_parameters(name):
+    T = load_part("part_b").layouts["hand"].sensors[int(name[1]) - 1].T_O_S
+    _, alpha, beta, psi = params_from_pose(T)
+    assert np.allclose(T[:3, 2], PAPER_B[name][0], atol=1e-6)
+    assert np.allclose(np.rad2deg([alpha, beta, psi]), PAPER_B[name][1], atol=1e-3)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.floats(-1.0, 1.0), st.floats(-np.pi + 1e-6, np.pi - 1e-6), st.floats(-np.pi + 1e-6, np.pi - 1e-6),
+    st.lists(st.floats(-0.1, 0.1), min_size=3, max_size=3),
+)  # fmt: skip
+def test_pose_parameters_round_trip(alpha, beta, psi, R):
+    T = pose_from_params(np.array(R), alpha, beta, psi)
+    assert np.allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12) and np.linalg.det(T[:3, :3]) > 0
+    R2, a2, b2, p2 = params_from_pose(T)
+    assert np.allclose(pose_from_params(R2, a2, b2, p2), T, atol=1e-9)
+    assert abs(np.cross([1, 0, 0], T[:3, 2])).sum() > 0  # never looking along the scan axis
+
+
+def test_psi_zero_puts_the_line_across_the_motion():
+    T = pose_from_params(np.zeros(3), np.deg2rad(20), np.deg2rad(-60), 0.0)
+    assert abs(T[:3, 0] @ [1, 0, 0]) < 1e-12  # x_S ⊥ x_O
+    assert T[:3, 1] @ [1, 0, 0] > 0.9  # the receiver on the +x side, tilted by alpha
+
+
+def test_pose_space_scaling_round_trip():
+    space = PoseSpace.around(np.array([[0, -0.02, 0], [0.06, 0.02, 0.0176]]))
+    u = np.array([0.1, 0.5, 0.9, 0.3, 0.25, 0.75])
+    assert np.allclose(space.from_pose(space.to_pose(u)), u, atol=1e-9)
+
+
+def test_rotation_sigma_of_a_known_information_matrix():
+    # H = diag(100, 400, 2500) on rotations (rad⁻²) and large on translations: σ = 0.1, 0.05, 0.02 rad,
+    # less the weak 5° prior, which adds 1/(5°)² = 131 rad⁻² to each rotation's information.
+    H = np.diag([100.0, 400.0, 2500.0, 1e12, 1e12, 1e12])
+    prior = 1 / np.deg2rad(5.0) ** 2
+    assert np.allclose(rotation_sigma(H), 1 / np.sqrt(np.array([100, 400, 2500]) + prior), rtol=1e-6)
+
+
+def test_flat_plate_surrogate_says_yaw_is_unobservable():
+    plate = trimesh.creation.box((0.06, 0.06, 0.002))
+
+    class Plate:
+        mesh, sensor, material = plate, "keyence-lj-x8080", "white-diffuse"
+        rotation_centre = np.zeros(3)
+
+        class motion:
+            length, step, n_profiles = 0.04, 0.5e-3, 80
+
+    down = np.array([[0, 1, 0, 0], [1, 0, 0, 0], [0, 0, -1, 0.001], [0, 0, 0, 1.0]])
+    surrogate = Surrogate(Plate())
+    info = surrogate.info(down)
+    roll, pitch, yaw = predicted_stats([info])["median_deg"][0]
+    # By hand: voxel points on a grid, 0.5 mm across the 34.5 mm line (y) and 1 mm along the 40 mm scan
+    # (x, the surrogate's doubled step); each with σ² = σ_noise² + voxel²/12. Roll information is
+    # Σy²/σ², pitch Σx²/σ²; the median |error| is 0.674 σ.
+    var = 2e-6**2 + 0.5e-3**2 / 12
+    ny, nx = 69, 40
+    sum_y2 = nx * ny * 0.0345**2 / 12
+    sum_x2 = ny * nx * 0.040**2 / 12
+    assert info.n_voxels == pytest.approx(nx * ny, rel=0.05)
+    assert roll == pytest.approx(np.rad2deg(0.6745 * np.sqrt(var / sum_y2)), rel=0.1)
+    assert pitch == pytest.approx(np.rad2deg(0.6745 * np.sqrt(var / sum_x2)), rel=0.1)
+    assert yaw > 3.0  # a plane says nothing about yaw: only the 5° prior is left
+
+
+@pytest.mark.parametrize("algorithm", ["GN_DIRECT_L", "GN_MLSL_LDS"])
+def test_driver_finds_a_known_optimum(algorithm):
+    # an egg-crate: a bowl with ~4 local minima per axis, global minimum 0 at an off-grid point
+    target = np.array([0.2137, 0.7071, 0.4142, 0.8862, 0.1234, 0.5772])
+
+    class Tracker:
+        best, calls = (np.inf, None), 0
+
+        def __call__(self, u, grad=None):
+            self.calls += 1
+            v = float(np.sum((u - target) ** 2) + 0.3 * np.sum(1 - np.cos(12 * (u - target))))
+            if v < self.best[0]:
+                self.best = (v, np.array(u))
+            return v
+
+    tracker = Tracker()
+    _optimize(tracker, algorithm, np.full(6, 0.5), 3000, seed=3)
+    _optimize(tracker, "LN_BOBYQA", tracker.best[1], 300, seed=3)
+    assert np.allclose(tracker.best[1], target, atol=1e-4)
+    assert tracker.best[0] < 1e-7
+    assert tracker.calls <= 3300
+
+
+@pytest.fixture(scope="module")
+def part_b_problem():
+    cfg = SearchConfig(global_evals=40, local_evals=15, joint_evals=20, max_time=120, random_starts=2, sensors=(1, 2))
+    return load_part("part_b"), load_objective("paper"), cfg
+
+
+def test_same_seed_same_layout(part_b_problem):
+    part, objective, cfg = part_b_problem
+    a = run_search(part, objective, cfg, seed=5)
+    b = run_search(part, objective, cfg, seed=5)
+    for k in (1, 2):
+        assert np.array_equal(a.found[k].u, b.found[k].u)
+    assert [r["value"] for r in a.history] == [r["value"] for r in b.history]
+
+
+def test_results_never_violate_the_constraints(part_b_problem):
+    part, objective, cfg = part_b_problem
+    problem = SurrogateProblem(part, objective, cfg)
+    out = run_search(part, objective, cfg, seed=2, problem=problem)
+    assert any(not r["feasible"] for r in out.history)  # the search did meet infeasible layouts
+    for found in out.found.values():
+        assert found.score < PENALTY
+        for T in found.poses:
+            assert problem.collision.clearance(T).distance >= cfg.clearance
+            assert problem.surrogate.info(T).n_points >= cfg.min_points
