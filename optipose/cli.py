@@ -114,13 +114,27 @@ def parts() -> None:
 @friendly_errors
 def show(
     part: Annotated[str, typer.Argument(help="A shipped part name or a mesh file.")],
-    out: Annotated[Optional[Path], typer.Option(help="PNG to write (default: results/<part>_layout.png).")] = None,
+    out: Annotated[Optional[Path], typer.Option(help="PNG to write (default: ./<part>.png).")] = None,
+    layout: Annotated[str, typer.Option(help="Which of the part's layouts to draw.")] = "hand",
     units: UnitsOpt = "auto",
 ) -> None:
-    """Draw a part with its hand-placed sensors (head boxes, laser fans, scanned points) to a PNG."""
+    """Draw a part with a layout's sensors (head boxes, laser fans, scanned points) to a PNG."""
     from optipose.cli_parts import show_command
 
-    show_command(part, out, units)
+    show_command(part, out, units, layout)
+
+
+@app.command()
+@friendly_errors
+def counts(
+    part: Annotated[Optional[str], typer.Argument(help="A part (default: every shipped part).")] = None,
+    layout: Annotated[str, typer.Option(help="Which of the part's layouts to scan.")] = "hand",
+    markdown: Annotated[bool, typer.Option(help="Print a Markdown table (for the README).")] = False,
+) -> None:
+    """Point counts of a nominal scan per sensor (the paper's Figure 9 at zero offset)."""
+    from optipose.cli_parts import counts_command
+
+    counts_command(part, layout, markdown)
 
 
 def main() -> None:
