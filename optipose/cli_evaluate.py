@@ -1,0 +1,110 @@
+"""``optipose evaluate``: the paper's protocol on one layout, printed as the paper's Table 1.
+
+The lead's ``optipose/cli.py`` calls :func:`register` to add the command; imports stay lazy so
+``optipose --help`` is instant.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+__all__ = ["register", "evaluate_command", "table1"]
+
+EXIT_USER_ERROR = 2
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``evaluate`` to the ``optipose`` Typer app."""
+
+    @app.command("evaluate")
+    @_friendly_errors
+    def evaluate(
+        part: Annotated[str, typer.Argument(help="A shipped part name (see `optipose parts`), a part TOML or a mesh file.")],
+        units: Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 2 means mm), m, mm or in.")] = "auto",
+        layout: Annotated[Optional[Path], typer.Option(help="Layout TOML ([[sensors]] name/T_O_S); default: the part's hand-placed one.")] = None,
+        out: Annotated[Optional[Path], typer.Option(help="Result folder (default: results/<part>-evaluate-<timestamp>/, linked as results/latest).")] = None,
+        objective: Annotated[str, typer.Option(help="Objective name in objectives/ or a TOML path.")] = "paper",
+        jobs: Annotated[int, typer.Option(help="Worker processes over orientations.", min=1)] = 1,
+        seed: Annotated[int, typer.Option(help="Seed of the sensor noise (and of random protocols).")] = 0,
+    ) -> None:
+        """Scan a layout at every orientation of an objective's protocol, register every sensor subset with
+        ICP, and print the best subset per axis for 1, 2, 3 … sensors (the paper's Table 1)."""
+        evaluate_command(part, units, layout, out, objective, jobs, seed)
+
+
+def evaluate_command(part: str, units: str = "auto", layout: Path | None = None, out: Path | None = None,
+                     objective: str = "paper", jobs: int = 1, seed: int = 0) -> Path:  # fmt: skip
+    """Run the evaluation, print Table 1, save the result folder; returns the folder."""
+    from rich.console import Console
+
+    from optipose.errors import ConfigError
+    from optipose.evaluate import Evaluator
+    from optipose.layout import load_layout
+    from optipose.objective import load_objective
+    from optipose.part import load_part
+    from optipose.results import make_result_dir, write_evaluation
+
+    the_part = load_part(part, units=units)
+    if layout is not None:
+        the_layout = load_layout(layout)
+    elif "hand" in the_part.layouts:
+        the_layout = the_part.layouts["hand"]
+    else:
+        raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give one with --layout")
+    the_objective = load_objective(objective)
+    console = Console(stderr=True)
+    with console.status(f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"):
+        with Evaluator(the_part, the_objective, seed=seed, jobs=jobs) as evaluator:
+            result = evaluator(the_layout)
+    folder = make_result_dir(the_part.name, "evaluate", out)
+    write_evaluation(result, folder, part_source=str(part), layout_source=str(layout or "part:hand"))
+    Console().print(table1(result))
+    n = len(result.per_scan)
+    if result.n_failed:
+        console.print(f"[yellow]{result.n_failed} of {n} registrations failed or did not converge; kept out of the statistics (see per_scan.csv)[/]")
+    console.print(f"results: {folder}")
+    return folder
+
+
+def table1(result):
+    """A rich table in the shape of the paper's Table 1: rows k = 1 … n, columns roll/pitch/yaw."""
+    import numpy as np
+    from rich.table import Table
+
+    n_scans = result.per_scan["scan"].nunique()
+    table = Table(title=f"{result.part}: {result.layout.name} layout, objective '{result.objective.name}', "
+                        f"{n_scans} scans, seed {result.seed} — median / 75th pct, degrees (subset)")  # fmt: skip
+    table.add_column("sensors", justify="right")
+    table.add_column("choice")
+    for axis in ("roll", "pitch", "yaw"):
+        table.add_column(f"{axis} [deg]", justify="right")
+    for choice in result.table:
+        cells = [
+            f"{np.rad2deg(a.median):.4f} / {np.rad2deg(a.p75):.4f} ({a.subset})" if a.observable else "[red]unobservable[/]"
+            for a in choice.axes
+        ]
+        table.add_row(str(choice.k), choice.sensors, *cells)
+    return table
+
+
+def _friendly_errors(fn):
+    """A user error becomes one line on stderr and exit code 2 (as in optipose.cli)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        from optipose.errors import OptiposeError
+
+        try:
+            return fn(*args, **kwargs)
+        except OptiposeError as exc:
+            typer.echo(f"optipose: error: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", err=True)
+            raise typer.Exit(EXIT_USER_ERROR) from None
+        except KeyboardInterrupt:
+            typer.echo("optipose: error: interrupted", err=True)
+            raise typer.Exit(130) from None
+
+    return wrapper

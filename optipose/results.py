@@ -1,0 +1,111 @@
+"""Result folders: one timestamped folder per run with the config it ran, and a ``latest`` link.
+
+``results/<part>-<command>-<YYYYmmdd-HHMMSS>/`` holds ``config.toml`` (the objective file as written, the
+resolved SI config, part, layout, seed and package versions) beside the command's tables. Files are SI
+(radians, metres); column names say so where it matters.
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+import time
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["make_result_dir", "write_config", "write_evaluation", "versions", "RESULTS_DIR"]
+
+log = logging.getLogger(__name__)
+RESULTS_DIR = Path("results")
+
+
+def make_result_dir(part: str, command: str, out: Path | None = None, root: Path = RESULTS_DIR) -> Path:
+    """Create the result folder (``out`` if given) and point ``<root>/latest`` at it."""
+    if out is None:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        out = root / f"{part}-{command}-{stamp}"
+        n = 1
+        while out.exists():  # two runs in the same second
+            n += 1
+            out = root / f"{part}-{command}-{stamp}-{n}"
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    _link_latest(out, out.parent)
+    return out
+
+
+def _link_latest(target: Path, root: Path) -> None:
+    latest = root / "latest"
+    try:
+        if latest.is_symlink() or latest.exists():
+            if not latest.is_symlink():
+                return  # a real folder named latest: leave it alone
+            latest.unlink()
+        latest.symlink_to(target.name, target_is_directory=True)
+    except OSError as exc:  # e.g. no symlinks on this file system
+        log.warning("could not update %s: %s", latest, exc)
+
+
+def versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for name in ("optipose", "numpy", "scipy", "open3d-cpu", "open3d", "trimesh", "embreex", "pandas"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def write_config(folder: Path, table: dict) -> Path:
+    import tomli_w
+
+    path = Path(folder) / "config.toml"
+    path.write_text(tomli_w.dumps(_plain(table)))
+    return path
+
+
+def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "") -> Path:
+    """Save an :class:`optipose.evaluate.EvaluationResult`: per-scan errors (CSV and Parquet), point counts,
+    statistics, Table 1 and the config. Returns the folder."""
+    folder = Path(folder)
+    result.per_scan.to_csv(folder / "per_scan.csv", index=False)
+    result.per_scan.to_parquet(folder / "per_scan.parquet", index=False)
+    result.points.to_csv(folder / "points.csv", index=False)
+    result.stats.to_csv(folder / "stats.csv", index=False)
+    rows = [
+        {"k": c.k, "sensors": c.sensors, "score_rad": c.score,
+         **{f"{a.axis}_{key}": val for a in c.axes for key, val in (("subset", a.subset), ("median_rad", a.median), ("p75_rad", a.p75))}}
+        for c in result.table
+    ]  # fmt: skip
+    import pandas as pd
+
+    pd.DataFrame(rows).to_csv(folder / "table1.csv", index=False)
+    write_config(folder, {
+        "command": "evaluate",
+        "part": {"name": result.part, "source": part_source},
+        "layout": {"name": result.layout.name, "source": layout_source, **result.layout.to_table()},
+        "seed": result.seed,
+        "objective": result.objective.to_dict(),
+        "objective_file": result.objective.source_text,
+        "timings_s": result.timings,
+        "failed_registrations": result.n_failed,
+        "versions": versions(),
+    })  # fmt: skip
+    return folder
+
+
+def _plain(value):
+    """TOML-safe: tuples to lists, numpy to Python, None dropped."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return str(value)
+    return value

@@ -1,0 +1,71 @@
+"""Per-axis orientation errors, their statistics, and which axes a cloud can observe at all.
+
+Errors are ``rpy_estimated − rpy_set`` (radians, signed; statistics use the magnitude, SPEC §4). A scan
+whose registration failed or did not converge is counted in ``n_failed`` and kept out of the numbers —
+never silently dropped, never averaged in.
+
+Observability: the point-to-plane information matrix ``H`` (6×6, rotation about the cloud's centroid,
+then translation) is made unitless by scaling rotation by the cloud's RMS radius; an axis is
+*unobservable* when the unit vector of that axis lies mostly (> ½ of its squared length) in the span of
+eigenvectors whose eigenvalues are below ``tolerance × λ_max``. A flat plate seen from above leaves yaw
+and in-plane translation there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from optipose.objective import AXES, StatisticConfig
+
+__all__ = ["unobservable_axes", "error_stats", "summarize", "STAT_COLUMNS"]
+
+STAT_COLUMNS = ("median", "p75", "mean", "max")
+
+
+def unobservable_axes(information: np.ndarray, scale: float, tolerance: float = 1e-6) -> np.ndarray:
+    """(6,) bool: roll, pitch, yaw, x, y, z the cloud cannot constrain.
+
+    information : (6, 6) ``H`` from :func:`optipose.registration.information_matrix`.
+    scale : m, a length for the cloud (its RMS radius), making rotation and translation comparable.
+    """
+    if not np.any(information):
+        return np.ones(6, dtype=bool)
+    D = np.diag([1.0 / max(scale, 1e-12)] * 3 + [1.0] * 3)
+    H = D @ information @ D
+    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    null = V[:, w < tolerance * w.max()]
+    return (null**2).sum(axis=1) > 0.5
+
+
+def error_stats(abs_errors: np.ndarray) -> dict[str, float]:
+    """Median, 75th percentile, mean and max of (n,) magnitudes; NaN when there are none."""
+    if len(abs_errors) == 0:
+        return dict.fromkeys(STAT_COLUMNS, float("nan"))
+    return {
+        "median": float(np.median(abs_errors)),
+        "p75": float(np.percentile(abs_errors, 75)),
+        "mean": float(np.mean(abs_errors)),
+        "max": float(np.max(abs_errors)),
+    }
+
+
+def summarize(per_scan: pd.DataFrame, cfg: StatisticConfig | None = None) -> pd.DataFrame:
+    """Statistics per subset and axis from the per-scan table of :mod:`optipose.evaluate`.
+
+    per_scan : columns ``subset``, ``ok``, ``err_roll``/``err_pitch``/``err_yaw`` (rad) and
+        ``unobservable_roll``/... (bool).
+    Returns one row per (subset, axis): median, p75, mean, max (rad), n_ok, n_failed, unobservable
+    (True when the axis is unobservable in at least half of the scans).
+    """
+    rows = []
+    for subset, group in per_scan.groupby("subset", sort=False):
+        ok = group["ok"].to_numpy(bool)
+        for axis in AXES:
+            stats = error_stats(np.abs(group.loc[ok, f"err_{axis}"].to_numpy()))
+            blind = group[f"unobservable_{axis}"].to_numpy(bool)
+            rows.append({
+                "subset": subset, "axis": axis, **stats, "n_ok": int(ok.sum()), "n_failed": int((~ok).sum()),
+                "unobservable": bool(blind.mean() >= 0.5) if len(blind) else True,
+            })  # fmt: skip
+    return pd.DataFrame(rows)
