@@ -28,7 +28,7 @@ class RayCaster(Protocol):
         """
 
     def first_triangle(self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray | None = None) -> np.ndarray:
-        """Triangle index (n,) int64 of the first hit, -1 on a miss: :meth:`first_hit` without distances."""
+        """Triangle index (n,) int32 of the first hit, -1 on a miss: :meth:`first_hit` without distances."""
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray) -> np.ndarray:
         """(n,) bool: something is hit on the ray between 0 and ``tfar`` (n,)."""
@@ -83,7 +83,8 @@ class EmbreeCaster:
         return dist, tri
 
     def first_triangle(self, origins, directions, tfar=None):
-        return np.concatenate(self._run(origins, directions, tfar)).astype(np.int64)
+        parts = self._run(origins, directions, tfar)
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     def occluded(self, origins, directions, tfar):
         parts = self._run(origins, directions, tfar, query="OCCLUDED")
@@ -121,7 +122,7 @@ class Open3DCaster:
         return dist, tri
 
     def first_triangle(self, origins, directions, tfar=None):
-        return self.first_hit(origins, directions, tfar)[1]
+        return self.first_hit(origins, directions, tfar)[1].astype(np.int32)
 
     def occluded(self, origins, directions, tfar):
         # test_occlusions takes one scalar tfar; scale directions so every segment ends at t = 1.

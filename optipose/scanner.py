@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from optipose.materials import Material, load_material
-from optipose.profiles import EMPTY, heights_to_points, ray_lines
+from optipose._kernels import NORMAL_QUANTILES, measure_hits, write_points
+from optipose.profiles import EMPTY, ray_lines
 from optipose.raycast import default_threads, face_planes, make_caster
 from optipose.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
@@ -118,10 +119,10 @@ class Scanner:
         self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()
         self._ray_lines = ray_lines(self._ray_o_S, self._ray_d_S)
         s = self.sensor
-        self._t_max = ((s.z_far - s.window_z) / self._ray_d_S[:, 2]).astype(np.float32)
+        t_max = ((s.z_far - s.window_z) / self._ray_d_S[:, 2]).astype(np.float32)
+        self._t_max_tiled = np.tile(t_max, _BLOCK_PROFILES)
         # intensity as a function of cos(AoI), tabulated once: one interp per hit instead of a formula
-        self._cos_grid = np.linspace(0.0, 1.0, 8193)
-        self._intensity_grid = self.material.intensity(np.arccos(self._cos_grid))
+        self._intensity_grid = self.material.intensity(np.arccos(np.linspace(0.0, 1.0, 8193)))
 
     # ------------------------------------------------------------------------------------------------
     def scan(
@@ -165,17 +166,40 @@ class Scanner:
             for k0 in range(0, len(shifts), _BLOCK_PROFILES)
         ]
 
-        def work(block):
-            j, k0, k1 = block
-            block_rng = np.random.default_rng([seed, j, k0]) if noise else None
-            return self._scan_block(views[j], shifts, k0, k1, block_rng)
+        run = self._pool.map if self._pool else map
+        # one nonzero 64-bit noise key per sensor of this scan (0 means no noise)
+        keys = [np.uint64(int(k) | 1) for k in np.random.default_rng([seed, 0x5CA7]).integers(1, 2**63, len(poses))]
+        keys = keys if noise else [np.uint64(0)] * len(poses)
+        hits = list(run(lambda blk: self._block_hits(views[blk[0]], shifts, blk[1], blk[2]), blocks))
 
-        outputs = list(self._pool.map(work, blocks)) if self._pool else [work(b) for b in blocks]
-        scans = []
+        # Phase 2 writes every block straight into its slice of the scan's arrays: no concatenation.
+        n_col, scans, jobs = self.sensor.points_per_profile, [], []
         for j, T_O_S in enumerate(poses):
-            mine = [out for (jj, _, _), out in zip(blocks, outputs) if jj == j]
-            raw, pts, prof, col, inten, face = (np.concatenate([o[i] for o in mine]) for i in range(6))
-            scans.append(Scan(pts, prof, col, inten, raw, T_O_S, np.asarray(rpy, float), face, T_O_P))
+            mine = [(blk, h) for blk, h in zip(blocks, hits) if blk[0] == j]
+            n = sum(len(h[0]) for _, h in mine)
+            scan = Scan(
+                points=np.empty((n, 3)), profile=np.empty(n, np.int32), column=np.empty(n, np.int32),
+                intensity=np.empty(n, np.float32), raw=np.full((len(shifts), n_col), EMPTY),
+                T_O_S=T_O_S, rpy=np.asarray(rpy, float), face=np.empty(n, np.int32), T_O_P=T_O_P,
+            )  # fmt: skip
+            start = 0
+            for blk, h in mine:
+                jobs.append((scan, views[j], blk, h, slice(start, start + len(h[0]))))
+                start += len(h[0])
+            scans.append(scan)
+
+        def write(job):
+            scan, view, (j, k0, k1), (idx, T, inten, tri), sl = job
+            s = self.sensor
+            write_points(
+                idx, T, inten, keys[j], NORMAL_QUANTILES, n_col, k0, shifts[k0:k1], self._ray_cos, *self._ray_lines, s.apex_z,
+                s.noise_sigma, s.detection_threshold, s.z_resolution, view.T_O_S[:3, :3], view.T_O_S[:3, 3],
+                scan.raw[k0:k1].reshape(-1), scan.points[sl], scan.profile[sl], scan.column[sl],
+            )  # fmt: skip
+            scan.intensity[sl] = inten
+            scan.face[sl] = tri
+
+        list(run(write, jobs))
         return scans
 
     def normals(self, scan: Scan) -> np.ndarray:
@@ -183,51 +207,31 @@ class Scanner:
         return self._normals[scan.face] @ scan.T_O_P[:3, :3].T
 
     # ------------------------------------------------------------------------------------------------
-    def _scan_block(self, view: "_SensorView", shifts: np.ndarray, k0: int, k1: int, rng):
-        """Profiles k0..k1-1 of one sensor: raw heights (m, n_col), then points (n, 3) in O with their
-        profile (n,), column (n,) and intensity (n,).
+    def _block_hits(self, view: "_SensorView", shifts: np.ndarray, k0: int, k1: int):
+        """Profiles k0..k1-1 of one sensor: the measured hits as (ray index in the block (n,), distance from
+        the apex (n,) float64, intensity (n,), triangle (n,)).
 
         Every ray of a view lies in the laser plane and starts on a line through the fan's apex, so the
         float64 hit on triangle f along ray c at shift s reduces to per-face and per-column scalars:
-        ``T = (q_f + s·b_f) / (cos_c·nu_f + sin_c·nw_f)`` (distance from the apex). Only 1-D gathers
-        touch the hits; 3-vectors are formed only for the few hits that need a shadow ray.
+        ``T = (q_f + s·b_f) / (cos_c·nu_f + sin_c·nw_f)`` (distance from the apex); the compiled kernel
+        :func:`measure_hits` applies the range, angle, intensity and receiver-side tests in one pass.
+        3-vectors are formed only for the hits that still need a shadow ray.
         """
-        s, n_col = self.sensor, self.sensor.points_per_profile
+        s, n_col, m = self.sensor, self.sensor.points_per_profile, k1 - k0
         shift_b = shifts[k0:k1]
         origins = (view.o_P32[None] - (shift_b[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
-        tri = self.caster.first_triangle(origins, np.tile(view.d_P32, (k1 - k0, 1)), np.tile(self._t_max, k1 - k0))
-        idx = np.flatnonzero(tri >= 0)
-        tri = tri[idx]
-        prof, col = np.divmod(idx, n_col)  # profile within the block, column
-        shift = shift_b[prof]
-        c, sn = self._ray_cos[col], self._ray_sin[col]
-        den = c * view.nu[tri] + sn * view.nw[tri]  # n·d = -cos(AoI): negative where the face meets the laser
-        T = (view.q[tri] + shift * view.b[tri]) / den  # exact float64 distance from the apex
-        z = s.apex_z + T * c
-        intensity = np.interp(-den, self._cos_grid, self._intensity_grid)
-        # the receiver must be in front of the face: n·(receiver - p) = a_f - s·b_f > 0
-        keep = (z >= s.z_near) & (z <= s.z_far) & (den < 0) & (intensity >= s.detection_threshold)
-        keep &= view.a[tri] - shift * view.b[tri] > 0
-        if s.saturation > 0:
-            keep &= intensity <= s.saturation
-        shadowed = np.flatnonzero(keep & ~self._on_hull[tri])
-        if len(shadowed):
-            keep[shadowed] = self._receiver_sees(view, T[shadowed], col[shadowed], shift[shadowed], tri[shadowed])
-        if not keep.all():
-            idx, tri, prof, col, shift, z, c, intensity = (v[keep] for v in (idx, tri, prof, col, shift, z, c, intensity))
-
-        if rng is not None:
-            sigma = s.noise_sigma / np.sqrt(np.clip(intensity, s.detection_threshold, 1.0))
-            z = z + rng.standard_normal(len(z), dtype=np.float32) * (sigma * c)  # noise along the ray, in z_S
-            if s.z_resolution > 0:
-                z = np.round(z * (1.0 / s.z_resolution)) * s.z_resolution
-        raw = np.full((k1 - k0) * n_col, EMPTY)
-        raw[idx] = -1e3 * z
-        points = heights_to_points(z, col, shift, self._ray_lines, view.T_O_S)
-        return (
-            raw.reshape(-1, n_col), points, (prof + k0).astype(np.int32), col.astype(np.int32),
-            intensity.astype(np.float32), tri.astype(np.int32),
+        tri = self.caster.first_triangle(origins, view.d_tiled[: m * n_col], self._t_max_tiled[: m * n_col])
+        idx, T, inten, tri, test = measure_hits(
+            tri, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
+            self._on_hull, s.apex_z, s.z_near, s.z_far, self._intensity_grid, s.detection_threshold, s.saturation,
         )  # fmt: skip
+        test = np.flatnonzero(test)
+        if len(test):
+            sub = idx[test]
+            keep = np.ones(len(idx), dtype=bool)
+            keep[test] = self._receiver_sees(view, T[test], sub % n_col, shift_b[sub // n_col], tri[test])
+            idx, T, inten, tri = idx[keep], T[keep], inten[keep], tri[keep]
+        return idx, T, inten, tri
 
     def _receiver_sees(self, view, T, col, shift, tri) -> np.ndarray:
         """(n,) bool: nothing blocks the segment from each hit to the receiver (no triangulation shadow).
@@ -257,6 +261,7 @@ class _SensorView:
     d_P: np.ndarray  # (n_col, 3) unit ray directions
     o_P32: np.ndarray  # (n_col, 3) ray origins on the window line, float32 for Embree
     d_P32: np.ndarray
+    d_tiled: np.ndarray  # (block rays, 3) float32: d_P32 for every profile of a block
     receiver_P: np.ndarray  # (3,)
     step_P: np.ndarray  # (3,)
     nu: np.ndarray  # (f,)
@@ -282,6 +287,7 @@ class _SensorView:
             d_P=d_P,
             o_P32=o_P.astype(np.float32),
             d_P32=d_P.astype(np.float32),
+            d_tiled=np.tile(d_P.astype(np.float32), (_BLOCK_PROFILES, 1)),
             receiver_P=receiver_P,
             step_P=step_P,
             nu=n @ R_PS[:, 2],
