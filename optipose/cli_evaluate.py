@@ -84,7 +84,7 @@ def table1(result):
         table.add_column(f"{axis} [deg]", justify="right")
     for choice in result.table:
         cells = [
-            f"{np.rad2deg(a.median):.4f} / {np.rad2deg(a.p75):.4f} ({a.subset})" if a.observable else "[red]unobservable[/]"
+            f"{np.rad2deg(a.median):.5f} / {np.rad2deg(a.p75):.5f} {a.subset}" if a.observable else "[red]unobservable[/]"
             for a in choice.axes
         ]
         table.add_row(str(choice.k), choice.sensors, *cells)

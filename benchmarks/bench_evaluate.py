@@ -1,0 +1,103 @@
+"""Time of the full paper protocol on part B's hand-placed three-sensor layout (77 orientations, 7 subsets,
+full fidelity), the share spent in ray casting vs. registration, and the ratio against a naive loop
+(re-scan per subset, Open3D voxel down-sampling and Open3D point-to-point ICP against a dense CAD sample,
+its KD-tree rebuilt on every call) timed in the same process on a few orientations.
+
+    .venv/bin/python benchmarks/bench_evaluate.py [--jobs 2] [--naive 4]
+
+Figures, not asserts: the machine may be shared, so compare the ratios printed here, not seconds across runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from itertools import combinations
+
+import numpy as np
+
+
+def naive_orientation(scanner, part, layout, rpy, seed, target, voxel, max_iter):
+    """One orientation the straightforward way: per subset, scan its sensors, merge, down-sample, ICP."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    t_scan = t_reg = 0.0
+    for k in range(1, len(layout) + 1):
+        for subset in combinations(range(len(layout)), k):
+            t0 = time.perf_counter()
+            scans = scanner.scan_many([layout.poses[j] for j in subset], part.motion, rpy=rpy, centre=part.rotation_centre, rng=seed)
+            t1 = time.perf_counter()
+            pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.vstack([s.points for s in scans])))
+            src = pcd.voxel_down_sample(voxel)
+            reg.registration_icp(src, target, 5e-3, np.eye(4), reg.TransformationEstimationPointToPoint(),
+                                 reg.ICPConvergenceCriteria(max_iteration=max_iter))  # fmt: skip
+            t_scan += t1 - t0
+            t_reg += time.perf_counter() - t1
+    return t_scan, t_reg
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--naive", type=int, default=4, help="orientations timed with the naive loop")
+    args = ap.parse_args()
+
+    import open3d as o3d
+
+    from optipose.evaluate import Evaluator
+    from optipose.objective import load_objective
+    from optipose.part import load_part
+    from optipose.reference import sample_surface
+    from optipose.scanner import Scanner
+
+    part = load_part("part_b")
+    layout = part.layouts["hand"]
+    objective = load_objective("paper")
+    print(f"part_b, hand layout {layout.names}, objective 'paper' ({objective.registration.method}, "
+          f"reference {objective.registration.reference}), {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")  # fmt: skip
+
+    # optipose: the full protocol
+    with Evaluator(part, objective, seed=0, jobs=args.jobs) as ev:
+        t0 = time.perf_counter()
+        result = ev(layout)
+        wall = time.perf_counter() - t0
+    cpu = result.timings["scan"] + result.timings["register"]
+    n = result.per_scan["scan"].nunique()
+    print(f"optipose evaluate, --jobs {args.jobs}: {wall:.1f} s wall for {n} orientations x 7 subsets "
+          f"({len(result.per_scan)} registrations, {result.n_failed} failed)")  # fmt: skip
+    print(f"  CPU seconds over workers: ray casting (scan) {result.timings['scan']:.1f} s ({100 * result.timings['scan'] / cpu:.0f} %), "
+          f"down-sampling + registration {result.timings['register']:.1f} s ({100 * result.timings['register'] / cpu:.0f} %)")  # fmt: skip
+
+    # the naive loop on a few orientations, same process
+    p = ev.perturbations
+    picks = np.linspace(0, len(p) - 1, args.naive).round().astype(int)
+    points, normals = sample_surface(part.mesh.vertices, part.mesh.faces, 0.2e-3)
+    target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    target.normals = o3d.utility.Vector3dVector(normals)
+    scanner = Scanner(part.mesh, part.sensor, part.material)
+    t_scan = t_reg = 0.0
+    for i in picks:
+        s, r = naive_orientation(scanner, part, layout, p.rpy[i], int(p.seeds[i]), target, 0.5e-3, 30)
+        t_scan, t_reg = t_scan + s, t_reg + r
+    per = (t_scan + t_reg) / len(picks)
+    print(f"naive loop (re-scan per subset, Open3D p2p ICP, 30 iterations, KD-tree per call): {per:.2f} s per orientation "
+          f"on {len(picks)} orientations -> {per * len(p):.0f} s for {len(p)} (scan {100 * t_scan / (t_scan + t_reg):.0f} %)")  # fmt: skip
+    print(f"speed-up of optipose evaluate over the naive loop: {per * len(p) / wall:.1f}x")
+
+    # optipose in one process on the same orientations, for a like-for-like per-orientation figure
+    from optipose.evaluate import _run_chunk
+
+    tasks = [(int(i), p.rpy[i], p.offset[i], int(p.seeds[i]), str(p.label[i])) for i in picks]
+    with Evaluator(part, objective, seed=0, jobs=1) as one:
+        _run_chunk(one._setup, layout.poses, layout.names, tasks[:1])  # build the scanner and reference
+        t0 = time.perf_counter()
+        _, _, timing = _run_chunk(one._setup, layout.poses, layout.names, tasks)
+        own = (time.perf_counter() - t0) / len(picks)
+    print(f"optipose, one process, same orientations: {own:.2f} s per orientation "
+          f"(scan {timing['scan'] / len(picks):.2f} s, register {timing['register'] / len(picks):.2f} s) -> {per / own:.1f}x the naive loop")
+
+
+if __name__ == "__main__":
+    main()
