@@ -137,6 +137,17 @@ def counts(
     counts_command(part, layout, markdown)
 
 
+def _register_commands() -> None:
+    """Commands defined in their own modules (each module imports only typer at import time)."""
+    from optipose import cli_evaluate, cli_search
+
+    cli_evaluate.register(app)
+    cli_search.register(app)
+
+
+_register_commands()
+
+
 def main() -> None:
     app()
 
