@@ -14,8 +14,10 @@ What the surrogate models, and why:
 * the scan runs at reduced fidelity (a few hundred columns, coarser steps), then is thinned to one point
   per registration voxel, because ICP runs on voxel-down-sampled clouds: the number of *voxels* seen, not
   raw points, sets the information;
-* each voxel point gets σᵢ² = σ_noise²/intensity + voxel²/12 — sensor noise plus the position
-  uncertainty of a voxel representative, which dominates at 0.5 mm voxels, as SPEC §4 measured;
+* each voxel point gets σᵢ² = σ_noise² / (intensity · mᵢ): the voxel's point is the mean of the mᵢ raw
+  points a full-fidelity scan puts in it, so its noise along the normal averages down; moving along the
+  surface does not change a point-to-surface residual. A sampled reference adds its own variance
+  (``extra_variance``, spacing²/12);
 * a weak prior (rotation 5°, translation 5 mm: what bin picking already knows) keeps H invertible when
   a layout leaves some direction unobservable; such an axis then gets a σ near the prior's, a poor score.
 
@@ -56,7 +58,10 @@ class Surrogate:
     columns : laser columns per profile in the reduced scan; ``step_factor`` : profile step multiplier.
     """
 
-    def __init__(self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0, threads: int | None = None):
+    def __init__(
+        self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0,
+        threads: int | None = None, extra_variance: float = 0.0,
+    ):  # fmt: skip
         from optipose.sensor import load_sensor
 
         self.part = part
@@ -65,6 +70,7 @@ class Surrogate:
         self.scanner = Scanner(part.mesh, sensor, part.material, threads=threads)
         self.motion = ScanMotion(part.motion.length, part.motion.step * step_factor)
         self.voxel = voxel
+        self.extra_variance = extra_variance  # m², e.g. a sampled reference's spacing²/12
         # a reduced scan sees 1/scale of the points of a full-fidelity one
         self.scale = (self.full_sensor.points_per_profile / sensor.points_per_profile) * (
             part.motion.n_profiles / self.motion.n_profiles
@@ -77,20 +83,24 @@ class Surrogate:
         if len(scan) == 0:
             return SensorInfo(np.zeros((6, 6)), 0, 0)
         normals = self.scanner.normals(scan)
-        first = _one_per_voxel(scan.points, self.voxel)
+        first, inverse, counts = _voxels(scan.points, self.voxel)
         p, n = scan.points[first] - self.centre, normals[first]
-        inten = np.clip(scan.intensity[first].astype(float), self.full_sensor.detection_threshold, 1.0)
-        var = self.full_sensor.noise_sigma**2 / inten + self.voxel**2 / 12.0
+        inten = np.bincount(inverse, weights=scan.intensity.astype(float)) / counts
+        inten = np.clip(inten, self.full_sensor.detection_threshold, 1.0)
+        # a voxel's point is the mean of the raw points in it: its noise along the normal shrinks with
+        # the number of points a full-fidelity scan puts there; its tangential spread does not matter
+        var = self.full_sensor.noise_sigma**2 / inten / (counts * self.scale) + self.extra_variance
         J = np.hstack([np.cross(p, n), n]) / np.sqrt(var)[:, None]
         return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first))
 
 
-def _one_per_voxel(points: np.ndarray, voxel: float) -> np.ndarray:
-    """Indices of one point per occupied voxel (the first in scan order)."""
+def _voxels(points: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Occupied voxels: index of one point in each (v,), each point's voxel (n,), points per voxel (v,)."""
     ijk = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
     dims = ijk.max(axis=0) + 1
-    _, first = np.unique((ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2], return_index=True)
-    return first
+    keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    _, first, inverse, counts = np.unique(keys, return_index=True, return_inverse=True, return_counts=True)
+    return first, inverse, counts
 
 
 def rotation_sigma(H: np.ndarray) -> np.ndarray:

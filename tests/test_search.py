@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from optipose.objective import load_objective
 from optipose.part import load_part
 from optipose.poseparam import PoseSpace, params_from_pose, pose_from_params
+from optipose.sensor import load_sensor
 from optipose.search import PENALTY, SearchConfig, SurrogateProblem, _optimize, run_search
 from optipose.surrogate import Surrogate, predicted_stats, rotation_sigma
 
@@ -76,16 +77,15 @@ def test_flat_plate_surrogate_says_yaw_is_unobservable():
     surrogate = Surrogate(Plate())
     info = surrogate.info(down)
     roll, pitch, yaw = predicted_stats([info])["median_deg"][0]
-    # By hand: voxel points on a grid, 0.5 mm across the 34.5 mm line (y) and 1 mm along the 40 mm scan
-    # (x, the surrogate's doubled step); each with σ² = σ_noise² + voxel²/12. Roll information is
-    # Σy²/σ², pitch Σx²/σ²; the median |error| is 0.674 σ.
-    var = 2e-6**2 + 0.5e-3**2 / 12
-    ny, nx = 69, 40
-    sum_y2 = nx * ny * 0.0345**2 / 12
-    sum_x2 = ny * nx * 0.040**2 / 12
-    assert info.n_voxels == pytest.approx(nx * ny, rel=0.05)
-    assert roll == pytest.approx(np.rad2deg(0.6745 * np.sqrt(var / sum_y2)), rel=0.1)
-    assert pitch == pytest.approx(np.rad2deg(0.6745 * np.sqrt(var / sum_x2)), rel=0.1)
+    # By hand: a voxel's point is the mean of the raw points in it, so on a plane the information is that
+    # of all N = 80 profiles x 3200 columns raw points with σ = 2 µm (white, head-on: intensity ≈ 1).
+    # Roll information is N·E[y²]/σ², y uniform over the line (half-width 17.36 mm at 1 mm beyond R);
+    # pitch N·E[x²]/σ², x uniform over the 40 mm scan. The median |error| is 0.674 σ.
+    n_points = 80 * 3200
+    half = load_sensor("keyence-lj-x8080").half_width(0.001)
+    assert info.n_points == pytest.approx(n_points, rel=0.01)
+    assert roll == pytest.approx(np.rad2deg(0.6745 * 2e-6 / np.sqrt(n_points * half**2 / 3)), rel=0.05)
+    assert pitch == pytest.approx(np.rad2deg(0.6745 * 2e-6 / np.sqrt(n_points * 0.040**2 / 12)), rel=0.05)
     assert yaw > 3.0  # a plane says nothing about yaw: only the 5° prior is left
 
 
