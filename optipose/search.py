@@ -54,6 +54,8 @@ class SearchConfig:
     margin: float = 0.005  # m, how far outside the part's box the aim point may go
     alpha_max_deg: float = 60.0
     random_starts: int = 8  # extra random start points scored before each greedy stage
+    select_candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
+    select_time: float = 300.0  # s, the selection stage
 
     def __post_init__(self) -> None:
         from optipose.errors import ConfigError
@@ -67,9 +69,12 @@ class SearchConfig:
 
 
 BUDGETS: dict[str, dict] = {
-    "quick": dict(global_evals=120, local_evals=40, joint_evals=60, max_time=35.0, random_starts=4),
-    "default": dict(global_evals=500, local_evals=150, joint_evals=300, max_time=420.0),
-    "thorough": dict(global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16),
+    "quick": dict(global_evals=120, local_evals=40, joint_evals=60, max_time=35.0, random_starts=4, select_candidates=0),
+    "default": dict(global_evals=400, local_evals=120, joint_evals=200, max_time=180.0, select_candidates=3, select_time=240.0),
+    "thorough": dict(
+        global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16,
+        select_candidates=6, select_time=1800.0,
+    ),  # fmt: skip
 }
 
 

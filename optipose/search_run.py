@@ -131,13 +131,17 @@ def run(part, objective, config: SearchConfig, seed: int, folder: Path, budget: 
             f"this part at all? check --units, the material and the part's size against the {config.clearance * 1e3:.0f} mm clearance)"
         )
     report = SearchReport(folder, outcome)
-    report.layouts = {k: _layout(f, k) for k, f in outcome.found.items()}
-    layout_dir = folder / "layouts"
-    layout_dir.mkdir(exist_ok=True)
-    for k, layout in report.layouts.items():
-        write_layout(layout, layout_dir / f"found_k{k}.toml")
-    if "hand" in part.layouts:
-        write_layout(part.layouts["hand"], layout_dir / "hand.toml")
+    _write_layouts(report, part, outcome.found)  # the surrogate's best, on disk before anything slower
+    if config.select_candidates > 0 and not outcome.interrupted:
+        from optipose.refine import select_finalists
+
+        if on_stage:
+            on_stage("selecting finalists by ICP on a reduced protocol")
+        finalists, rows = select_finalists(
+            part, objective, outcome, problem, seed, config.select_candidates, config.select_time, on_stage
+        )
+        pd.DataFrame(rows).to_csv(folder / "selection.csv", index=False)
+        _write_layouts(report, part, {**outcome.found, **finalists})
     _surrogate_rows(report, outcome)
     if outcome.interrupted:
         return report
@@ -145,6 +149,16 @@ def run(part, objective, config: SearchConfig, seed: int, folder: Path, budget: 
         on_stage("validating on the full protocol (held-out noise seed)")
     _validate(report, part, objective, seed, jobs)
     return report
+
+
+def _write_layouts(report: SearchReport, part, found: dict[int, Found]) -> None:
+    report.layouts = {k: _layout(f, k) for k, f in found.items()}
+    layout_dir = report.folder / "layouts"
+    layout_dir.mkdir(exist_ok=True)
+    for k, layout in report.layouts.items():
+        write_layout(layout, layout_dir / f"found_k{k}.toml")
+    if "hand" in part.layouts:
+        write_layout(part.layouts["hand"], layout_dir / "hand.toml")
 
 
 def _layout(found: Found, k: int) -> Layout:
