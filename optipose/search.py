@@ -263,6 +263,9 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, problem: Su
         for k in range(1, max(ks) + 1):
             if config.strategy in ("greedy", "both") or k == 1:
                 placed = _greedy_stage(problem, config, placed, hand_u, rng, seed * 1000 + k)
+                if k not in problem.best:  # no feasible layout of k sensors: more sensors will not help
+                    log.warning("no feasible layout of %d sensor(s) found; stopping", k)
+                    break
                 value, stats = problem.evaluate(placed)
                 greedy[k] = Found(k, "greedy", placed.copy(), problem.space.to_poses(placed), value, stats or {})
             if k > 1 and config.strategy in ("joint", "both"):

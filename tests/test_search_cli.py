@@ -1,0 +1,82 @@
+"""``optipose search`` end to end on a small budget and a short protocol."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pandas as pd
+import pytest
+import trimesh
+
+SMALL = """[search]
+global_evals = 25
+local_evals = 8
+joint_evals = 10
+random_starts = 2
+select_candidates = 0
+"""
+SHORT = """name = "short"
+[protocol]
+sequences = ["R", "P", "Y"]
+start_deg = -2.0
+stop_deg = 2.0
+step_deg = 4.0
+"""
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=900)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("search")
+    (d / "small.toml").write_text(SMALL)
+    (d / "short.toml").write_text(SHORT)
+    trimesh.creation.box((0.0004, 0.0004, 0.0004)).export(d / "speck.stl")
+    return d
+
+
+def test_a_part_no_sensor_can_see_ends_with_a_clear_message(files):
+    result = run("search", files / "speck.stl", "--units", "m", "--search-config", files / "small.toml", "--out", files / "speck")
+    assert result.returncode == 2, result.stderr
+    assert "no feasible layout" in result.stderr and "Traceback" not in result.stderr
+    assert (files / "speck" / "history.csv").is_file()  # what was tried is kept
+
+
+@pytest.fixture(scope="module")
+def searched(files):
+    out = files / "b"
+    result = run("search", "part_b", "--sensors", "1,2", "--search-config", files / "small.toml",
+                 "--objective", files / "short.toml", "--seed", 4, "--out", out)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    return out, result
+
+
+def test_search_writes_a_result_folder_that_explains_itself(searched):
+    out, result = searched
+    config = tomllib.loads((out / "config.toml").read_text())
+    assert config["seed"] == 4 and config["validation_seed"] != 4
+    assert config["search"]["global_evals"] == 25 and config["objective"]["name"] == "short"
+    history = pd.read_csv(out / "history.csv")
+    assert len(history) > 50 and set(history["k"]) == {1, 2}
+    comparison = pd.read_csv(out / "comparison.csv")
+    assert set(comparison["layout"]) == {"found", "hand"} and set(comparison["k"]) == {1, 2}
+    assert np.all(comparison["median_deg"] >= 0)
+    for k in (1, 2):
+        text = (out / "layouts" / f"found_k{k}.toml").read_text()
+        assert text.count("[[sensors]]") == k
+    assert "found vs. hand-placed" in result.stdout
+
+
+def test_resume_replays_from_the_cache_to_the_same_layout(searched):
+    out, _ = searched
+    before = (out / "layouts" / "found_k2.toml").read_text()
+    n_before = len(pd.read_csv(out / "history.csv"))
+    result = run("search", "--resume", out, "part_b")
+    assert result.returncode == 0, result.stderr
+    assert (out / "layouts" / "found_k2.toml").read_text() == before
+    assert len(pd.read_csv(out / "history.csv")) == n_before
