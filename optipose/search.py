@@ -198,7 +198,8 @@ class SurrogateProblem:
 
 
 def _optimize(problem: SurrogateProblem, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, local: str | None = None):
-    """One NLopt run on [0, 1]^n from ``x0``; returns (best value, best x). Stops cleanly on _Stop."""
+    """One NLopt run on [0, 1]^n from ``x0``. The objective records what it sees (its history and best), so
+    nothing is returned; NLopt's own stops end quietly, a :class:`_Stop` (time up, Ctrl-C) propagates."""
     import nlopt
 
     n = len(x0)
@@ -215,8 +216,10 @@ def _optimize(problem: SurrogateProblem, algorithm: str, x0: np.ndarray, maxeval
         sub.set_xtol_rel(1e-4)
         sub.set_maxeval(max(10, maxeval // 10))
         opt.set_local_optimizer(sub)
-    if algorithm == "GN_ISRES" or algorithm.startswith("GN_CRS") or algorithm.startswith("GN_ESCH"):
-        opt.set_population(max(10 * (n + 1), 20) if algorithm.startswith("GN_CRS") else 0)
+    if algorithm.startswith(("GN_CRS", "GN_ISRES")):
+        # NLopt's default populations (CRS2 10(n+1), ISRES 20(n+1)) would spend most of a small budget on
+        # one random generation; cap them at a fifth of the budget
+        opt.set_population(int(min(10 * (n + 1), max(n + 2, maxeval // 5))))
     nlopt.srand(int(seed) % (2**31))
     try:
         opt.optimize(np.clip(x0, 0.0, 1.0))
