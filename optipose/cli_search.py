@@ -104,11 +104,16 @@ def search_command(part, units, sensors, budget, objective, seed, jobs, out, res
     if not resume:
         folder = make_result_dir(the_part.name, "search", out)
 
-    report = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
+    try:
+        report = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
+    except KeyboardInterrupt:
+        console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
+                      f"continue with `optipose search --resume {folder} {part}`")  # fmt: skip
+        raise typer.Exit(130) from None
     _print_report(Console(), report, the_part)
     if report.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
-                      f"`optipose search --resume {folder}`")  # fmt: skip
+                      f"`optipose search --resume {folder} {part}`")  # fmt: skip
         raise typer.Exit(130)
     console.print(f"results: {folder}")
     return folder
