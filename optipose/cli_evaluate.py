@@ -6,7 +6,6 @@ The lead's ``optipose/cli.py`` calls :func:`register` to add the command; import
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -14,14 +13,14 @@ import typer
 
 __all__ = ["register", "evaluate_command", "table1"]
 
-EXIT_USER_ERROR = 2
 
 
 def register(app: typer.Typer) -> None:
     """Add ``evaluate`` to the ``optipose`` Typer app."""
+    from optipose.cli import friendly_errors
 
     @app.command("evaluate")
-    @_friendly_errors
+    @friendly_errors
     def evaluate(
         part: Annotated[str, typer.Argument(help="A shipped part name (see `optipose parts`), a part TOML or a mesh file.")],
         units: Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 2 means mm), m, mm or in.")] = "auto",
@@ -89,22 +88,3 @@ def table1(result):
         ]
         table.add_row(str(choice.k), choice.sensors, *cells)
     return table
-
-
-def _friendly_errors(fn):
-    """A user error becomes one line on stderr and exit code 2 (as in optipose.cli)."""
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        from optipose.errors import OptiposeError
-
-        try:
-            return fn(*args, **kwargs)
-        except OptiposeError as exc:
-            typer.echo(f"optipose: error: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", err=True)
-            raise typer.Exit(EXIT_USER_ERROR) from None
-        except KeyboardInterrupt:
-            typer.echo("optipose: error: interrupted", err=True)
-            raise typer.Exit(130) from None
-
-    return wrapper
