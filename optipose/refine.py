@@ -13,6 +13,7 @@ evaluated on a reduced protocol — each sequence at its two end angles, 14 scan
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
 from dataclasses import replace
@@ -58,6 +59,20 @@ def _history_candidates(problem: SurrogateProblem, k: int, n: int) -> list[Found
     return _distinct(out)[:n]
 
 
+def _sub_layouts(problem: SurrogateProblem, outcome: SearchOutcome, k: int, have: list[Found]) -> list[Found]:
+    """k-sensor subsets of the larger layouts found: a sensor placed for a pair can be the best single one.
+    Scored on the surrogate, distinct from what is already a candidate; at most two."""
+    out = []
+    for big in [f for kk, f in outcome.found.items() if kk > k and f.stats]:
+        for combo in itertools.combinations(range(big.k), k):
+            u = np.concatenate([big.u[6 * i : 6 * i + 6] for i in combo])
+            value, stats = problem.evaluate(u)
+            if stats is not None:
+                out.append(Found(k, f"subset of k={big.k}", u, problem.space.to_poses(u), value, stats))
+    fresh = [c for c in _distinct(out, 0.02) if all(np.max(np.abs(c.u - h.u)) > 0.02 for h in have)]
+    return fresh[:2]
+
+
 def select_finalists(part, objective, outcome: SearchOutcome, problem: SurrogateProblem, seed: int,
                      per_k: int = 3, max_time: float = np.inf, on_stage=None) -> tuple[dict[int, Found], list[dict]]:  # fmt: skip
     """For every k, evaluate the candidates on the reduced protocol and keep the best.
@@ -74,6 +89,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
         for k in sorted(outcome.found):
             candidates = [f for f in (outcome.found.get(k), outcome.greedy.get(k), outcome.joint.get(k)) if f and f.stats]
             candidates = _distinct(candidates + _history_candidates(problem, k, per_k), 0.02)[:per_k]
+            candidates += _sub_layouts(problem, outcome, k, candidates)
             hand = outcome.hand.get(k)
             best, best_score = None, np.inf
             for cand in candidates + ([hand] if hand else []):
