@@ -88,7 +88,8 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
     with Evaluator(part, reduced, seed=selection_seed(seed)) as evaluator:
         for k in sorted(outcome.found):
             candidates = [f for f in (outcome.found.get(k), outcome.greedy.get(k), outcome.joint.get(k)) if f and f.stats]
-            candidates = _distinct(candidates + _history_candidates(problem, k, per_k), 0.02)[:per_k]
+            n = per_k * (2 if k == 1 else 1)  # a one-sensor candidate costs a third of a three-sensor one
+            candidates = _distinct(candidates + _history_candidates(problem, k, n), 0.02)[:n]
             candidates += _sub_layouts(problem, outcome, k, candidates)
             hand = outcome.hand.get(k)
             best, best_score = None, np.inf
