@@ -259,7 +259,7 @@ def _register_subsets(worker, setup, scans, subsets, references, names, i, rpy, 
         point_rows.append({"scan": i, "label": label, "sensor_index": j, "sensor": names[j],
                            "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip
     shared = references[0] is references[-1] and cfg.backend == "fast"
-    initial = [Matches(*worker.reference.closest(c)) if shared and len(c) else None for c in clouds]
+    initial = [Matches(*worker.reference.nearest(c)) if shared and len(c) else None for c in clouds]
     T_O_P = part_motion(rpy, setup.centre, offset)
     rows = []
     for s_index, (subset, reference) in enumerate(zip(subsets, references)):

@@ -8,7 +8,9 @@ and an id. Two kinds:
   CAD sample in the limit of zero spacing, so the reference adds no sampling error. Between queries, a
   point that still projects well inside the face it was matched to keeps that face
   (:meth:`SurfaceReference.follow`), which makes an ICP iteration near convergence cost a projection
-  rather than a search.
+  rather than a search. :meth:`SurfaceReference.nearest` goes further for ICP: a point that leaves its
+  face for a neighbouring face's interior is found there by an exact search of the faces near it, so
+  the global search is left to points near edges and corners and to points that moved far.
 - :class:`SampledReference` — a point cloud with normals and a KD-tree: a CAD sample at a given spacing
   (``cad-sample``) or the scan at the nominal orientation (``nominal-scan``).
 """
@@ -18,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["SurfaceReference", "SampledReference", "sample_surface"]
+
+_NEIGHBOUR_RADIUS = 1e-3  # m: faces listed near each face for nearest(); exact for points within half of it
 
 
 class SurfaceReference:
@@ -49,6 +53,27 @@ class SurfaceReference:
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(mesh)
         self.area = 0.5 * float(area2.sum())
+        self._tri = np.ascontiguousarray(tri)
+        self._neighbours = None
+
+    def _near_faces(self) -> tuple[np.ndarray, ...]:
+        """Faces whose bounding boxes lie within ``_NEIGHBOUR_RADIUS`` of each face's (a superset of the faces
+        that close): face boxes lo, hi (f, 3), CSR start (f + 1,) and list, built on first use."""
+        if self._neighbours is None:
+            from scipy.spatial import cKDTree
+
+            lo, hi = self._tri.min(axis=1), self._tri.max(axis=1)
+            centre, half = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo, axis=1)
+            near = cKDTree(centre).query_ball_point(centre, _NEIGHBOUR_RADIUS + half + half.max())
+            lists = []
+            for f, cand in enumerate(near):
+                cand = np.asarray(cand, dtype=np.int64)
+                gap = np.maximum(0.0, np.maximum(lo[cand] - hi[f], lo[f] - hi[cand]))
+                keep = cand[(np.einsum("ij,ij->i", gap, gap) <= _NEIGHBOUR_RADIUS**2) & (cand != f)]
+                lists.append(np.sort(keep))
+            start = np.concatenate([[0], np.cumsum([len(x) for x in lists])]).astype(np.int64)
+            self._neighbours = (np.ascontiguousarray(lo), np.ascontiguousarray(hi), start, np.concatenate(lists).astype(np.int64))
+        return self._neighbours
 
     def __repr__(self) -> str:
         return f"SurfaceReference({len(self.faces)} faces, {self.area * 1e6:.0f} mm^2)"
@@ -81,6 +106,31 @@ class SurfaceReference:
         ok = h[:, 1:].min(axis=1) > 2.0 * np.abs(dist)
         return q, n, ok
 
+    def nearest(self, points: np.ndarray, ids: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest surface points (n, 3), face normals (n, 3) and face ids (n,), searching globally only
+        where it must.
+
+        ids : each point's face at the previous ICP step, or None (then this is :meth:`closest`). A point
+        that lies inside its face by more than twice its distance keeps it (:meth:`follow`); one that does
+        not, but does inside a face near its face (an exact search of the faces within
+        ``_NEIGHBOUR_RADIUS``), takes that face and its float64 projection. The rest (points that moved
+        far, or whose closest point is on or near an edge or a corner) get :meth:`closest`'s answer. Where
+        the float32 search picks a face only by rounding (a point within nanometres of the edge between
+        two coplanar sliver triangles, where its point can be micrometres off), this answers the nearer
+        point, so distances can be smaller than :meth:`closest`'s; point-to-plane residuals agree.
+        """
+        from optipose import _icp_kernels as kernels
+
+        if ids is None:
+            return self.closest(points)
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        ids = np.array(ids, dtype=np.int64)
+        q, open_ = kernels.nearest(points, ids, self._planes, self._plane_c, self._tri, *self._near_faces(), _NEIGHBOUR_RADIUS)
+        open_ = np.flatnonzero(open_)
+        if len(open_):
+            q[open_], _, ids[open_] = self.closest(points[open_])
+        return q, self.normals[ids], ids
+
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """A uniform sample of the surface, about one point per ``spacing``² (m); points and normals."""
         return sample_surface(self.vertices, self.faces, spacing, seed)
@@ -103,6 +153,10 @@ class SampledReference:
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         _, ids = self._tree.query(points)
         return self.points[ids], self.normals[ids], ids.astype(np.int64)
+
+    def nearest(self, points: np.ndarray, ids: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The closest sample points: a search every time (``ids`` is ignored)."""
+        return self.closest(points)
 
     def follow(self, points: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A sample point is only the closest one where the search says so: always search again."""

@@ -82,16 +82,12 @@ def voxel_down(points: np.ndarray, size: float) -> np.ndarray:
     The grid is fixed in O (Open3D's moves with the cloud's bounding box), so a voxel's content does not
     depend on what else was scanned. Output order is the voxels' sorted keys: deterministic.
     """
+    from optipose._icp_kernels import voxel_centroids
+
     points = np.asarray(points, dtype=np.float64)
     if size <= 0 or len(points) == 0:
         return points
-    cell = np.floor(points / size).astype(np.int64)
-    cell -= cell.min(axis=0)
-    dims = cell.max(axis=0) + 1
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    sums = np.stack([np.bincount(inverse, points[:, j], len(counts)) for j in range(3)], axis=1)
-    return sums / counts[:, None]
+    return voxel_centroids(np.ascontiguousarray(points), float(size))
 
 
 def remove_outliers(points: np.ndarray, neighbors: int = 20, std_ratio: float = 2.0) -> np.ndarray:
@@ -119,6 +115,53 @@ def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------------------
 def _register_fast(source, reference, cfg: RegistrationConfig, initial: Matches | None) -> Registration:
+    """ICP with compiled passes: transform, closest points (:meth:`nearest` from the previous step's faces),
+    and the normal equations, whose ``AᵀA`` at the last step is also the information matrix."""
+    from optipose import _icp_kernels as kernels
+
+    source = np.ascontiguousarray(source, dtype=np.float64)
+    T = np.eye(4)
+    ids = None
+    max_d2 = cfg.max_correspondence_distance**2
+    converged, it, history = False, 0, None
+    for it in range(1, cfg.max_iterations + 1):
+        p = kernels.transform(source, T)
+        if it == 1 and initial is not None:
+            q, n, ids = initial.q, initial.n, initial.ids.copy()
+        else:
+            q, n, ids = reference.nearest(p, ids)
+        inlier, c, AtA, Atb, sum_d2 = kernels.normal_equations(p, q, n, max_d2)
+        n_in = int(inlier.sum())
+        if n_in < _MIN_POINTS:
+            return _failed(len(source), f"{n_in} points within the correspondence distance", T, it)
+        if cfg.method == "point_to_point":
+            delta = _kabsch(p[inlier], q[inlier])
+        else:
+            delta = _solve_point_to_plane(AtA, Atb, c)
+        if delta is None:
+            return _failed(len(source), "degenerate step", T, it)
+        T = delta @ T
+        angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
+        if angle < cfg.tolerance_rotation and np.linalg.norm(delta[:3, 3]) < cfg.tolerance_translation:
+            converged = True
+            break
+        if cfg.method == "point_to_point":
+            T, history = _accelerate(T, delta, c, history)
+    return Registration(
+        T_target_source=T,
+        converged=converged,
+        iterations=it,
+        fitness=n_in / len(source),
+        rmse=float(np.sqrt(sum_d2 / n_in)),
+        n_points=len(source),
+        information=AtA,
+        failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
+    )
+
+
+def _register_plain(source, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration:
+    """The same ICP in plain numpy on ``closest``/``follow`` (Open3D answers near edges): the readable
+    reference the compiled :func:`_register_fast` is tested against."""
     T = np.eye(4)
     ids = None
     max_d2 = cfg.max_correspondence_distance**2
@@ -202,7 +245,12 @@ def _point_to_plane(p: np.ndarray, q: np.ndarray, n: np.ndarray) -> np.ndarray |
     c = p.mean(axis=0)
     A = np.hstack([np.cross(p - c, n), n])
     b = np.einsum("ij,ij->i", q - p, n)
-    x, *_ = np.linalg.lstsq(A.T @ A, A.T @ b, rcond=1e-12)
+    return _solve_point_to_plane(A.T @ A, A.T @ b, c)
+
+
+def _solve_point_to_plane(AtA: np.ndarray, Atb: np.ndarray, c: np.ndarray) -> np.ndarray | None:
+    """The step (4, 4) from the normal equations about c: rotation vector then translation."""
+    x, *_ = np.linalg.lstsq(AtA, Atb, rcond=1e-12)
     if not np.all(np.isfinite(x)):
         return None
     R = Rotation.from_rotvec(x[:3]).as_matrix()

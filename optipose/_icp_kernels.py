@@ -1,0 +1,240 @@
+"""Compiled kernels of registration (numba, ``nogil``): voxel centroids, closest points on a planar-faced
+mesh and the point-to-plane normal equations, each one pass over the cloud instead of a dozen numpy
+temporaries. The arithmetic is documented in :mod:`optipose.registration` and :mod:`optipose.reference`;
+compiled once per machine and cached next to this file (``cache=True``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def voxel_centroids(points, size):
+    """Centroids (m, 3) of the points (n, 3) in each cube of side ``size``, in the voxels' sorted key order.
+
+    Same sums in the same order as ``np.unique`` + ``np.bincount`` (each voxel adds its points in input
+    order), so the result is bit-identical. A scan runs along its profiles, so consecutive points mostly
+    share a voxel: only the first point of each run is looked up, in a hash table sized by the runs.
+    """
+    n = points.shape[0]
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    for j in range(3):
+        lo[j] = np.iinfo(np.int64).max
+        hi[j] = np.iinfo(np.int64).min
+    for i in range(n):
+        for j in range(3):
+            c = np.int64(np.floor(points[i, j] / size))
+            lo[j] = min(lo[j], c)
+            hi[j] = max(hi[j], c)
+    d1 = hi[1] - lo[1] + 1
+    d2 = hi[2] - lo[2] + 1
+    key = np.empty(n, np.int64)
+    runs = 0
+    for i in range(n):
+        c0 = np.int64(np.floor(points[i, 0] / size)) - lo[0]
+        c1 = np.int64(np.floor(points[i, 1] / size)) - lo[1]
+        c2 = np.int64(np.floor(points[i, 2] / size)) - lo[2]
+        key[i] = (c0 * d1 + c1) * d2 + c2
+        if i == 0 or key[i] != key[i - 1]:
+            runs += 1
+    cap = 16
+    while cap < 2 * runs:
+        cap *= 2
+    table = np.full(cap, -1, np.int64)  # slot -> voxel
+    keys = np.empty(runs, np.int64)  # voxel -> key
+    sums = np.zeros((runs, 3), np.float64)
+    counts = np.zeros(runs, np.int64)
+    m = 0
+    v = -1
+    for i in range(n):
+        if i == 0 or key[i] != key[i - 1]:
+            h = (key[i] * np.int64(-7046029254386353131)) >> 20 & (cap - 1)
+            while True:
+                v = table[h]
+                if v < 0:
+                    v = m
+                    table[h] = v
+                    keys[v] = key[i]
+                    m += 1
+                    break
+                if keys[v] == key[i]:
+                    break
+                h = (h + 1) & (cap - 1)
+        for j in range(3):
+            sums[v, j] += points[i, j]
+        counts[v] += 1
+    order = np.argsort(keys[:m])
+    out = np.empty((m, 3), np.float64)
+    for k in range(m):
+        v = order[k]
+        for j in range(3):
+            out[k, j] = sums[v, j] / counts[v]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def transform(points, T):
+    """``points @ T[:3, :3].T + T[:3, 3]`` (n, 3)."""
+    n = points.shape[0]
+    out = np.empty((n, 3), np.float64)
+    for i in range(n):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        for j in range(3):
+            out[i, j] = T[j, 0] * x + T[j, 1] * y + T[j, 2] * z + T[j, 3]
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _closest_on_triangle(px, py, pz, a, b, c):
+    """Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision Detection §5.1.5)."""
+    abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    acx, acy, acz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    apx, apy, apz = px - a[0], py - a[1], pz - a[2]
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a[0], a[1], a[2]
+    bpx, bpy, bpz = px - b[0], py - b[1], pz - b[2]
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return b[0], b[1], b[2]
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return a[0] + v * abx, a[1] + v * aby, a[2] + v * abz
+    cpx, cpy, cpz = px - c[0], py - c[1], pz - c[2]
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return c[0], c[1], c[2]
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return a[0] + w * acx, a[1] + w * acy, a[2] + w * acz
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return b[0] + w * (c[0] - b[0]), b[1] + w * (c[1] - b[1]), b[2] + w * (c[2] - b[2])
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return a[0] + abx * v + acx * w, a[1] + aby * v + acy * w, a[2] + abz * v + acz * w
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _project(p, i, f, planes, plane_c, q):
+    """Project p[i] on face f's plane into q[i]; True when it lies inside the face by more than 2|d|."""
+    h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
+    inset = np.inf
+    for k in range(1, 4):
+        hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
+        inset = min(inset, hk)
+    for j in range(3):
+        q[i, j] = p[i, j] - h0 * planes[f, 0, j]
+    return inset > 2.0 * abs(h0), inset >= 0.0
+
+
+@njit(cache=True, nogil=True)
+def follow(p, ids, planes, plane_c):
+    """:meth:`SurfaceReference.follow` in one pass: projections q (n, 3) and ok (n,) bool."""
+    n = p.shape[0]
+    q = np.empty((n, 3), np.float64)
+    ok = np.empty(n, np.bool_)
+    for i in range(n):
+        ok[i] = _project(p, i, ids[i], planes, plane_c, q)[0]
+    return q, ok
+
+
+@njit(cache=True, nogil=True)
+def nearest(p, ids, planes, plane_c, tri, lo, hi, nbr_start, nbr, radius):
+    """Closest points of p (n, 3) on a mesh, from a face guess ``ids`` (n,) updated in place.
+
+    A point inside its face by more than 2|d| keeps it (as ``follow``). Otherwise the faces near its face
+    are searched exactly: ``nbr[nbr_start[f]:nbr_start[f + 1]]`` lists every face within ``radius`` of
+    face f, and any face closer to p than the closest point x on f lies within 2|p − x| of f, so the list
+    holds the answer when 2|p − x| <= radius (faces whose bounding box (lo, hi) is farther than the best
+    so far are skipped). The point is settled when it lies inside the face found by more than 2|d|, like
+    a followed point. Returns q (n, 3) and ``open`` (n,) bool: points not settled, left to the global
+    search (too far from their face, or closest to an edge or a corner).
+    """
+    n = p.shape[0]
+    q = np.empty((n, 3), np.float64)
+    open_ = np.zeros(n, np.bool_)
+    for i in range(n):
+        f = ids[i]
+        ok, _ = _project(p, i, f, planes, plane_c, q)
+        if ok:
+            continue
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        qx, qy, qz = _closest_on_triangle(px, py, pz, tri[f, 0], tri[f, 1], tri[f, 2])
+        best = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+        if 4.0 * best > radius * radius:
+            open_[i] = True
+            continue
+        g_best = f
+        for k in range(nbr_start[f], nbr_start[f + 1]):
+            g = nbr[k]
+            box = 0.0
+            for j in range(3):
+                gap = max(lo[g, j] - p[i, j], p[i, j] - hi[g, j], 0.0)
+                box += gap * gap
+            if box >= best:
+                continue
+            gx, gy, gz = _closest_on_triangle(px, py, pz, tri[g, 0], tri[g, 1], tri[g, 2])
+            d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
+            if d2 < best:
+                best, g_best = d2, g
+        ok, _ = _project(p, i, g_best, planes, plane_c, q)
+        if ok:
+            ids[i] = g_best
+        else:
+            open_[i] = True
+    return q, open_
+
+
+@njit(cache=True, nogil=True)
+def normal_equations(p, q, n, max_d2):
+    """Point-to-plane normal equations over the pairs within ``sqrt(max_d2)``, about their centroid c.
+
+    Returns inlier (n,) bool, c (3,), ``AᵀA`` (6, 6), ``Aᵀb`` (6,) and Σ d² over inliers, with rows
+    ``Aᵢ = [((pᵢ − c) × nᵢ)ᵀ, nᵢᵀ]``, ``bᵢ = (qᵢ − pᵢ)·nᵢ`` — so ``AᵀA`` is also the information matrix.
+    """
+    m = p.shape[0]
+    inlier = np.empty(m, np.bool_)
+    c = np.zeros(3)
+    count = 0
+    sum_d2 = 0.0
+    for i in range(m):
+        d2 = (p[i, 0] - q[i, 0]) ** 2 + (p[i, 1] - q[i, 1]) ** 2 + (p[i, 2] - q[i, 2]) ** 2
+        inlier[i] = d2 <= max_d2
+        if inlier[i]:
+            count += 1
+            sum_d2 += d2
+            for j in range(3):
+                c[j] += p[i, j]
+    AtA = np.zeros((6, 6))
+    Atb = np.zeros(6)
+    if count == 0:
+        return inlier, c, AtA, Atb, sum_d2
+    c /= count
+    J = np.empty(6)
+    for i in range(m):
+        if not inlier[i]:
+            continue
+        x, y, z = p[i, 0] - c[0], p[i, 1] - c[1], p[i, 2] - c[2]
+        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+        J[0], J[1], J[2] = y * nz - z * ny, z * nx - x * nz, x * ny - y * nx
+        J[3], J[4], J[5] = nx, ny, nz
+        b = (q[i, 0] - p[i, 0]) * nx + (q[i, 1] - p[i, 1]) * ny + (q[i, 2] - p[i, 2]) * nz
+        for r in range(6):
+            Atb[r] += J[r] * b
+            for s in range(r, 6):
+                AtA[r, s] += J[r] * J[s]
+    for r in range(6):
+        for s in range(r):
+            AtA[r, s] = AtA[s, r]
+    return inlier, c, AtA, Atb, sum_d2
