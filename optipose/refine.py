@@ -8,7 +8,10 @@ seed, twenty times its predicted spread, while S2, whose pocket edges cancel, st
 search ends by running the objective's own registration: every candidate of k sensors (the greedy and
 joint winners, the best hand-placed k-subset, and the best distinct layouts of the surrogate history) is
 evaluated on a reduced protocol — each sequence at its two end angles, 14 scans instead of 77 — with a
-*selection* noise seed, and the best is kept. The full protocol with the held-out seed then reports it.
+*selection* noise seed. The kept one is, among the candidates no worse than the hand-placed layout on any
+axis, the lowest score (else simply the lowest score). For k ≥ 2 one candidate is the (k−1) finalist
+plus one sensor, so nested layouts keep the smaller choices. The full protocol with the held-out seed
+then reports the finalist.
 """
 
 from __future__ import annotations
@@ -73,12 +76,32 @@ def _sub_layouts(problem: SurrogateProblem, outcome: SearchOutcome, k: int, have
     return fresh[:2]
 
 
+def _extended(problem: SurrogateProblem, base: Found, others: list[Found]) -> Found | None:
+    """``base`` (k-1 sensors) plus the one sensor of ``others`` that the surrogate likes best with it.
+    Nested layouts keep every smaller choice available to the per-axis assignment, so k sensors never
+    do worse than the k-1 they contain."""
+    best = None
+    for other in others:
+        for i in range(other.k):
+            u = np.concatenate([base.u, other.u[6 * i : 6 * i + 6]])
+            value, stats = problem.evaluate(u)
+            if stats is not None and (best is None or value < best.score):
+                best = Found(base.k + 1, f"k={base.k} finalist + 1", u, problem.space.to_poses(u), value, stats)
+    return best
+
+
+def _dominates(choice, reference) -> bool:
+    """Every axis's median and 75th percentile at most the reference's."""
+    return all(a.median <= b.median and a.p75 <= b.p75 for a, b in zip(choice.axes, reference.axes))
+
+
 def select_finalists(part, objective, outcome: SearchOutcome, problem: SurrogateProblem, seed: int,
                      per_k: int = 3, max_time: float = np.inf, on_stage=None) -> tuple[dict[int, Found], list[dict]]:  # fmt: skip
-    """For every k, evaluate the candidates on the reduced protocol and keep the best.
+    """For every k, evaluate the candidates on the reduced protocol and keep the best: among those no
+    worse than the hand-placed layout on any axis, the lowest score; when none is, the lowest score.
 
     Returns the finalists per k (``strategy`` tells where each came from) and one row per candidate
-    (k, origin, surrogate score, reduced-protocol score in degrees).
+    (k, origin, surrogate score, reduced-protocol score in degrees, whether it dominates the hand layout).
     """
     from optipose.evaluate import Evaluator
 
@@ -86,24 +109,33 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
     reduced = reduced_objective(objective)
     finalists, rows = {}, []
     with Evaluator(part, reduced, seed=selection_seed(seed)) as evaluator:
+        hand = evaluator(part.layouts["hand"]) if "hand" in part.layouts else None
         for k in sorted(outcome.found):
             candidates = [f for f in (outcome.found.get(k), outcome.greedy.get(k), outcome.joint.get(k)) if f and f.stats]
             n = per_k * (2 if k == 1 else 1)  # a one-sensor candidate costs a third of a three-sensor one
             candidates = _distinct(candidates + _history_candidates(problem, k, n), 0.02)[:n]
             candidates += _sub_layouts(problem, outcome, k, candidates)
-            hand = outcome.hand.get(k)
-            best, best_score = None, np.inf
-            for cand in candidates + ([hand] if hand else []):
+            if k - 1 in finalists:
+                nested = _extended(problem, finalists[k - 1], candidates)
+                candidates += [nested] if nested is not None else []
+            reference = hand.table[k - 1] if hand is not None and k <= len(hand.table) else None
+            if reference is not None:
+                rows.append({"k": k, "origin": "hand", "surrogate_deg": np.nan,
+                             "reduced_protocol_deg": float(np.rad2deg(reference.score)), "dominates_hand": True})  # fmt: skip
+            best, best_key = None, None
+            for cand in candidates:
                 if time.monotonic() > deadline and best is not None:
                     log.info("selection for k=%d stopped by the time budget", k)
                     break
                 if on_stage:
                     on_stage(f"selecting k={k} on the reduced protocol ({cand.strategy})")
-                result = evaluator(cand.poses)
-                score = float(np.rad2deg(result.table[k - 1].score))
-                rows.append({"k": k, "origin": cand.strategy, "surrogate_deg": cand.score, "reduced_protocol_deg": score})
-                if cand is not hand and score < best_score:
-                    best, best_score = cand, score
+                choice = evaluator(cand.poses).table[k - 1]
+                dominates = reference is None or _dominates(choice, reference)
+                key = (not dominates, choice.score)
+                rows.append({"k": k, "origin": cand.strategy, "surrogate_deg": cand.score,
+                             "reduced_protocol_deg": float(np.rad2deg(choice.score)), "dominates_hand": dominates})  # fmt: skip
+                if best_key is None or key < best_key:
+                    best, best_key = cand, key
             if best is not None:
                 finalists[k] = best
     return finalists, rows
