@@ -69,7 +69,8 @@ class SearchConfig:
 
 
 BUDGETS: dict[str, dict] = {
-    "quick": dict(global_evals=120, local_evals=40, joint_evals=60, max_time=35.0, random_starts=4, select_candidates=0),
+    # quick: greedy only, so the layouts are nested and one full-protocol run validates k = 1, 2, 3
+    "quick": dict(global_evals=100, local_evals=30, max_time=25.0, random_starts=4, select_candidates=0, strategy="greedy"),
     "default": dict(global_evals=400, local_evals=120, joint_evals=200, max_time=180.0, select_candidates=3, select_time=240.0),
     "thorough": dict(
         global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16,
