@@ -139,57 +139,101 @@ def _project(p, i, f, planes, plane_c, q):
 
 
 @njit(cache=True, nogil=True)
-def follow(p, ids, planes, plane_c):
-    """:meth:`SurfaceReference.follow` in one pass: projections q (n, 3) and ok (n,) bool."""
-    n = p.shape[0]
-    q = np.empty((n, 3), np.float64)
-    ok = np.empty(n, np.bool_)
-    for i in range(n):
-        ok[i] = _project(p, i, ids[i], planes, plane_c, q)[0]
-    return q, ok
+def face_grid(tri, normals, offsets, origin, cell, shape, margin):
+    """Faces listed per cell of a grid (origin (3,), cube side ``cell``, ``shape`` (3,) cells): every face
+    within ``margin`` of the cell (bounding box and plane within margin of the cell's box, a superset).
+    Returns CSR start (cells + 1,) and face list, faces ascending in each cell."""
+    n_cells = shape[0] * shape[1] * shape[2]
+    start = np.zeros(n_cells + 1, np.int64)
+    _grid_pass(tri, normals, offsets, origin, cell, shape, margin, start[1:], np.empty(0, np.int64))
+    for c in range(n_cells):
+        start[c + 1] += start[c]
+    faces = np.empty(start[n_cells], np.int64)
+    _grid_pass(tri, normals, offsets, origin, cell, shape, margin, start[:-1].copy(), faces)
+    return start, faces
 
 
 @njit(cache=True, nogil=True)
-def nearest(p, ids, planes, plane_c, tri, lo, hi, nbr_start, nbr, radius):
-    """Closest points of p (n, 3) on a mesh, from a face guess ``ids`` (n,) updated in place.
+def _grid_pass(tri, normals, offsets, origin, cell, shape, margin, slot, faces):
+    """Count faces per cell into ``slot`` (faces empty), or write them at ``slot`` (advanced)."""
+    write = faces.shape[0] > 0
+    half_diag = 0.5 * np.sqrt(3.0) * cell
+    lo_c = np.empty(3, np.int64)
+    hi_c = np.empty(3, np.int64)
+    for f in range(tri.shape[0]):
+        for j in range(3):
+            lo_v = min(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) - margin
+            hi_v = max(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) + margin
+            lo_c[j] = max(0, np.int64(np.floor((lo_v - origin[j]) / cell)))
+            hi_c[j] = min(shape[j] - 1, np.int64(np.floor((hi_v - origin[j]) / cell)))
+        for i in range(lo_c[0], hi_c[0] + 1):
+            for j in range(lo_c[1], hi_c[1] + 1):
+                for k in range(lo_c[2], hi_c[2] + 1):
+                    cx = origin[0] + (i + 0.5) * cell
+                    cy = origin[1] + (j + 0.5) * cell
+                    cz = origin[2] + (k + 0.5) * cell
+                    if abs(normals[f, 0] * cx + normals[f, 1] * cy + normals[f, 2] * cz - offsets[f]) > half_diag + margin:
+                        continue
+                    c = (i * shape[1] + j) * shape[2] + k
+                    if write:
+                        faces[slot[c]] = f
+                    slot[c] += 1
 
-    A point inside its face by more than 2|d| keeps it (as ``follow``). Otherwise the faces near its face
-    are searched exactly: ``nbr[nbr_start[f]:nbr_start[f + 1]]`` lists every face within ``radius`` of
-    face f, and any face closer to p than the closest point x on f lies within 2|p − x| of f, so the list
-    holds the answer when 2|p − x| <= radius (faces whose bounding box (lo, hi) is farther than the best
-    so far are skipped). The point is settled when it lies inside the face found by more than 2|d|, like
-    a followed point. Returns q (n, 3) and ``open`` (n,) bool: points not settled, left to the global
-    search (too far from their face, or closest to an edge or a corner).
+
+@njit(cache=True, nogil=True)
+def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, start, faces):
+    """Closest points of p (n, 3) on a mesh; ``ids`` (n,) holds a guess of each point's face (-1: none)
+    and gets the answer.
+
+    A point inside its guessed face by more than 2|d| keeps it (as ``follow``). Otherwise the faces
+    listed for its grid cell (:func:`face_grid`) are searched exactly: they hold every face within
+    ``margin`` of the cell, so the answer is certain when the closest point found is within ``margin``
+    (faces whose bounding box (lo, hi) is farther than the best so far are skipped; the guessed face
+    starts the search, which prunes more). The point is settled when it lies inside the face found by
+    more than 2|d|, like a followed point; a point closest to an edge is never settled, so an exact tie
+    between faces needs a point equidistant from two faces' interiors. Returns q (n, 3) and ``open``
+    (n,) bool: points not settled, left to the global search (outside the grid or farther than
+    ``margin`` from the surface, or closest to, or near, an edge or a corner).
     """
     n = p.shape[0]
     q = np.empty((n, 3), np.float64)
     open_ = np.zeros(n, np.bool_)
+    m2 = margin * margin
     for i in range(n):
         f = ids[i]
-        ok, _ = _project(p, i, f, planes, plane_c, q)
-        if ok:
+        if f >= 0 and _project(p, i, f, planes, plane_c, q)[0]:
             continue
-        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-        qx, qy, qz = _closest_on_triangle(px, py, pz, tri[f, 0], tri[f, 1], tri[f, 2])
-        best = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
-        if 4.0 * best > radius * radius:
+        c = 0
+        outside = False
+        for j in range(3):
+            cj = np.int64(np.floor((p[i, j] - origin[j]) / cell))
+            if cj < 0 or cj >= shape[j]:
+                outside = True
+            c = c * shape[j] + cj
+        if outside:
             open_[i] = True
             continue
-        g_best = f
-        for k in range(nbr_start[f], nbr_start[f + 1]):
-            g = nbr[k]
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        best = m2
+        g_best = -1
+        if f >= 0:
+            gx, gy, gz = _closest_on_triangle(px, py, pz, tri[f, 0], tri[f, 1], tri[f, 2])
+            d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
+            if d2 <= best:
+                best, g_best = d2, f
+        for k in range(start[c], start[c + 1]):
+            g = faces[k]
             box = 0.0
             for j in range(3):
                 gap = max(lo[g, j] - p[i, j], p[i, j] - hi[g, j], 0.0)
                 box += gap * gap
-            if box >= best:
+            if box > best:
                 continue
             gx, gy, gz = _closest_on_triangle(px, py, pz, tri[g, 0], tri[g, 1], tri[g, 2])
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
-            if d2 < best:
+            if d2 < best or (g_best < 0 and d2 <= best):
                 best, g_best = d2, g
-        ok, _ = _project(p, i, g_best, planes, plane_c, q)
-        if ok:
+        if g_best >= 0 and _project(p, i, g_best, planes, plane_c, q)[0]:
             ids[i] = g_best
         else:
             open_[i] = True

@@ -9,8 +9,8 @@ and an id. Two kinds:
   point that still projects well inside the face it was matched to keeps that face
   (:meth:`SurfaceReference.follow`), which makes an ICP iteration near convergence cost a projection
   rather than a search. :meth:`SurfaceReference.nearest` goes further for ICP: a point that leaves its
-  face for a neighbouring face's interior is found there by an exact search of the faces near it, so
-  the global search is left to points near edges and corners and to points that moved far.
+  face for another face's interior is found by an exact search of the faces listed in its cell of a
+  grid (built once), so the BVH search is left to points near edges and corners and far from the part.
 - :class:`SampledReference` — a point cloud with normals and a KD-tree: a CAD sample at a given spacing
   (``cad-sample``) or the scan at the nominal orientation (``nominal-scan``).
 """
@@ -21,7 +21,8 @@ import numpy as np
 
 __all__ = ["SurfaceReference", "SampledReference", "sample_surface"]
 
-_NEIGHBOUR_RADIUS = 1e-3  # m: faces listed near each face for nearest(); exact for points within half of it
+_CELL = 0.5e-3  # m: grid cells of nearest(), larger if the part would need more than _MAX_CELLS
+_MAX_CELLS = 4_000_000
 
 
 class SurfaceReference:
@@ -54,26 +55,23 @@ class SurfaceReference:
         self._scene.add_triangles(mesh)
         self.area = 0.5 * float(area2.sum())
         self._tri = np.ascontiguousarray(tri)
-        self._neighbours = None
+        self._face_grid = None
 
-    def _near_faces(self) -> tuple[np.ndarray, ...]:
-        """Faces whose bounding boxes lie within ``_NEIGHBOUR_RADIUS`` of each face's (a superset of the faces
-        that close): face boxes lo, hi (f, 3), CSR start (f + 1,) and list, built on first use."""
-        if self._neighbours is None:
-            from scipy.spatial import cKDTree
+    def _grid(self) -> tuple:
+        """The faces near each cell of a ``_CELL`` grid over the part (see :func:`_icp_kernels.face_grid`),
+        with the faces' bounding boxes; built on first use."""
+        if self._face_grid is None:
+            from optipose._icp_kernels import face_grid
 
             lo, hi = self._tri.min(axis=1), self._tri.max(axis=1)
-            centre, half = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo, axis=1)
-            near = cKDTree(centre).query_ball_point(centre, _NEIGHBOUR_RADIUS + half + half.max())
-            lists = []
-            for f, cand in enumerate(near):
-                cand = np.asarray(cand, dtype=np.int64)
-                gap = np.maximum(0.0, np.maximum(lo[cand] - hi[f], lo[f] - hi[cand]))
-                keep = cand[(np.einsum("ij,ij->i", gap, gap) <= _NEIGHBOUR_RADIUS**2) & (cand != f)]
-                lists.append(np.sort(keep))
-            start = np.concatenate([[0], np.cumsum([len(x) for x in lists])]).astype(np.int64)
-            self._neighbours = (np.ascontiguousarray(lo), np.ascontiguousarray(hi), start, np.concatenate(lists).astype(np.int64))
-        return self._neighbours
+            extent = hi.max(axis=0) - lo.min(axis=0)
+            cell = max(_CELL, float(np.prod(extent + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
+            margin = 2 * cell  # exact for points within a millimetre of the surface at the default cell
+            origin = lo.min(axis=0) - margin
+            shape = np.floor((hi.max(axis=0) + margin - origin) / cell).astype(np.int64) + 1
+            start, faces = face_grid(self._tri, self.normals, self.offsets, origin, cell, shape, margin)
+            self._face_grid = (np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape, margin, start, faces)
+        return self._face_grid
 
     def __repr__(self) -> str:
         return f"SurfaceReference({len(self.faces)} faces, {self.area * 1e6:.0f} mm^2)"
@@ -110,22 +108,23 @@ class SurfaceReference:
         """Closest surface points (n, 3), face normals (n, 3) and face ids (n,), searching globally only
         where it must.
 
-        ids : each point's face at the previous ICP step, or None (then this is :meth:`closest`). A point
-        that lies inside its face by more than twice its distance keeps it (:meth:`follow`); one that does
-        not, but does inside a face near its face (an exact search of the faces within
-        ``_NEIGHBOUR_RADIUS``), takes that face and its float64 projection. The rest (points that moved
-        far, or whose closest point is on or near an edge or a corner) get :meth:`closest`'s answer. Where
+        ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
+        inside its face by more than twice its distance keeps it (:meth:`follow`). Any other point is searched exactly among
+        the faces listed for its cell of a grid over the part (every face within two cells of the cell);
+        when the closest face found is that close and the point lies inside it by more than twice its
+        distance, the point takes that face and its float64 projection, as :meth:`closest` would. The
+        rest (points far from the surface, or whose closest point is on or near an edge or a corner) get
+        :meth:`closest`'s answer (Open3D's, float32 off the faces' interiors) unchanged. Where
         the float32 search picks a face only by rounding (a point within nanometres of the edge between
         two coplanar sliver triangles, where its point can be micrometres off), this answers the nearer
         point, so distances can be smaller than :meth:`closest`'s; point-to-plane residuals agree.
         """
         from optipose import _icp_kernels as kernels
 
-        if ids is None:
-            return self.closest(points)
         points = np.ascontiguousarray(points, dtype=np.float64)
-        ids = np.array(ids, dtype=np.int64)
-        q, open_ = kernels.nearest(points, ids, self._planes, self._plane_c, self._tri, *self._near_faces(), _NEIGHBOUR_RADIUS)
+        ids = np.full(len(points), -1, dtype=np.int64) if ids is None else np.array(ids, dtype=np.int64)
+        ids[ids >= len(self.faces)] = -1
+        q, open_ = kernels.nearest(points, ids, self._planes, self._plane_c, self._tri, *self._grid())
         open_ = np.flatnonzero(open_)
         if len(open_):
             q[open_], _, ids[open_] = self.closest(points[open_])

@@ -170,10 +170,14 @@ def _tilted_scan(block, rpy_deg, spacing=0.7e-3, noise=5e-6):
     return transform_points(part_motion(np.asarray(rpy_deg) * DEG, block.rotation_centre), points)
 
 
-def test_nearest_from_a_face_guess_answers_what_closest_does(block, surface):
+@pytest.mark.parametrize("guess", ["none", "previous step"])
+def test_nearest_answers_what_closest_does(block, surface, guess):
     scan = _tilted_scan(block, [0.6, -0.4, 0.8])
-    _, _, guess = surface.closest(transform_points(part_motion(np.array([0.3, 0.2, -0.5]) * DEG, block.rotation_centre), scan))
-    q, n, ids = surface.nearest(scan, guess)
+    if guess == "previous step":
+        _, _, ids = surface.closest(transform_points(part_motion(np.array([0.3, 0.2, -0.5]) * DEG, block.rotation_centre), scan))
+    else:
+        ids = None
+    q, n, ids = surface.nearest(scan, ids)
     q0, n0, ids0 = surface.closest(scan)
     np.testing.assert_array_equal(q, q0)
     np.testing.assert_array_equal(n, n0)
