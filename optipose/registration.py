@@ -4,6 +4,9 @@ One API, two back-ends (chosen by ``RegistrationConfig.backend``):
 
 - ``fast`` — ICP written here on top of a :mod:`optipose.reference` built once per part: point-to-point
   (Kabsch on closest points, the paper's method) or point-to-plane (a linearised 6×6 solve per step).
+  Each step is three compiled passes (:mod:`optipose._icp_kernels`): move the cloud, find closest points
+  from the faces of the previous step (``reference.nearest``), sum the normal equations.
+  :func:`_register_plain` is the same loop in numpy, kept as the reference the tests compare with.
   Generalized ICP has no fast path and goes to Open3D.
 - ``open3d`` — ``o3d.pipelines.registration.registration_icp`` / ``registration_generalized_icp`` against
   a dense sample of the reference, as the paper ran it. Open3D rebuilds its KD-tree on every call, which
