@@ -62,7 +62,7 @@ def make_block() -> trimesh.Trimesh:
 
 
 def scanner_rays(scanner: Scanner, T_O_S: np.ndarray, motion: ScanMotion):
-    """The primary rays of a whole scan, built as ``Scanner._scan_block`` builds them (part frame, float32).
+    """The primary rays of a whole scan, built as ``Scanner._block_hits`` builds them (part frame, float32).
 
     Returns origins (n, 3), directions (n, 3), tfar (n,), n = profiles × points per profile.
     """
@@ -70,7 +70,8 @@ def scanner_rays(scanner: Scanner, T_O_S: np.ndarray, motion: ScanMotion):
     shifts = motion.offsets()
     origins = (view.o_P32[None] - (shifts[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
     directions = np.tile(view.d_P32, (len(shifts), 1))
-    return np.ascontiguousarray(origins), directions, np.tile(scanner._t_max, len(shifts))
+    n_col = scanner.sensor.points_per_profile
+    return np.ascontiguousarray(origins), directions, np.tile(scanner._t_max_tiled[:n_col], len(shifts))
 
 
 # ---------------------------------------------------------------------------------------------------------
