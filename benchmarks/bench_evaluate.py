@@ -72,6 +72,8 @@ def main() -> None:
 
     # the naive loop on a few orientations, same process
     p = ev.perturbations
+    if args.naive < 1:
+        return
     picks = np.linspace(0, len(p) - 1, args.naive).round().astype(int)
     points, normals = sample_surface(part.mesh.vertices, part.mesh.faces, 0.2e-3)
     target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
