@@ -17,7 +17,7 @@ def register(app: typer.Typer) -> None:
     @app.command("search")
     @friendly_errors
     def search(
-        part: Annotated[str, typer.Argument(help="A shipped part name, a part TOML or a mesh file (STL/OBJ/PLY).")],
+        part: Annotated[Optional[str], typer.Argument(help="A shipped part name, a part TOML or a mesh file (STL/OBJ/PLY); not needed with --resume.")] = None,
         units: Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 2 means mm), m, mm or in.")] = "auto",
         sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
         budget: Annotated[str, typer.Option(help="quick (about a minute), default (under 10 min) or thorough.")] = "default",
@@ -88,6 +88,10 @@ def search_command(part, units, sensors, budget, objective, seed, jobs, out, res
     from optipose.search_run import config_from_budget
 
     console = Console(stderr=True)
+    if part is None and resume is None:
+        from optipose.errors import ConfigError
+
+        raise ConfigError("give a PART to search (a shipped part name or a mesh file), or --resume DIR")
     if resume:
         saved = _resumed(resume)
         part = saved["part"]["source"] or saved["part"]["name"]
@@ -108,12 +112,12 @@ def search_command(part, units, sensors, budget, objective, seed, jobs, out, res
         report = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
     except KeyboardInterrupt:
         console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
-                      f"continue with `optipose search --resume {folder} {part}`")  # fmt: skip
+                      f"continue with `optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(130) from None
     _print_report(Console(), report, the_part)
     if report.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
-                      f"`optipose search --resume {folder} {part}`")  # fmt: skip
+                      f"`optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(130)
     console.print(f"results: {folder}")
     return folder

@@ -40,6 +40,11 @@ def files(tmp_path_factory):
     return d
 
 
+def test_search_without_a_part_says_so():
+    result = run("search")
+    assert result.returncode == 2 and "give a PART" in result.stderr
+
+
 def test_a_part_no_sensor_can_see_ends_with_a_clear_message(files):
     result = run("search", files / "speck.stl", "--units", "m", "--search-config", files / "small.toml", "--out", files / "speck")
     assert result.returncode == 2, result.stderr
@@ -76,7 +81,7 @@ def test_resume_replays_from_the_cache_to_the_same_layout(searched):
     out, _ = searched
     before = (out / "layouts" / "found_k2.toml").read_text()
     n_before = len(pd.read_csv(out / "history.csv"))
-    result = run("search", "--resume", out, "part_b")
+    result = run("search", "--resume", out)
     assert result.returncode == 0, result.stderr
     assert (out / "layouts" / "found_k2.toml").read_text() == before
     assert len(pd.read_csv(out / "history.csv")) == n_before
