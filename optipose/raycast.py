@@ -1,7 +1,7 @@
 """Ray casting back-ends behind one interface: Embree through embreex, or Open3D's RaycastingScene.
 
 Both build the acceleration structure once per mesh and then answer batches of rays. Embree works in
-float32; callers that need float64 hits refine them with :func:`refine_hits` against the triangles.
+float32; the scanner recomputes each hit in float64 from the triangle Embree names (:func:`face_planes`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "refine_hits", "BACKENDS"]
+__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "BACKENDS"]
 
 
 class RayCaster(Protocol):
@@ -156,16 +156,3 @@ def face_planes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     normal /= np.where(length > 0, length, 1.0)
     return normal, np.einsum("ij,ij->i", normal, tris[:, 0])
-
-
-def refine_hits(
-    origins: np.ndarray, directions: np.ndarray, tri: np.ndarray, normals: np.ndarray, offsets: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Exact float64 ray–plane distances (n,) and unit face normals (n, 3) for rays with a known triangle.
-
-    Embree's float32 distance only locates the triangle; intersecting the ray with that triangle's plane
-    (``normals``, ``offsets`` from :func:`face_planes`) in float64 puts the hit on the surface to ~1e-16 m.
-    """
-    n = normals[tri]
-    t = (offsets[tri] - np.einsum("ij,ij->i", n, origins)) / np.einsum("ij,ij->i", n, directions)
-    return t, n

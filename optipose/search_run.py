@@ -26,7 +26,7 @@ from optipose.layout import Layout, SensorPose, write_layout
 from optipose.search import BUDGETS, Found, SearchConfig, SearchOutcome, SurrogateProblem, run_search
 from optipose.surrogate import SensorInfo
 
-__all__ = ["SearchReport", "run", "validation_seed", "comparison_rows", "NoFeasibleLayout"]
+__all__ = ["SearchReport", "run", "validation_seed", "config_from_budget", "NoFeasibleLayout"]
 
 log = logging.getLogger(__name__)
 
@@ -237,10 +237,6 @@ def _choice_rows(label: str, k: int, choice) -> list[dict]:
          "median_deg": float(np.rad2deg(a.median)), "p75_deg": float(np.rad2deg(a.p75)), "score_deg": float(np.rad2deg(choice.score))}
         for a in choice.axes
     ]  # fmt: skip
-
-
-def comparison_rows(report: SearchReport) -> pd.DataFrame:
-    return pd.DataFrame(report.rows)
 
 
 def config_from_budget(budget: str, sensors: tuple[int, ...], overrides: dict | None = None) -> SearchConfig:
