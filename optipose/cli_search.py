@@ -151,7 +151,8 @@ def _print_report(console, report, part) -> None:
 
     outcome = report.outcome
     if report.validated:
-        table = Table(title=f"{part.name}: found vs. hand-placed, full protocol, held-out noise seed (degrees, median / 75th pct)")
+        table = Table(title=f"{part.name}: found vs. hand-placed, full protocol, held-out noise seed "
+                            "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
         for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
             table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")
         rows = report.rows
@@ -160,15 +161,18 @@ def _print_report(console, report, part) -> None:
                 mine = [r for r in rows if r["k"] == k and r["layout"] == label]
                 if not mine:
                     continue
-                cells = {r["axis"]: f"{r['median_deg']:.4f} / {r['p75_deg']:.4f} ({r['subset']})" for r in mine}
-                table.add_row(str(k), label, mine[0]["sensors"], cells.get("roll", "-"), cells.get("pitch", "-"), cells.get("yaw", "-"), f"{mine[0]['score_deg']:.4f}")
+                cells = {r["axis"]: f"{1e3 * r['median_deg']:.3f}/{1e3 * r['p75_deg']:.3f} {r['subset']}" for r in mine}
+                table.add_row(
+                    str(k), label, mine[0]["sensors"], cells.get("roll", "-"), cells.get("pitch", "-"),
+                    cells.get("yaw", "-"), f"{1e3 * mine[0]['score_deg']:.3f}",
+                )  # fmt: skip
         console.print(table)
-    strategies = Table(title="surrogate scores (deg): greedy vs. joint vs. hand")
+    strategies = Table(title="surrogate scores (millidegrees): greedy vs. joint vs. hand")
     for col in ("k", "greedy", "joint", "hand", "winner"):
         strategies.add_column(col, justify="right")
     for k in sorted(outcome.found):
         g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
-        fmt = lambda f: f"{f.score:.4f}" if f is not None and f.stats else "-"  # noqa: E731
+        fmt = lambda f: f"{1e3 * f.score:.3f}" if f is not None and f.stats else "-"  # noqa: E731
         strategies.add_row(str(k), fmt(g), fmt(j), fmt(h), outcome.found[k].strategy)
     console.print(strategies)
     for k, layout in sorted(report.layouts.items()):
