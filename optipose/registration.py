@@ -144,8 +144,7 @@ def _register_fast(source, reference, cfg: RegistrationConfig, initial: Matches 
         if delta is None:
             return _failed(len(source), "degenerate step", T, it)
         T = delta @ T
-        angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
-        if angle < cfg.tolerance_rotation and np.linalg.norm(delta[:3, 3]) < cfg.tolerance_translation:
+        if _small_step(delta, cfg):
             converged = True
             break
         if cfg.method == "point_to_point":
@@ -188,8 +187,7 @@ def _register_plain(source, reference, cfg: RegistrationConfig, initial: Matches
         if delta is None:
             return _failed(len(source), "degenerate step", T, it)
         T = delta @ T
-        angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
-        if angle < cfg.tolerance_rotation and np.linalg.norm(delta[:3, 3]) < cfg.tolerance_translation:
+        if _small_step(delta, cfg):
             converged = True
             break
         if cfg.method == "point_to_point":
@@ -206,6 +204,12 @@ def _register_plain(source, reference, cfg: RegistrationConfig, initial: Matches
         information=information_matrix(p[inlier], n[inlier]),
         failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
     )
+
+
+def _small_step(delta: np.ndarray, cfg: RegistrationConfig) -> bool:
+    """The ICP step turned less than the rotation tolerance and moved less than the translation one."""
+    angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
+    return bool(angle < cfg.tolerance_rotation and np.linalg.norm(delta[:3, 3]) < cfg.tolerance_translation)
 
 
 def _accelerate(T: np.ndarray, delta: np.ndarray, c: np.ndarray, previous: np.ndarray | None):
