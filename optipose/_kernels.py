@@ -13,10 +13,11 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def measure_hits(
-    tri, n_col, shift_b, ray_cos, ray_sin, nu, nw, q, b, a, on_hull,
+    tri, n_part, n_col, shift_b, ray_cos, ray_sin, nu, nw, q, b, a, on_hull,
     apex_z, z_near, z_far, intensity_grid, threshold, saturation,
 ):  # fmt: skip
-    """From Embree's first triangles (m,) of a block of rays to the hits that are measured.
+    """From Embree's first triangles (m,) of a block of rays to the hits that are measured; triangles
+    ``n_part`` and above belong to occluders and hide what is behind them.
 
     Returns ``idx`` (n,) ray index in the block, ``T`` (n,) float64 distance from the fan's apex,
     ``intensity`` (n,), ``tri`` (n,) and ``shadow_test`` (n,) bool: hits whose shadow must still be
@@ -33,7 +34,7 @@ def measure_hits(
     n = 0
     for i in range(m):
         f = tri[i]
-        if f < 0:
+        if f < 0 or f >= n_part:  # a miss, or an occluder (faces from n_part on): nothing measured
             continue
         col = i % n_col
         shift = shift_b[i // n_col]

@@ -41,7 +41,21 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
     from optipose.partview import render_part
 
     loaded = load_part(part, units)
-    path = render_part(loaded, out or Path(f"{loaded.name}.png"), layout if layout in loaded.layouts else None)
+    if layout.endswith(".toml"):  # a layout file, e.g. results/<run>/layouts/found_k2.toml
+        from dataclasses import replace
+
+        from optipose.layout import load_layout
+
+        extra = load_layout(layout)
+        loaded = replace(loaded, layouts={**loaded.layouts, extra.name: extra})
+        layout = extra.name
+    elif layout == "hand" and layout not in loaded.layouts:
+        layout = None  # a bare mesh: draw the part alone
+    elif layout not in loaded.layouts:
+        from optipose.errors import ConfigError
+
+        raise ConfigError(f"part '{loaded.name}' has no layout '{layout}' (it has: {', '.join(loaded.layouts) or 'none'}; or give a .toml file)")
+    path = render_part(loaded, out or Path(f"{loaded.name}.png"), layout)
     _console().print(f"wrote {path}")
     return path
 

@@ -114,6 +114,7 @@ class Evaluator:
             observability_tolerance=self.objective.statistic.observability_tolerance,
             seed=self.seed,
             threads=None if self.jobs == 1 else 1,
+            occluders=tuple(getattr(part, "occluders", ())),
         )
         self._pool = None
 
@@ -174,6 +175,7 @@ class _Setup:
     observability_tolerance: float
     seed: int
     threads: int | None
+    occluders: tuple = ()  # the part's keep-outs, (lo, hi) boxes that hide what they cover
 
 
 _STATE: dict[str, "_Worker"] = {}  # per process: the live scanner and reference of each evaluator
@@ -188,7 +190,7 @@ class _Worker:
 
         self.setup = setup
         mesh = trimesh.Trimesh(setup.vertices, setup.faces, process=False)
-        self.scanner = Scanner(mesh, setup.sensor, setup.material, threads=setup.threads)
+        self.scanner = Scanner(mesh, setup.sensor, setup.material, threads=setup.threads, occluders=list(setup.occluders))
         cfg = setup.registration
         if cfg.reference == "cad-sample":
             self.reference = SampledReference(*sample_surface(setup.vertices, setup.faces, cfg.reference_spacing), kind="cad-sample")

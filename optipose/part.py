@@ -100,6 +100,17 @@ class Part:
         """Bounding-box extents (3,) m."""
         return np.asarray(self.mesh.extents, dtype=float)
 
+    @property
+    def occluders(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The keep-outs as boxes that block the laser and the receiver (the flange hides what it covers)."""
+        return [(np.asarray(k.lo, float), np.asarray(k.hi, float)) for k in self.keepouts]
+
+    def scanner(self, sensor=None, material=None, **kwargs):
+        """A :class:`optipose.scanner.Scanner` of this part, its keep-outs as occluders."""
+        from optipose.scanner import Scanner
+
+        return Scanner(self.mesh, sensor or self.sensor, material or self.material, occluders=self.occluders, **kwargs)
+
 
 def list_parts() -> list[str]:
     """Names of the shipped parts (folders of ``parts/`` holding a ``part.toml``)."""
@@ -252,16 +263,14 @@ def nominal_scans(part: Part, layout: str = "hand") -> dict:
 
     Each sensor uses its own model when the layout names one, else the part's.
     """
-    from optipose.scanner import Scanner
-
     if layout not in part.layouts:
         have = ", ".join(part.layouts) or "none"
         raise ConfigError(f"part '{part.name}' has no layout '{layout}' (layouts: {have})")
-    scanners: dict[str, Scanner] = {}
+    scanners: dict = {}
     out = {}
     for pose in part.layouts[layout].sensors:
         model = pose.sensor or part.sensor
         if model not in scanners:
-            scanners[model] = Scanner(part.mesh, model, part.material)
+            scanners[model] = part.scanner(model)
         out[pose.name] = scanners[model].scan(pose.T_O_S, part.motion, centre=part.rotation_centre)
     return out

@@ -69,9 +69,8 @@ def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict 
 
 
 def _nominal_points(part, layout: Layout) -> dict[str, np.ndarray]:
-    from optipose.scanner import Scanner
 
-    scanner = Scanner(part.mesh, part.sensor, part.material)
+    scanner = part.scanner()
     scans = scanner.scan_many(layout.poses, part.motion, noise=False)
     return {s.name: scan.points for s, scan in zip(layout.sensors, scans)}
 

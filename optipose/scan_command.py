@@ -64,13 +64,12 @@ def run_scan(part_spec, sensor_pose, layout_path, material, sensor, rpy_deg, see
 
     from optipose.part import load_part
     from optipose.profiles import write_profiles
-    from optipose.scanner import Scanner
 
     if out and out.suffix.lower() not in CLOUD_SUFFIXES:  # refuse before the work, not after
         raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
     part = load_part(part_spec, units=units)
     layout = poses_from_cli(sensor_pose, layout_path, part)
-    scanner = Scanner(part.mesh, sensor or part.sensor, material or part.material)
+    scanner = part.scanner(sensor, material)
     rpy = np.deg2rad(rpy_deg)
     scans = scanner.scan_many(layout.poses, part.motion, rpy, part.rotation_centre, rng=seed, noise=noise)
 

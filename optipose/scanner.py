@@ -96,6 +96,9 @@ class Scanner:
     backend : ray-casting back-end, see :func:`optipose.raycast.make_caster`.
     threads : worker threads for one scan (default: the cores this process may use, or
         ``OPTIPOSE_RAY_THREADS``). Results do not depend on it.
+    occluders : axis-aligned boxes ``(lo (3,), hi (3,))`` in the part's frame, m, that travel with the part
+        (a part's keep-outs: the flange it is held by). They cast shadows and hide what is behind them but
+        are never measured.
     """
 
     def __init__(
@@ -105,7 +108,18 @@ class Scanner:
         material: Material | str,
         backend: str = "auto",
         threads: int | None = None,
+        occluders: list[tuple[np.ndarray, np.ndarray]] | None = None,
     ):
+        self.n_part_faces = len(mesh.faces)
+        if occluders:  # keep-outs (the flange) block the laser and the receiver but return no points
+            import trimesh
+
+            boxes = []
+            for lo, hi in occluders:
+                box = trimesh.creation.box(np.asarray(hi, float) - np.asarray(lo, float))
+                box.apply_translation((np.asarray(lo, float) + np.asarray(hi, float)) / 2)
+                boxes.append(box)
+            mesh = trimesh.util.concatenate([trimesh.Trimesh(mesh.vertices, mesh.faces, process=False), *boxes])
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
         self.sensor = load_sensor(sensor)
@@ -222,7 +236,7 @@ class Scanner:
         origins = (view.o_P32[None] - (shift_b[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
         tri = self.caster.first_triangle(origins, view.d_tiled[: m * n_col], self._t_max_tiled[: m * n_col])
         idx, T, inten, tri, test = measure_hits(
-            tri, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
+            tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
             self._on_hull, s.apex_z, s.z_near, s.z_far, self._intensity_grid, s.detection_threshold, s.saturation,
         )  # fmt: skip
         test = np.flatnonzero(test)

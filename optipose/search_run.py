@@ -148,7 +148,22 @@ def run(part, objective, config: SearchConfig, seed: int, folder: Path, budget: 
     if on_stage:
         on_stage("validating on the full protocol (held-out noise seed)")
     _validate(report, part, objective, seed, jobs)
+    _pictures(report, part)
     return report
+
+
+def _pictures(report: SearchReport, part) -> None:
+    """``layouts/found_k*.png`` beside the TOML files: each found layout drawn as ``optipose show`` does."""
+    from dataclasses import replace as _replace
+
+    from optipose.partview import render_part
+
+    shown = _replace(part, layouts={**part.layouts, **{f"found_k{k}": lay for k, lay in report.layouts.items()}})
+    for k in report.layouts:
+        try:
+            render_part(shown, report.folder / "layouts" / f"found_k{k}.png", f"found_k{k}")
+        except Exception as exc:  # a picture must never cost the results
+            log.warning("could not draw found_k%d: %s", k, exc)
 
 
 def _write_layouts(report: SearchReport, part, found: dict[int, Found]) -> None:

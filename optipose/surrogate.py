@@ -67,7 +67,7 @@ class Surrogate:
         self.part = part
         self.full_sensor = load_sensor(part.sensor)
         sensor = replace(self.full_sensor, points_per_profile=min(columns, self.full_sensor.points_per_profile))
-        self.scanner = Scanner(part.mesh, sensor, part.material, threads=threads)
+        self.scanner = Scanner(part.mesh, sensor, part.material, threads=threads, occluders=getattr(part, "occluders", None))
         self.motion = ScanMotion(part.motion.length, part.motion.step * step_factor)
         self.voxel = voxel
         self.extra_variance = extra_variance  # m², e.g. a sampled reference's spacing²/12

@@ -220,3 +220,17 @@ def test_normals_follow_the_rotated_part():
     normals = scanner.normals(scan)
     expected = part_motion(rpy, np.zeros(3))[:3, 2]  # the plate's +z, rotated
     assert len(scan) > 0 and np.allclose(normals, expected, atol=1e-12)
+
+
+def test_an_occluder_hides_what_it_covers_and_returns_no_points():
+    # A plate at z = 0 seen from below through a box (the flange) that covers its middle third in x.
+    T_UP = np.array([[0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 1, -0.002], [0, 0, 0, 1.0]])  # z_S = +z_O, R under the plate
+    motion = ScanMotion(30 * MM)
+    free = Scanner(plate(0.0), SENSOR, "white-diffuse").scan(T_UP, motion, noise=False)
+    flange = (np.array([-5, -40, -15]) * MM, np.array([5, 40, -2.5]) * MM)  # 10 mm wide in x, below the plate
+    hidden = Scanner(plate(0.0), SENSOR, "white-diffuse", occluders=[flange]).scan(T_UP, motion, noise=False)
+    assert len(free) == motion.n_profiles * 3200
+    assert np.allclose(hidden.points[:, 2], -2 * MM, atol=1e-12)  # only the plate's bottom face, never the box
+    x = hidden.points[:, 0]
+    assert not np.any((x > -5 * MM) & (x < 5 * MM))  # nothing behind the box
+    assert np.any(x < -8 * MM) and np.any(x > 8 * MM)
