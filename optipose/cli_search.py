@@ -146,7 +146,6 @@ def _run_with_progress(console, part, objective, config, seed, folder, budget, j
 
 
 def _print_report(console, report, part) -> None:
-    import numpy as np
     from rich.table import Table
 
     outcome = report.outcome
