@@ -1,9 +1,11 @@
 """How well does the surrogate rank layouts against ICP? (SPEC §6)
 
-Draws feasible single-sensor layouts at random for a part (seeded), scores each with the surrogate
-(information matrix of one reduced nominal scan) and with the objective's own ICP on the reduced protocol
-(14 scans, as the search's selection stage), and prints Spearman's rank correlation between the two, the
-agreement on the best layout, and the time per evaluation of each fidelity.
+Draws feasible single-sensor layouts at random for a part (seeded), adds the part's hand-placed sensors,
+scores each with two surrogates, the noise-only information matrix of one reduced nominal scan and the
+same plus the voxel-bias model (the search's default), and with the objective's own ICP on the reduced
+protocol (14 scans, as the search's selection stage). Prints Spearman's rank correlation with ICP for the
+score and per axis, the median factor between predicted and ICP per-axis scores, the agreement on the best
+layout, and the time per evaluation of each fidelity.
 
     .venv/bin/python benchmarks/bench_surrogate_ranking.py [--part part_b] [--layouts 16] [--seed 0]
 """
@@ -21,6 +23,9 @@ from optipose.objective import load_objective
 from optipose.part import load_part
 from optipose.refine import reduced_objective
 from optipose.search import SearchConfig, SurrogateProblem
+from optipose.surrogate import Surrogate, predicted_stats
+
+AXES = ("roll", "pitch", "yaw")
 
 
 def main() -> None:
@@ -41,26 +46,49 @@ def main() -> None:
         t_sur += time.perf_counter() - t0
         if stats is not None:
             layouts.append((u, value))
-    t_icp, icp = 0.0, []
+    hand = part.layouts["hand"].poses if "hand" in part.layouts else []
+    layouts += [(problem.space.from_pose(T), problem.evaluate(problem.space.from_pose(T), constrained=False)[0]) for T in hand]
+    n_hand = len(hand)
+    t0 = time.perf_counter()
+    bias_stats = [predicted_stats([problem.surrogate.info(problem.space.to_pose(u))], *problem._weights) for u, _ in layouts]
+    t_bias = time.perf_counter() - t0
+    layouts = [(u, s["score"]) for (u, _), s in zip(layouts, bias_stats)]
+    t_icp, icp, icp_axes = 0.0, [], []
     with Evaluator(part, reduced_objective(objective), seed=args.seed + 1) as evaluator:
         for u, _ in layouts:
             t0 = time.perf_counter()
             result = evaluator([problem.space.to_pose(u)])
             t_icp += time.perf_counter() - t0
             icp.append(np.rad2deg(result.table[0].score))
-    surrogate = np.array([v for _, v in layouts])
-    icp = np.array(icp)
-    rho, p = spearmanr(surrogate, icp)
-    print(f"bench_surrogate_ranking: {args.part}, {len(layouts)} random feasible one-sensor layouts, seed {args.seed}")
-    print(f"{'layout':>6} {'surrogate deg':>14} {'ICP (14 scans) deg':>19}")
+            row = result.stats[result.stats["subset"] == result.layout.names[0]].set_index("axis")
+            icp_axes.append([np.rad2deg(row.loc[a, "median"] + row.loc[a, "p75"]) for a in AXES])
+    # the same layouts on the noise-only surrogate (no voxel-bias turns), timed the same way
+    plain = Surrogate(part, voxel=objective.registration.voxel_size, turns=np.zeros((0, 3)))
+    weights = (tuple(objective.statistic.weights), objective.statistic.median_weight, objective.statistic.p75_weight)
+    t0 = time.perf_counter()
+    noise_only = [predicted_stats([plain.info(problem.space.to_pose(u))], *weights) for u, _ in layouts]
+    t_plain = time.perf_counter() - t0
+    models = {
+        "noise only": (np.array([s["score"] for s in noise_only]), np.array([s["axis_score"] for s in noise_only])),
+        "noise + voxel bias": (np.array([v for _, v in layouts]), np.array([s["axis_score"] for s in bias_stats])),
+    }
+    icp, icp_axes = np.array(icp), np.array(icp_axes)
+    print(f"bench_surrogate_ranking: {args.part}, {len(layouts) - n_hand} random feasible one-sensor layouts "
+          f"+ {n_hand} hand-placed sensors, seed {args.seed}")
+    print(f"{'layout':>6} {'noise only':>11} {'with bias':>11} {'ICP (14 scans)':>15}   (scores in mdeg)")
     for i in np.argsort(icp):
-        print(f"{i:>6} {surrogate[i]:>14.6f} {icp[i]:>19.6f}")
-    top = int(np.argmin(icp))
-    print(f"Spearman rho = {rho:.2f} (p = {p:.3g}); the surrogate's best is ICP rank "
-          f"{int(np.argsort(np.argsort(icp))[np.argmin(surrogate)]) + 1} of {len(icp)}; ICP's best is surrogate rank "
-          f"{int(np.argsort(np.argsort(surrogate))[top]) + 1}")  # fmt: skip
-    print(f"time per layout: surrogate {1e3 * t_sur / max(1, len(layouts)):.0f} ms (incl. infeasible draws), "
-          f"ICP reduced protocol {t_icp / len(layouts):.2f} s; ratio {t_icp / max(t_sur, 1e-9):.0f}x")
+        label = f"hand{i - len(layouts) + n_hand + 1}" if i >= len(layouts) - n_hand else str(i)
+        print(f"{label:>6} {1e3 * models['noise only'][0][i]:>11.3f} {1e3 * models['noise + voxel bias'][0][i]:>11.3f} {1e3 * icp[i]:>15.3f}")
+    for name, (score, axes) in models.items():
+        rho = spearmanr(score, icp)[0]
+        per_axis = ", ".join(f"{a} {spearmanr(axes[:, j], icp_axes[:, j])[0]:.2f}" for j, a in enumerate(AXES))
+        factor = ", ".join(f"{a} {np.exp(np.median(np.abs(np.log(axes[:, j] / icp_axes[:, j])))):.2f}x" for j, a in enumerate(AXES))
+        ranks = np.argsort(np.argsort(icp))
+        print(f"{name}: Spearman rho score {rho:.2f}; per axis {per_axis}; median factor off ICP per axis {factor}; "
+              f"its best is ICP rank {int(ranks[np.argmin(score)]) + 1} of {len(icp)}")
+    n = len(layouts)
+    print(f"time per layout: noise-only surrogate {1e3 * t_plain / n:.0f} ms, with bias {1e3 * t_bias / n:.0f} ms, "
+          f"ICP reduced protocol {t_icp / n:.2f} s ({t_icp / max(t_bias, 1e-9):.0f}x the surrogate with bias)")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,11 @@ along the scan or of a keep-out, whose heads overlap, or whose sensor returns fe
 scores ``PENALTY + violation`` (violation ≥ 0, normalised, so the optimiser is led back toward
 feasibility). Infeasible layouts are recorded in the history but never become a result.
 
+The user wants a layout that is no worse than the hand-placed one on *any* axis, not only on the sum, and
+the sum is dominated by the worst axis (usually roll), so an unpenalised optimiser happily trades a
+good axis for it. Each axis predicted worse than ``hand_margin`` × the best hand-placed k-subset's
+therefore adds ``hand_weight`` × the excess to the score (:meth:`SurrogateProblem.shortfall`).
+
 Every sensor pose's information matrix is cached by its parameters, so a repeated pose costs nothing and
 a resumed search replays its earlier evaluations from the cache.
 """
@@ -27,7 +32,7 @@ import numpy as np
 
 from optipose.collision import DEFAULT_MARGIN, collision_model, heads_clearance
 from optipose.poseparam import PoseSpace
-from optipose.surrogate import SensorInfo, Surrogate, predicted_stats
+from optipose.surrogate import SensorInfo, Surrogate, predicted_stats, protocol_turns
 
 __all__ = ["SearchConfig", "BUDGETS", "Found", "SearchOutcome", "SurrogateProblem", "run_search", "PENALTY"]
 
@@ -56,6 +61,11 @@ class SearchConfig:
     random_starts: int = 8  # extra random start points scored before each greedy stage
     select_candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
     select_time: float = 300.0  # s, the selection stage
+    # a layout is asked to beat the hand-placed one on every axis, not just on the sum: each axis whose
+    # predicted score exceeds hand_margin x the hand-placed k-subset's adds hand_weight x the excess
+    # (0 turns it off; < 1 leaves room for the surrogate's error)
+    hand_margin: float = 0.5
+    hand_weight: float = 5.0
 
     def __post_init__(self) -> None:
         from optipose.errors import ConfigError
@@ -126,13 +136,14 @@ class SurrogateProblem:
         self.part, self.config = part, config
         stat = objective.statistic
         self._weights = (tuple(stat.weights), stat.median_weight, stat.p75_weight)
-        self.surrogate = surrogate or Surrogate(part, voxel=objective.registration.voxel_size)
+        self.surrogate = surrogate or Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective))
         self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
         self.collision = collision_model(part)
         self.cache: dict[tuple, SensorInfo | float] = {}
         self.history: list[dict] = []
         self.best: dict[int, tuple[float, np.ndarray]] = {}
         self.deadline = np.inf
+        self.targets: dict[int, np.ndarray] = {}  # k -> per-axis surrogate scores (deg) a layout should beat
         self.stage = ""
         self.on_eval = None  # callback(row) for progress bars
         self.interrupted = False
@@ -174,7 +185,15 @@ class SurrogateProblem:
         if violation > 0:
             return PENALTY + violation, None
         stats = predicted_stats(parts, *self._weights)
-        return stats["score"], stats
+        return stats["score"] + self.shortfall(k, stats), stats
+
+    def shortfall(self, k: int, stats: dict) -> float:
+        """The per-axis penalty (deg) for axes predicted worse than the margin times the hand layout's."""
+        target = self.targets.get(k, self.targets.get(max(self.targets, default=0)))
+        if target is None or self.config.hand_margin <= 0:
+            return 0.0
+        excess = np.clip(stats["axis_score"] - self.config.hand_margin * target, 0.0, None)
+        return float(self.config.hand_weight * np.dot(self._weights[0], excess))
 
     def __call__(self, u: np.ndarray, grad=None) -> float:
         if time.monotonic() > self.deadline:
@@ -261,6 +280,7 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, problem: Su
     hand_u = _hand_units(problem, hand_poses)
     ks = sorted(set(config.sensors))
     hand = _best_hand_subsets(problem, hand_u, [k for k in ks if k <= len(hand_u)])
+    problem.targets = {k: f.stats["axis_score"] for k, f in hand.items()}
     greedy, joint = {}, {}
     try:
         placed = np.zeros(0)

@@ -70,6 +70,7 @@ def _save_cache(folder: Path, cache: dict) -> None:
     keys = list(cache)
     infos = [cache[k] for k in keys]
     ok = np.array([isinstance(v, SensorInfo) for v in infos])
+    n_phases = max((len(v.G) for v in infos if isinstance(v, SensorInfo) and v.G is not None), default=0)
     np.savez_compressed(
         folder / "cache.npz",
         u=np.array(keys, dtype=float).reshape(-1, 6),
@@ -77,7 +78,14 @@ def _save_cache(folder: Path, cache: dict) -> None:
         H=np.array([v.H if isinstance(v, SensorInfo) else np.zeros((6, 6)) for v in infos]).reshape(-1, 6, 6),
         counts=np.array([[v.n_points, v.n_voxels] if isinstance(v, SensorInfo) else [0, 0] for v in infos]).reshape(-1, 2),
         violation=np.array([0.0 if isinstance(v, SensorInfo) else v for v in infos]),
+        A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(-1, 6, 6),
+        G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(-1, n_phases, 6),
     )
+
+
+def _or_zeros(info, name: str, shape: tuple) -> np.ndarray:
+    value = getattr(info, name, None) if isinstance(info, SensorInfo) else None
+    return np.zeros(shape) if value is None else value
 
 
 def _load_cache(folder: Path) -> dict:
@@ -85,9 +93,12 @@ def _load_cache(folder: Path) -> dict:
     if not path.is_file():
         return {}
     data = np.load(path)
+    if "G" not in data:  # a cache from before the surrogate modelled the voxel bias: scores differ, start over
+        return {}
     out = {}
-    for u, ok, H, (n_points, n_voxels), violation in zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"]):
-        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels)) if ok else float(violation)
+    rows = zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"], data["A"], data["G"])
+    for u, ok, H, (n_points, n_voxels), violation, A, G in rows:
+        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G) if ok else float(violation)
     return out
 
 
