@@ -150,7 +150,8 @@ def _print_report(console, report, part) -> None:
 
     outcome = report.outcome
     if report.validated:
-        table = Table(title=f"{part.name}: found vs. hand-placed, full protocol, held-out noise seed "
+        protocol = "full protocol" if report.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
+        table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed "
                             "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
         for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
             table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")

@@ -137,3 +137,29 @@ def test_results_never_violate_the_constraints(part_b_problem):
         for T in found.poses:
             assert problem.collision.clearance(T).distance >= cfg.clearance
             assert problem.surrogate.info(T).n_points >= cfg.min_points
+
+
+def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the_hand_layout():
+    from optipose.evaluate import Evaluator
+    from optipose.objective import load_objective as load
+    from optipose.refine import _dominates, _excess, polish
+    from optipose.search import Found
+
+    part = load_part("part_b")
+    objective = load("paper")
+    short = objective.__class__(**{**objective.__dict__, "protocol": objective.protocol.__class__(
+        **{**objective.protocol.__dict__, "sequences": ("R", "Y"), "step": objective.protocol.stop - objective.protocol.start})})  # fmt: skip
+    cfg = SearchConfig(polish_evals=8, polish_time=120.0, polish_step=0.2)
+    problem = SurrogateProblem(part, objective, cfg)
+    with Evaluator(part, short, seed=5) as evaluator:
+        reference = evaluator(part.layouts["hand"]).table[0]
+        u = problem.space.from_pose(part.layouts["hand"].poses[1])  # S2: its yaw is far worse than the best single's
+        start = Found(1, "start", u, problem.space.to_poses(u), 0.0)
+        found, choice, rows = polish(problem, evaluator, start, reference, cfg, 120.0)
+    assert 1 <= len(rows) <= 8
+    assert found is not None and problem.evaluate(found.u)[1] is not None  # feasible: constraints hold
+    winners = [r["reduced_protocol_deg"] for r in rows if r["dominates_hand"]]
+    if winners:  # the best of the layouts no worse than the hand layout on every axis is kept
+        assert _dominates(choice, reference) and np.rad2deg(choice.score) == pytest.approx(min(winners))
+    assert _dominates(choice, reference) == (_excess(choice, reference, 1.0) == 0.0)
+    assert _excess(reference, reference, 1.0) == 0.0 and _excess(reference, reference, 0.5) > 0.0

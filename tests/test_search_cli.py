@@ -71,6 +71,7 @@ def test_search_writes_a_result_folder_that_explains_itself(searched):
     comparison = pd.read_csv(out / "comparison.csv")
     assert set(comparison["layout"]) == {"found", "hand"} and set(comparison["k"]) == {1, 2}
     assert np.all(comparison["median_deg"] >= 0)
+    assert set(comparison["protocol"]) == {"full"} and "full protocol" in result.stdout
     for k in (1, 2):
         text = (out / "layouts" / f"found_k{k}.toml").read_text()
         assert text.count("[[sensors]]") == k
@@ -85,3 +86,16 @@ def test_resume_replays_from_the_cache_to_the_same_layout(searched):
     assert result.returncode == 0, result.stderr
     assert (out / "layouts" / "found_k2.toml").read_text() == before
     assert len(pd.read_csv(out / "history.csv")) == n_before
+
+
+def test_quick_budget_validates_on_the_reduced_protocol_and_says_so():
+    from optipose.objective import load_objective
+    from optipose.refine import reduced_objective
+    from optipose.search_run import config_from_budget
+
+    assert config_from_budget("quick", (1, 2, 3)).validation == "reduced"
+    assert config_from_budget("default", (1, 2, 3)).validation == "full"
+    # the paper's 7 sequences at their two end angles: 14 of the 77 scans
+    from optipose.protocol import perturbations
+
+    assert len(perturbations(reduced_objective(load_objective("paper")).protocol, 0)) == 14
