@@ -10,8 +10,8 @@ hand-placed layout on any axis, the lowest score (else simply the lowest score).
 is the (k−1) finalist plus one sensor, so nested layouts keep the smaller choices.
 
 When the finalist is not yet no worse than the hand-placed layout on every axis and twice as good in sum
-(the product's promise), an **ICP polish** runs a local
-NLopt search (``polish_algorithm``) from the finalist on the reduced protocol itself, scoring the sum plus
+(the product's promise), an **ICP polish** runs a local NLopt search (``polish_algorithm``) from the
+finalist and from the hand-placed k-subset (half the time each) on the reduced protocol itself, scoring the sum plus
 ``hand_weight`` × every axis's median and 75th percentile above ``polish_margin`` × the hand layout's
 (constraints as in the search). The full protocol with the held-out seed then reports the finalist.
 """
@@ -157,6 +157,21 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
     return Found(k, "ICP polish", u, problem.space.to_poses(u), value, stats or {}), best[2], rows
 
 
+def _hand_start(problem: SurrogateProblem, part, reference) -> list[Found]:
+    """The hand-placed sensors of the reference choice (e.g. ``S3``) as a polish start: it is no worse than
+    itself on every axis, so a local search from it that keeps that while lowering the sum is what a user
+    who already owns these mounts wants."""
+    hand = part.layouts["hand"]
+    from optipose.assignment import subset_name
+
+    combos = [c for c in itertools.combinations(range(len(hand.names)), reference.k) if subset_name(c, hand.names) == reference.sensors]
+    if not combos:
+        return []
+    picked = combos[0]
+    u = np.concatenate([problem.space.from_pose(hand.poses[i]) for i in picked])
+    return [Found(reference.k, "hand start", u, problem.space.to_poses(u), problem.evaluate(u)[0], {})]
+
+
 def select_finalists(part, objective, outcome: SearchOutcome, problem: SurrogateProblem, seed: int,
                      per_k: int = 3, max_time: float = np.inf, on_stage=None) -> tuple[dict[int, Found], list[dict]]:  # fmt: skip
     """For every k, evaluate the candidates on the reduced protocol and keep the best: among those no
@@ -202,10 +217,13 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
             short = best is not None and reference is not None and (best_key[0] or best_key[1] > reference.score / 2)
             if short and config.polish_time > 0:  # not yet no worse on every axis and 2x better in sum
                 polish_time = config.polish_time * (1.0 if k == 1 else 0.5)  # larger k: three times the scans
-                polished, choice, polish_rows = polish(problem, evaluator, best, reference, config, polish_time, on_stage)
-                rows += polish_rows
-                if polished is not None and (not _dominates(choice, reference), choice.score) < best_key:
-                    best = polished
+                starts = [best] + _hand_start(problem, part, reference)
+                for start in starts:
+                    polished, choice, polish_rows = polish(problem, evaluator, start, reference, config, polish_time / len(starts), on_stage)
+                    rows += polish_rows
+                    key = (not _dominates(choice, reference), choice.score) if polished is not None else None
+                    if key is not None and key < best_key:
+                        best, best_key = polished, key
             if best is not None:
                 finalists[k] = best
     return finalists, rows

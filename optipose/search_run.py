@@ -81,8 +81,8 @@ def _save_cache(folder: Path, cache: dict) -> None:
         H=np.array([v.H if isinstance(v, SensorInfo) else np.zeros((6, 6)) for v in infos]).reshape(-1, 6, 6),
         counts=np.array([[v.n_points, v.n_voxels] if isinstance(v, SensorInfo) else [0, 0] for v in infos]).reshape(-1, 2),
         violation=np.array([0.0 if isinstance(v, SensorInfo) else v for v in infos]),
-        A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(-1, 6, 6),
-        G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(-1, n_phases, 6),
+        A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(len(infos), 6, 6),
+        G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
     )
 
 
