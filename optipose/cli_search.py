@@ -20,7 +20,7 @@ def register(app: typer.Typer) -> None:
         part: Annotated[Optional[str], typer.Argument(help="A shipped part name, a part TOML or a mesh file (STL/OBJ/PLY); not needed with --resume.")] = None,
         units: Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 2 means mm), m, mm or in.")] = "auto",
         sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
-        budget: Annotated[str, typer.Option(help="quick (about a minute), default (under 10 min) or thorough.")] = "default",
+        budget: Annotated[str, typer.Option(help="quick (under a minute, validated on the 14-scan reduced protocol), default (under 10 min) or thorough.")] = "default",
         objective: Annotated[str, typer.Option(help="Objective name in objectives/ or a TOML path.")] = "paper",
         seed: Annotated[int, typer.Option(help="Seed of the search (validation uses a held-out seed derived from it).")] = 0,
         jobs: Annotated[int, typer.Option(help="Worker processes for the validation.", min=1)] = 1,
@@ -28,8 +28,9 @@ def register(app: typer.Typer) -> None:
         resume: Annotated[Optional[Path], typer.Option(help="Continue the search in this result folder (same settings).")] = None,
         config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with [search] keys overriding the budget (algorithms, evaluations, constraints).")] = None,
     ) -> None:
-        """Search sensor poses with NLopt on a fast surrogate, validate the finalists on the full ICP protocol
-        with a held-out noise seed, and print found vs. hand-placed per axis (the paper's Table 1 shape)."""
+        """Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
+        the full ICP protocol (quick: the reduced one) with a held-out noise seed, and print found vs.
+        hand-placed per axis (the paper's Table 1 shape)."""
         search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config)
 
 
@@ -167,12 +168,13 @@ def _print_report(console, report, part) -> None:
                     cells.get("yaw", "-"), f"{1e3 * mine[0]['score_deg']:.3f}",
                 )  # fmt: skip
         console.print(table)
-    strategies = Table(title="surrogate scores (millidegrees): greedy vs. joint vs. hand")
+    strategies = Table(title="surrogate: predicted score (millidegrees) of greedy vs. joint vs. hand; "
+                             "the winner is chosen on it plus the penalty for axes not clearly better than the hand's")  # fmt: skip
     for col in ("k", "greedy", "joint", "hand", "winner"):
         strategies.add_column(col, justify="right")
     for k in sorted(outcome.found):
         g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
-        fmt = lambda f: f"{1e3 * f.score:.3f}" if f is not None and f.stats else "-"  # noqa: E731
+        fmt = lambda f: f"{1e3 * f.stats['score']:.3f}" if f is not None and f.stats else "-"  # noqa: E731
         strategies.add_row(str(k), fmt(g), fmt(j), fmt(h), outcome.found[k].strategy)
     console.print(strategies)
     for k, layout in sorted(report.layouts.items()):
