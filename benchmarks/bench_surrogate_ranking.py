@@ -38,12 +38,10 @@ def main() -> None:
     part, objective = load_part(args.part), load_objective("paper")
     problem = SurrogateProblem(part, objective, SearchConfig())
     rng = np.random.default_rng(args.seed)
-    layouts, t_sur = [], 0.0
+    layouts = []
     while len(layouts) < args.layouts:
         u = rng.random(6)
-        t0 = time.perf_counter()
         value, stats = problem.evaluate(u)
-        t_sur += time.perf_counter() - t0
         if stats is not None:
             layouts.append((u, value))
     hand = part.layouts["hand"].poses if "hand" in part.layouts else []

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -63,19 +62,9 @@ def test_rotation_sigma_of_a_known_information_matrix():
     assert np.allclose(rotation_sigma(H), 1 / np.sqrt(np.array([100, 400, 2500]) + prior), rtol=1e-6)
 
 
-def test_flat_plate_surrogate_says_yaw_is_unobservable():
-    plate = trimesh.creation.box((0.06, 0.06, 0.002))
-
-    class Plate:
-        mesh, sensor, material = plate, "keyence-lj-x8080", "white-diffuse"
-        rotation_centre = np.zeros(3)
-
-        class motion:
-            length, step, n_profiles = 0.04, 0.5e-3, 80
-
-    down = np.array([[0, 1, 0, 0], [1, 0, 0, 0], [0, 0, -1, 0.001], [0, 0, 0, 1.0]])
-    surrogate = Surrogate(Plate())
-    info = surrogate.info(down)
+def test_flat_plate_surrogate_says_yaw_is_unobservable(flat_plate):
+    plate, down = flat_plate
+    info = Surrogate(plate).info(down)
     roll, pitch, yaw = predicted_stats([info])["median_deg"][0]
     # By hand: a voxel's point is the mean of the raw points in it, so on a plane the information is that
     # of all N = 80 profiles x 3200 columns raw points with σ = 2 µm (white, head-on: intensity ≈ 1).
