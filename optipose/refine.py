@@ -161,9 +161,9 @@ def _hand_start(problem: SurrogateProblem, part, reference) -> list[Found]:
     """The hand-placed sensors of the reference choice (e.g. ``S3``) as a polish start: it is no worse than
     itself on every axis, so a local search from it that keeps that while lowering the sum is what a user
     who already owns these mounts wants."""
-    hand = part.layouts["hand"]
     from optipose.assignment import subset_name
 
+    hand = part.layouts["hand"]
     combos = [c for c in itertools.combinations(range(len(hand.names)), reference.k) if subset_name(c, hand.names) == reference.sensors]
     if not combos:
         return []
