@@ -11,7 +11,8 @@ is the (k−1) finalist plus one sensor, so nested layouts keep the smaller choi
 
 When the finalist is not yet no worse than the hand-placed layout on every axis and twice as good in sum
 (the product's promise), an **ICP polish** runs a local NLopt search (``polish_algorithm``) from the
-finalist and from the hand-placed k-subset (half the time each) on the reduced protocol itself, scoring the sum plus
+finalist (for one sensor also from the hand-placed one, half the evaluations each) on the reduced
+protocol itself, for ``polish_evals`` evaluations (half for k ≥ 2), scoring the sum plus
 ``hand_weight`` × every axis's median and 75th percentile above ``polish_margin`` × the hand layout's
 (constraints as in the search). The full protocol with the held-out seed then reports the finalist.
 """
@@ -102,8 +103,10 @@ def _excess(choice, reference, margin: float) -> float:
     return float(sum(max(0.0, a.median - margin * b.median) + max(0.0, a.p75 - margin * b.p75) for a, b in zip(choice.axes, reference.axes)))
 
 
-def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config, max_time: float, on_stage=None):
-    """Local NLopt search from ``start`` on the reduced-protocol ICP score plus the hand-dominance penalty.
+def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config, max_evals: int, max_time: float, on_stage=None):
+    """Local NLopt search from ``start`` on the reduced-protocol ICP score plus the hand-dominance penalty,
+    ``max_evals`` evaluations (``max_time`` s is a safety net: evaluations, not the clock, should end it,
+    so that a seed gives the same layout on a busy machine).
 
     Returns the best feasible layout seen that is no worse than ``reference`` on any axis (or the lowest
     penalised score when none is) as a :class:`Found`, its choice, and one row per evaluation.
@@ -141,7 +144,7 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
     opt.set_lower_bounds(np.zeros(n))
     opt.set_upper_bounds(np.ones(n))
     opt.set_min_objective(f)
-    opt.set_maxeval(int(config.polish_evals))
+    opt.set_maxeval(int(max_evals))
     opt.set_initial_step(np.full(n, config.polish_step))
     opt.set_xtol_abs(1e-4)
     try:
@@ -215,11 +218,15 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
                     best, best_key = cand, key
             config = problem.config
             short = best is not None and reference is not None and (best_key[0] or best_key[1] > reference.score / 2)
-            if short and config.polish_time > 0:  # not yet no worse on every axis and 2x better in sum
-                polish_time = config.polish_time * (1.0 if k == 1 else 0.5)  # larger k: three times the scans
-                starts = [best] + _hand_start(problem, part, reference)
+            if short and config.polish_evals > 0:  # not yet no worse on every axis and 2x better in sum
+                # one sensor: from the finalist and from the hand-placed sensor, half the evaluations each;
+                # more sensors (2-3x the scans per evaluation): half the evaluations, from the finalist
+                starts = ([best] + _hand_start(problem, part, reference)) if k == 1 else [best]
+                evals = config.polish_evals if k == 1 else config.polish_evals // 2
                 for start in starts:
-                    polished, choice, polish_rows = polish(problem, evaluator, start, reference, config, polish_time / len(starts), on_stage)
+                    polished, choice, polish_rows = polish(
+                        problem, evaluator, start, reference, config, evals // len(starts), config.polish_time / len(starts), on_stage
+                    )
                     rows += polish_rows
                     key = (not _dominates(choice, reference), choice.score) if polished is not None else None
                     if key is not None and key < best_key:

@@ -68,8 +68,8 @@ class SearchConfig:
     hand_weight: float = 5.0
     # the ICP polish of a finalist that is not yet no worse than the hand layout on every axis (refine.py)
     polish_algorithm: str = "LN_COBYLA"
-    polish_evals: int = 60  # per k
-    polish_time: float = 0.0  # s for k = 1 (half for larger k); 0: no polish
+    polish_evals: int = 0  # evaluations for k = 1 (half for larger k); 0: no polish
+    polish_time: float = 150.0  # s per k, a safety net: the evaluations should end the polish
     polish_margin: float = 0.9  # aim below 0.9 x the hand layout's per-axis statistics
     polish_step: float = 0.03  # initial step in [0, 1] units (about 2 mm of aim point, 4 deg of view)
     validation: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
@@ -95,11 +95,11 @@ BUDGETS: dict[str, dict] = {
     ),  # fmt: skip
     "default": dict(
         global_evals=400, local_evals=120, joint_evals=200, max_time=180.0, select_candidates=3, select_time=240.0,
-        polish_time=90.0,
+        polish_evals=40,
     ),  # fmt: skip
     "thorough": dict(
         global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16,
-        select_candidates=6, select_time=1800.0, polish_time=600.0, polish_evals=300,
+        select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200,
     ),  # fmt: skip
 }
 

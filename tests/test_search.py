@@ -144,7 +144,7 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
         reference = evaluator(part.layouts["hand"]).table[0]
         u = problem.space.from_pose(part.layouts["hand"].poses[1])  # S2: its yaw is far worse than the best single's
         start = Found(1, "start", u, problem.space.to_poses(u), 0.0)
-        found, choice, rows = polish(problem, evaluator, start, reference, cfg, 120.0)
+        found, choice, rows = polish(problem, evaluator, start, reference, cfg, 8, 120.0)
     assert 1 <= len(rows) <= 8
     assert found is not None and problem.evaluate(found.u)[1] is not None  # feasible: constraints hold
     winners = [r["reduced_protocol_deg"] for r in rows if r["dominates_hand"]]
