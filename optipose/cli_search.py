@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import tomllib
 from pathlib import Path
 from typing import Annotated, Optional
@@ -23,7 +24,7 @@ def register(app: typer.Typer) -> None:
         budget: Annotated[str, typer.Option(help="quick (under a minute, validated on the 14-scan reduced protocol), default (under 10 min) or thorough.")] = "default",
         objective: Annotated[str, typer.Option(help="Objective name in objectives/ or a TOML path.")] = "paper",
         seed: Annotated[int, typer.Option(help="Seed of the search (validation uses a held-out seed derived from it).")] = 0,
-        jobs: Annotated[int, typer.Option(help="Worker processes for the validation.", min=1)] = 1,
+        jobs: Annotated[Optional[int], typer.Option(help="Worker processes for the ICP stages (selection, polish, validation); default: one per core.", min=1)] = None,
         out: Annotated[Optional[Path], typer.Option(help="Result folder (default: results/<part>-search-<timestamp>/).")] = None,
         resume: Annotated[Optional[Path], typer.Option(help="Continue the search in this result folder (same settings).")] = None,
         config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with [search] keys overriding the budget (algorithms, evaluations, constraints).")] = None,
@@ -89,6 +90,7 @@ def search_command(part, units, sensors, budget, objective, seed, jobs, out, res
     from optipose.search_run import config_from_budget
 
     console = Console(stderr=True)
+    jobs = jobs or os.cpu_count() or 1
     if part is None and resume is None:
         from optipose.errors import ConfigError
 

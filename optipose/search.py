@@ -72,6 +72,11 @@ class SearchConfig:
     polish_time: float = 150.0  # s per k, a safety net: the evaluations should end the polish
     polish_margin: float = 0.9  # aim below 0.9 x the hand layout's per-axis statistics
     polish_step: float = 0.03  # initial step in [0, 1] units (about 2 mm of aim point, 4 deg of view)
+    # a finalist that beats the hand layout on the reduced protocol by less than polish_margin on some axis
+    # or clear_ratio in sum is confirmed: the best confirm_candidates of that k re-run the full protocol
+    # (selection seed) and the best there is kept (0: no confirmation)
+    confirm_candidates: int = 0
+    clear_ratio: float = 0.4
     validation: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
 
     def __post_init__(self) -> None:
@@ -95,11 +100,11 @@ BUDGETS: dict[str, dict] = {
     ),  # fmt: skip
     "default": dict(
         global_evals=400, local_evals=120, joint_evals=200, max_time=180.0, select_candidates=3, select_time=240.0,
-        polish_evals=40,
+        polish_evals=90, confirm_candidates=3,
     ),  # fmt: skip
     "thorough": dict(
         global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16,
-        select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200,
+        select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6,
     ),  # fmt: skip
 }
 

@@ -152,7 +152,7 @@ def run(part, objective, config: SearchConfig, seed: int, folder: Path, budget: 
         if on_stage:
             on_stage("selecting finalists by ICP on a reduced protocol")
         finalists, rows = select_finalists(
-            part, objective, outcome, problem, seed, config.select_candidates, config.select_time, on_stage
+            part, objective, outcome, problem, seed, config.select_candidates, config.select_time, on_stage, jobs
         )
         pd.DataFrame(rows).to_csv(folder / "selection.csv", index=False)
         _write_layouts(report, part, {**outcome.found, **finalists})

@@ -152,3 +152,47 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
         assert _dominates(choice, reference) and np.rad2deg(choice.score) == pytest.approx(min(winners))
     assert _dominates(choice, reference) == (_excess(choice, reference, 1.0) == 0.0)
     assert _excess(reference, reference, 1.0) == 0.0 and _excess(reference, reference, 0.5) > 0.0
+
+
+def _choice(per_axis_mdeg, k=1):
+    """A Choice with (median, p75) per axis given in millidegrees; score = their sum (the paper objective)."""
+    from optipose.assignment import AxisChoice, Choice
+
+    axes = tuple(AxisChoice(a, "F1", np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3)) for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg))
+    return Choice(k, "F1", axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3)))
+
+
+def test_a_narrow_win_is_not_clear_and_needs_confirmation():
+    from optipose.refine import _clear
+
+    cfg = SearchConfig(polish_margin=0.9, clear_ratio=0.4)
+    hand = _choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])  # sum 8.6
+    assert _clear(_choice([(1.0, 1.5), (0.05, 0.1), (0.05, 0.1)]), hand, cfg)  # every axis <= 0.9x, sum 2.85 <= 3.44
+    assert not _clear(_choice([(1.0, 1.5), (0.05, 0.1), (0.095, 0.1)]), hand, cfg)  # yaw median 0.95x the hand's
+    assert not _clear(_choice([(3.0, 4.4), (0.05, 0.1), (0.05, 0.1)]), hand, cfg)  # every axis fine, sum 7.7 > 3.44
+    assert not _clear(hand, hand, cfg)
+
+
+def test_the_polish_also_starts_from_the_candidate_closest_to_beating_the_hand_layout():
+    from optipose.refine import _nearest
+    from optipose.search import Found
+
+    hand = _choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])
+    low_sum = Found(1, "low sum", np.zeros(6), [], 0.0)  # roll great, yaw 0.3 mdeg over the hand's
+    near = Found(1, "near", np.ones(6), [], 0.0)  # only the pitch median 0.01 mdeg over
+    far = Found(1, "far", np.full(6, 0.5), [], 0.0)
+    pool = [((True, 1.0), low_sum, _choice([(0.2, 0.3), (0.05, 0.1), (0.25, 0.35)])),
+            ((True, 5.0), near, _choice([(2.0, 2.5), (0.11, 0.2), (0.1, 0.2)])),
+            ((True, 9.0), far, _choice([(9.0, 9.0), (1.0, 2.0), (1.0, 2.0)]))]  # fmt: skip
+    assert _nearest(pool, hand, low_sum) == [near]
+    assert _nearest(pool, hand, near) == []  # the finalist itself is already the nearest
+
+
+def test_distinct_keeps_the_best_of_each_neighbourhood_by_the_given_key():
+    from optipose.refine import _distinct
+    from optipose.search import Found
+
+    a, b, c = (Found(1, n, u, [], s) for n, u, s in (("a", np.zeros(6), 3.0), ("b", np.full(6, 0.01), 1.0), ("c", np.ones(6), 2.0)))
+    assert [f.strategy for f in _distinct([a, b, c], 0.02)] == ["b", "c"]  # a lies within 0.02 of the better b
+    rank = {"a": 0, "b": 2, "c": 1}
+    assert [f.strategy for f in _distinct([a, b, c], 0.02, key=lambda f: rank[f.strategy])] == ["a", "c"]
