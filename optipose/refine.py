@@ -100,6 +100,16 @@ def _extended(problem: SurrogateProblem, base: Found, others: list[Found]) -> Fo
     return best
 
 
+def _row(k: int, origin: str, surrogate_deg: float, choice, protocol: str, dominates: bool) -> dict:
+    """One line of ``selection.csv``: where a layout came from, its surrogate score, and its ICP score and
+    per-axis median / 75th percentile (degrees, with the subset used) on the reduced or full protocol."""
+    row = {"k": k, "origin": origin, "surrogate_deg": surrogate_deg, "protocol": protocol,
+           "score_deg": float(np.rad2deg(choice.score)), "dominates_hand": dominates}  # fmt: skip
+    for a in choice.axes:
+        row |= {f"{a.axis}_median_deg": float(np.rad2deg(a.median)), f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)), f"{a.axis}_subset": a.subset}
+    return row
+
+
 def _dominates(choice, reference) -> bool:
     """Every axis's median and 75th percentile at most the reference's."""
     return all(a.median <= b.median and a.p75 <= b.p75 for a, b in zip(choice.axes, reference.axes))
@@ -136,8 +146,7 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
         excess = _excess(choice, reference, config.polish_margin) if reference is not None else 0.0
         score = float(np.rad2deg(choice.score + config.hand_weight * excess))
         dominates = reference is None or _dominates(choice, reference)
-        rows.append({"k": k, "origin": "ICP polish", "surrogate_deg": value, "reduced_protocol_deg": float(np.rad2deg(choice.score)),
-                     "dominates_hand": dominates})  # fmt: skip
+        rows.append(_row(k, "ICP polish", value, choice, "reduced", dominates))
         key = (not dominates, float(np.rad2deg(choice.score)) if dominates else score)
         if best[0] is None or key < best[0]:
             best[:] = [key, u.copy(), choice]
@@ -224,8 +233,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
         for k in sorted(outcome.found):
             reference = hand.table[k - 1] if hand is not None and k <= len(hand.table) else None
             if reference is not None:
-                rows.append({"k": k, "origin": "hand", "surrogate_deg": np.nan,
-                             "reduced_protocol_deg": float(np.rad2deg(reference.score)), "dominates_hand": True})  # fmt: skip
+                rows.append(_row(k, "hand", np.nan, reference, "reduced", True))
             pool: list[tuple[tuple, Found, object]] = []  # (key, layout, its choice) of every ICP evaluation here
             for cand in _candidates(problem, outcome, k, per_k, finalists):
                 if time.monotonic() > deadline and pool:
@@ -236,8 +244,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
                 choice = evaluator(cand.poses).table[k - 1]
                 dominates = reference is None or _dominates(choice, reference)
                 pool.append(((not dominates, choice.score), cand, choice))
-                rows.append({"k": k, "origin": cand.strategy, "surrogate_deg": cand.score,
-                             "reduced_protocol_deg": float(np.rad2deg(choice.score)), "dominates_hand": dominates})  # fmt: skip
+                rows.append(_row(k, cand.strategy, cand.score, choice, "reduced", dominates))
             if not pool:
                 continue
             key, best, choice = min(pool, key=lambda t: t[0])
@@ -259,6 +266,8 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
             if confirmer is not None and reference is not None and not _clear(choice, reference, config):
                 best = confirmer.pick(k, [(kk, f) for kk, f, _ in pool], config.confirm_candidates, rows, on_stage)
             finalists[k] = best
+    if confirmer is not None:
+        confirmer.adopt_subsets(problem, finalists, rows, on_stage)
     return finalists, rows
 
 
@@ -277,25 +286,58 @@ class _Confirmer:
     def __init__(self, part, objective, seed: int, jobs: int):
         from optipose.evaluate import Evaluator
 
-        self.part, self.evaluator, self._hand = part, Evaluator(part, objective, seed=seed, jobs=jobs), None
+        self.part, self.evaluator = part, Evaluator(part, objective, seed=seed, jobs=jobs)
+        self._hand = None
+        self._results: dict[bytes, object] = {}  # layout parameters -> its full-protocol evaluation
+        self.chosen: dict[int, tuple] = {}  # k -> key of the confirmed finalist
 
-    def pick(self, k: int, pool: list[tuple[tuple, Found]], n: int, rows: list[dict], on_stage=None) -> Found:
+    def reference(self, on_stage=None):
         if self._hand is None:
             if on_stage:
                 on_stage("confirming on the full protocol: the hand-placed layout")
             self._hand = self.evaluator(self.part.layouts["hand"])
-        reference = self._hand.table[k - 1]
-        rows.append({"k": k, "origin": "hand", "surrogate_deg": np.nan, "full_protocol_deg": float(np.rad2deg(reference.score)),
-                     "dominates_hand": True})  # fmt: skip
+        return self._hand
+
+    def evaluate(self, layout: Found):
+        key = np.asarray(layout.u, dtype=float).tobytes()
+        if key not in self._results:
+            self._results[key] = self.evaluator(layout.poses)
+        return self._results[key]
+
+    def pick(self, k: int, pool: list[tuple[tuple, Found]], n: int, rows: list[dict], on_stage=None) -> Found:
+        reference = self.reference(on_stage).table[k - 1]
+        rows.append(_row(k, "hand", np.nan, reference, "full", True))
         keys = {id(f): key for key, f in pool}
         best, best_key = None, None
         for cand in _distinct([f for _, f in pool], 0.02, key=lambda f: keys[id(f)])[:n]:
             if on_stage:
                 on_stage(f"confirming k={k} on the full protocol ({cand.strategy})")
-            choice = self.evaluator(cand.poses).table[k - 1]
+            choice = self.evaluate(cand).table[k - 1]
             dominates = _dominates(choice, reference)
-            rows.append({"k": k, "origin": f"confirm: {cand.strategy}", "surrogate_deg": cand.score,
-                         "full_protocol_deg": float(np.rad2deg(choice.score)), "dominates_hand": dominates})  # fmt: skip
+            rows.append(_row(k, f"confirm: {cand.strategy}", cand.score, choice, "full", dominates))
             if best_key is None or (not dominates, choice.score) < best_key:
                 best, best_key = cand, (not dominates, choice.score)
+        self.chosen[k] = best_key
         return best
+
+    def adopt_subsets(self, problem: SurrogateProblem, finalists: dict[int, Found], rows: list[dict], on_stage=None) -> None:
+        """A confirmed k finalist gives way to the best k sensors of a larger finalist when those do better
+        on the full protocol: the per-axis assignment of a triple's evaluation is a pair result as well,
+        and the validation evaluates such a nested layout inside the larger one, as here."""
+        from optipose.assignment import subset_name
+
+        for k, key in sorted(self.chosen.items()):
+            reference = self.reference(on_stage).table[k - 1]
+            for big in [finalists[kk] for kk in sorted(finalists) if kk > k]:
+                if on_stage:
+                    on_stage(f"confirming k={k}: the best {k} of the k={big.k} finalist")
+                result = self.evaluate(big)
+                choice = result.table[k - 1]
+                combo = next(c for c in itertools.combinations(range(big.k), k) if subset_name(c, result.layout.names) == choice.sensors)
+                u = np.concatenate([big.u[6 * i : 6 * i + 6] for i in combo])
+                value, stats = problem.evaluate(u)
+                dominates = _dominates(choice, reference)
+                rows.append(_row(k, f"best {k} of the k={big.k} finalist", value, choice, "full", dominates))
+                if stats is not None and (not dominates, choice.score) < key:
+                    finalists[k] = Found(k, f"best {k} of the k={big.k} finalist", u, problem.space.to_poses(u), value, stats)
+                    key = self.chosen[k] = (not dominates, choice.score)

@@ -147,7 +147,8 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
         found, choice, rows = polish(problem, evaluator, start, reference, cfg, 8, 120.0)
     assert 1 <= len(rows) <= 8
     assert found is not None and problem.evaluate(found.u)[1] is not None  # feasible: constraints hold
-    winners = [r["reduced_protocol_deg"] for r in rows if r["dominates_hand"]]
+    assert all(r["protocol"] == "reduced" for r in rows)
+    winners = [r["score_deg"] for r in rows if r["dominates_hand"]]
     if winners:  # the best of the layouts no worse than the hand layout on every axis is kept
         assert _dominates(choice, reference) and np.rad2deg(choice.score) == pytest.approx(min(winners))
     assert _dominates(choice, reference) == (_excess(choice, reference, 1.0) == 0.0)
