@@ -94,13 +94,16 @@ class Evaluator:
 
     part : :class:`optipose.part.Part`. objective : an :class:`Objective` or a name/path.
     jobs : worker processes over orientations (1 = in this process).
+    quiet : report failed registrations at INFO instead of WARNING (a search's hundreds of internal
+        evaluations; the counts stay in ``per_scan`` and ``stats``).
     """
 
-    def __init__(self, part, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1):
+    def __init__(self, part, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1, quiet: bool = False):
         self.part = part
         self.objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.seed = int(seed)
         self.jobs = max(1, int(jobs))
+        self._failure_level = logging.INFO if quiet else logging.WARNING
         self.perturbations: Perturbations = perturbations(self.objective.protocol, self.seed)
         self._setup = _Setup(
             token=uuid.uuid4().hex,
@@ -155,7 +158,7 @@ class Evaluator:
         failed = int((~per_scan["ok"]).sum())
         if failed:
             reasons = per_scan.loc[~per_scan["ok"], "failure"].value_counts().to_dict()
-            log.warning("%d of %d registrations failed or did not converge: %s", failed, len(per_scan), reasons)
+            log.log(self._failure_level, "%d of %d registrations failed or did not converge: %s", failed, len(per_scan), reasons)
         return EvaluationResult(self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings)
 
 

@@ -13,7 +13,7 @@ When the finalist is not yet no worse than the hand-placed layout on every axis 
 (the product's promise), an **ICP polish** runs a local NLopt search (``polish_algorithm``) on the
 reduced protocol itself, for ``polish_evals`` evaluations (half for k ≥ 2) shared by its starts: the
 finalist, the candidate closest to beating the hand layout on every axis, and for one sensor the
-hand-placed sensor. It scores the sum plus ``hand_weight`` × every axis's median and 75th percentile
+hand-placed sensor. It scores the sum plus ``polish_weight`` × every axis's median and 75th percentile
 above ``polish_margin`` × the hand layout's (constraints as in the search).
 
 A 14-scan median and 75th percentile are noisy: a polish tuned on them can win there and lose on a fresh
@@ -144,7 +144,7 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
             return float(value)  # PENALTY + violation: infeasible, never a result
         choice = evaluator(problem.space.to_poses(u)).table[k - 1]
         excess = _excess(choice, reference, config.polish_margin) if reference is not None else 0.0
-        score = float(np.rad2deg(choice.score + config.hand_weight * excess))
+        score = float(np.rad2deg(choice.score + config.polish_weight * excess))
         dominates = reference is None or _dominates(choice, reference)
         rows.append(_row(k, "ICP polish", value, choice, "reduced", dominates))
         key = (not dominates, float(np.rad2deg(choice.score)) if dominates else score)
@@ -228,7 +228,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
     config = problem.config
     finalists, rows = {}, []
     confirmer = _Confirmer(part, objective, selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
-    with Evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs) as evaluator:
+    with Evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
         hand = evaluator(part.layouts["hand"]) if "hand" in part.layouts else None
         for k in sorted(outcome.found):
             reference = hand.table[k - 1] if hand is not None and k <= len(hand.table) else None
@@ -286,7 +286,7 @@ class _Confirmer:
     def __init__(self, part, objective, seed: int, jobs: int):
         from optipose.evaluate import Evaluator
 
-        self.part, self.evaluator = part, Evaluator(part, objective, seed=seed, jobs=jobs)
+        self.part, self.evaluator = part, Evaluator(part, objective, seed=seed, jobs=jobs, quiet=True)
         self._hand = None
         self._results: dict[bytes, object] = {}  # layout parameters -> its full-protocol evaluation
         self.chosen: dict[int, tuple] = {}  # k -> key of the confirmed finalist

@@ -71,6 +71,7 @@ class SearchConfig:
     polish_evals: int = 0  # evaluations for k = 1 (half for larger k); 0: no polish
     polish_time: float = 150.0  # s per k, a safety net: the evaluations should end the polish
     polish_margin: float = 0.9  # aim below 0.9 x the hand layout's per-axis statistics
+    polish_weight: float = 5.0  # cost per unit of per-axis excess over polish_margin x the hand's, on top of the sum
     polish_step: float = 0.03  # initial step in [0, 1] units (about 2 mm of aim point, 4 deg of view)
     # a finalist that beats the hand layout on the reduced protocol by less than polish_margin on some axis
     # or clear_ratio in sum is confirmed: the best confirm_candidates of that k re-run the full protocol
