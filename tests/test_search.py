@@ -197,3 +197,33 @@ def test_distinct_keeps_the_best_of_each_neighbourhood_by_the_given_key():
     assert [f.strategy for f in _distinct([a, b, c], 0.02)] == ["b", "c"]  # a lies within 0.02 of the better b
     rank = {"a": 0, "b": 2, "c": 1}
     assert [f.strategy for f in _distinct([a, b, c], 0.02, key=lambda f: rank[f.strategy])] == ["a", "c"]
+
+
+def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_finalist():
+    from types import SimpleNamespace
+
+    from optipose.assignment import Choice
+    from optipose.refine import _Confirmer
+    from optipose.search import Found
+
+    def as_sensor(choice, name):
+        return Choice(1, name, choice.axes, choice.score)
+
+    hand = SimpleNamespace(table=[_choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])])
+    single = as_sensor(_choice([(1.0, 2.0), (0.05, 0.1), (0.05, 0.1)]), "S2")  # the pair's second sensor beats the hand
+    pair_result = SimpleNamespace(table=[single], layout=SimpleNamespace(names=["S1", "S2"]))
+    confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
+    confirmer._hand, confirmer._results, confirmer.chosen = hand, {}, {1: (True, np.deg2rad(5e-3))}
+    confirmer.evaluate = lambda layout: pair_result
+    problem = SimpleNamespace(evaluate=lambda u: (0.25, {"score": 0.25}), space=SimpleNamespace(to_poses=lambda u: ["pose"]))
+    pair = Found(2, "joint", np.concatenate([np.zeros(6), np.full(6, 0.5)]), [], 0.0)
+    finalists, rows = {1: Found(1, "polish", np.ones(6), [], 0.0), 2: pair}, []
+    confirmer.adopt_subsets(problem, finalists, rows)
+    assert finalists[1].strategy == "best 1 of the k=2 finalist"
+    assert np.array_equal(finalists[1].u, np.full(6, 0.5))  # the second sensor's six numbers
+    assert confirmer.chosen[1] == (False, single.score) and rows[-1]["dominates_hand"]
+
+    pair_result.table = [as_sensor(_choice([(9.0, 9.0), (0.05, 0.1), (0.05, 0.1)]), "S1")]  # worse than the finalist
+    kept = finalists[1]
+    confirmer.adopt_subsets(problem, finalists, rows)
+    assert finalists[1] is kept and not rows[-1]["dominates_hand"]
