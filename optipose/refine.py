@@ -115,6 +115,12 @@ def _dominates(choice, reference) -> bool:
     return all(a.median <= b.median and a.p75 <= b.p75 for a, b in zip(choice.axes, reference.axes))
 
 
+def _rank(choice, reference) -> tuple[bool, float]:
+    """Sort key of a choice against the hand-placed reference: those no worse on every axis first, then
+    the lower score (no reference: every choice counts as no worse)."""
+    return (reference is not None and not _dominates(choice, reference), choice.score)
+
+
 def _excess(choice, reference, margin: float) -> float:
     """How far (rad, summed) the choice's per-axis medians and 75th percentiles exceed margin × the reference's."""
     return float(sum(max(0.0, a.median - margin * b.median) + max(0.0, a.p75 - margin * b.p75) for a, b in zip(choice.axes, reference.axes)))
@@ -242,9 +248,9 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
                 if on_stage:
                     on_stage(f"selecting k={k} on the reduced protocol ({cand.strategy})")
                 choice = evaluator(cand.poses).table[k - 1]
-                dominates = reference is None or _dominates(choice, reference)
-                pool.append(((not dominates, choice.score), cand, choice))
-                rows.append(_row(k, cand.strategy, cand.score, choice, "reduced", dominates))
+                rank = _rank(choice, reference)
+                pool.append((rank, cand, choice))
+                rows.append(_row(k, cand.strategy, cand.score, choice, "reduced", not rank[0]))
             if not pool:
                 continue
             key, best, choice = min(pool, key=lambda t: t[0])
@@ -261,7 +267,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
                     )
                     rows += polish_rows
                     if polished is not None:
-                        pool.append(((not _dominates(p_choice, reference), p_choice.score), polished, p_choice))
+                        pool.append((_rank(p_choice, reference), polished, p_choice))
                 key, best, choice = min(pool, key=lambda t: t[0])
             if confirmer is not None and reference is not None and not _clear(choice, reference, config):
                 best = confirmer.pick(k, [(kk, f) for kk, f, _ in pool], config.confirm_candidates, rows, on_stage)
@@ -313,10 +319,10 @@ class _Confirmer:
             if on_stage:
                 on_stage(f"confirming k={k} on the full protocol ({cand.strategy})")
             choice = self.evaluate(cand).table[k - 1]
-            dominates = _dominates(choice, reference)
-            rows.append(_row(k, f"confirm: {cand.strategy}", cand.score, choice, "full", dominates))
-            if best_key is None or (not dominates, choice.score) < best_key:
-                best, best_key = cand, (not dominates, choice.score)
+            rank = _rank(choice, reference)
+            rows.append(_row(k, f"confirm: {cand.strategy}", cand.score, choice, "full", not rank[0]))
+            if best_key is None or rank < best_key:
+                best, best_key = cand, rank
         self.chosen[k] = best_key
         return best
 
@@ -336,8 +342,8 @@ class _Confirmer:
                 combo = next(c for c in itertools.combinations(range(big.k), k) if subset_name(c, result.layout.names) == choice.sensors)
                 u = np.concatenate([big.u[6 * i : 6 * i + 6] for i in combo])
                 value, stats = problem.evaluate(u)
-                dominates = _dominates(choice, reference)
-                rows.append(_row(k, f"best {k} of the k={big.k} finalist", value, choice, "full", dominates))
-                if stats is not None and (not dominates, choice.score) < key:
+                rank = _rank(choice, reference)
+                rows.append(_row(k, f"best {k} of the k={big.k} finalist", value, choice, "full", not rank[0]))
+                if stats is not None and rank < key:
                     finalists[k] = Found(k, f"best {k} of the k={big.k} finalist", u, problem.space.to_poses(u), value, stats)
-                    key = self.chosen[k] = (not dominates, choice.score)
+                    key = self.chosen[k] = rank
