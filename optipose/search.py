@@ -59,6 +59,12 @@ class SearchConfig:
     margin: float = 0.005  # m, how far outside the part's box the aim point may go
     alpha_max_deg: float = 60.0
     random_starts: int = 8  # extra random start points scored before each greedy stage
+    # before each greedy stage: score this many space-filling (scrambled Sobol) poses of the new sensor on the
+    # surrogate, and polish the best screen_starts distinct ones locally (screen_evals each). DIRECT-L
+    # refines around one basin; the screen finds the others, which the ICP selection then compares
+    screen_samples: int = 0
+    screen_starts: int = 6
+    screen_evals: int = 30
     select_candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
     select_time: float = 300.0  # s, the selection stage
     # a layout is asked to beat the hand-placed one on every axis, not just on the sum: each axis whose
@@ -97,14 +103,15 @@ BUDGETS: dict[str, dict] = {
     # quick: greedy only, so the layouts are nested and one run validates k = 1, 2, 3; on the reduced protocol
     "quick": dict(
         global_evals=70, local_evals=20, max_time=25.0, random_starts=4, select_candidates=0, strategy="greedy",
-        validation="reduced",
+        validation="reduced", screen_samples=256, screen_starts=2, screen_evals=10,
     ),  # fmt: skip
     "default": dict(
-        global_evals=400, local_evals=120, joint_evals=200, max_time=180.0, select_candidates=3, select_time=240.0,
-        polish_evals=90, confirm_candidates=3,
+        global_evals=400, local_evals=120, joint_evals=200, max_time=240.0, select_candidates=3, select_time=240.0,
+        polish_evals=90, confirm_candidates=3, screen_samples=4096,
     ),  # fmt: skip
     "thorough": dict(
-        global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16,
+        global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16, screen_samples=16384,
+        screen_starts=12, screen_evals=60,
         select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6,
     ),  # fmt: skip
 }
@@ -341,18 +348,20 @@ def _as_found(problem: SurrogateProblem, k: int) -> Found | None:
 
 
 def _greedy_stage(problem, config, placed, hand_u, rng, seed) -> np.ndarray:
-    """Add one sensor to ``placed`` (6(k-1),): global stage over its 6 numbers, then a local polish."""
+    """Add one sensor to ``placed`` (6(k-1),): a space-filling screen (:func:`_screen`), a global stage over
+    its 6 numbers from the best start, then a local polish."""
     k = len(placed) // 6 + 1
-    problem.stage = f"greedy:k={k}"
     f = lambda u6: problem.evaluate(np.concatenate([placed, u6]))[0]  # noqa: E731
-    starts = [u for u in hand_u] + [rng.random(6) for _ in range(config.random_starts)]
-    scored = sorted(((f(u), i) for i, u in enumerate(starts)), key=lambda t: t[0])
-    x0 = starts[scored[0][1]] if scored else rng.random(6)
 
     def wrapped(u6, grad=None):
         return problem(np.concatenate([placed, np.asarray(u6)]))
 
     wrapped_problem = _Shim(problem, wrapped)
+    screened = _screen(problem, config, wrapped_problem, k, seed - k)  # the same points at every k: cached
+    starts = [u for u in hand_u] + [rng.random(6) for _ in range(config.random_starts)] + screened[:1]
+    scored = sorted(((f(u), i) for i, u in enumerate(starts)), key=lambda t: t[0])
+    x0 = starts[scored[0][1]] if scored else rng.random(6)
+    problem.stage = f"greedy:k={k}"
     _optimize(wrapped_problem, config.global_algorithm, x0, config.global_evals, seed, config.local_algorithm)
     best_u6 = problem.best.get(k, (None, np.concatenate([placed, x0])))[1][-6:]
     problem.stage = f"greedy-polish:k={k}"
@@ -376,6 +385,37 @@ def _joint_stage(problem, config, k, greedy: Found | None, hand: Found | None, r
             if best is None or row["value"] < best.score:
                 best = Found(k, "joint", u, problem.space.to_poses(u), row["value"], problem.evaluate(u)[1])
     return best or Found(k, "joint", greedy.u if greedy else np.zeros(6 * k), [], np.inf, {})
+
+
+def _screen(problem, config, wrapped_problem, k: int, seed: int) -> list[np.ndarray]:
+    """Score ``screen_samples`` scrambled-Sobol poses of the k-th sensor, then polish locally the best
+    ``screen_starts`` of them that lie apart (more than 0.1 apart in some [0, 1] unit); returns the polished
+    bests, best first. Every evaluation is recorded, so the ICP selection sees these basins too.
+    After k = 1 the poses' information is cached, so later greedy stages re-score the same points nearly free."""
+    if config.screen_samples <= 0:
+        return []
+    from scipy.stats import qmc
+
+    problem.stage = f"screen:k={k}"
+    points = qmc.Sobol(6, scramble=True, seed=seed).random(int(config.screen_samples))
+    values = np.array([wrapped_problem(u) for u in points])
+    order = np.argsort(values, kind="stable")
+    picked: list[np.ndarray] = []
+    for i in order:
+        if values[i] >= PENALTY or len(picked) >= config.screen_starts:
+            break
+        if all(np.max(np.abs(points[i] - p)) > 0.1 for p in picked):
+            picked.append(points[i])
+    problem.stage = f"screen-polish:k={k}"
+    bests = []
+    for j, start in enumerate(picked):
+        before = len(problem.history)
+        _optimize(wrapped_problem, config.local_algorithm, start, config.screen_evals, seed + 10 + j)
+        rows = [r for r in problem.history[before:] if r["feasible"]]
+        best = min(rows, key=lambda r: r["value"]) if rows else None
+        if best is not None:
+            bests.append((best["value"], np.asarray(best["u"], dtype=float)[-6:]))
+    return [u for _, u in sorted(bests, key=lambda t: t[0])]
 
 
 class _Shim:

@@ -101,9 +101,50 @@ def test_driver_finds_a_known_optimum(algorithm):
     assert tracker.calls <= 3300
 
 
+class _Recorder:
+    """A stand-in for SurrogateProblem: records every evaluation as the search's history does."""
+
+    def __init__(self, f):
+        self.f, self.history, self.stage = f, [], ""
+
+    def __call__(self, u, grad=None):
+        v = float(self.f(np.asarray(u, dtype=float)))
+        self.history.append({"stage": self.stage, "value": v, "feasible": v < PENALTY, "u": list(map(float, u))})
+        return v
+
+
+def test_screen_finds_the_basin_a_local_search_from_the_centre_misses():
+    from optipose.search import _screen
+
+    centre, target = np.full(6, 0.5), np.array([0.15, 0.8, 0.3, 0.7, 0.2, 0.6])
+
+    def f(u):  # a wide shallow bowl at the centre, a deeper narrower one at the target, a wall at u0 > 0.9
+        if u[0] > 0.9:
+            return PENALTY + u[0]
+        return min(1.0 + np.sum((u - centre) ** 2), 0.2 + 3.0 * np.sum((u - target) ** 2))
+
+    local = _Recorder(f)
+    _optimize(local, "LN_BOBYQA", centre, 200, seed=0)
+    assert min(r["value"] for r in local.history) == pytest.approx(1.0)  # stuck in the centre's bowl
+
+    cfg = SearchConfig(screen_samples=512, screen_starts=3, screen_evals=80)
+    problem = _Recorder(f)
+    starts = _screen(problem, cfg, problem, 1, seed=4)
+    stages = [r["stage"] for r in problem.history]
+    assert stages.count("screen:k=1") == 512 and stages[:512] == ["screen:k=1"] * 512
+    assert 1 <= len(starts) <= 3
+    assert np.allclose(starts[0], target, atol=1e-3)  # best first, polished to the deeper basin's bottom
+    assert all(f(u) < PENALTY for u in starts)  # an infeasible screen point is never a start
+    again = _Recorder(f)
+    assert all(np.array_equal(a, b) for a, b in zip(_screen(again, cfg, again, 1, seed=4), starts))  # seeded
+
+
 @pytest.fixture(scope="module")
 def part_b_problem():
-    cfg = SearchConfig(global_evals=40, local_evals=15, joint_evals=20, max_time=120, random_starts=2, sensors=(1, 2))
+    cfg = SearchConfig(
+        global_evals=40, local_evals=15, joint_evals=20, max_time=120, random_starts=2, sensors=(1, 2),
+        screen_samples=64, screen_starts=2, screen_evals=8,
+    )  # fmt: skip
     return load_part("part_b"), load_objective("paper"), cfg
 
 
@@ -227,3 +268,33 @@ def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_final
     kept = finalists[1]
     confirmer.adopt_subsets(problem, finalists, rows)
     assert finalists[1] is kept and not rows[-1]["dominates_hand"]
+
+
+def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_layout():
+    from types import SimpleNamespace
+
+    from optipose.refine import _Confirmer
+    from optipose.search import Found
+
+    hand = SimpleNamespace(table=[_choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])])
+    # on the full protocol the two leaders of the reduced ranking trade pitch for roll; the fourth is no worse anywhere
+    full = {0.0: _choice([(0.2, 0.3), (0.15, 0.3), (0.05, 0.1)]), 0.2: _choice([(0.3, 0.4), (0.12, 0.25), (0.05, 0.1)]),
+            0.4: _choice([(5.0, 6.0), (0.1, 0.2), (0.1, 0.2)]), 0.6: _choice([(0.5, 0.8), (0.08, 0.15), (0.04, 0.07)])}  # fmt: skip
+    cands = [Found(1, f"c{i}", np.full(6, u), [], 0.0) for i, u in enumerate(sorted(full))]
+    pool = [((True, float(i)), c) for i, c in enumerate(cands)]
+    evaluated = []
+
+    def evaluate(layout):
+        evaluated.append(layout.strategy)
+        return SimpleNamespace(table=[full[float(layout.u[0])]])
+
+    confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
+    confirmer._hand, confirmer._results, confirmer.chosen, confirmer.evaluate = hand, {}, {}, evaluate
+    assert confirmer.pick(1, pool, 2, []).strategy == "c0"  # the leaders alone: the lower sum, pitch worse
+    assert evaluated == ["c0", "c1"]
+    evaluated.clear()
+    assert confirmer.pick(1, pool, 2, [], near=cands[3]).strategy == "c3"
+    assert evaluated == ["c0", "c1", "c3"] and confirmer.chosen[1][0] is False  # no worse on every axis
+    evaluated.clear()
+    confirmer.pick(1, pool, 2, [], near=cands[0])  # already a leader: not run twice
+    assert evaluated == ["c0", "c1"]
