@@ -148,6 +148,39 @@ def _run_with_progress(console, part, objective, config, seed, folder, budget, j
         return run(part, objective, config, seed, folder, budget, jobs, resume, on_eval, on_stage)
 
 
+def verdicts(rows: list[dict]) -> list[str]:
+    """One line per k on the validation rows (comparison.csv's): the ratio of the hand layout's score to the
+    found one's and every axis where the found layout is worse, so a user sees at once whether to keep the
+    hand-placed sensors; and whether the found one sensor beats the hand-placed largest layout."""
+    lines = []
+    by = {(r["k"], r["layout"], r["axis"]): r for r in rows}
+    ks = sorted({r["k"] for r in rows})
+    for k in ks:
+        found = [by.get((k, "found", a)) for a in ("roll", "pitch", "yaw")]
+        hand = [by.get((k, "hand", a)) for a in ("roll", "pitch", "yaw")]
+        if None in found or None in hand:
+            continue
+        ratio = hand[0]["score_deg"] / found[0]["score_deg"]
+        worse = [
+            f"{f['axis']} {stat} {1e3 * f[col]:.3f} vs {1e3 * h[col]:.3f}"
+            for f, h in zip(found, hand) for stat, col in (("median", "median_deg"), ("p75", "p75_deg")) if f[col] > h[col]
+        ]  # fmt: skip
+        than = f"x {'better' if ratio >= 1 else 'worse'} in sum than hand {hand[0]['sensors']}"
+        head = f"k={k}: found {found[0]['sensors']} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
+        if worse and ratio < 1:
+            lines.append(f"{head} and worse on {'; '.join(worse)} mdeg: keep {hand[0]['sensors']}")
+        elif worse:
+            lines.append(f"{head}, but worse on {'; '.join(worse)} mdeg: keep {hand[0]['sensors']} if no axis may get worse")
+        else:
+            lines.append(f"{head}, no worse on any axis")
+    one, top = by.get((1, "found", "roll")), by.get((max(ks, default=0), "hand", "roll"))
+    if one is not None and top is not None and max(ks) > 1:
+        beats = one["score_deg"] < top["score_deg"]
+        lines.append(f"one found sensor {'beats' if beats else 'does not beat'} the hand-placed {top['sensors']} in sum "
+                     f"({1e3 * one['score_deg']:.3f} vs {1e3 * top['score_deg']:.3f} mdeg)")  # fmt: skip
+    return lines
+
+
 def _print_report(console, report, part) -> None:
     from rich.table import Table
 
@@ -170,6 +203,8 @@ def _print_report(console, report, part) -> None:
                     cells.get("yaw", "-"), f"{1e3 * mine[0]['score_deg']:.3f}",
                 )  # fmt: skip
         console.print(table)
+        for line in verdicts(rows):
+            console.print(line)
     strategies = Table(title="surrogate: predicted score (millidegrees) of greedy vs. joint vs. hand; "
                              "the winner is chosen on it plus the penalty for axes not clearly better than the hand's")  # fmt: skip
     for col in ("k", "greedy", "joint", "hand", "winner"):
