@@ -52,12 +52,12 @@ def main() -> None:
     scored.sort(key=lambda t: t[0])
     for score, axes, u in scored[: args.show]:
         pose = problem.space.describe(problem.space.to_pose(u))
-        print(f"  sum {1e3 * score:.3f} mdeg ({best_hand['score'] / score:.2f}x the hand's), per axis / hand {np.round(axes / target, 2)}: {pose}")
+        print(f"  sum {1e3 * score:.3f} mdeg (hand / this {best_hand['score'] / score:.2f}), this / hand per axis {np.round(axes / target, 2)}: {pose}")
     dominating = [t for t in scored if np.all(t[1] <= target)]
     twice = [t for t in dominating if t[0] <= best_hand["score"] / 2]
     print(f"no worse than {name} on every axis: {len(dominating)}; of those, at least 2x better in sum: {len(twice)}")
     if dominating:
-        print(f"  best of those: {best_hand['score'] / dominating[0][0]:.2f}x the hand's sum")
+        print(f"  best of those: hand / this {best_hand['score'] / dominating[0][0]:.2f} in sum")
 
 
 if __name__ == "__main__":
