@@ -35,7 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from optipose.search import Found, SearchOutcome, SurrogateProblem
+from optipose.search import Found, SearchOutcome, SurrogateProblem, apart
 
 __all__ = ["reduced_objective", "select_finalists", "selection_seed"]
 
@@ -60,7 +60,7 @@ def _distinct(candidates: list[Found], min_distance: float = 0.05, key=None) -> 
     (better: lower ``key(candidate)``, by default the surrogate score)."""
     kept: list[Found] = []
     for c in sorted(candidates, key=key or (lambda f: f.score)):
-        if all(np.max(np.abs(c.u - k.u)) > min_distance for k in kept if len(k.u) == len(c.u)):
+        if apart(c.u, [k.u for k in kept if len(k.u) == len(c.u)], min_distance):
             kept.append(c)
     return kept
 
@@ -202,8 +202,8 @@ def _hand_start(problem: SurrogateProblem, part, reference) -> list[Found]:
 
 def _clear(choice, reference, config) -> bool:
     """The choice beats the reference with room to spare: every axis at most ``polish_margin`` × the
-    reference's and the sum at most ``clear_ratio`` × its sum. A win that narrow on a 14-scan sample needs
-    no confirmation; anything less does."""
+    reference's and the sum at most ``clear_ratio`` × its sum. A win that wide on a 14-scan sample needs
+    no confirmation (unless a polish produced it); anything less does."""
     return _excess(choice, reference, config.polish_margin) == 0.0 and choice.score <= config.clear_ratio * reference.score
 
 
@@ -272,17 +272,17 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
                 starts = [best] + _nearest(pool, reference, best) + (_hand_start(problem, part, reference) if k == 1 else [])
                 evals = config.polish_evals if k == 1 else config.polish_evals // 2
                 for start in starts:
-                    polished, p_choice, polish_rows = polish(
+                    found, p_choice, polish_rows = polish(
                         problem, evaluator, start, reference, config, evals // len(starts), config.polish_time / len(starts), on_stage
                     )
                     rows += polish_rows
-                    if polished is not None:
-                        pool.append((_rank(p_choice, reference), polished, p_choice))
+                    if found is not None:
+                        pool.append((_rank(p_choice, reference), found, p_choice))
                 key, best, choice = min(pool, key=lambda t: t[0])
             # a polish minimised these very 14-scan statistics, so its winner's are biased low (B's one sensor:
             # pitch 0.086 / 0.191 mdeg there, 0.115 / 0.234 on the held-out seed): after a polish, always confirm
             if confirmer is not None and reference is not None and (polished or not _clear(choice, reference, config)):
-                near = min(pool, key=lambda t: (_excess(t[2], reference, 1.0), t[0]))[1]
+                near = _closest(pool, reference)
                 best = confirmer.pick(k, [(kk, f) for kk, f, _ in pool], config.confirm_candidates, rows, on_stage, near)
             finalists[k] = best
     if confirmer is not None:
@@ -290,10 +290,15 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
     return finalists, rows
 
 
+def _closest(pool: list[tuple[tuple, Found, object]], reference) -> Found:
+    """The candidate whose per-axis statistics exceed the reference's least (ties: the better rank)."""
+    return min(pool, key=lambda t: (_excess(t[2], reference, 1.0), t[0]))[1]
+
+
 def _nearest(pool: list[tuple[tuple, Found, object]], reference, best: Found) -> list[Found]:
-    """The candidate whose per-axis statistics exceed the reference's least, when that is not ``best``:
-    the lowest sum can sit far from dominance while a slightly worse sum is one axis away from it."""
-    near = min(pool, key=lambda t: (_excess(t[2], reference, 1.0), t[0]))[1]
+    """The closest candidate (:func:`_closest`), when that is not ``best``: the lowest sum can sit far from
+    dominance while a slightly worse sum is one axis away from it."""
+    near = _closest(pool, reference)
     return [] if near is best else [near]
 
 
@@ -331,7 +336,7 @@ class _Confirmer:
         reference = self.reference(on_stage).table[k - 1]
         keys = {id(f): key for key, f in pool}
         leaders = _distinct([f for _, f in pool], 0.02, key=lambda f: keys[id(f)])[:n]
-        if near is not None and all(np.max(np.abs(near.u - f.u)) > 0.02 for f in leaders):
+        if near is not None and apart(near.u, [f.u for f in leaders], 0.02):
             leaders.append(near)
         best, best_key = None, None
         for cand in leaders:

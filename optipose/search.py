@@ -81,8 +81,9 @@ class SearchConfig:
     polish_weight: float = 5.0  # cost per unit of per-axis excess over polish_margin x the hand's, on top of the sum
     polish_step: float = 0.03  # initial step in [0, 1] units (about 2 mm of aim point, 4 deg of view)
     # a finalist that beats the hand layout on the reduced protocol by less than polish_margin on some axis
-    # or clear_ratio in sum is confirmed: the best confirm_candidates of that k re-run the full protocol
-    # (selection seed) and the best there is kept (0: no confirmation)
+    # or clear_ratio in sum, or that a polish produced, is confirmed: the best confirm_candidates of that k
+    # and the one closest to dominance re-run the full protocol (selection seed) and the best there is
+    # kept (0: no confirmation)
     confirm_candidates: int = 0
     clear_ratio: float = 0.4
     validation: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
@@ -405,7 +406,7 @@ def _screen(problem, config, wrapped_problem, k: int, seed: int) -> list[np.ndar
     for i in order:
         if values[i] >= PENALTY or len(picked) >= config.screen_starts:
             break
-        if all(np.max(np.abs(points[i] - p)) > 0.1 for p in picked):
+        if apart(points[i], picked, 0.1):
             picked.append(points[i])
     problem.stage = f"screen-polish:k={k}"
     bests = []
@@ -413,10 +414,15 @@ def _screen(problem, config, wrapped_problem, k: int, seed: int) -> list[np.ndar
         before = len(problem.history)
         _optimize(wrapped_problem, config.local_algorithm, start, config.screen_evals, seed + 10 + j)
         rows = [r for r in problem.history[before:] if r["feasible"]]
-        best = min(rows, key=lambda r: r["value"]) if rows else None
-        if best is not None:
+        if rows:
+            best = min(rows, key=lambda r: r["value"])
             bests.append((best["value"], np.asarray(best["u"], dtype=float)[-6:]))
     return [u for _, u in sorted(bests, key=lambda t: t[0])]
+
+
+def apart(u: np.ndarray, others, min_distance: float) -> bool:
+    """``u`` lies more than ``min_distance`` from every one of ``others`` in some [0, 1] unit (max norm)."""
+    return all(np.max(np.abs(np.asarray(u) - np.asarray(o))) > min_distance for o in others)
 
 
 class _Shim:
