@@ -13,7 +13,14 @@ Parameterisation, chosen for how LLT sensors are mounted around a part carried a
   ``x_S ∥ x_O × z_S`` (the paper's sensors, with the receiver on the +x side); ψ = 180° is the same line
   with the receiver on the −x side, so the receiver's side is part of the search.
 
-The optimiser sees every variable scaled to [0, 1] (:class:`PoseSpace`).
+The optimiser sees every variable scaled to [0, 1] (:class:`PoseSpace`). Both angles of a full turn are
+mapped so that the box's faces, where a bounded optimiser cannot cross from one end of the turn to the
+other, hold poses nobody mounts: β runs from +90° (looking up from under the part, through its support)
+round to +90° again, with −90° (straight down) in the middle; ψ runs from −90° to 270° (both ends: the
+laser line along the motion, which sweeps nothing), with the receiver on the +x side (ψ = 0) at a quarter
+and on the −x side (ψ = 180°) at three quarters. With ψ in (−180°, 180°] instead, half of the
+receiver-on-−x poses sat at one face and half at the other: part B's best single sensor (ψ = −172°,
+found by random sampling) was in a basin that ran off the box, and the search never reached it.
 """
 
 from __future__ import annotations
@@ -24,9 +31,13 @@ import numpy as np
 
 from optipose.transforms import make_T
 
-__all__ = ["PoseSpace", "pose_from_params", "params_from_pose"]
+__all__ = ["PoseSpace", "pose_from_params", "params_from_pose", "SPACE_VERSION"]
 
 _X = np.array([1.0, 0.0, 0.0])
+# the angles at u = 0 (and, a full turn later, at u = 1): see the module doc
+_BETA_AT_0 = -1.5 * np.pi  # ≡ +90°, looking up
+_PSI_AT_0 = -0.5 * np.pi  # the laser line along the motion
+SPACE_VERSION = 2  # bump when the [0, 1] ↔ pose map changes: cached poses keyed by u are then stale
 
 
 def pose_from_params(R: np.ndarray, alpha: float, beta: float, psi: float) -> np.ndarray:
@@ -79,16 +90,15 @@ class PoseSpace:
         u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
         R = self.lo + u[:3] * (self.hi - self.lo)
         alpha = (2 * u[3] - 1) * self.alpha_max
-        beta = (2 * u[4] - 1) * np.pi
-        psi = (2 * u[5] - 1) * np.pi
+        beta = 2 * np.pi * u[4] + _BETA_AT_0
+        psi = 2 * np.pi * u[5] + _PSI_AT_0
         return pose_from_params(R, alpha, beta, psi)
 
     def from_pose(self, T_O_S: np.ndarray) -> np.ndarray:
         """The 6 numbers in [0, 1] of a pose (clipped into the space when it lies outside)."""
         R, alpha, beta, psi = params_from_pose(T_O_S)
-        u = np.concatenate(
-            [(R - self.lo) / (self.hi - self.lo), [alpha / self.alpha_max / 2 + 0.5, beta / np.pi / 2 + 0.5, psi / np.pi / 2 + 0.5]]
-        )
+        turn = lambda angle, at_0: ((angle - at_0) % (2 * np.pi)) / (2 * np.pi)  # noqa: E731
+        u = np.concatenate([(R - self.lo) / (self.hi - self.lo), [alpha / self.alpha_max / 2 + 0.5, turn(beta, _BETA_AT_0), turn(psi, _PSI_AT_0)]])
         return np.clip(u, 0.0, 1.0)
 
     def to_poses(self, u: np.ndarray) -> list[np.ndarray]:

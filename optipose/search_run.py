@@ -25,6 +25,7 @@ import pandas as pd
 
 from optipose.errors import ConfigError, OptiposeError
 from optipose.layout import Layout, SensorPose, write_layout
+from optipose.poseparam import SPACE_VERSION
 from optipose.search import BUDGETS, Found, SearchConfig, SearchOutcome, SurrogateProblem, run_search
 from optipose.surrogate import SensorInfo
 
@@ -83,6 +84,7 @@ def _save_cache(folder: Path, cache: dict) -> None:
         violation=np.array([0.0 if isinstance(v, SensorInfo) else v for v in infos]),
         A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(len(infos), 6, 6),
         G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
+        space=SPACE_VERSION,
     )
 
 
@@ -97,6 +99,8 @@ def _load_cache(folder: Path) -> dict:
         return {}
     data = np.load(path)
     if "G" not in data:  # a cache from before the surrogate modelled the voxel bias: scores differ, start over
+        return {}
+    if (int(data["space"]) if "space" in data else 1) != SPACE_VERSION:  # its u keys name other poses: start over
         return {}
     out = {}
     rows = zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"], data["A"], data["G"])

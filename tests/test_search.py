@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -52,6 +54,24 @@ def test_pose_space_scaling_round_trip():
     space = PoseSpace.around(np.array([[0, -0.02, 0], [0.06, 0.02, 0.0176]]))
     u = np.array([0.1, 0.5, 0.9, 0.3, 0.25, 0.75])
     assert np.allclose(space.from_pose(space.to_pose(u)), u, atol=1e-9)
+
+
+def test_pose_space_puts_the_turns_seams_where_nobody_mounts_a_sensor():
+    space = PoseSpace.around(np.array([[0, -0.02, 0], [0.06, 0.02, 0.0176]]))
+    centre = np.array([0.5, 0.5, 0.5, 0.5])
+    at = lambda beta_u, psi_u: space.to_pose(np.r_[centre, beta_u, psi_u])  # noqa: E731
+    # the middle of the box looks straight down; both faces of beta look straight up (the same pose)
+    assert np.allclose(at(0.5, 0.25)[:3, 2], [0, 0, -1], atol=1e-12)
+    assert np.allclose(at(0.0, 0.25)[:3, 2], [0, 0, 1], atol=1e-12) and np.allclose(at(0.0, 0.25), at(1.0, 0.25), atol=1e-12)
+    # psi: a quarter is the paper's line across the motion with the receiver on +x, three quarters the
+    # same line with the receiver on -x, and both faces put the line along the motion
+    assert at(0.5, 0.25)[:3, 1] @ [1, 0, 0] > 0.999 and at(0.5, 0.75)[:3, 1] @ [1, 0, 0] < -0.999
+    assert abs(at(0.5, 0.0)[:3, 0] @ [1, 0, 0]) > 0.999 and np.allclose(at(0.5, 0.0), at(0.5, 1.0), atol=1e-12)
+    # the receiver-on--x poses near psi = 180 deg lie inside the box, on both sides of it
+    for psi in (170.0, 180.0, -170.0):
+        T = pose_from_params(np.full(3, 0.01), 0.1, np.deg2rad(-110), np.deg2rad(psi))
+        u = space.from_pose(T)
+        assert 0.7 < u[5] < 0.8 and np.allclose(space.to_pose(u), T, atol=1e-9)
 
 
 def test_rotation_sigma_of_a_known_information_matrix():
@@ -167,6 +187,25 @@ def test_results_never_violate_the_constraints(part_b_problem):
         for T in found.poses:
             assert problem.collision.clearance(T).distance >= cfg.clearance
             assert problem.surrogate.info(T).n_points >= cfg.min_points
+            assert abs(T[0, 0]) <= np.sin(np.deg2rad(cfg.line_skew_max_deg)) + 1e-9  # the line's turn toward the motion
+
+
+def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
+    part, objective, cfg = part_b_problem
+    problem = SurrogateProblem(part, objective, cfg)
+    loose = SurrogateProblem(part, objective, replace(cfg, line_skew_max_deg=90.0), surrogate=problem.surrogate)
+    R, alpha, beta, _ = params_from_pose(part.layouts["hand"].poses[0])
+    for psi, allowed in ((0.0, True), (55.0, True), (-65.0, False), (180.0 + 59.0, True), (180.0 - 70.0, False)):
+        T = pose_from_params(R, alpha, beta, np.deg2rad(psi))
+        # S1 looks straight across the scan axis (alpha = 0), so the line's angle from across the motion is psi's
+        assert np.rad2deg(np.arcsin(abs(T[0, 0]))) == pytest.approx(min(abs(psi), abs(180 - psi)), abs=1e-6)
+        u = problem.space.from_pose(T)
+        strict, free = problem.sensor(u), loose.sensor(u)
+        if allowed:  # the constraint adds nothing: same information, or the same other violation
+            assert type(strict) is type(free), psi
+            assert strict == free if isinstance(free, float) else np.array_equal(strict.H, free.H), psi
+        else:
+            assert isinstance(strict, float) and strict >= 1.0 and strict != free, psi
 
 
 def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the_hand_layout():
