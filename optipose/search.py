@@ -60,7 +60,7 @@ class SearchConfig:
     alpha_max_deg: float = 60.0
     # the laser line may turn at most this far from across the motion (the angle between the line and the
     # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers cos of
-    # its width across the part, and fools the surrogate (part B, line 67° from across: predicted
+    # its width across the part, and fools the surrogate (part B, line 66° from across: predicted
     # 0.51 mdeg, 18.9 mdeg in ICP); 90 turns the constraint off
     line_skew_max_deg: float = 60.0
     random_starts: int = 8  # extra random start points scored before each greedy stage
