@@ -9,8 +9,8 @@ worse than them on the surrogate.
 Constraints are a documented penalty, not NLopt constraints, because the global algorithms worth using
 here (DIRECT-L, CRS2, MLSL) take none: a layout whose head comes within ``clearance`` of the part swept
 along the scan or of a keep-out, whose heads overlap, whose laser line turns more than
-``line_skew_max_deg`` from across the motion, or whose sensor returns fewer than ``min_points``, scores ``PENALTY + violation`` (violation ≥ 0, normalised, so the optimiser is led back toward
-feasibility). Infeasible layouts are recorded in the history but never become a result.
+``line_skew_max_deg`` from across the motion, or whose sensor returns fewer than ``min_points``, scores
+``PENALTY + violation`` (violation ≥ 0, normalised, so the optimiser is led back toward feasibility). Infeasible layouts are recorded in the history but never become a result.
 
 The user wants a layout that is no worse than the hand-placed one on *any* axis, not only on the sum, and
 the sum is dominated by the worst axis (usually roll), so an unpenalised optimiser happily trades a
@@ -59,8 +59,8 @@ class SearchConfig:
     margin: float = 0.005  # m, how far outside the part's box the aim point may go
     alpha_max_deg: float = 60.0
     # the laser line may turn at most this far from across the motion (the angle between the line and the
-    # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers cos of
-    # its width across the part, and fools the surrogate (part B, line 66° from across: predicted
+    # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers less of the
+    # part across the motion, and fools the surrogate (part B, line 66° from across: predicted
     # 0.51 mdeg, 18.9 mdeg in ICP); 90 turns the constraint off
     line_skew_max_deg: float = 60.0
     random_starts: int = 8  # extra random start points scored before each greedy stage

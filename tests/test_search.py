@@ -74,6 +74,20 @@ def test_pose_space_puts_the_turns_seams_where_nobody_mounts_a_sensor():
         assert 0.7 < u[5] < 0.8 and np.allclose(space.to_pose(u), T, atol=1e-9)
 
 
+def test_a_cache_saved_under_another_pose_map_is_not_reused(tmp_path):
+    from optipose.search_run import _load_cache, _save_cache
+    from optipose.surrogate import SensorInfo
+
+    info = SensorInfo(np.eye(6), 2500, 900, np.eye(6), np.ones((2, 6)))
+    cache = {tuple(np.full(6, 0.25)): info, tuple(np.full(6, 0.75)): 1.5}
+    _save_cache(tmp_path, cache)
+    loaded = _load_cache(tmp_path)
+    assert loaded[tuple(np.full(6, 0.75))] == 1.5 and np.array_equal(loaded[tuple(np.full(6, 0.25))].H, np.eye(6))
+    data = dict(np.load(tmp_path / "cache.npz"))
+    np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k != "space"})  # as saved before the map changed
+    assert _load_cache(tmp_path) == {}
+
+
 def test_rotation_sigma_of_a_known_information_matrix():
     # H = diag(100, 400, 2500) on rotations (rad⁻²) and large on translations: σ = 0.1, 0.05, 0.02 rad,
     # less the weak 5° prior, which adds 1/(5°)² = 131 rad⁻² to each rotation's information.
