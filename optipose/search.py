@@ -10,7 +10,8 @@ Constraints are a documented penalty, not NLopt constraints, because the global 
 here (DIRECT-L, CRS2, MLSL) take none: a layout whose head comes within ``clearance`` of the part swept
 along the scan or of a keep-out, whose heads overlap, whose laser line turns more than
 ``line_skew_max_deg`` from across the motion, or whose sensor returns fewer than ``min_points``, scores
-``PENALTY + violation`` (violation ≥ 0, normalised, so the optimiser is led back toward feasibility). Infeasible layouts are recorded in the history but never become a result.
+``PENALTY + violation`` (violation ≥ 0, normalised, so the optimiser is led back toward feasibility).
+Infeasible layouts are recorded in the history but never become a result.
 
 The user wants a layout that is no worse than the hand-placed one on *any* axis, not only on the sum, and
 the sum is dominated by the worst axis (usually roll), so an unpenalised optimiser happily trades a
@@ -59,8 +60,8 @@ class SearchConfig:
     margin: float = 0.005  # m, how far outside the part's box the aim point may go
     alpha_max_deg: float = 60.0
     # the laser line may turn at most this far from across the motion (the angle between the line and the
-    # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers less of the
-    # part across the motion, and fools the surrogate (part B, line 66° from across: predicted
+    # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers less
+    # of the part across the motion, and fools the surrogate (part B, line 66° from across: predicted
     # 0.51 mdeg, 18.9 mdeg in ICP); 90 turns the constraint off
     line_skew_max_deg: float = 60.0
     random_starts: int = 8  # extra random start points scored before each greedy stage
@@ -190,11 +191,9 @@ class SurrogateProblem:
         if key not in self.cache:
             T = self.space.to_pose(np.asarray(key))
             skew, limit = abs(T[0, 0]), np.sin(np.deg2rad(self.config.line_skew_max_deg))  # |x_S · x_O|
-            if skew > limit + 1e-12:
+            if skew > limit + 1e-12:  # checked first: it needs no collision test and no scan
                 self.cache[key] = 1.0 + (skew - limit) / max(1.0 - limit, 1e-9)
-                return self.cache[key]
-            gap = self.collision.clearance(T).distance
-            if gap < self.config.clearance:
+            elif (gap := self.collision.clearance(T).distance) < self.config.clearance:
                 self.cache[key] = 1.0 + min(self.config.clearance - gap, 1.0) / self.config.clearance
             else:
                 info = self.surrogate.info(T)
@@ -387,11 +386,8 @@ def _joint_stage(problem, config, k, greedy: Found | None, hand: Found | None, r
     problem.stage = f"joint:k={k}"
     best = None
     for start in [s for s in (greedy, hand) if s is not None] or [Found(k, "random", rng.random(6 * k), [], np.inf)]:
-        before = len(problem.history)
-        _optimize(problem, config.local_algorithm, start.u, config.joint_evals // (2 if hand and greedy else 1), seed)
-        rows = [r for r in problem.history[before:] if r["feasible"]]
-        if rows:
-            row = min(rows, key=lambda r: r["value"])
+        row = local_best(problem, config.local_algorithm, start.u, config.joint_evals // (2 if hand and greedy else 1), seed)
+        if row is not None:
             u = np.asarray(row["u"])
             if best is None or row["value"] < best.score:
                 best = Found(k, "joint", u, problem.space.to_poses(u), row["value"], problem.evaluate(u)[1])
@@ -420,13 +416,21 @@ def _screen(problem, config, wrapped_problem, k: int, seed: int) -> list[np.ndar
     problem.stage = f"screen-polish:k={k}"
     bests = []
     for j, start in enumerate(picked):
-        before = len(problem.history)
-        _optimize(wrapped_problem, config.local_algorithm, start, config.screen_evals, seed + 10 + j)
-        rows = [r for r in problem.history[before:] if r["feasible"]]
-        if rows:
-            best = min(rows, key=lambda r: r["value"])
+        best = local_best(wrapped_problem, config.local_algorithm, start, config.screen_evals, seed + 10 + j, problem.history)
+        if best is not None:
             bests.append((best["value"], np.asarray(best["u"], dtype=float)[-6:]))
     return [u for _, u in sorted(bests, key=lambda t: t[0])]
+
+
+def local_best(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, history: list[dict] | None = None) -> dict | None:
+    """Run a local NLopt search on ``fn`` (a :class:`SurrogateProblem` or a sub-problem of one, whose
+    evaluations are recorded in ``history``, by default ``fn.history``) and return the best feasible
+    history row it produced, or None when it met no feasible layout."""
+    history = fn.history if history is None else history
+    before = len(history)
+    _optimize(fn, algorithm, x0, maxeval, seed)
+    rows = [r for r in history[before:] if r["feasible"]]
+    return min(rows, key=lambda r: r["value"]) if rows else None
 
 
 def apart(u: np.ndarray, others, min_distance: float) -> bool:

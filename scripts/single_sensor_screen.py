@@ -79,27 +79,24 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
     from dataclasses import replace
 
     from optipose.evaluate import Evaluator
-    from optipose.refine import _dominates, reduced_objective, selection_seed
-    from optipose.search import _optimize, apart
+    from optipose.refine import _dominates, _rank, reduced_objective, selection_seed
+    from optipose.search import apart, local_best
     from optipose.search_run import validation_seed
 
-    weights = np.asarray(problem._weights[0])
-    key = lambda t: t[0] + 20.0 * float(weights @ np.clip(t[1] - target, 0.0, None))  # noqa: E731
+    # rank and polish on the search's own score with its per-axis penalty at margin 1 and weight 20
+    problem.config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)
+    problem.targets = {1: target}
+    key = lambda t: t[0] + problem.shortfall(1, {"axis_score": t[1]})  # noqa: E731
     starts: list[np.ndarray] = []
     for t in sorted(scored, key=key):
         if len(starts) >= args.icp:
             break
         if apart(t[2], starts, 0.1):
             starts.append(t[2])
-    # polish each on the same score: the search's penalty with margin 1 and weight 20
-    problem.config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)
-    problem.targets = {1: target}
     poses: list[np.ndarray] = []
     for j, u0 in enumerate(starts):
-        before = len(problem.history)
-        _optimize(problem, "LN_BOBYQA", u0, args.polish, args.seed + j)
-        rows = [r for r in problem.history[before:] if r["feasible"]]
-        u = np.asarray(min(rows, key=lambda r: r["value"])["u"]) if rows else u0
+        row = local_best(problem, "LN_BOBYQA", u0, args.polish, args.seed + j)
+        u = np.asarray(row["u"]) if row is not None else u0
         if apart(u, poses, 0.02):
             poses.append(u)
     fmt = lambda c: " ".join(f"{a.axis} {1e3 * np.rad2deg(a.median):.3f}/{1e3 * np.rad2deg(a.p75):.3f}" for a in c.axes)  # noqa: E731
@@ -114,11 +111,11 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
         ranked = []
         for u in poses:
             choice = reduced(problem.space.to_poses(u)).table[0]
-            ranked.append((not _dominates(choice, bar), choice.score, u))
-        ranked.sort(key=lambda t: t[:2])
-        print(f"{len(poses)} distinct poses on the reduced protocol: {sum(not t[0] for t in ranked)} no worse than {bar.sensors} on every axis")
+            ranked.append((_rank(choice, bar), u))
+        ranked.sort(key=lambda t: t[0])
+        print(f"{len(poses)} distinct poses on the reduced protocol: {sum(not t[0][0] for t in ranked)} no worse than {bar.sensors} on every axis")
         wins = 0
-        for _, _, u in ranked[: args.confirm]:
+        for _, u in ranked[: args.confirm]:
             poses_u = problem.space.to_poses(u)
             a, b = full(poses_u).table[0], held_out(poses_u).table[0]
             wins += _dominates(b, bar_held) and b.score <= bar_held.score / 2
