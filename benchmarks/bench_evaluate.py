@@ -46,11 +46,11 @@ def main() -> None:
 
     import open3d as o3d
 
-    from optipose.evaluate import Evaluator
-    from optipose.objective import load_objective
-    from optipose.part import load_part
-    from optipose.reference import sample_surface
-    from optipose.scanner import Scanner
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.evaluate.objective import load_objective
+    from optipose.model.part import load_part
+    from optipose.registration.reference import sample_surface
+    from optipose.scan.scanner import Scanner
 
     part = load_part("part_b")
     layout = part.layouts["hand"]
@@ -89,7 +89,7 @@ def main() -> None:
     print(f"speed-up of optipose evaluate over the naive loop: {per * len(p) / wall:.1f}x")
 
     # optipose in one process on the same orientations, for a like-for-like per-orientation figure
-    from optipose.evaluate import _run_chunk
+    from optipose.evaluate.evaluator import _run_chunk
 
     tasks = [(int(i), p.rpy[i], p.offset[i], int(p.seeds[i]), str(p.label[i])) for i in picks]
     with Evaluator(part, objective, seed=0, jobs=1) as one:

@@ -39,8 +39,8 @@ import trimesh
 from rich.console import Console
 from rich.table import Table
 
-from optipose.raycast import EmbreeCaster, Open3DCaster
-from optipose.scanner import Scanner, ScanMotion, _SensorView
+from optipose.scan.raycast import EmbreeCaster, Open3DCaster
+from optipose.scan.scanner import Scanner, ScanMotion, _SensorView
 from optipose.transforms import part_motion
 
 BLOCK_EXTENTS = (0.060, 0.041, 0.0176)  # m, part B's envelope
@@ -79,7 +79,7 @@ class NaiveScanner:
     """The straightforward way: per profile, build its rays, cast them (one embreex call), then shadow-cast
     every candidate hit to the receiver (a second call), with per-profile numpy for the rest.
 
-    Same model as :class:`optipose.scanner.Scanner` (same rays, trapezoid, AoI intensity, receiver-side
+    Same model as :class:`optipose.scan.scanner.Scanner` (same rays, trapezoid, AoI intensity, receiver-side
     and shadow tests, noise, quantisation, raw profiles, points in O), so point counts must agree.
     """
 

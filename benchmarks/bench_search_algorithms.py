@@ -1,8 +1,8 @@
 """NLopt global algorithms against random search on the surrogate, on the same evaluation budget (SPEC §6).
 
 Problems: one sensor (6 variables) on part_a, part_b and part_c, and two sensors placed jointly (12
-variables) on part_b, scored by :class:`optipose.search.SurrogateProblem` with the ``paper`` objective and
-the default :class:`~optipose.search.SearchConfig` constraints (penalty ``PENALTY + violation`` when
+variables) on part_b, scored by :class:`optipose.search.core.SurrogateProblem` with the ``paper`` objective and
+the default :class:`~optipose.search.core.SearchConfig` constraints (penalty ``PENALTY + violation`` when
 infeasible). Every run gets a fresh problem (empty pose cache), the same start point per seed (NLopt's x0,
 and random search's first draw), ``nlopt.srand(seed)`` through ``search._optimize``, and exactly
 ``--evals`` evaluations. Runs are interleaved (the algorithm order rotates per seed) so that background
@@ -57,7 +57,7 @@ class _Budgeted:
 
 def run_one(part, objective, surrogate, algorithm, local, k: int, seed: int, evals: int) -> dict:
     """One run from a fresh problem; returns its best-so-far curve (evals,) and counters."""
-    from optipose.search import SearchConfig, SurrogateProblem, _optimize
+    from optipose.search.core import SearchConfig, SurrogateProblem, _optimize
 
     problem = SurrogateProblem(part, objective, SearchConfig(), surrogate=surrogate)
     problem.stage = algorithm or "random"
@@ -87,9 +87,9 @@ def run_one(part, objective, surrogate, algorithm, local, k: int, seed: int, eva
 
 def run_problem(part_name: str, k: int, objective, evals: int, seeds: int) -> dict[str, list[dict]]:
     """All algorithms × seeds on one problem, interleaved; label -> runs in seed order."""
-    from optipose.part import load_part
-    from optipose.search import SearchConfig, SurrogateProblem
-    from optipose.surrogate import Surrogate
+    from optipose.model.part import load_part
+    from optipose.search.core import SearchConfig, SurrogateProblem
+    from optipose.search.surrogate import Surrogate
 
     part = load_part(part_name)
     surrogate = Surrogate(part, voxel=objective.registration.voxel_size)
@@ -212,7 +212,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=3, help="seeds per algorithm and problem")
     args = ap.parse_args()
 
-    from optipose.objective import load_objective
+    from optipose.evaluate.objective import load_objective
 
     objective = load_objective("paper")
     checkpoints = tuple(c for c in CHECKPOINTS if c < args.evals) + (args.evals,)

@@ -18,12 +18,12 @@ import time
 import numpy as np
 from scipy.stats import spearmanr
 
-from optipose.evaluate import Evaluator
-from optipose.objective import load_objective
-from optipose.part import load_part
-from optipose.refine import reduced_objective
-from optipose.search import SearchConfig, SurrogateProblem
-from optipose.surrogate import Surrogate, predicted_stats
+from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.objective import load_objective
+from optipose.model.part import load_part
+from optipose.search.refine import reduced_objective
+from optipose.search.core import SearchConfig, SurrogateProblem
+from optipose.search.surrogate import Surrogate, predicted_stats
 
 AXES = ("roll", "pitch", "yaw")
 

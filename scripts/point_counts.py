@@ -6,7 +6,7 @@ the ``--markdown`` output).
 
 import sys
 
-from optipose.cli_parts import counts_command
+from optipose.cli.parts import counts_command
 
 if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]

@@ -25,10 +25,10 @@ import time
 import numpy as np
 from scipy.stats import qmc
 
-from optipose.objective import load_objective
-from optipose.part import load_part
-from optipose.search import SearchConfig, SurrogateProblem
-from optipose.surrogate import SensorInfo, predicted_stats
+from optipose.evaluate.objective import load_objective
+from optipose.model.part import load_part
+from optipose.search.core import SearchConfig, SurrogateProblem
+from optipose.search.surrogate import SensorInfo, predicted_stats
 
 
 def main() -> None:
@@ -78,10 +78,10 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
     """The ``--icp`` stage (module doc)."""
     from dataclasses import replace
 
-    from optipose.evaluate import Evaluator
-    from optipose.refine import _dominates, _rank, reduced_objective, selection_seed
-    from optipose.search import apart, local_best
-    from optipose.search_run import validation_seed
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.search.refine import _dominates, _rank, reduced_objective, selection_seed
+    from optipose.search.core import apart, local_best
+    from optipose.search.pipeline import validation_seed
 
     # rank and polish on the search's own score with its per-axis penalty at margin 1 and weight 20
     problem.config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)

@@ -9,16 +9,16 @@ import pandas as pd
 import pytest
 import trimesh
 
-from optipose.assignment import all_subsets, best_choices, subset_name
+from optipose.evaluate.assignment import all_subsets, best_choices, subset_name
 from optipose.errors import ConfigError
-from optipose.evaluate import Evaluator
-from optipose.layout import Layout, SensorPose
-from optipose.objective import StatisticConfig, load_objective, objective_from_table
-from optipose.protocol import perturbations
-from optipose.reference import SampledReference, SurfaceReference, sample_surface
-from optipose.registration import Matches, _register_plain, information_matrix, register, voxel_down
-from optipose.scanner import ScanMotion
-from optipose.statistics import unobservable_axes
+from optipose.evaluate.evaluator import Evaluator
+from optipose.model.layout import Layout, SensorPose
+from optipose.evaluate.objective import StatisticConfig, load_objective, objective_from_table
+from optipose.evaluate.protocol import perturbations
+from optipose.registration.reference import SampledReference, SurfaceReference, sample_surface
+from optipose.registration.icp import Matches, _register_plain, information_matrix, register, voxel_down
+from optipose.scan.scanner import ScanMotion
+from optipose.evaluate.statistics import unobservable_axes
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion, transform_points
 
 DEG = np.pi / 180
@@ -31,7 +31,7 @@ def _objective(sequences=("R",), start=-1.0, stop=1.0, step=1.0, **registration)
 
 
 class _Part:
-    """A minimal stand-in for optipose.part.Part."""
+    """A minimal stand-in for optipose.model.part.Part."""
 
     def __init__(self, mesh, layout, material="black-pla", length=None, centre=None):
         self.name, self.mesh, self.material, self.sensor = "synthetic", mesh, material, "keyence-lj-x8080"
@@ -227,7 +227,7 @@ def test_evaluator_flags_a_plate_seen_from_above(tmp_path):
     assert stats.loc["yaw", "unobservable"] and not stats.loc["roll", "unobservable"] and not stats.loc["pitch", "unobservable"]
     assert not result.table[0].axes[2].observable and result.table[0].axes[0].observable
     assert result.per_scan["unobservable_x"].all() and result.per_scan["unobservable_y"].all()
-    from optipose.cli_evaluate import table1
+    from optipose.cli.evaluate import table1
 
     from rich.console import Console
 
@@ -321,7 +321,7 @@ def test_cli_evaluate_writes_results_and_rejects_bad_input(tmp_path, monkeypatch
     import typer
     from typer.testing import CliRunner
 
-    from optipose.cli_evaluate import register as register_evaluate
+    from optipose.cli.evaluate import register as register_evaluate
 
     app = typer.Typer()
     register_evaluate(app)

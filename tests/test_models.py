@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from optipose.errors import ConfigError
-from optipose.materials import load_material, material_presets
-from optipose.sensor import load_sensor, sensor_presets
+from optipose.model.material import load_material, material_presets
+from optipose.model.sensor import load_sensor, sensor_presets
 
 
 def test_presets_are_shipped():

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from optipose.collision import ConvexSet, _sat_gap, clearance, collides, heads_clearance
+from optipose.model.collision import ConvexSet, _sat_gap, clearance, collides, heads_clearance
 from optipose.errors import ConfigError, MeshError
-from optipose.part import PARTS_DIR, Keepout, Part, list_parts, load_part
-from optipose.scanner import ScanMotion, Scanner
-from optipose.sensor import load_sensor
+from optipose.model.part import PARTS_DIR, Keepout, Part, list_parts, load_part
+from optipose.scan.scanner import ScanMotion, Scanner
+from optipose.model.sensor import load_sensor
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ["part_a", "part_b", "part_c"]
@@ -290,7 +290,7 @@ def test_sat_agrees_with_a_linear_program_on_random_poses(parts):
 
 # --- commands ----------------------------------------------------------------------------------------
 def test_show_writes_a_png_and_counts_match_a_scan(tmp_path, parts):
-    from optipose.cli_parts import counts_table, show_command
+    from optipose.cli.parts import counts_table, show_command
 
     out = show_command("part_c", tmp_path / "c.png", "auto")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from optipose.materials import load_material
-from optipose.profiles import EMPTY, profiles_to_points, read_profiles, write_profiles
-from optipose.scanner import Scanner, ScanMotion
-from optipose.sensor import load_sensor
+from optipose.model.material import load_material
+from optipose.scan.profiles import EMPTY, profiles_to_points, read_profiles, write_profiles
+from optipose.scan.scanner import Scanner, ScanMotion
+from optipose.model.sensor import load_sensor
 from optipose.transforms import invert_T, part_motion, transform_points
 
 MM = 1e-3

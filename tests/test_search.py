@@ -9,12 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from optipose.objective import load_objective
-from optipose.part import load_part
-from optipose.poseparam import PoseSpace, params_from_pose, pose_from_params
-from optipose.sensor import load_sensor
-from optipose.search import PENALTY, SearchConfig, SurrogateProblem, _optimize, run_search
-from optipose.surrogate import Surrogate, predicted_stats, rotation_sigma
+from optipose.evaluate.objective import load_objective
+from optipose.model.part import load_part
+from optipose.search.space import PoseSpace, params_from_pose, pose_from_params
+from optipose.model.sensor import load_sensor
+from optipose.search.core import PENALTY, SearchConfig, SurrogateProblem, _optimize, run_search
+from optipose.search.surrogate import Surrogate, predicted_stats, rotation_sigma
 
 PAPER_B = {  # SPEC §7: z_S of the paper's S1, S2, S3 and their (alpha, beta, psi) in this parameterisation
     "S1": ((0, 0.7071068, -0.7071068), (0, -45, 0)),
@@ -75,8 +75,8 @@ def test_pose_space_puts_the_turns_seams_where_nobody_mounts_a_sensor():
 
 
 def test_a_cache_saved_under_another_pose_map_is_not_reused(tmp_path):
-    from optipose.search_run import _load_cache, _save_cache
-    from optipose.surrogate import SensorInfo
+    from optipose.search.pipeline import _load_cache, _save_cache
+    from optipose.search.surrogate import SensorInfo
 
     info = SensorInfo(np.eye(6), 2500, 900, np.eye(6), np.ones((2, 6)))
     cache = {tuple(np.full(6, 0.25)): info, tuple(np.full(6, 0.75)): 1.5}
@@ -148,7 +148,7 @@ class _Recorder:
 
 
 def test_screen_finds_the_basin_a_local_search_from_the_centre_misses():
-    from optipose.search import _screen
+    from optipose.search.core import _screen
 
     centre, target = np.full(6, 0.5), np.array([0.15, 0.8, 0.3, 0.7, 0.2, 0.6])
 
@@ -223,10 +223,10 @@ def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
 
 
 def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the_hand_layout():
-    from optipose.evaluate import Evaluator
-    from optipose.objective import load_objective as load
-    from optipose.refine import _dominates, _excess, polish
-    from optipose.search import Found
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.evaluate.objective import load_objective as load
+    from optipose.search.refine import _dominates, _excess, polish
+    from optipose.search.core import Found
 
     part = load_part("part_b")
     objective = load("paper")
@@ -251,14 +251,14 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
 
 def _choice(per_axis_mdeg, k=1):
     """A Choice with (median, p75) per axis given in millidegrees; score = their sum (the paper objective)."""
-    from optipose.assignment import AxisChoice, Choice
+    from optipose.evaluate.assignment import AxisChoice, Choice
 
     axes = tuple(AxisChoice(a, "F1", np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3)) for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg))
     return Choice(k, "F1", axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3)))
 
 
 def test_a_narrow_win_is_not_clear_and_needs_confirmation():
-    from optipose.refine import _clear
+    from optipose.search.refine import _clear
 
     cfg = SearchConfig(polish_margin=0.9, clear_ratio=0.4)
     hand = _choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])  # sum 8.6
@@ -269,8 +269,8 @@ def test_a_narrow_win_is_not_clear_and_needs_confirmation():
 
 
 def test_the_polish_also_starts_from_the_candidate_closest_to_beating_the_hand_layout():
-    from optipose.refine import _nearest
-    from optipose.search import Found
+    from optipose.search.refine import _nearest
+    from optipose.search.core import Found
 
     hand = _choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])
     low_sum = Found(1, "low sum", np.zeros(6), [], 0.0)  # roll great, yaw 0.3 mdeg over the hand's
@@ -284,8 +284,8 @@ def test_the_polish_also_starts_from_the_candidate_closest_to_beating_the_hand_l
 
 
 def test_distinct_keeps_the_best_of_each_neighbourhood_by_the_given_key():
-    from optipose.refine import _distinct
-    from optipose.search import Found
+    from optipose.search.refine import _distinct
+    from optipose.search.core import Found
 
     a, b, c = (Found(1, n, u, [], s) for n, u, s in (("a", np.zeros(6), 3.0), ("b", np.full(6, 0.01), 1.0), ("c", np.ones(6), 2.0)))
     assert [f.strategy for f in _distinct([a, b, c], 0.02)] == ["b", "c"]  # a lies within 0.02 of the better b
@@ -296,9 +296,9 @@ def test_distinct_keeps_the_best_of_each_neighbourhood_by_the_given_key():
 def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_finalist():
     from types import SimpleNamespace
 
-    from optipose.assignment import Choice
-    from optipose.refine import _Confirmer
-    from optipose.search import Found
+    from optipose.evaluate.assignment import Choice
+    from optipose.search.refine import _Confirmer
+    from optipose.search.core import Found
 
     def as_sensor(choice, name):
         return Choice(1, name, choice.axes, choice.score)
@@ -326,8 +326,8 @@ def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_final
 def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_layout():
     from types import SimpleNamespace
 
-    from optipose.refine import _Confirmer
-    from optipose.search import Found
+    from optipose.search.refine import _Confirmer
+    from optipose.search.core import Found
 
     hand = SimpleNamespace(table=[_choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])])
     # on the full protocol the two leaders of the reduced ranking trade pitch for roll; the fourth is no worse anywhere

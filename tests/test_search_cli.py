@@ -89,20 +89,20 @@ def test_resume_replays_from_the_cache_to_the_same_layout(searched):
 
 
 def test_quick_budget_validates_on_the_reduced_protocol_and_says_so():
-    from optipose.objective import load_objective
-    from optipose.refine import reduced_objective
-    from optipose.search_run import config_from_budget
+    from optipose.evaluate.objective import load_objective
+    from optipose.search.refine import reduced_objective
+    from optipose.search.pipeline import config_from_budget
 
     assert config_from_budget("quick", (1, 2, 3)).validation == "reduced"
     assert config_from_budget("default", (1, 2, 3)).validation == "full"
     # the paper's 7 sequences at their two end angles: 14 of the 77 scans
-    from optipose.protocol import perturbations
+    from optipose.evaluate.protocol import perturbations
 
     assert len(perturbations(reduced_objective(load_objective("paper")).protocol, 0)) == 14
 
 
 def test_verdicts_name_every_worse_axis_and_say_when_to_keep_the_hand_layout():
-    from optipose.cli_search import verdicts
+    from optipose.cli.search import verdicts
 
     def rows(k, layout, sensors, stats):
         score = sum(m + p for m, p in stats)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from optipose.objective import load_objective
-from optipose.part import load_part
-from optipose.search_run import config_from_budget, run
+from optipose.evaluate.objective import load_objective
+from optipose.model.part import load_part
+from optipose.search.pipeline import config_from_budget, run
 
 
 @pytest.mark.slow

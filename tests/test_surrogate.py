@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optipose.objective import load_objective
-from optipose.part import load_part
-from optipose.reference import SurfaceReference
-from optipose.registration import register, voxel_down
-from optipose.surrogate import Surrogate, SensorInfo, bias_rotation, predicted_stats
+from optipose.evaluate.objective import load_objective
+from optipose.model.part import load_part
+from optipose.registration.reference import SurfaceReference
+from optipose.registration.icp import register, voxel_down
+from optipose.search.surrogate import Surrogate, SensorInfo, bias_rotation, predicted_stats
 from optipose.transforms import invert_T, matrix_to_rpy
 
 # orientations of the part (deg): the protocol's ends and a few in between

@@ -1,6 +1,6 @@
 """The middle fidelity: pick each k's finalist by real ICP on a reduced protocol, and polish it there.
 
-The surrogate (:mod:`optipose.surrogate`) predicts the noise and the voxel-centroid bias of a
+The surrogate (:mod:`optipose.search.surrogate`) predicts the noise and the voxel-centroid bias of a
 registration from one nominal scan turned in place; it ranks well but its optimum is where its errors
 favour it most. So the search ends by running the objective's own registration: every candidate of k
 sensors (the greedy and joint winners, the best hand-placed k-subset, and the best distinct layouts of
@@ -35,16 +35,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from optipose.search import Found, SearchOutcome, SurrogateProblem, apart
+from optipose.seeds import selection_seed
+from optipose.search.core import Found, SearchOutcome, SurrogateProblem, apart
 
 __all__ = ["reduced_objective", "select_finalists", "selection_seed"]
 
 log = logging.getLogger(__name__)
-
-
-def selection_seed(seed: int) -> int:
-    """The noise seed of the selection stage: neither the search's nor the validation's."""
-    return int(np.random.SeedSequence([int(seed), 0x5E1EC7]).generate_state(1)[0])
 
 
 def reduced_objective(objective):
@@ -139,7 +135,7 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
     """
     import nlopt
 
-    from optipose.search import PENALTY, _algorithm
+    from optipose.search.core import PENALTY, _algorithm
 
     k, rows, best = start.k, [], [None, None, None]  # key, u, choice
     deadline = time.monotonic() + max_time
@@ -189,7 +185,7 @@ def _hand_start(problem: SurrogateProblem, part, reference) -> list[Found]:
     """The hand-placed sensors of the reference choice (e.g. ``S3``) as a polish start: it is no worse than
     itself on every axis, so a local search from it that keeps that while lowering the sum is what a user
     who already owns these mounts wants."""
-    from optipose.assignment import subset_name
+    from optipose.evaluate.assignment import subset_name
 
     hand = part.layouts["hand"]
     combos = [c for c in itertools.combinations(range(len(hand.names)), reference.k) if subset_name(c, hand.names) == reference.sensors]
@@ -231,7 +227,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, problem: Surrogate
     (k, origin, surrogate score, reduced- or full-protocol score in degrees, whether it dominates the hand
     layout on that protocol).
     """
-    from optipose.evaluate import Evaluator
+    from optipose.evaluate.evaluator import Evaluator
 
     deadline = time.monotonic() + max_time
     config = problem.config
@@ -308,7 +304,7 @@ class _Confirmer:
     can win there and lose on a fresh seed (part C did)."""
 
     def __init__(self, part, objective, seed: int, jobs: int):
-        from optipose.evaluate import Evaluator
+        from optipose.evaluate.evaluator import Evaluator
 
         self.part, self.evaluator = part, Evaluator(part, objective, seed=seed, jobs=jobs, quiet=True)
         self._hand = None
@@ -354,7 +350,7 @@ class _Confirmer:
         """A confirmed k finalist gives way to the best k sensors of a larger finalist when those do better
         on the full protocol: the per-axis assignment of a triple's evaluation is a pair result as well,
         and the validation evaluates such a nested layout inside the larger one, as here."""
-        from optipose.assignment import subset_name
+        from optipose.evaluate.assignment import subset_name
 
         for k, key in sorted(self.chosen.items()):
             reference = self.reference(on_stage).table[k - 1]

@@ -4,7 +4,7 @@ Steps, each in its own function:
 
 1. :func:`run` sets up the result folder (or reopens one with ``resume``) and saves the config first, so
    even an interrupted run explains itself;
-2. the NLopt search on the surrogate (:mod:`optipose.search`), with the per-sensor cache and the history
+2. the NLopt search on the surrogate (:mod:`optipose.search.core`), with the per-sensor cache and the history
    flushed to the folder as it goes; a resumed run reloads the cache and replays its earlier evaluations
    for free (same seed, same sequence);
 3. validation: the found layouts and the hand-placed one are evaluated on the objective's full protocol
@@ -24,10 +24,11 @@ import numpy as np
 import pandas as pd
 
 from optipose.errors import ConfigError, OptiposeError
-from optipose.layout import Layout, SensorPose, write_layout
-from optipose.poseparam import SPACE_VERSION
-from optipose.search import BUDGETS, Found, SearchConfig, SearchOutcome, SurrogateProblem, run_search
-from optipose.surrogate import SensorInfo
+from optipose.model.layout import Layout, SensorPose, write_layout
+from optipose.search.space import SPACE_VERSION
+from optipose.search.core import BUDGETS, Found, SearchConfig, SearchOutcome, SurrogateProblem, run_search
+from optipose.search.surrogate import SensorInfo
+from optipose.seeds import validation_seed
 
 __all__ = ["SearchReport", "run", "validation_seed", "config_from_budget", "NoFeasibleLayout"]
 
@@ -36,11 +37,6 @@ log = logging.getLogger(__name__)
 
 class NoFeasibleLayout(OptiposeError):
     """The search met no layout that satisfies the constraints (e.g. the sensors cannot see the part)."""
-
-
-def validation_seed(seed: int) -> int:
-    """The held-out noise seed of the validation: derived from, and never equal to, the search seed."""
-    return int(np.random.SeedSequence([int(seed), 0x7A11D]).generate_state(1)[0])
 
 
 @dataclass
@@ -55,7 +51,7 @@ class SearchReport:
 
 # --- the folder ---------------------------------------------------------------------------------------
 def _config_table(part, objective, config: SearchConfig, budget: str, seed: int) -> dict:
-    from optipose.results import versions
+    from optipose.io.folders import versions
 
     return {
         "command": "search",
@@ -120,7 +116,7 @@ def run(part, objective, config: SearchConfig, seed: int, folder: Path, budget: 
         jobs: int = 1, resume: bool = False, on_eval=None, on_stage=None) -> SearchReport:  # fmt: skip
     """Search, validate and write everything to ``folder``. ``on_eval(row)`` follows the search;
     ``on_stage(text)`` is told when a stage starts."""
-    from optipose.results import write_config
+    from optipose.io.folders import write_config
 
     folder.mkdir(parents=True, exist_ok=True)
     write_config(folder, _config_table(part, objective, config, budget, seed))
@@ -151,7 +147,7 @@ def run(part, objective, config: SearchConfig, seed: int, folder: Path, budget: 
     report = SearchReport(folder, outcome)
     _write_layouts(report, part, outcome.found)  # the surrogate's best, on disk before anything slower
     if config.select_candidates > 0 and not outcome.interrupted:
-        from optipose.refine import select_finalists
+        from optipose.search.refine import select_finalists
 
         if on_stage:
             on_stage("selecting finalists by ICP on a reduced protocol")
@@ -175,7 +171,7 @@ def _pictures(report: SearchReport, part) -> None:
     """``layouts/found_k*.png`` beside the TOML files: each found layout drawn as ``optipose show`` does."""
     from dataclasses import replace as _replace
 
-    from optipose.partview import render_part
+    from optipose.report.views import render_part
 
     shown = _replace(part, layouts={**part.layouts, **{f"found_k{k}": lay for k, lay in report.layouts.items()}})
     for k in report.layouts:
@@ -226,13 +222,13 @@ def _groups(layouts: dict[int, Layout]) -> list[list[int]]:
 
 
 def _validate(report: SearchReport, part, objective, seed: int, jobs: int) -> None:
-    from optipose.assignment import _choose
-    from optipose.evaluate import Evaluator
-    from optipose.results import write_evaluation
+    from optipose.evaluate.assignment import _choose
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.io.folders import write_evaluation
 
     vseed = validation_seed(seed)
     if report.protocol == "reduced":
-        from optipose.refine import reduced_objective
+        from optipose.search.refine import reduced_objective
 
         objective = reduced_objective(objective)
     out_dir = report.folder / "validation"

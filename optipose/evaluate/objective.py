@@ -27,7 +27,7 @@ __all__ = [
     "AXES",
 ]
 
-OBJECTIVES_DIR = Path(__file__).resolve().parents[1] / "objectives"
+OBJECTIVES_DIR = Path(__file__).resolve().parents[2] / "objectives"
 AXES = ("roll", "pitch", "yaw")
 METHODS = ("point_to_point", "point_to_plane", "generalized")
 BACKENDS = ("fast", "open3d")
@@ -58,7 +58,7 @@ class ProtocolConfig:
 
 @dataclass(frozen=True)
 class RegistrationConfig:
-    """ICP settings (SI). See :mod:`optipose.registration`."""
+    """ICP settings (SI). See :mod:`optipose.registration.icp`."""
 
     method: str = "point_to_plane"
     backend: str = "fast"

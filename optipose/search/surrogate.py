@@ -36,7 +36,7 @@ What the surrogate models, and why:
   little), but it moves the edges through the grid as the protocol does; on part B's hand and found
   poses it predicts pitch and yaw within about 2× of ICP, where grid shifts alone were 5× low.
 
-It ranks layouts; the full ICP protocol (:mod:`optipose.evaluate`) gives the numbers that are reported.
+It ranks layouts; the full ICP protocol (:mod:`optipose.evaluate.evaluator`) gives the numbers that are reported.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.stats import norm
 
-from optipose.scanner import Scanner, ScanMotion
+from optipose.scan.scanner import Scanner, ScanMotion
 from optipose.transforms import part_motion
 
 __all__ = ["Surrogate", "SensorInfo", "protocol_turns", "bias_rotation", "MEDIAN_PER_SIGMA", "P75_PER_SIGMA", "predicted_stats"]
@@ -63,7 +63,7 @@ DEFAULT_TURNS = np.deg2rad([[2, 0, 0], [-2, 0, 0], [0, 2, 0], [0, -2, 0], [0, 0,
 def protocol_turns(objective, n: int = 8) -> np.ndarray:
     """``n`` of the objective's protocol orientations (rad), a fixed draw without repeats (a regular
     stride would land on the same step of every sequence)."""
-    from optipose.protocol import perturbations
+    from optipose.evaluate.protocol import perturbations
 
     rpy = perturbations(objective.protocol, 0).rpy
     return rpy[np.sort(np.random.default_rng(1536).choice(len(rpy), min(n, len(rpy)), replace=False))]
@@ -83,7 +83,7 @@ class SensorInfo:
 class Surrogate:
     """Per-sensor information matrices from reduced nominal scans of a part.
 
-    part : a loaded :class:`optipose.part.Part`.
+    part : a loaded :class:`optipose.model.part.Part`.
     voxel : m, the registration voxel size of the objective.
     turns : (m, 3) roll, pitch, yaw (rad) of the part at which the voxel bias is sampled, e.g.
         :func:`protocol_turns` of the objective; default: eight turns of ±2° (empty: no bias model).
@@ -94,7 +94,7 @@ class Surrogate:
         self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0,
         threads: int | None = None, extra_variance: float = 0.0, turns: np.ndarray | None = None,
     ):  # fmt: skip
-        from optipose.sensor import load_sensor
+        from optipose.model.sensor import load_sensor
 
         self.part = part
         self.full_sensor = load_sensor(part.sensor)
@@ -135,8 +135,8 @@ class Surrogate:
         """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc)."""
         if not len(self.motions):
             return None, None
-        from optipose._icp_kernels import voxel_centroids
-        from optipose.reference import SurfaceReference
+        from optipose.registration.kernels import voxel_centroids
+        from optipose.registration.reference import SurfaceReference
 
         if self._reference is None:
             self._reference = SurfaceReference(self.part.mesh.vertices, self.part.mesh.faces)

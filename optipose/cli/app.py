@@ -96,7 +96,7 @@ def scan(
     units: UnitsOpt = "auto",
 ) -> None:
     """Scan a part with one or more sensors and print what each sees."""
-    from optipose.scan_command import run_scan
+    from optipose.cli.scan import run_scan
 
     run_scan(part, sensor_pose, layout, material, sensor, _parse_floats(rpy, 3, "--rpy"), seed, noise, out, raw, units)
 
@@ -105,7 +105,7 @@ def scan(
 @friendly_errors
 def parts() -> None:
     """List the shipped parts with their size, material, scanning length and layouts."""
-    from optipose.cli_parts import parts_command
+    from optipose.cli.parts import parts_command
 
     parts_command()
 
@@ -119,7 +119,7 @@ def show(
     units: UnitsOpt = "auto",
 ) -> None:
     """Draw a part with a layout's sensors (head boxes, laser fans, scanned points) to a PNG."""
-    from optipose.cli_parts import show_command
+    from optipose.cli.parts import show_command
 
     show_command(part, out, units, layout)
 
@@ -132,17 +132,17 @@ def counts(
     markdown: Annotated[bool, typer.Option(help="Print a Markdown table (for the README).")] = False,
 ) -> None:
     """Point counts of a nominal scan per sensor (the paper's Figure 9 at zero offset)."""
-    from optipose.cli_parts import counts_command
+    from optipose.cli.parts import counts_command
 
     counts_command(part, layout, markdown)
 
 
 def _register_commands() -> None:
     """Commands defined in their own modules (each module imports only typer at import time)."""
-    from optipose import cli_evaluate, cli_search
+    from optipose.cli import evaluate, search
 
-    cli_evaluate.register(app)
-    cli_search.register(app)
+    evaluate.register(app)
+    search.register(app)
 
 
 _register_commands()

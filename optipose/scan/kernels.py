@@ -1,7 +1,7 @@
 """Compiled per-hit kernels of the scanner (numba, ``nogil`` so scanner threads run them in parallel).
 
 Each kernel is one pass over a block's rays doing what would otherwise be some forty numpy passes; the
-arithmetic is the scanner's, documented in :mod:`optipose.scanner`. Compiled once per machine and cached
+arithmetic is the scanner's, documented in :mod:`optipose.scan.scanner`. Compiled once per machine and cached
 next to this file (``cache=True``).
 """
 

@@ -2,9 +2,9 @@
 
 One API, two back-ends (chosen by ``RegistrationConfig.backend``):
 
-- ``fast`` — ICP written here on top of a :mod:`optipose.reference` built once per part: point-to-point
+- ``fast`` — ICP written here on top of a :mod:`optipose.registration.reference` built once per part: point-to-point
   (Kabsch on closest points, the paper's method) or point-to-plane (a linearised 6×6 solve per step).
-  Each step is three compiled passes (:mod:`optipose._icp_kernels`): move the cloud, find closest points
+  Each step is three compiled passes (:mod:`optipose.registration.kernels`): move the cloud, find closest points
   from the faces of the previous step (``reference.nearest``), sum the normal equations.
   :func:`_register_plain` is the same loop in numpy, kept as the reference the tests compare with.
   Generalized ICP has no fast path and goes to Open3D.
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from optipose.objective import RegistrationConfig
+from optipose.evaluate.objective import RegistrationConfig
 
 __all__ = ["Registration", "Matches", "register", "voxel_down", "remove_outliers", "information_matrix"]
 
@@ -85,7 +85,7 @@ def voxel_down(points: np.ndarray, size: float) -> np.ndarray:
     The grid is fixed in O (Open3D's moves with the cloud's bounding box), so a voxel's content does not
     depend on what else was scanned. Output order is the voxels' sorted keys: deterministic.
     """
-    from optipose._icp_kernels import voxel_centroids
+    from optipose.registration.kernels import voxel_centroids
 
     points = np.asarray(points, dtype=np.float64)
     if size <= 0 or len(points) == 0:
@@ -120,7 +120,7 @@ def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
 def _register_fast(source, reference, cfg: RegistrationConfig, initial: Matches | None) -> Registration:
     """ICP with compiled passes: transform, closest points (:meth:`nearest` from the previous step's faces),
     and the normal equations, whose ``AᵀA`` at the last step is also the information matrix."""
-    from optipose import _icp_kernels as kernels
+    from optipose.registration import kernels
 
     source = np.ascontiguousarray(source, dtype=np.float64)
     T = np.eye(4)

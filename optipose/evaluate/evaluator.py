@@ -22,12 +22,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from optipose.assignment import Choice, all_subsets, best_choices, subset_name
-from optipose.layout import Layout, SensorPose
-from optipose.objective import AXES, Objective, RegistrationConfig, load_objective
-from optipose.protocol import Perturbations, perturbations
-from optipose.registration import Matches, register, remove_outliers, voxel_down
-from optipose.statistics import summarize, unobservable_axes
+from optipose.evaluate.assignment import Choice, all_subsets, best_choices, subset_name
+from optipose.model.layout import Layout, SensorPose
+from optipose.evaluate.objective import AXES, Objective, RegistrationConfig, load_objective
+from optipose.seeds import nominal_reference_seed
+from optipose.evaluate.protocol import Perturbations, perturbations
+from optipose.registration.icp import Matches, register, remove_outliers, voxel_down
+from optipose.evaluate.statistics import summarize, unobservable_axes
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 
 __all__ = ["Evaluator", "EvaluationResult", "evaluate"]
@@ -78,7 +79,7 @@ class EvaluationResult:
 
 
 def evaluate(part, layout: Layout | None = None, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1) -> EvaluationResult:
-    """Evaluate ``layout`` (default: the part's hand-placed one) on ``part`` (a :class:`optipose.part.Part`)."""
+    """Evaluate ``layout`` (default: the part's hand-placed one) on ``part`` (a :class:`optipose.model.part.Part`)."""
     if layout is None:
         if "hand" not in part.layouts:
             from optipose.errors import ConfigError
@@ -92,7 +93,7 @@ def evaluate(part, layout: Layout | None = None, objective: Objective | str = "p
 class Evaluator:
     """A part and an objective, ready to evaluate layouts; the costly set-up is done once.
 
-    part : :class:`optipose.part.Part`. objective : an :class:`Objective` or a name/path.
+    part : :class:`optipose.model.part.Part`. objective : an :class:`Objective` or a name/path.
     jobs : worker processes over orientations (1 = in this process).
     quiet : report failed registrations at INFO instead of WARNING (a search's hundreds of internal
         evaluations; the counts stay in ``per_scan`` and ``stats``).
@@ -188,8 +189,8 @@ class _Worker:
     def __init__(self, setup: _Setup):
         import trimesh
 
-        from optipose.reference import SampledReference, SurfaceReference, sample_surface
-        from optipose.scanner import Scanner
+        from optipose.registration.reference import SampledReference, SurfaceReference, sample_surface
+        from optipose.scan.scanner import Scanner
 
         self.setup = setup
         mesh = trimesh.Trimesh(setup.vertices, setup.faces, process=False)
@@ -211,10 +212,10 @@ class _Worker:
         return self._nominal[key]
 
     def _nominal_references(self, poses, subsets) -> list:
-        from optipose.reference import SampledReference
+        from optipose.registration.reference import SampledReference
 
         cfg = self.setup.registration
-        seed = int(np.random.SeedSequence([self.setup.seed, 7]).generate_state(1)[0])
+        seed = nominal_reference_seed(self.setup.seed)
         scans = self.scanner.scan_many(poses, self.setup.motion, centre=self.setup.centre, rng=seed)
         clouds = [_with_normals(voxel_down(s.points, cfg.reference_spacing), T[:3, 2]) for s, T in zip(scans, poses)]
         return [

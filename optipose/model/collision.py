@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from optipose.sensor import SensorModel, load_sensor
+from optipose.model.sensor import SensorModel, load_sensor
 
 __all__ = [
     "DEFAULT_MARGIN", "Clearance", "ConvexSet", "CollisionModel",
@@ -92,7 +92,7 @@ class ConvexSet:
 class CollisionModel:
     """The obstacles of one part for one sensor model; :meth:`clearance` and :meth:`collides` per pose.
 
-    part : an :class:`optipose.part.Part` (mesh, motion, keep-outs); sensor : model or preset name
+    part : an :class:`optipose.model.part.Part` (mesh, motion, keep-outs); sensor : model or preset name
     (default: the part's sensor).
     """
 

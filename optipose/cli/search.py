@@ -13,7 +13,7 @@ __all__ = ["register", "search_command"]
 
 
 def register(app: typer.Typer) -> None:
-    from optipose.cli import friendly_errors
+    from optipose.cli.app import friendly_errors
 
     @app.command("search")
     @friendly_errors
@@ -49,7 +49,7 @@ def _parse_sensors(text: str) -> tuple[int, ...]:
 
 def _overrides(path: Path | None) -> dict:
     from optipose.errors import ConfigError
-    from optipose.search import SearchConfig
+    from optipose.search.core import SearchConfig
 
     if path is None:
         return {}
@@ -83,11 +83,11 @@ def _resumed(resume: Path) -> dict:
 def search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config) -> Path:
     from rich.console import Console
 
-    from optipose.objective import load_objective, objective_from_table
-    from optipose.part import load_part
-    from optipose.results import make_result_dir
-    from optipose.search import SearchConfig
-    from optipose.search_run import config_from_budget
+    from optipose.evaluate.objective import load_objective, objective_from_table
+    from optipose.model.part import load_part
+    from optipose.io.folders import make_result_dir
+    from optipose.search.core import SearchConfig
+    from optipose.search.pipeline import config_from_budget
 
     console = Console(stderr=True)
     jobs = jobs or os.cpu_count() or 1
@@ -130,7 +130,7 @@ def _run_with_progress(console, part, objective, config, seed, folder, budget, j
     import numpy as np
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from optipose.search_run import run
+    from optipose.search.pipeline import run
 
     n_k = max(config.sensors)
     total = n_k * (config.global_evals + config.local_evals) + (n_k - 1) * config.joint_evals

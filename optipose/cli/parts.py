@@ -1,6 +1,6 @@
 """Commands about parts: ``optipose parts``, ``optipose show PART``, ``optipose counts PART``.
 
-Plain functions; :mod:`optipose.cli` registers them as typer commands (and turns errors into exit codes).
+Plain functions; :mod:`optipose.cli.app` registers them as typer commands (and turns errors into exit codes).
 Imports are lazy so the CLI's ``--help`` stays instant.
 """
 
@@ -16,7 +16,7 @@ def parts_command() -> None:
     from rich import box
     from rich.table import Table
 
-    from optipose.part import list_parts, load_part
+    from optipose.model.part import list_parts, load_part
 
     table = Table(title="Shipped parts (parts/)", box=box.SIMPLE_HEAD, pad_edge=False)
     for column in ("part", "L x W x H mm", "material", "scan mm", "layouts", "keep-outs"):
@@ -37,14 +37,14 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
 
     out : the PNG to write; default ``<part name>.png`` in the current folder.
     """
-    from optipose.part import load_part
-    from optipose.partview import render_part
+    from optipose.model.part import load_part
+    from optipose.report.views import render_part
 
     loaded = load_part(part, units)
     if layout.endswith(".toml"):  # a layout file, e.g. results/<run>/layouts/found_k2.toml
         from dataclasses import replace
 
-        from optipose.layout import load_layout
+        from optipose.model.layout import load_layout
 
         extra = load_layout(layout)
         loaded = replace(loaded, layouts={**loaded.layouts, extra.name: extra})
@@ -62,7 +62,7 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
 
 def counts_table(parts: list[str], layout: str = "hand") -> list[dict]:
     """Nominal-scan point counts per sensor: rows {part, sensor, points, profiles, per_profile}."""
-    from optipose.part import load_part, nominal_scans
+    from optipose.model.part import load_part, nominal_scans
 
     rows = []
     for name in parts:
@@ -80,7 +80,7 @@ def counts_command(part: str | None = None, layout: str = "hand", markdown: bool
     """Print nominal-scan point counts per sensor for one part (or every shipped part when None)."""
     from rich.table import Table
 
-    from optipose.part import list_parts
+    from optipose.model.part import list_parts
 
     rows = counts_table([part] if part else list_parts(), layout)
     if markdown:  # for README tables

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from optipose.errors import ConfigError
-from optipose.layout import Layout, SensorPose, load_layout
+from optipose.model.layout import Layout, SensorPose, load_layout
 from optipose.transforms import validate_pose
 
 log = logging.getLogger(__name__)
@@ -62,8 +62,8 @@ def run_scan(part_spec, sensor_pose, layout_path, material, sensor, rpy_deg, see
     from rich.console import Console
     from rich.table import Table
 
-    from optipose.part import load_part
-    from optipose.profiles import write_profiles
+    from optipose.model.part import load_part
+    from optipose.scan.profiles import write_profiles
 
     if out and out.suffix.lower() not in CLOUD_SUFFIXES:  # refuse before the work, not after
         raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")

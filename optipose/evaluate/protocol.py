@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from optipose.objective import SEQUENCE_AXES, ProtocolConfig
+from optipose.evaluate.objective import SEQUENCE_AXES, ProtocolConfig
 
 __all__ = ["Perturbations", "perturbations"]
 

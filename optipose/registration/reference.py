@@ -61,7 +61,7 @@ class SurfaceReference:
         """The faces near each cell of a ``_CELL`` grid over the part (see :func:`_icp_kernels.face_grid`),
         with the faces' bounding boxes; built on first use."""
         if self._face_grid is None:
-            from optipose._icp_kernels import face_grid
+            from optipose.registration.kernels import face_grid
 
             lo, hi = self._tri.min(axis=1), self._tri.max(axis=1)
             extent = hi.max(axis=0) - lo.min(axis=0)
@@ -119,7 +119,7 @@ class SurfaceReference:
         two coplanar sliver triangles, where its point can be micrometres off), this answers the nearer
         point, so distances can be smaller than :meth:`closest`'s; point-to-plane residuals agree.
         """
-        from optipose import _icp_kernels as kernels
+        from optipose.registration import kernels
 
         points = np.ascontiguousarray(points, dtype=np.float64)
         ids = np.full(len(points), -1, dtype=np.int64) if ids is None else np.array(ids, dtype=np.int64)

@@ -16,7 +16,7 @@ from itertools import combinations
 import numpy as np
 import pandas as pd
 
-from optipose.objective import AXES, StatisticConfig
+from optipose.evaluate.objective import AXES, StatisticConfig
 
 __all__ = ["all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY"]
 
@@ -64,7 +64,7 @@ class Choice:
 
 
 def best_choices(stats: pd.DataFrame, names: list[str], cfg: StatisticConfig, n_scans: int) -> list[Choice]:
-    """The best choice for k = 1 … n sensors (Table 1), from :func:`optipose.statistics.summarize` output."""
+    """The best choice for k = 1 … n sensors (Table 1), from :func:`optipose.evaluate.statistics.summarize` output."""
     by_key = {(r.subset, r.axis): r for r in stats.itertuples(index=False)}
     out = []
     for k in range(1, len(names) + 1):

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from optipose.layout import Layout
-from optipose.sensor import load_sensor
+from optipose.model.layout import Layout
+from optipose.model.sensor import load_sensor
 from optipose.transforms import transform_points
 
 __all__ = ["render_part"]

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from optipose.errors import ConfigError
-from optipose.sensor import SensorModel
+from optipose.model.sensor import SensorModel
 
 __all__ = ["EMPTY", "profiles_to_points", "heights_to_points", "ray_lines", "write_profiles", "read_profiles"]
 

@@ -31,9 +31,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from optipose.collision import DEFAULT_MARGIN, collision_model, heads_clearance
-from optipose.poseparam import PoseSpace
-from optipose.surrogate import SensorInfo, Surrogate, predicted_stats, protocol_turns
+from optipose.model.collision import DEFAULT_MARGIN, collision_model, heads_clearance
+from optipose.search.space import PoseSpace
+from optipose.search.surrogate import SensorInfo, Surrogate, predicted_stats, protocol_turns
 
 __all__ = ["SearchConfig", "BUDGETS", "Found", "SearchOutcome", "SurrogateProblem", "run_search", "PENALTY"]
 

@@ -11,7 +11,7 @@ Embree in one call. A point is measured when
 
 Noise is Gaussian along the laser ray with σ growing as intensity falls, then Z is quantised to the
 device's output resolution. Profiles are turned into points in O with the motion undone (paper eq. 4),
-through the same code that reads real raw profiles (:mod:`optipose.profiles`).
+through the same code that reads real raw profiles (:mod:`optipose.scan.profiles`).
 """
 
 from __future__ import annotations
@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from optipose.materials import Material, load_material
-from optipose._kernels import NORMAL_QUANTILES, measure_hits, write_points
-from optipose.profiles import EMPTY, ray_lines
-from optipose.raycast import default_threads, face_planes, make_caster
-from optipose.sensor import SensorModel, load_sensor
+from optipose.model.material import Material, load_material
+from optipose.scan.kernels import NORMAL_QUANTILES, measure_hits, write_points
+from optipose.scan.profiles import EMPTY, ray_lines
+from optipose.scan.raycast import default_threads, face_planes, make_caster
+from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
 __all__ = ["ScanMotion", "Scan", "Scanner"]
@@ -93,7 +93,7 @@ class Scanner:
 
     mesh : a ``trimesh.Trimesh`` in metres (or anything with ``vertices`` (v, 3) and ``faces`` (f, 3)).
     sensor, material : models or preset names.
-    backend : ray-casting back-end, see :func:`optipose.raycast.make_caster`.
+    backend : ray-casting back-end, see :func:`optipose.scan.raycast.make_caster`.
     threads : worker threads for one scan (default: the cores this process may use, or
         ``OPTIPOSE_RAY_THREADS``). Results do not depend on it.
     occluders : axis-aligned boxes ``(lo (3,), hi (3,))`` in the part's frame, m, that travel with the part

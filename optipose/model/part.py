@@ -6,7 +6,7 @@ A part is described by a TOML part file (``parts/<name>/part.toml`` for the ship
     name = "part_b"                 # optional, default: the folder's name (part.toml) or the file's stem
     description = "..."             # optional
     mesh = "part_b.stl"             # relative to this file; optional in a file beside an STL
-    units = "m"                     # auto | m | mm | in (optional, default auto; see optipose.mesh)
+    units = "m"                     # auto | m | mm | in (optional, default auto; see optipose.model.mesh)
     material = "black-pla"          # preset name or a .csv/.toml path (relative to this file)
     sensor = "keyence-lj-x8080"     # preset name or a .toml path
     scan_length_mm = 60.0           # optional, default: the mesh's extent along x
@@ -18,14 +18,14 @@ A part is described by a TOML part file (``parts/<name>/part.toml`` for the ship
     min_mm = [-10.0, -40.0, -50.0]
     max_mm = [70.0, 40.0, 0.0]
 
-    [layouts.hand]                  # any number of named layouts, format of optipose.layout
+    [layouts.hand]                  # any number of named layouts, format of optipose.model.layout
     description = "..."
     [[layouts.hand.sensors]]
     name = "S1"
     T_O_S = [[...], [...], [...], [0, 0, 0, 1]]   # metres; columns: S's axes and R's position in O
 
 Keep-out boxes are fixed to the part (they stand for the gripper flange that holds it), so they travel
-with it along the scan; :mod:`optipose.collision` sweeps them together with the part.
+with it along the scan; :mod:`optipose.model.collision` sweeps them together with the part.
 
 :func:`load_part` takes a shipped part's name, a part file, or a mesh file. A mesh may have a part file
 beside it (``<stem>.toml``, else ``part.toml`` in its folder); with none, the defaults are: material
@@ -43,15 +43,15 @@ from typing import NamedTuple
 import numpy as np
 
 from optipose.errors import ConfigError, MeshError
-from optipose.layout import Layout, layout_from_table
-from optipose.materials import load_material
-from optipose.mesh import load_mesh
-from optipose.scanner import ScanMotion
-from optipose.sensor import load_sensor
+from optipose.model.layout import Layout, layout_from_table
+from optipose.model.material import load_material
+from optipose.model.mesh import load_mesh
+from optipose.scan.scanner import ScanMotion
+from optipose.model.sensor import load_sensor
 
 __all__ = ["Part", "Keepout", "load_part", "list_parts", "nominal_scans", "PARTS_DIR", "DEFAULT_MATERIAL", "DEFAULT_SENSOR"]
 
-PARTS_DIR = Path(__file__).resolve().parents[1] / "parts"
+PARTS_DIR = Path(__file__).resolve().parents[2] / "parts"
 DEFAULT_MATERIAL = "milled-aluminium-ra1.6"
 DEFAULT_SENSOR = "keyence-lj-x8080"
 DEFAULT_STEP_MM = 0.5
@@ -71,12 +71,12 @@ class Keepout(NamedTuple):
     hi: np.ndarray
 
 
-@dataclass(eq=False)  # identity semantics: a part is hashable and can key caches (optipose.collision)
+@dataclass(eq=False)  # identity semantics: a part is hashable and can key caches (optipose.model.collision)
 class Part:
     """A part ready to scan. Lengths in metres, in the part's frame O.
 
     mesh : ``trimesh.Trimesh`` in metres.
-    material, sensor : preset names (or paths) for :class:`optipose.scanner.Scanner`.
+    material, sensor : preset names (or paths) for :class:`optipose.scan.scanner.Scanner`.
     motion : the scan's travel along +x_O.
     rotation_centre : (3,) m, the centre of the orientation offsets (SPEC §3).
     keepouts : boxes fixed to the part that sensor heads must avoid.
@@ -106,8 +106,8 @@ class Part:
         return [(np.asarray(k.lo, float), np.asarray(k.hi, float)) for k in self.keepouts]
 
     def scanner(self, sensor=None, material=None, **kwargs):
-        """A :class:`optipose.scanner.Scanner` of this part, its keep-outs as occluders."""
-        from optipose.scanner import Scanner
+        """A :class:`optipose.scan.scanner.Scanner` of this part, its keep-outs as occluders."""
+        from optipose.scan.scanner import Scanner
 
         return Scanner(self.mesh, sensor or self.sensor, material or self.material, occluders=self.occluders, **kwargs)
 

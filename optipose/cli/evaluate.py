@@ -17,7 +17,7 @@ __all__ = ["register", "evaluate_command", "table1"]
 
 def register(app: typer.Typer) -> None:
     """Add ``evaluate`` to the ``optipose`` Typer app."""
-    from optipose.cli import friendly_errors
+    from optipose.cli.app import friendly_errors
 
     @app.command("evaluate")
     @friendly_errors
@@ -41,11 +41,11 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     from rich.console import Console
 
     from optipose.errors import ConfigError
-    from optipose.evaluate import Evaluator
-    from optipose.layout import load_layout
-    from optipose.objective import load_objective
-    from optipose.part import load_part
-    from optipose.results import make_result_dir, write_evaluation
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.model.layout import load_layout
+    from optipose.evaluate.objective import load_objective
+    from optipose.model.part import load_part
+    from optipose.io.folders import make_result_dir, write_evaluation
 
     the_part = load_part(part, units=units)
     if layout is not None:

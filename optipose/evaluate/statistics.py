@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from optipose.objective import AXES, StatisticConfig
+from optipose.evaluate.objective import AXES, StatisticConfig
 
 __all__ = ["unobservable_axes", "error_stats", "summarize", "STAT_COLUMNS"]
 
@@ -26,7 +26,7 @@ STAT_COLUMNS = ("median", "p75", "mean", "max")
 def unobservable_axes(information: np.ndarray, scale: float, tolerance: float = 1e-6) -> np.ndarray:
     """(6,) bool: roll, pitch, yaw, x, y, z the cloud cannot constrain.
 
-    information : (6, 6) ``H`` from :func:`optipose.registration.information_matrix`.
+    information : (6, 6) ``H`` from :func:`optipose.registration.icp.information_matrix`.
     scale : m, a length for the cloud (its RMS radius), making rotation and translation comparable.
     """
     if not np.any(information):
@@ -51,7 +51,7 @@ def error_stats(abs_errors: np.ndarray) -> dict[str, float]:
 
 
 def summarize(per_scan: pd.DataFrame, cfg: StatisticConfig | None = None) -> pd.DataFrame:
-    """Statistics per subset and axis from the per-scan table of :mod:`optipose.evaluate`.
+    """Statistics per subset and axis from the per-scan table of :mod:`optipose.evaluate.evaluator`.
 
     per_scan : columns ``subset``, ``ok``, ``err_roll``/``err_pitch``/``err_yaw`` (rad) and
         ``unobservable_roll``/... (bool).

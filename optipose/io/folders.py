@@ -67,7 +67,7 @@ def write_config(folder: Path, table: dict) -> Path:
 
 
 def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "") -> Path:
-    """Save an :class:`optipose.evaluate.EvaluationResult`: per-scan errors (CSV and Parquet), point counts,
+    """Save an :class:`optipose.evaluate.evaluator.EvaluationResult`: per-scan errors (CSV and Parquet), point counts,
     statistics, Table 1 and the config. Returns the folder."""
     folder = Path(folder)
     result.per_scan.to_csv(folder / "per_scan.csv", index=False)

@@ -1,0 +1,39 @@
+"""Every seed derived from a run's seed, in one place.
+
+A run has one user-given seed. The stages that need their own noise draw get a seed derived from it
+through ``numpy.random.SeedSequence`` with a fixed tag, so each is reproducible, none equals another, and
+none equals the run's seed itself: the search scores layouts on the selection seed and reports them on
+the validation seed, which it never saw.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed"]
+
+_SELECTION = 0x5E1EC7
+_VALIDATION = 0x7A11D
+_NOMINAL_REFERENCE = 7
+
+
+def derived_seed(seed: int, tag: int) -> int:
+    """A seed for one purpose (``tag``) of a run with seed ``seed``: a 32-bit int, the same on every machine."""
+    return int(np.random.SeedSequence([int(seed), int(tag)]).generate_state(1)[0])
+
+
+def selection_seed(seed: int) -> int:
+    """The noise seed of the search's ICP selection, polish and confirmation: neither the search's nor the
+    validation's."""
+    return derived_seed(seed, _SELECTION)
+
+
+def validation_seed(seed: int) -> int:
+    """The held-out noise seed of the search's validation: derived from, and never equal to, the search seed."""
+    return derived_seed(seed, _VALIDATION)
+
+
+def nominal_reference_seed(seed: int) -> int:
+    """The noise seed of the nominal-orientation scan that serves as the reference (``reference =
+    "nominal-scan"``): a scan of its own, not one of the protocol's."""
+    return derived_seed(seed, _NOMINAL_REFERENCE)
