@@ -40,7 +40,8 @@ from rich.console import Console
 from rich.table import Table
 
 from optipose.scan.raycast import EmbreeCaster, Open3DCaster
-from optipose.scan.scanner import Scanner, ScanMotion, _SensorView
+from optipose.model.motion import ScanMotion
+from optipose.scan.scanner import Scanner
 from optipose.transforms import part_motion
 
 BLOCK_EXTENTS = (0.060, 0.041, 0.0176)  # m, part B's envelope
@@ -62,16 +63,8 @@ def make_block() -> trimesh.Trimesh:
 
 
 def scanner_rays(scanner: Scanner, T_O_S: np.ndarray, motion: ScanMotion):
-    """The primary rays of a whole scan, built as ``Scanner._block_hits`` builds them (part frame, float32).
-
-    Returns origins (n, 3), directions (n, 3), tfar (n,), n = profiles × points per profile.
-    """
-    view = _SensorView.build(scanner, T_O_S, part_motion(np.zeros(3), np.zeros(3)))
-    shifts = motion.offsets()
-    origins = (view.o_P32[None] - (shifts[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
-    directions = np.tile(view.d_P32, (len(shifts), 1))
-    n_col = scanner.sensor.points_per_profile
-    return np.ascontiguousarray(origins), directions, np.tile(scanner._t_max_tiled[:n_col], len(shifts))
+    """The primary rays of a whole scan (part frame, float32): origins (n, 3), directions (n, 3), tfar (n,)."""
+    return scanner.primary_rays(T_O_S, motion)
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -1,10 +1,10 @@
 """NLopt global algorithms against random search on the surrogate, on the same evaluation budget (SPEC §6).
 
 Problems: one sensor (6 variables) on part_a, part_b and part_c, and two sensors placed jointly (12
-variables) on part_b, scored by :class:`optipose.search.core.SurrogateProblem` with the ``paper`` objective and
-the default :class:`~optipose.search.core.SearchConfig` constraints (penalty ``PENALTY + violation`` when
+variables) on part_b, scored by :class:`optipose.search.problem.SurrogateProblem` with the ``paper`` objective and
+the default :class:`~optipose.search.config.SearchConfig` constraints (penalty ``PENALTY + violation`` when
 infeasible). Every run gets a fresh problem (empty pose cache), the same start point per seed (NLopt's x0,
-and random search's first draw), ``nlopt.srand(seed)`` through ``search._optimize``, and exactly
+and random search's first draw), ``nlopt.srand(seed)`` through ``optipose.search.driver.optimize``, and exactly
 ``--evals`` evaluations. Runs are interleaved (the algorithm order rotates per seed) so that background
 load on a shared machine hits all algorithms alike.
 
@@ -41,7 +41,7 @@ CHECKPOINTS = (25, 50, 100, 200, 400)
 
 
 class _Budgeted:
-    """Hands NLopt the problem but stops it (nlopt.ForcedStop, which ``_optimize`` swallows) at the budget,
+    """Hands NLopt the problem but stops it (nlopt.ForcedStop, which ``optimize`` swallows) at the budget,
     so no algorithm gets more evaluations than another."""
 
     def __init__(self, problem, evals: int):
@@ -57,10 +57,12 @@ class _Budgeted:
 
 def run_one(part, objective, surrogate, algorithm, local, k: int, seed: int, evals: int) -> dict:
     """One run from a fresh problem; returns its best-so-far curve (evals,) and counters."""
-    from optipose.search.core import SearchConfig, SurrogateProblem, _optimize
+    from optipose.search.config import SearchConfig
+    from optipose.search.driver import optimize
+    from optipose.search.problem import SurrogateProblem
+    from optipose.search.study import SurrogateStudy
 
-    problem = SurrogateProblem(part, objective, SearchConfig(), surrogate=surrogate)
-    problem.stage = algorithm or "random"
+    problem = SurrogateStudy(SurrogateProblem(part, objective, SearchConfig(), surrogate=surrogate))
     rng = np.random.default_rng(seed)
     x0 = rng.random(6 * k)  # the same start for every algorithm of this seed
     t0 = time.perf_counter()
@@ -69,33 +71,35 @@ def run_one(part, objective, surrogate, algorithm, local, k: int, seed: int, eva
         while len(problem.history) < evals:
             problem(rng.random(6 * k))
     else:
-        _optimize(_Budgeted(problem, evals), algorithm, x0, evals, seed, local)
+        with problem.stage_named(algorithm or "random"):
+            optimize(_Budgeted(problem, evals), algorithm, x0, evals, seed, local)
     wall = time.perf_counter() - t0
     rows = problem.history[:evals]
-    values = np.array([r["value"] if r["feasible"] else np.inf for r in rows])
+    values = np.array([r.value if r.feasible else np.inf for r in rows])
     curve = np.minimum.accumulate(values) if len(values) else np.full(evals, np.inf)
     curve = np.concatenate([curve, np.full(evals - len(curve), curve[-1] if len(curve) else np.inf)])
     return {
         "curve": curve,
         "evals_done": len(rows),
-        "infeasible": float(np.mean([not r["feasible"] for r in rows])) if rows else np.nan,
-        "first_feasible": next((i + 1 for i, r in enumerate(rows) if r["feasible"]), None),
+        "infeasible": float(np.mean([not r.feasible for r in rows])) if rows else np.nan,
+        "first_feasible": next((i + 1 for i, r in enumerate(rows) if r.feasible), None),
         "wall_s": wall,
-        "new_poses": len(problem.cache),
+        "new_poses": len(problem.problem.cache),
     }
 
 
 def run_problem(part_name: str, k: int, objective, evals: int, seeds: int) -> dict[str, list[dict]]:
     """All algorithms × seeds on one problem, interleaved; label -> runs in seed order."""
     from optipose.model.part import load_part
-    from optipose.search.core import SearchConfig, SurrogateProblem
+    from optipose.search.config import SearchConfig
+    from optipose.search.problem import SurrogateProblem
     from optipose.search.surrogate import Surrogate
 
     part = load_part(part_name)
     surrogate = Surrogate(part, voxel=objective.registration.voxel_size)
     warm = SurrogateProblem(part, objective, SearchConfig(), surrogate=surrogate)
     for u in np.random.default_rng(12345).random((4, 6)):  # JIT and ray-caster set-up, outside the timing
-        warm(u)
+        warm.score(u)
     runs: dict[str, list[dict]] = {label: [] for label, _, _ in ALGORITHMS}
     for seed in range(seeds):
         order = ALGORITHMS[seed % len(ALGORITHMS) :] + ALGORITHMS[: seed % len(ALGORITHMS)]

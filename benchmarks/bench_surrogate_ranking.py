@@ -21,8 +21,9 @@ from scipy.stats import spearmanr
 from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
-from optipose.search.refine import reduced_objective
-from optipose.search.core import SearchConfig, SurrogateProblem
+from optipose.evaluate.objective import reduced_objective
+from optipose.search.config import SearchConfig
+from optipose.search.problem import SurrogateProblem
 from optipose.search.surrogate import Surrogate, predicted_stats
 
 AXES = ("roll", "pitch", "yaw")
@@ -41,14 +42,14 @@ def main() -> None:
     layouts = []
     while len(layouts) < args.layouts:
         u = rng.random(6)
-        value, stats = problem.evaluate(u)
-        if stats is not None:
-            layouts.append((u, value))
+        score = problem.score(u)
+        if score.feasible:
+            layouts.append((u, score.value))
     hand = part.layouts["hand"].poses if "hand" in part.layouts else []
-    layouts += [(problem.space.from_pose(T), problem.evaluate(problem.space.from_pose(T), constrained=False)[0]) for T in hand]
+    layouts += [(problem.space.from_pose(T), problem.score(problem.space.from_pose(T), constrained=False).value) for T in hand]
     n_hand = len(hand)
     t0 = time.perf_counter()
-    bias_stats = [predicted_stats([problem.surrogate.info(problem.space.to_pose(u))], *problem._weights) for u, _ in layouts]
+    bias_stats = [predicted_stats([problem.surrogate.info(problem.space.to_pose(u))], *problem.weights) for u, _ in layouts]
     t_bias = time.perf_counter() - t0
     layouts = [(u, s["score"]) for (u, _), s in zip(layouts, bias_stats)]
     t_icp, icp, icp_axes = 0.0, [], []

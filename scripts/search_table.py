@@ -6,37 +6,32 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-import pandas as pd
+import numpy as np
+
+from optipose.io import load_result
 
 
-def cell(rows: pd.DataFrame, axis: str) -> str:
-    r = rows[rows["axis"] == axis].iloc[0]
-    return f"{1e3 * r['median_deg']:.3f} / {1e3 * r['p75_deg']:.3f} ({r['subset']})"
+def mdeg(rad: float) -> float:
+    return 1e3 * float(np.rad2deg(rad))
+
+
+def cells(choice) -> str:
+    return " | ".join(f"{mdeg(a.median):.3f} / {mdeg(a.p75):.3f} ({a.name or 'unobservable'})" for a in choice.axes)
 
 
 def main(folders: list[str]) -> None:
     print("| part | k | layout | roll (mdeg) | pitch (mdeg) | yaw (mdeg) | score (mdeg) | hand / found | every axis no worse |")
     print("| --- | --- | --- | --- | --- | --- | ---: | ---: | --- |")
     for folder in folders:
-        c = pd.read_csv(Path(folder) / "comparison.csv")
-        part = Path(folder).name.split("-")[-1]
-        for k in sorted(c["k"].unique()):
-            found, hand = c[(c.k == k) & (c.layout == "found")], c[(c.k == k) & (c.layout == "hand")]
-            ratio = hand["score_deg"].iloc[0] / found["score_deg"].iloc[0]
-            ok = all(
-                (found[found.axis == a][col].iloc[0] <= hand[hand.axis == a][col].iloc[0])
-                for a in ("roll", "pitch", "yaw") for col in ("median_deg", "p75_deg")
-            )  # fmt: skip
-            for label, rows in (("found", found), ("hand", hand)):
-                extra = (f"{ratio:.2f}x", "yes" if ok else "no") if label == "found" else ("", "")
-                print(f"| {part} | {k} | {label} {rows['sensors'].iloc[0]} | {cell(rows, 'roll')} | {cell(rows, 'pitch')} | "
-                      f"{cell(rows, 'yaw')} | {1e3 * rows['score_deg'].iloc[0]:.3f} | {extra[0]} | {extra[1]} |")  # fmt: skip
-        f1 = c[(c.k == 1) & (c.layout == "found")]["score_deg"].iloc[0]
-        h3 = c[(c.k == c.k.max()) & (c.layout == "hand")]["score_deg"].iloc[0]
-        print(f"<!-- {part}: found 1-sensor {f1:.5f} vs hand {c.k.max()}-sensor {h3:.5f}: "
-              f"{'beats' if f1 < h3 else 'does not beat'} it -->")
+        result = load_result(folder)
+        for v in result.verdicts():
+            print(f"| {result.part} | {v.k} | found {v.found.name} | {cells(v.found)} | {mdeg(v.found.score):.3f} | "
+                  f"{v.ratio:.2f}x | {'yes' if v.no_worse else 'no'} |")  # fmt: skip
+            print(f"| {result.part} | {v.k} | hand {v.reference.name} | {cells(v.reference)} | {mdeg(v.reference.score):.3f} |  |  |")
+        lines = result.verdict_lines()
+        if lines and lines[-1].startswith("one found sensor"):
+            print(f"<!-- {result.part}: {lines[-1]} -->")
 
 
 if __name__ == "__main__":

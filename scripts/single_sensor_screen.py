@@ -27,7 +27,8 @@ from scipy.stats import qmc
 
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
-from optipose.search.core import SearchConfig, SurrogateProblem
+from optipose.search.config import SearchConfig
+from optipose.search.problem import SurrogateProblem
 from optipose.search.surrogate import SensorInfo, predicted_stats
 
 
@@ -46,7 +47,7 @@ def main() -> None:
 
     part, objective = load_part(args.part), load_objective(args.objective)
     problem = SurrogateProblem(part, objective, SearchConfig())
-    weights = problem._weights
+    weights = problem.weights
     hand = {s.name: predicted_stats([problem.surrogate.info(np.asarray(s.T_O_S))], *weights) for s in part.layouts["hand"].sensors}
     name, best_hand = min(hand.items(), key=lambda kv: kv[1]["score"])
     target = best_hand["axis_score"]
@@ -79,13 +80,15 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
     from dataclasses import replace
 
     from optipose.evaluate.evaluator import Evaluator
-    from optipose.search.refine import _dominates, _rank, reduced_objective, selection_seed
-    from optipose.search.core import apart, local_best
-    from optipose.search.pipeline import validation_seed
+    from optipose.evaluate.compare import dominates, rank
+    from optipose.evaluate.objective import reduced_objective
+    from optipose.search.driver import apart, local_best
+    from optipose.search.study import SurrogateStudy
+    from optipose.seeds import selection_seed, validation_seed
 
     # rank and polish on the search's own score with its per-axis penalty at margin 1 and weight 20
-    problem.config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)
-    problem.targets = {1: target}
+    config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)
+    problem = SurrogateProblem(part, objective, config, problem.surrogate, targets={1: target})
     key = lambda t: t[0] + problem.shortfall(1, {"axis_score": t[1]})  # noqa: E731
     starts: list[np.ndarray] = []
     for t in sorted(scored, key=key):
@@ -95,8 +98,8 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
             starts.append(t[2])
     poses: list[np.ndarray] = []
     for j, u0 in enumerate(starts):
-        row = local_best(problem, "LN_BOBYQA", u0, args.polish, args.seed + j)
-        u = np.asarray(row["u"]) if row is not None else u0
+        row = local_best(SurrogateStudy(problem), "LN_BOBYQA", u0, args.polish, args.seed + j)
+        u = np.asarray(row.u) if row is not None else u0
         if apart(u, poses, 0.02):
             poses.append(u)
     fmt = lambda c: " ".join(f"{a.axis} {1e3 * np.rad2deg(a.median):.3f}/{1e3 * np.rad2deg(a.p75):.3f}" for a in c.axes)  # noqa: E731
@@ -107,20 +110,20 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
         Evaluator(part, objective, seed=validation_seed(args.seed), jobs=args.jobs, quiet=True) as held_out,
     ):
         bar, bar_held = full(hand).table[0], held_out(hand).table[0]
-        print(f"ICP, best hand sensor: full protocol {bar.sensors} {fmt(bar)} mdeg; held-out seed {bar_held.sensors} {fmt(bar_held)} mdeg, sum {1e3 * np.rad2deg(bar_held.score):.3f}")
+        print(f"ICP, best hand sensor: full protocol {bar.name} {fmt(bar)} mdeg; held-out seed {bar_held.name} {fmt(bar_held)} mdeg, sum {1e3 * np.rad2deg(bar_held.score):.3f}")
         ranked = []
         for u in poses:
             choice = reduced(problem.space.to_poses(u)).table[0]
-            ranked.append((_rank(choice, bar), u))
+            ranked.append((rank(choice, bar), u))
         ranked.sort(key=lambda t: t[0])
-        print(f"{len(poses)} distinct poses on the reduced protocol: {sum(not t[0][0] for t in ranked)} no worse than {bar.sensors} on every axis")
+        print(f"{len(poses)} distinct poses on the reduced protocol: {sum(not t[0][0] for t in ranked)} no worse than {bar.name} on every axis")
         wins = 0
         for _, u in ranked[: args.confirm]:
             poses_u = problem.space.to_poses(u)
             a, b = full(poses_u).table[0], held_out(poses_u).table[0]
-            wins += _dominates(b, bar_held) and b.score <= bar_held.score / 2
-            print(f"  full: {'no worse' if _dominates(a, bar) else 'worse somewhere'} | held-out: hand / this {bar_held.score / b.score:.2f}, "
-                  f"{'no worse on every axis' if _dominates(b, bar_held) else 'worse on some axis'}: {fmt(b)} | {problem.space.describe(poses_u[0])}")  # fmt: skip
+            wins += dominates(b, bar_held) and b.score <= bar_held.score / 2
+            print(f"  full: {'no worse' if dominates(a, bar) else 'worse somewhere'} | held-out: hand / this {bar_held.score / b.score:.2f}, "
+                  f"{'no worse on every axis' if dominates(b, bar_held) else 'worse on some axis'}: {fmt(b)} | {problem.space.describe(poses_u[0])}")  # fmt: skip
         print(f"held-out: {wins} of {min(args.confirm, len(ranked))} no worse on every axis and at least 2x better in sum")
 
 

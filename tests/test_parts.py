@@ -14,7 +14,8 @@ import trimesh
 from optipose.model.collision import ConvexSet, _sat_gap, clearance, collides, heads_clearance
 from optipose.errors import ConfigError, MeshError
 from optipose.model.part import PARTS_DIR, Keepout, Part, list_parts, load_part
-from optipose.scan.scanner import ScanMotion, Scanner
+from optipose.model.motion import ScanMotion
+from optipose.scan.scanner import Scanner
 from optipose.model.sensor import load_sensor
 
 ROOT = Path(__file__).resolve().parents[1]

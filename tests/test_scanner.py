@@ -8,7 +8,8 @@ import trimesh
 
 from optipose.model.material import load_material
 from optipose.scan.profiles import EMPTY, profiles_to_points, read_profiles, write_profiles
-from optipose.scan.scanner import Scanner, ScanMotion
+from optipose.model.motion import ScanMotion
+from optipose.scan.scanner import Scanner
 from optipose.model.sensor import load_sensor
 from optipose.transforms import invert_T, part_motion, transform_points
 

@@ -13,7 +13,12 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.search.space import PoseSpace, params_from_pose, pose_from_params
 from optipose.model.sensor import load_sensor
-from optipose.search.core import PENALTY, SearchConfig, SurrogateProblem, _optimize, run_search
+from optipose.search.config import SearchConfig
+from optipose.search.driver import optimize
+from optipose.search.problem import SurrogateProblem, Violation
+from optipose.search.records import PENALTY, Found, LayoutScore
+from optipose.search.study import SurrogateStudy
+from optipose.search.surrogate_search import run_search
 from optipose.search.surrogate import Surrogate, predicted_stats, rotation_sigma
 
 PAPER_B = {  # SPEC §7: z_S of the paper's S1, S2, S3 and their (alpha, beta, psi) in this parameterisation
@@ -75,17 +80,19 @@ def test_pose_space_puts_the_turns_seams_where_nobody_mounts_a_sensor():
 
 
 def test_a_cache_saved_under_another_pose_map_is_not_reused(tmp_path):
-    from optipose.search.pipeline import _load_cache, _save_cache
+    from optipose.io.search import load_cache, save_cache
+    from optipose.search.space import SPACE_VERSION
     from optipose.search.surrogate import SensorInfo
 
     info = SensorInfo(np.eye(6), 2500, 900, np.eye(6), np.ones((2, 6)))
-    cache = {tuple(np.full(6, 0.25)): info, tuple(np.full(6, 0.75)): 1.5}
-    _save_cache(tmp_path, cache)
-    loaded = _load_cache(tmp_path)
-    assert loaded[tuple(np.full(6, 0.75))] == 1.5 and np.array_equal(loaded[tuple(np.full(6, 0.25))].H, np.eye(6))
+    cache = {tuple(np.full(6, 0.25)): info, tuple(np.full(6, 0.75)): Violation("clearance", 1.5)}
+    save_cache(tmp_path, cache, SPACE_VERSION)
+    loaded = load_cache(tmp_path, SPACE_VERSION)
+    assert loaded[tuple(np.full(6, 0.75))] == ("clearance", 1.5) and np.array_equal(loaded[tuple(np.full(6, 0.25))].H, np.eye(6))
+    assert load_cache(tmp_path, SPACE_VERSION + 1) == {}  # its u keys name other poses
     data = dict(np.load(tmp_path / "cache.npz"))
     np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k != "space"})  # as saved before the map changed
-    assert _load_cache(tmp_path) == {}
+    assert load_cache(tmp_path, SPACE_VERSION) == {}
 
 
 def test_rotation_sigma_of_a_known_information_matrix():
@@ -128,27 +135,33 @@ def test_driver_finds_a_known_optimum(algorithm):
             return v
 
     tracker = Tracker()
-    _optimize(tracker, algorithm, np.full(6, 0.5), 3000, seed=3)
-    _optimize(tracker, "LN_BOBYQA", tracker.best[1], 300, seed=3)
+    optimize(tracker, algorithm, np.full(6, 0.5), 3000, seed=3)
+    optimize(tracker, "LN_BOBYQA", tracker.best[1], 300, seed=3)
     assert np.allclose(tracker.best[1], target, atol=1e-4)
     assert tracker.best[0] < 1e-7
     assert tracker.calls <= 3300
 
 
-class _Recorder:
-    """A stand-in for SurrogateProblem: records every evaluation as the search's history does."""
+class _Problem:
+    """A stand-in for SurrogateProblem: a function, infeasible where it returns PENALTY + violation."""
 
     def __init__(self, f):
-        self.f, self.history, self.stage = f, [], ""
+        self.f = f
 
-    def __call__(self, u, grad=None):
+    def score(self, u):
         v = float(self.f(np.asarray(u, dtype=float)))
-        self.history.append({"stage": self.stage, "value": v, "feasible": v < PENALTY, "u": list(map(float, u))})
-        return v
+        return LayoutScore(v, {}) if v < PENALTY else LayoutScore(float("nan"), None, v - PENALTY, "wall")
+
+
+def _recorder(f):
+    """A study of ``f`` and its sub-problem over one sensor (nothing placed yet)."""
+    from optipose.search.driver import SubProblem
+
+    return SubProblem(SurrogateStudy(_Problem(f)), np.zeros(0))
 
 
 def test_screen_finds_the_basin_a_local_search_from_the_centre_misses():
-    from optipose.search.core import _screen
+    from optipose.search.screen import screen
 
     centre, target = np.full(6, 0.5), np.array([0.15, 0.8, 0.3, 0.7, 0.2, 0.6])
 
@@ -157,20 +170,21 @@ def test_screen_finds_the_basin_a_local_search_from_the_centre_misses():
             return PENALTY + u[0]
         return min(1.0 + np.sum((u - centre) ** 2), 0.2 + 3.0 * np.sum((u - target) ** 2))
 
-    local = _Recorder(f)
-    _optimize(local, "LN_BOBYQA", centre, 200, seed=0)
-    assert min(r["value"] for r in local.history) == pytest.approx(1.0)  # stuck in the centre's bowl
+    local = _recorder(f)
+    optimize(local, "LN_BOBYQA", centre, 200, seed=0)
+    assert min(r.value for r in local.history) == pytest.approx(1.0)  # stuck in the centre's bowl
 
     cfg = SearchConfig(screen_samples=512, screen_starts=3, screen_evals=80)
-    problem = _Recorder(f)
-    starts = _screen(problem, cfg, problem, 1, seed=4)
-    stages = [r["stage"] for r in problem.history]
+    problem = _recorder(f)
+    starts = screen(problem, cfg, 1, seed=4)
+    stages = [r.stage for r in problem.history]
     assert stages.count("screen:k=1") == 512 and stages[:512] == ["screen:k=1"] * 512
     assert 1 <= len(starts) <= 3
     assert np.allclose(starts[0], target, atol=1e-3)  # best first, polished to the deeper basin's bottom
     assert all(f(u) < PENALTY for u in starts)  # an infeasible screen point is never a start
-    again = _Recorder(f)
-    assert all(np.array_equal(a, b) for a, b in zip(_screen(again, cfg, again, 1, seed=4), starts))  # seeded
+    again = _recorder(f)
+    assert all(np.array_equal(a, b) for a, b in zip(screen(again, cfg, 1, seed=4), starts))  # seeded
+    assert any(r.constraint == "wall" and not r.feasible for r in problem.history)  # the wall was met, and named
 
 
 @pytest.fixture(scope="module")
@@ -188,14 +202,15 @@ def test_same_seed_same_layout(part_b_problem):
     b = run_search(part, objective, cfg, seed=5)
     for k in (1, 2):
         assert np.array_equal(a.found[k].u, b.found[k].u)
-    assert [r["value"] for r in a.history] == [r["value"] for r in b.history]
+    assert [r.value for r in a.history] == [r.value for r in b.history]
 
 
 def test_results_never_violate_the_constraints(part_b_problem):
     part, objective, cfg = part_b_problem
     problem = SurrogateProblem(part, objective, cfg)
-    out = run_search(part, objective, cfg, seed=2, problem=problem)
-    assert any(not r["feasible"] for r in out.history)  # the search did meet infeasible layouts
+    out = run_search(part, objective, cfg, seed=2, study=SurrogateStudy(problem))
+    assert any(not r.feasible for r in out.history)  # the search did meet infeasible layouts
+    assert {r.constraint for r in out.history if not r.feasible} <= {"line_skew", "clearance", "min_points", "head_gap"}
     for found in out.found.values():
         assert found.score < PENALTY
         for T in found.poses:
@@ -217,16 +232,17 @@ def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
         strict, free = problem.sensor(u), loose.sensor(u)
         if allowed:  # the constraint adds nothing: same information, or the same other violation
             assert type(strict) is type(free), psi
-            assert strict == free if isinstance(free, float) else np.array_equal(strict.H, free.H), psi
+            assert strict == free if isinstance(free, Violation) else np.array_equal(strict.H, free.H), psi
         else:
-            assert isinstance(strict, float) and strict >= 1.0 and strict != free, psi
+            assert isinstance(strict, Violation) and strict.constraint == "line_skew" and strict.amount >= 1.0 and strict != free, psi
 
 
 def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the_hand_layout():
     from optipose.evaluate.evaluator import Evaluator
     from optipose.evaluate.objective import load_objective as load
-    from optipose.search.refine import _dominates, _excess, polish
-    from optipose.search.core import Found
+    from optipose.evaluate.compare import dominates as _dominates
+    from optipose.evaluate.compare import excess as _excess
+    from optipose.search.polish import polish
 
     part = load_part("part_b")
     objective = load("paper")
@@ -240,9 +256,9 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
         start = Found(1, "start", u, problem.space.to_poses(u), 0.0)
         found, choice, rows = polish(problem, evaluator, start, reference, cfg, 8, 120.0)
     assert 1 <= len(rows) <= 8
-    assert found is not None and problem.evaluate(found.u)[1] is not None  # feasible: constraints hold
-    assert all(r["protocol"] == "reduced" for r in rows)
-    winners = [r["score_deg"] for r in rows if r["dominates_hand"]]
+    assert found is not None and problem.score(found.u).feasible  # constraints hold
+    assert all(r.protocol == "reduced" for r in rows)
+    winners = [np.rad2deg(r.choice.score) for r in rows if r.dominates]
     if winners:  # the best of the layouts no worse than the hand layout on every axis is kept
         assert _dominates(choice, reference) and np.rad2deg(choice.score) == pytest.approx(min(winners))
     assert _dominates(choice, reference) == (_excess(choice, reference, 1.0) == 0.0)
@@ -253,12 +269,12 @@ def _choice(per_axis_mdeg, k=1):
     """A Choice with (median, p75) per axis given in millidegrees; score = their sum (the paper objective)."""
     from optipose.evaluate.assignment import AxisChoice, Choice
 
-    axes = tuple(AxisChoice(a, "F1", np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3)) for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg))
-    return Choice(k, "F1", axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3)))
+    axes = tuple(AxisChoice(a, (0,), "F1", np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3)) for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg))
+    return Choice(k, tuple(range(k)), "F1", axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3)))
 
 
 def test_a_narrow_win_is_not_clear_and_needs_confirmation():
-    from optipose.search.refine import _clear
+    from optipose.search.select import clear_win as _clear
 
     cfg = SearchConfig(polish_margin=0.9, clear_ratio=0.4)
     hand = _choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])  # sum 8.6
@@ -269,8 +285,7 @@ def test_a_narrow_win_is_not_clear_and_needs_confirmation():
 
 
 def test_the_polish_also_starts_from_the_candidate_closest_to_beating_the_hand_layout():
-    from optipose.search.refine import _nearest
-    from optipose.search.core import Found
+    from optipose.search.select import nearest as _nearest
 
     hand = _choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])
     low_sum = Found(1, "low sum", np.zeros(6), [], 0.0)  # roll great, yaw 0.3 mdeg over the hand's
@@ -284,8 +299,7 @@ def test_the_polish_also_starts_from_the_candidate_closest_to_beating_the_hand_l
 
 
 def test_distinct_keeps_the_best_of_each_neighbourhood_by_the_given_key():
-    from optipose.search.refine import _distinct
-    from optipose.search.core import Found
+    from optipose.search.candidates import distinct as _distinct
 
     a, b, c = (Found(1, n, u, [], s) for n, u, s in (("a", np.zeros(6), 3.0), ("b", np.full(6, 0.01), 1.0), ("c", np.ones(6), 2.0)))
     assert [f.strategy for f in _distinct([a, b, c], 0.02)] == ["b", "c"]  # a lies within 0.02 of the better b
@@ -297,37 +311,35 @@ def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_final
     from types import SimpleNamespace
 
     from optipose.evaluate.assignment import Choice
-    from optipose.search.refine import _Confirmer
-    from optipose.search.core import Found
+    from optipose.search.confirm import Confirmer as _Confirmer
 
-    def as_sensor(choice, name):
-        return Choice(1, name, choice.axes, choice.score)
+    def as_sensor(choice, index):
+        return Choice(1, (index,), f"S{index + 1}", choice.axes, choice.score)
 
     hand = SimpleNamespace(table=[_choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])])
-    single = as_sensor(_choice([(1.0, 2.0), (0.05, 0.1), (0.05, 0.1)]), "S2")  # the pair's second sensor beats the hand
+    single = as_sensor(_choice([(1.0, 2.0), (0.05, 0.1), (0.05, 0.1)]), 1)  # the pair's second sensor beats the hand
     pair_result = SimpleNamespace(table=[single], layout=SimpleNamespace(names=["S1", "S2"]))
     confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
     confirmer._hand, confirmer._results, confirmer.chosen = hand, {}, {1: (True, np.deg2rad(5e-3))}
     confirmer.evaluate = lambda layout: pair_result
-    problem = SimpleNamespace(evaluate=lambda u: (0.25, {"score": 0.25}), space=SimpleNamespace(to_poses=lambda u: ["pose"]))
+    problem = SimpleNamespace(score=lambda u: LayoutScore(0.25, {"score": 0.25}), space=SimpleNamespace(to_poses=lambda u: ["pose"]))
     pair = Found(2, "joint", np.concatenate([np.zeros(6), np.full(6, 0.5)]), [], 0.0)
     finalists, rows = {1: Found(1, "polish", np.ones(6), [], 0.0), 2: pair}, []
     confirmer.adopt_subsets(problem, finalists, rows)
     assert finalists[1].strategy == "best 1 of the k=2 finalist"
     assert np.array_equal(finalists[1].u, np.full(6, 0.5))  # the second sensor's six numbers
-    assert confirmer.chosen[1] == (False, single.score) and rows[-1]["dominates_hand"]
+    assert confirmer.chosen[1] == (False, single.score) and rows[-1].dominates
 
-    pair_result.table = [as_sensor(_choice([(9.0, 9.0), (0.05, 0.1), (0.05, 0.1)]), "S1")]  # worse than the finalist
+    pair_result.table = [as_sensor(_choice([(9.0, 9.0), (0.05, 0.1), (0.05, 0.1)]), 0)]  # worse than the finalist
     kept = finalists[1]
     confirmer.adopt_subsets(problem, finalists, rows)
-    assert finalists[1] is kept and not rows[-1]["dominates_hand"]
+    assert finalists[1] is kept and not rows[-1].dominates
 
 
 def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_layout():
     from types import SimpleNamespace
 
-    from optipose.search.refine import _Confirmer
-    from optipose.search.core import Found
+    from optipose.search.confirm import Confirmer as _Confirmer
 
     hand = SimpleNamespace(table=[_choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])])
     # on the full protocol the two leaders of the reduced ranking trade pitch for roll; the fourth is no worse anywhere

@@ -18,7 +18,10 @@ import pandas as pd
 
 from optipose.evaluate.objective import AXES, StatisticConfig
 
-__all__ = ["all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY"]
+__all__ = [
+    "all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "choose", "stats_by_key",
+    "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY",
+]  # fmt: skip
 
 MAX_FAILED_FRACTION = 0.1
 UNOBSERVABLE_PENALTY = np.deg2rad(10.0)  # rad per axis: worse than any measurable error under ±2° protocols
@@ -36,9 +39,17 @@ def subset_name(subset: tuple[int, ...], names: list[str]) -> str:
 
 @dataclass(frozen=True)
 class AxisChoice:
+    """One axis of a choice: the subset of the layout's sensors used for it and its statistics.
+
+    subset : sensor indices in the layout, () when no subset of the choice can observe the axis.
+    name : the subset for display, e.g. "S1S2" ("" when unobservable).
+    median, p75 : rad (NaN when unobservable).
+    """
+
     axis: str
-    subset: str  # "" when no subset of the choice can observe the axis
-    median: float  # rad (NaN when unobservable)
+    subset: tuple[int, ...]
+    name: str
+    median: float
     p75: float
 
     @property
@@ -48,44 +59,58 @@ class AxisChoice:
 
 @dataclass(frozen=True)
 class Choice:
-    """The best k sensors and, per axis, the subset of them to use."""
+    """The best k sensors and, per axis, the subset of them to use.
+
+    sensors : the k sensor indices in the layout; name : them for display, e.g. "S1S3"; score : rad.
+    """
 
     k: int
-    sensors: str
+    sensors: tuple[int, ...]
+    name: str
     axes: tuple[AxisChoice, ...]
-    score: float  # rad
+    score: float
 
     def __repr__(self) -> str:
         cells = ", ".join(
-            f"{a.axis}={np.rad2deg(a.median):.4f}/{np.rad2deg(a.p75):.4f} deg ({a.subset})" if a.observable else f"{a.axis}=unobservable"
+            f"{a.axis}={np.rad2deg(a.median):.4f}/{np.rad2deg(a.p75):.4f} deg ({a.name})" if a.observable else f"{a.axis}=unobservable"
             for a in self.axes
         )
-        return f"Choice(k={self.k}, {self.sensors}: {cells})"
+        return f"Choice(k={self.k}, {self.name}: {cells})"
 
 
 def best_choices(stats: pd.DataFrame, names: list[str], cfg: StatisticConfig, n_scans: int) -> list[Choice]:
     """The best choice for k = 1 … n sensors (Table 1), from :func:`optipose.evaluate.statistics.summarize` output."""
-    by_key = {(r.subset, r.axis): r for r in stats.itertuples(index=False)}
+    by_key = stats_by_key(stats)
     out = []
     for k in range(1, len(names) + 1):
-        candidates = [_choose(c, names, by_key, cfg, n_scans) for c in combinations(range(len(names)), k)]
+        candidates = [choose(c, names, by_key, cfg, n_scans) for c in combinations(range(len(names)), k)]
         out.append(min(candidates, key=lambda ch: ch.score))  # first of equals: lowest sensor indices
     return out
 
 
-def _choose(sensors: tuple[int, ...], names, by_key, cfg: StatisticConfig, n_scans: int) -> Choice:
-    subsets = [subset_name(s, names) for k in range(1, len(sensors) + 1) for s in combinations(sensors, k)]
+def stats_by_key(stats: pd.DataFrame) -> dict:
+    """The rows of a statistics table by (subset name, axis)."""
+    return {(r.subset, r.axis): r for r in stats.itertuples(index=False)}
+
+
+def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: StatisticConfig, n_scans: int) -> Choice:
+    """The choice of exactly these ``sensors`` (indices): each axis takes its best eligible subset of them.
+
+    by_key : :func:`stats_by_key` of the layout's statistics; n_scans : scans per subset in the protocol.
+    """
+    subsets = [s for k in range(1, len(sensors) + 1) for s in combinations(sensors, k)]
     axes, score = [], 0.0
     for axis, weight in zip(AXES, cfg.weights):
-        eligible = [by_key[(s, axis)] for s in subsets if _eligible(by_key[(s, axis)], n_scans)]
+        eligible = [(s, by_key[(subset_name(s, names), axis)]) for s in subsets]
+        eligible = [(s, r) for s, r in eligible if _eligible(r, n_scans)]
         if not eligible:
-            axes.append(AxisChoice(axis, "", float("nan"), float("nan")))
+            axes.append(AxisChoice(axis, (), "", float("nan"), float("nan")))
             score += weight * UNOBSERVABLE_PENALTY * (cfg.median_weight + cfg.p75_weight)
             continue
-        best = min(eligible, key=lambda r: (r.median, r.p75))  # stable: the smaller subset wins a full tie
-        axes.append(AxisChoice(axis, best.subset, best.median, best.p75))
+        s, best = min(eligible, key=lambda t: (t[1].median, t[1].p75))  # stable: the smaller subset wins a full tie
+        axes.append(AxisChoice(axis, tuple(s), best.subset, best.median, best.p75))
         score += weight * (cfg.median_weight * best.median + cfg.p75_weight * best.p75)
-    return Choice(len(sensors), subset_name(sensors, names), tuple(axes), float(score))
+    return Choice(len(sensors), tuple(sensors), subset_name(sensors, names), tuple(axes), float(score))
 
 
 def _eligible(row, n_scans: int) -> bool:

@@ -9,12 +9,13 @@ for every key with its meaning.
 from __future__ import annotations
 
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from optipose.errors import ConfigError
+from optipose.registration.backends import BACKENDS as REGISTRATION_BACKENDS
 
 __all__ = [
     "ProtocolConfig",
@@ -23,6 +24,7 @@ __all__ = [
     "Objective",
     "load_objective",
     "objective_from_table",
+    "reduced_objective",
     "OBJECTIVES_DIR",
     "AXES",
 ]
@@ -30,7 +32,6 @@ __all__ = [
 OBJECTIVES_DIR = Path(__file__).resolve().parents[2] / "objectives"
 AXES = ("roll", "pitch", "yaw")
 METHODS = ("point_to_point", "point_to_plane", "generalized")
-BACKENDS = ("fast", "open3d")
 REFERENCES = ("cad-surface", "cad-sample", "nominal-scan")
 SEQUENCE_AXES = {"R": (0,), "P": (1,), "Y": (2,), "RP": (0, 1), "PY": (1, 2), "YR": (2, 0), "RPY": (0, 1, 2)}
 _MM, _DEG = 1e-3, np.pi / 180
@@ -58,7 +59,7 @@ class ProtocolConfig:
 
 @dataclass(frozen=True)
 class RegistrationConfig:
-    """ICP settings (SI). See :mod:`optipose.registration.icp`."""
+    """ICP settings (SI). See :mod:`optipose.registration`; ``backend`` names one of its registry."""
 
     method: str = "point_to_plane"
     backend: str = "fast"
@@ -116,6 +117,15 @@ def load_objective(spec: str | Path) -> Objective:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"objective file {path}: {exc}") from None
     return objective_from_table(table, where=str(path), source_text=text, default_name=path.stem)
+
+
+def reduced_objective(objective: Objective) -> Objective:
+    """The objective with each sequence cut to its two end angles (start and stop): the search's cheap
+    protocol (14 of the paper's 77 scans); a random protocol keeps a fifth of its draws (at least 4)."""
+    p = objective.protocol
+    if p.kind != "sequences":
+        return replace(objective, protocol=replace(p, count=max(4, p.count // 5)))
+    return replace(objective, protocol=replace(p, step=max(p.stop - p.start, 1e-9)))
 
 
 def objective_from_table(table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective") -> Objective:
@@ -176,7 +186,7 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
     d = RegistrationConfig()
     cfg = RegistrationConfig(
         method=_choice(t, "method", METHODS, d.method, where),
-        backend=_choice(t, "backend", BACKENDS, d.backend, where),
+        backend=_choice(t, "backend", tuple(REGISTRATION_BACKENDS), d.backend, where),
         reference=_choice(t, "reference", REFERENCES, d.reference, where),
         reference_spacing=_num(t, "reference_spacing_mm", 0.2, where) * _MM,
         voxel_size=_num(t, "voxel_size_mm", 0.5, where) * _MM,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["make_result_dir", "write_config", "write_evaluation", "versions", "RESULTS_DIR"]
+__all__ = ["make_result_dir", "write_config", "read_config", "write_table", "versions", "RESULTS_DIR"]
 
 log = logging.getLogger(__name__)
 RESULTS_DIR = Path("results")
@@ -59,6 +59,7 @@ def versions() -> dict[str, str]:
 
 
 def write_config(folder: Path, table: dict) -> Path:
+    """``config.toml`` of a result folder: what produced it (command, part, objective file, seed, versions)."""
     import tomli_w
 
     path = Path(folder) / "config.toml"
@@ -66,34 +67,25 @@ def write_config(folder: Path, table: dict) -> Path:
     return path
 
 
-def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "") -> Path:
-    """Save an :class:`optipose.evaluate.evaluator.EvaluationResult`: per-scan errors (CSV and Parquet), point counts,
-    statistics, Table 1 and the config. Returns the folder."""
-    folder = Path(folder)
-    result.per_scan.to_csv(folder / "per_scan.csv", index=False)
-    result.per_scan.to_parquet(folder / "per_scan.parquet", index=False)
-    result.points.to_csv(folder / "points.csv", index=False)
-    result.stats.to_csv(folder / "stats.csv", index=False)
-    rows = [
-        {"k": c.k, "sensors": c.sensors, "score_rad": c.score,
-         **{f"{a.axis}_{key}": val for a in c.axes for key, val in (("subset", a.subset), ("median_rad", a.median), ("p75_rad", a.p75))}}
-        for c in result.table
-    ]  # fmt: skip
-    import pandas as pd
+def read_config(folder: Path) -> dict:
+    """The parsed ``config.toml`` of a result folder; ConfigError when there is none or it is broken."""
+    import tomllib
 
-    pd.DataFrame(rows).to_csv(folder / "table1.csv", index=False)
-    write_config(folder, {
-        "command": "evaluate",
-        "part": {"name": result.part, "source": part_source},
-        "layout": {"name": result.layout.name, "source": layout_source, **result.layout.to_table()},
-        "seed": result.seed,
-        "objective": result.objective.to_dict(),
-        "objective_file": result.objective.source_text,
-        "timings_s": result.timings,
-        "failed_registrations": result.n_failed,
-        "versions": versions(),
-    })  # fmt: skip
-    return folder
+    from optipose.errors import ConfigError
+
+    path = Path(folder) / "config.toml"
+    if not path.is_file():
+        raise ConfigError(f"{folder}: no config.toml there (not an optipose result folder)")
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def write_table(frame, path: Path) -> Path:
+    """A table as CSV (index dropped)."""
+    frame.to_csv(path, index=False)
+    return path
 
 
 def _plain(value):

@@ -46,7 +46,7 @@ from optipose.errors import ConfigError, MeshError
 from optipose.model.layout import Layout, layout_from_table
 from optipose.model.material import load_material
 from optipose.model.mesh import load_mesh
-from optipose.scan.scanner import ScanMotion
+from optipose.model.motion import ScanMotion
 from optipose.model.sensor import load_sensor
 
 __all__ = ["Part", "Keepout", "load_part", "list_parts", "nominal_scans", "PARTS_DIR", "DEFAULT_MATERIAL", "DEFAULT_SENSOR"]

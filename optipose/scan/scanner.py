@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from optipose.model.material import Material, load_material
+from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import NORMAL_QUANTILES, measure_hits, write_points
 from optipose.scan.profiles import EMPTY, ray_lines
 from optipose.scan.raycast import default_threads, face_planes, make_caster
@@ -32,31 +33,6 @@ __all__ = ["ScanMotion", "Scan", "Scanner"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count
-
-
-@dataclass(frozen=True)
-class ScanMotion:
-    """The part's travel along ``+x_O``: ``length`` (m) in ``step`` (m) increments, centred on the nominal pose.
-
-    Profile k is taken with the part shifted by ``offsets()[k]``; the sensor poses are given at shift 0,
-    so a sensor aimed at the middle of the part sweeps the whole scanning length.
-    """
-
-    length: float
-    step: float = 0.5e-3
-
-    def __post_init__(self) -> None:
-        if not (self.length > 0 and self.step > 0):
-            raise ValueError("scan length and step must be positive")
-
-    @property
-    def n_profiles(self) -> int:
-        return max(1, int(round(self.length / self.step)))
-
-    def offsets(self) -> np.ndarray:
-        """Part shifts along +x_O (n_profiles,), m."""
-        n = self.n_profiles
-        return (np.arange(n) + 0.5) * self.step - 0.5 * n * self.step
 
 
 @dataclass
@@ -215,6 +191,17 @@ class Scanner:
 
         list(run(write, jobs))
         return scans
+
+    def primary_rays(self, T_O_S: np.ndarray, motion: ScanMotion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The laser rays of a whole scan at the nominal orientation, as the scanner casts them (part frame,
+        float32): origins (n, 3), directions (n, 3) and far limits (n,), n = profiles × points per profile.
+        For benchmarks that cast the same rays with another ray caster."""
+        view = _SensorView.build(self, T_O_S, part_motion(np.zeros(3), np.zeros(3)))
+        shifts = motion.offsets()
+        origins = (view.o_P32[None] - (shifts[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
+        directions = np.tile(view.d_P32, (len(shifts), 1))
+        n_col = self.sensor.points_per_profile
+        return np.ascontiguousarray(origins), directions, np.tile(self._t_max_tiled[:n_col], len(shifts))
 
     def normals(self, scan: Scan) -> np.ndarray:
         """Unit surface normals (n, 3) in O at a scan's points (outward, of the rotated part)."""

@@ -47,7 +47,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.stats import norm
 
-from optipose.scan.scanner import Scanner, ScanMotion
+from optipose.model.motion import ScanMotion
+from optipose.scan.scanner import Scanner
 from optipose.transforms import part_motion
 
 __all__ = ["Surrogate", "SensorInfo", "protocol_turns", "bias_rotation", "MEDIAN_PER_SIGMA", "P75_PER_SIGMA", "predicted_stats"]

@@ -1,0 +1,101 @@
+"""A layout against a reference (the hand-placed one): the one place that says "no worse on every axis".
+
+The user's question is whether to keep the sensors they have or buy the found ones. A found choice of k
+sensors wins outright when every axis's median and 75th percentile is at most the reference's; how far
+it misses is the summed excess. The search ranks and polishes with these, the CLI prints a
+:class:`Verdict` per k, and :func:`optipose.io.load_result` gives a saved search's verdicts back.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from optipose.evaluate.assignment import Choice
+
+__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "one_versus_many"]
+
+_STATISTICS = (("median", "median"), ("p75", "p75"))
+
+
+def dominates(choice: Choice, reference: Choice) -> bool:
+    """Every axis's median and 75th percentile at most the reference's."""
+    return all(a.median <= b.median and a.p75 <= b.p75 for a, b in zip(choice.axes, reference.axes))
+
+
+def excess(choice: Choice, reference: Choice, margin: float = 1.0) -> float:
+    """How far (rad, summed) the choice's per-axis medians and 75th percentiles exceed margin × the reference's."""
+    return float(sum(max(0.0, a.median - margin * b.median) + max(0.0, a.p75 - margin * b.p75) for a, b in zip(choice.axes, reference.axes)))
+
+
+def rank(choice: Choice, reference: Choice | None) -> tuple[bool, float]:
+    """Sort key of a choice against the reference: those no worse on every axis first, then the lower
+    score (no reference: every choice counts as no worse)."""
+    return (reference is not None and not dominates(choice, reference), choice.score)
+
+
+def weighted_excess(values: np.ndarray, target: np.ndarray, margin: float, weights) -> float:
+    """Σ weightᵢ · max(0, valueᵢ − margin · targetᵢ) over axes: the surrogate's per-axis scores (3,)
+    against the reference's, in their unit."""
+    return float(np.dot(weights, np.clip(np.asarray(values) - margin * np.asarray(target), 0.0, None)))
+
+
+@dataclass(frozen=True)
+class AxisGap:
+    """An axis statistic on which the found choice is worse than the reference (rad)."""
+
+    axis: str
+    statistic: str  # median | p75
+    found: float
+    reference: float
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Found vs. the reference for one k: the ratio in sum, the axes where found is worse, what to do."""
+
+    k: int
+    found: Choice
+    reference: Choice
+
+    @property
+    def ratio(self) -> float:
+        """Reference score over found score: above 1, the found choice is better in sum."""
+        return float(np.rad2deg(self.reference.score)) / float(np.rad2deg(self.found.score))
+
+    @property
+    def worse(self) -> tuple[AxisGap, ...]:
+        return tuple(
+            AxisGap(f.axis, stat, getattr(f, attr), getattr(r, attr))
+            for f, r in zip(self.found.axes, self.reference.axes) for stat, attr in _STATISTICS
+            if float(np.rad2deg(getattr(f, attr))) > float(np.rad2deg(getattr(r, attr)))
+        )  # fmt: skip
+
+    @property
+    def no_worse(self) -> bool:
+        """No axis statistic worse than the reference's: replacing the reference loses nothing."""
+        return not self.worse
+
+    def line(self) -> str:
+        """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace."""
+        ratio, name, ref = self.ratio, self.found.name, self.reference.name
+        worse = [f"{g.axis} {g.statistic} {_mdeg(g.found):.3f} vs {_mdeg(g.reference):.3f}" for g in self.worse]
+        than = f"x {'better' if ratio >= 1 else 'worse'} in sum than hand {ref}"
+        head = f"k={self.k}: found {name} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
+        if worse and ratio < 1:
+            return f"{head} and worse on {'; '.join(worse)} mdeg: keep {ref}"
+        if worse:
+            return f"{head}, but worse on {'; '.join(worse)} mdeg: keep {ref} if no axis may get worse"
+        return f"{head}, no worse on any axis"
+
+
+def one_versus_many(one: Choice, many: Choice) -> str:
+    """Whether one found sensor beats the reference's largest choice in sum: fewer sensors to buy."""
+    beats = float(np.rad2deg(one.score)) < float(np.rad2deg(many.score))
+    return (f"one found sensor {'beats' if beats else 'does not beat'} the hand-placed {many.name} in sum "
+            f"({_mdeg(one.score):.3f} vs {_mdeg(many.score):.3f} mdeg)")  # fmt: skip
+
+
+def _mdeg(rad: float) -> float:
+    return 1e3 * float(np.rad2deg(rad))

@@ -1,0 +1,59 @@
+"""An evaluation's result folder: per-scan errors, point counts, statistics, Table 1 and the config."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from optipose.io.folders import versions, write_config
+from optipose.io.tables import table1_frame
+
+__all__ = ["write_evaluation", "read_evaluation"]
+
+
+def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "") -> Path:
+    """Save an :class:`optipose.evaluate.evaluator.EvaluationResult`: per-scan errors (CSV and Parquet),
+    point counts, statistics, Table 1 and the config. Returns the folder."""
+    folder = Path(folder)
+    result.per_scan.to_csv(folder / "per_scan.csv", index=False)
+    result.per_scan.to_parquet(folder / "per_scan.parquet", index=False)
+    result.points.to_csv(folder / "points.csv", index=False)
+    result.stats.to_csv(folder / "stats.csv", index=False)
+    table1_frame(result.table).to_csv(folder / "table1.csv", index=False)
+    write_config(folder, {
+        "command": "evaluate",
+        "part": {"name": result.part, "source": part_source},
+        "layout": {"name": result.layout.name, "source": layout_source, **result.layout.to_table()},
+        "seed": result.seed,
+        "objective": result.objective.to_dict(),
+        "objective_file": result.objective.source_text,
+        "timings_s": result.timings,
+        "failed_registrations": result.n_failed,
+        "versions": versions(),
+    })  # fmt: skip
+    return folder
+
+
+def read_evaluation(folder: Path, config: dict | None = None):
+    """The :class:`~optipose.evaluate.evaluator.EvaluationResult` saved in ``folder`` by
+    :func:`write_evaluation`: the tables as written, Table 1 recomputed from the statistics (CSV floats
+    round-trip exactly, so it is the table that was saved)."""
+    import tomllib
+
+    import pandas as pd
+
+    from optipose.evaluate.assignment import best_choices
+    from optipose.evaluate.evaluator import EvaluationResult
+    from optipose.evaluate.objective import objective_from_table
+    from optipose.io.folders import read_config
+    from optipose.model.layout import layout_from_table
+
+    folder = Path(folder)
+    config = config or read_config(folder)
+    objective = objective_from_table(tomllib.loads(config["objective_file"]), source_text=config["objective_file"])
+    layout = layout_from_table(config["layout"], name=config["layout"]["name"], where=f"{folder}/config.toml")
+    per_scan = pd.read_parquet(folder / "per_scan.parquet")
+    stats = pd.read_csv(folder / "stats.csv")
+    table = best_choices(stats, layout.names, objective.statistic, per_scan["scan"].nunique())
+    points = pd.read_csv(folder / "points.csv")
+    timings = {k: float(v) for k, v in config.get("timings_s", {}).items()}
+    return EvaluationResult(config["part"]["name"], layout, objective, int(config["seed"]), per_scan, points, stats, table, timings)

@@ -1,0 +1,85 @@
+"""Read a result folder back: :func:`load_result` gives the typed result a command wrote.
+
+``optipose evaluate`` folders give an :class:`~optipose.evaluate.evaluator.EvaluationResult`, ``optipose
+search`` folders a :class:`~optipose.search.records.SearchResult` whose ``verdicts()`` say, per k, whether
+the found layout beats the hand-placed one. The CLI tables, ``scripts/search_table.py`` and reports read
+results through here, never by parsing CSV columns of their own.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from optipose.errors import ConfigError
+from optipose.evaluate.assignment import AxisChoice, Choice
+from optipose.evaluate.objective import AXES
+from optipose.io.folders import read_config
+
+__all__ = ["load_result", "load_search", "choices_from_comparison"]
+
+
+def load_result(folder: str | Path):
+    """The result saved in ``folder``: an EvaluationResult or a SearchResult (ConfigError for anything else)."""
+    folder = Path(folder)
+    config = read_config(folder)
+    command = config.get("command")
+    if command == "evaluate":
+        from optipose.io.evaluation import read_evaluation
+
+        return read_evaluation(folder, config)
+    if command == "search":
+        return load_search(folder, config)
+    raise ConfigError(f"{folder}: a '{command}' result, which optipose cannot read back")
+
+
+def load_search(folder: Path, config: dict | None = None):
+    """The :class:`~optipose.search.records.SearchResult` of a search folder."""
+    from optipose.model.layout import load_layout
+    from optipose.search.records import SearchResult, Validation
+
+    folder = Path(folder)
+    config = config or read_config(folder)
+    layouts = {int(p.stem.removeprefix("found_k")): load_layout(p) for p in sorted((folder / "layouts").glob("found_k*.toml"))}
+    hand_path = folder / "layouts" / "hand.toml"
+    hand = load_layout(hand_path) if hand_path.is_file() else None
+    validation = None
+    if (folder / "comparison.csv").is_file():
+        rows = pd.read_csv(folder / "comparison.csv")
+        found_names = [f"F{i + 1}" for i in range(max(layouts, default=0))]
+        found = choices_from_comparison(rows[rows.layout == "found"], found_names)
+        hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
+        protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
+        validation = Validation(protocol, int(config.get("validation_seed", -1)), found, hand_choices)
+    return SearchResult(folder, config["part"]["name"], int(config["seed"]), str(config.get("budget", "")), config,
+                        layouts, hand, validation)  # fmt: skip
+
+
+def choices_from_comparison(rows: pd.DataFrame, names: list[str]) -> dict[int, Choice]:
+    """k → Choice from ``comparison.csv`` rows of one layout (degrees back to radians), in file order."""
+    out = {}
+    for k, group in rows.groupby("k", sort=False):
+        by_axis = {r.axis: r for r in group.itertuples(index=False)}
+        axes = []
+        for axis in AXES:
+            r = by_axis[axis]
+            name = "" if r.subset == "unobservable" else str(r.subset)
+            axes.append(AxisChoice(axis, _indices(name, names), name, float(np.deg2rad(r.median_deg)), float(np.deg2rad(r.p75_deg))))
+        first = group.iloc[0]
+        sensors = str(first["sensors"])
+        out[int(k)] = Choice(int(k), _indices(sensors, names), sensors, tuple(axes), float(np.deg2rad(first["score_deg"])))
+    return out
+
+
+def _indices(name: str, names: list[str]) -> tuple[int, ...]:
+    """Sensor indices of a subset name such as ``S1S3`` (the layout's names, longest first)."""
+    if not name:
+        return ()
+    pattern = "|".join(re.escape(n) for n in sorted(names, key=len, reverse=True))
+    tokens = re.findall(pattern, name) if pattern else []
+    if "".join(tokens) != name:
+        raise ConfigError(f"subset '{name}' does not name sensors of the layout ({', '.join(names)})")
+    return tuple(sorted(names.index(t) for t in tokens))

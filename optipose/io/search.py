@@ -1,0 +1,119 @@
+"""A search's result folder: written as the search goes, so an interrupted run explains itself.
+
+``config.toml`` (first), ``history.csv`` and ``cache.npz`` (flushed as the search goes: what was computed
+is never lost, and ``--resume`` replays it), ``layouts/found_k*.toml`` (the surrogate's best first, the
+finalists after the selection), ``selection.csv``, ``surrogate_scores.csv``, ``validation/`` (one
+evaluation folder per evaluated layout) and ``comparison.csv`` (found vs. hand per k and axis).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from optipose.io.evaluation import write_evaluation
+from optipose.io.folders import versions, write_config
+from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame
+from optipose.model.layout import Layout, write_layout
+
+__all__ = [
+    "write_search_config", "save_cache", "load_cache", "write_history", "write_layouts", "write_selection",
+    "write_surrogate_scores", "write_validation",
+]  # fmt: skip
+
+
+def write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int) -> Path:
+    from dataclasses import asdict
+
+    return write_config(folder, {
+        "command": "search",
+        "part": {"name": part.name, "source": str(getattr(part, "source", ""))},
+        "seed": seed,
+        "validation_seed": validation_seed,
+        "budget": budget,
+        "search": asdict(config),
+        "objective": objective.to_dict(),
+        "objective_file": objective.source_text,
+        "versions": versions(),
+    })  # fmt: skip
+
+
+def save_cache(folder: Path, cache, space_version: int) -> None:
+    """The per-sensor cache (u key → SensorInfo or Violation) as ``cache.npz``."""
+    from optipose.search.surrogate import SensorInfo
+
+    keys = list(cache)
+    infos = [cache[k] for k in keys]
+    ok = np.array([isinstance(v, SensorInfo) for v in infos])
+    n_phases = max((len(v.G) for v in infos if isinstance(v, SensorInfo) and v.G is not None), default=0)
+    np.savez_compressed(
+        folder / "cache.npz",
+        u=np.array(keys, dtype=float).reshape(-1, 6),
+        feasible=ok,
+        H=np.array([v.H if isinstance(v, SensorInfo) else np.zeros((6, 6)) for v in infos]).reshape(-1, 6, 6),
+        counts=np.array([[v.n_points, v.n_voxels] if isinstance(v, SensorInfo) else [0, 0] for v in infos]).reshape(-1, 2),
+        violation=np.array([0.0 if isinstance(v, SensorInfo) else v.amount for v in infos]),
+        constraint=np.array(["" if isinstance(v, SensorInfo) else v.constraint for v in infos], dtype=str),
+        A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(len(infos), 6, 6),
+        G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
+        space=space_version,
+    )
+
+
+def _or_zeros(info, name: str, shape: tuple) -> np.ndarray:
+    value = getattr(info, name, None)  # a Violation has neither
+    return np.zeros(shape) if value is None else value
+
+
+def load_cache(folder: Path, space_version: int) -> dict:
+    """The cache saved by :func:`save_cache`; empty when there is none or it was made under another pose
+    map or surrogate (its keys or scores would mean something else)."""
+    from optipose.search.problem import Violation
+    from optipose.search.surrogate import SensorInfo
+
+    path = folder / "cache.npz"
+    if not path.is_file():
+        return {}
+    data = np.load(path)
+    if "G" not in data:  # a cache from before the surrogate modelled the voxel bias: scores differ, start over
+        return {}
+    if (int(data["space"]) if "space" in data else 1) != space_version:  # its u keys name other poses: start over
+        return {}
+    constraint = data["constraint"] if "constraint" in data else np.full(len(data["u"]), "infeasible")
+    out = {}
+    rows = zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"], data["A"], data["G"], constraint)
+    for u, ok, H, (n_points, n_voxels), violation, A, G, why in rows:
+        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G) if ok else Violation(str(why), float(violation))
+    return out
+
+
+def write_history(folder: Path, history) -> None:
+    history_frame(history).to_csv(folder / "history.csv", index=False)
+
+
+def write_layouts(folder: Path, layouts: dict[int, Layout], hand: Layout | None) -> None:
+    """``layouts/found_k*.toml`` and, when the part has one, ``layouts/hand.toml``."""
+    layout_dir = folder / "layouts"
+    layout_dir.mkdir(exist_ok=True)
+    for k, layout in layouts.items():
+        write_layout(layout, layout_dir / f"found_k{k}.toml")
+    if hand is not None:
+        write_layout(hand, layout_dir / "hand.toml")
+
+
+def write_selection(folder: Path, records) -> None:
+    selection_frame(records).to_csv(folder / "selection.csv", index=False)
+
+
+def write_surrogate_scores(folder: Path, outcome) -> None:
+    surrogate_frame(outcome).to_csv(folder / "surrogate_scores.csv", index=False)
+
+
+def write_validation(folder: Path, validation) -> None:
+    """``validation/<layout>/`` per evaluation and ``comparison.csv``."""
+    for name, result in validation.evaluations.items():
+        sub = folder / "validation" / name
+        sub.mkdir(parents=True, exist_ok=True)
+        write_evaluation(result, sub)
+    comparison_frame(validation).to_csv(folder / "comparison.csv", index=False)

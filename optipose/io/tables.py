@@ -1,0 +1,72 @@
+"""The one place that turns records into tables (pandas), for the CSV files of a result folder.
+
+Angles in tables are degrees where the column says ``_deg`` and radians where it says ``_rad``; sensors
+and subsets appear by name (``S1S2``), as a user reads them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["table1_frame", "comparison_frame", "selection_frame", "history_frame", "surrogate_frame"]
+
+
+def table1_frame(choices) -> pd.DataFrame:
+    """The paper's Table 1 (``table1.csv``): one row per k with each axis's subset, median and p75 (rad)."""
+    rows = [
+        {"k": c.k, "sensors": c.name, "score_rad": c.score,
+         **{f"{a.axis}_{key}": val for a in c.axes for key, val in (("subset", a.name), ("median_rad", a.median), ("p75_rad", a.p75))}}
+        for c in choices
+    ]  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def comparison_frame(validation) -> pd.DataFrame:
+    """Found vs. hand per k and axis (``comparison.csv``, degrees): the found rows in the order they were
+    evaluated, then the hand rows."""
+    rows = [r for k, c in validation.found.items() for r in _choice_rows("found", k, c)]
+    rows += [r for k, c in validation.hand.items() for r in _choice_rows("hand", k, c)]
+    for row in rows:
+        row["protocol"] = validation.protocol
+    return pd.DataFrame(rows)
+
+
+def _choice_rows(label: str, k: int, choice) -> list[dict]:
+    return [
+        {"k": k, "layout": label, "sensors": choice.name, "axis": a.axis, "subset": a.name or "unobservable",
+         "median_deg": float(np.rad2deg(a.median)), "p75_deg": float(np.rad2deg(a.p75)), "score_deg": float(np.rad2deg(choice.score))}
+        for a in choice.axes
+    ]  # fmt: skip
+
+
+def selection_frame(records) -> pd.DataFrame:
+    """The ICP evaluations of the selection, polish and confirmation (``selection.csv``)."""
+    rows = []
+    for r in records:
+        row = {"k": r.k, "origin": r.origin, "surrogate_deg": r.surrogate, "protocol": r.protocol,
+               "score_deg": float(np.rad2deg(r.choice.score)), "dominates_hand": r.dominates}  # fmt: skip
+        for a in r.choice.axes:
+            row |= {f"{a.axis}_median_deg": float(np.rad2deg(a.median)), f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)), f"{a.axis}_subset": a.name}
+        row["state"] = r.state.value
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def history_frame(evaluations) -> pd.DataFrame:
+    """Every surrogate evaluation of the search (``history.csv``): u as a list, value as the optimiser saw it."""
+    return pd.DataFrame([
+        {"eval": e.number, "stage": e.stage, "k": e.k, "value": e.value, "feasible": e.feasible, "best": e.best,
+         "u": list(e.u), "state": e.state.value, "constraint": e.constraint}
+        for e in evaluations
+    ])  # fmt: skip
+
+
+def surrogate_frame(outcome) -> pd.DataFrame:
+    """The surrogate's scores of the winner, greedy, joint and hand layouts per k (``surrogate_scores.csv``)."""
+    rows = []
+    for k, f in sorted(outcome.found.items()):
+        for label, g in (("found", f), ("greedy", outcome.greedy.get(k)), ("joint", outcome.joint.get(k)), ("hand", outcome.hand.get(k))):
+            if g is not None and g.stats:
+                rows.append({"k": k, "layout": label, "fidelity": "surrogate", "score_deg": g.stats["score"], "penalised_deg": g.score})
+    return pd.DataFrame(rows)

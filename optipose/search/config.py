@@ -1,0 +1,104 @@
+"""How to search: :class:`SearchConfig` and the budgets that fill in its numbers.
+
+Every stage of :mod:`optipose.search` reads its settings from one frozen config; a result folder saves
+it (``config.toml``, table ``search``) so ``--resume`` continues with the same one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from optipose.errors import ConfigError
+from optipose.model.collision import DEFAULT_MARGIN
+
+__all__ = ["SearchConfig", "BUDGETS", "config_from_budget"]
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """How to search. Budgets (``quick``, ``default``, ``thorough``) fill in the numbers."""
+
+    global_algorithm: str = "GN_DIRECT_L"  # best of five on all four problems: benchmarks/README.md
+    local_algorithm: str = "LN_BOBYQA"
+    global_evals: int = 300  # per greedy stage
+    local_evals: int = 120  # per local polish
+    joint_evals: int = 200  # per joint polish (k >= 2)
+    max_time: float = 600.0  # s, the whole surrogate search
+    sensors: tuple[int, ...] = (1, 2, 3)
+    strategy: str = "both"  # greedy | joint | both
+    min_points: int = 2000
+    clearance: float = DEFAULT_MARGIN  # m, head to swept part / keep-outs
+    head_gap: float = 0.0  # m, head to head
+    margin: float = 0.005  # m, how far outside the part's box the aim point may go
+    alpha_max_deg: float = 60.0
+    # the laser line may turn at most this far from across the motion (the angle between the line and the
+    # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers less
+    # of the part across the motion, and fools the surrogate (part B, line 66° from across: predicted
+    # 0.51 mdeg, 18.9 mdeg in ICP); 90 turns the constraint off
+    line_skew_max_deg: float = 60.0
+    random_starts: int = 8  # extra random start points scored before each greedy stage
+    # before each greedy stage: score this many space-filling (scrambled Sobol) poses of the new sensor on the
+    # surrogate, and polish the best screen_starts distinct ones locally (screen_evals each). DIRECT-L
+    # refines around one basin; the screen finds the others, which the ICP selection then compares (so
+    # quick, which has no ICP selection, skips it: with 256 points it cost 8 s and changed no layout on B)
+    screen_samples: int = 0
+    screen_starts: int = 6
+    screen_evals: int = 30
+    select_candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
+    select_time: float = 300.0  # s, the selection stage
+    # a layout is asked to beat the hand-placed one on every axis, not just on the sum: each axis whose
+    # predicted score exceeds hand_margin x the hand-placed k-subset's adds hand_weight x the excess
+    # (0 turns it off; < 1 leaves room for the surrogate's error)
+    hand_margin: float = 0.5
+    hand_weight: float = 5.0
+    # the ICP polish of a finalist that is not yet no worse than the hand layout on every axis (refine.py)
+    polish_algorithm: str = "LN_COBYLA"
+    polish_evals: int = 0  # evaluations for k = 1 (half for larger k); 0: no polish
+    polish_time: float = 150.0  # s per k, a safety net: the evaluations should end the polish
+    polish_margin: float = 0.9  # aim below 0.9 x the hand layout's per-axis statistics
+    polish_weight: float = 5.0  # cost per unit of per-axis excess over polish_margin x the hand's, on top of the sum
+    polish_step: float = 0.03  # initial step in [0, 1] units (about 2 mm of aim point, 4 deg of view)
+    # a finalist that beats the hand layout on the reduced protocol by less than polish_margin on some axis
+    # or clear_ratio in sum, or that a polish produced, is confirmed: the best confirm_candidates of that k
+    # and the one closest to dominance re-run the full protocol (selection seed) and the best there is
+    # kept (0: no confirmation)
+    confirm_candidates: int = 0
+    clear_ratio: float = 0.4
+    validation: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
+
+    def __post_init__(self) -> None:
+        from optipose.search.driver import algorithm_code
+
+        if not self.sensors or min(self.sensors) < 1 or max(self.sensors) > 6:
+            raise ConfigError("--sensors: give sensor counts between 1 and 6, e.g. 1,2,3")
+        if self.validation not in ("full", "reduced"):
+            raise ConfigError(f"search validation must be full or reduced, not '{self.validation}'")
+        if self.strategy not in ("greedy", "joint", "both"):
+            raise ConfigError(f"search strategy must be greedy, joint or both, not '{self.strategy}'")
+        for name in (self.global_algorithm, self.local_algorithm, self.polish_algorithm):
+            algorithm_code(name)  # raises ConfigError for an unknown name
+
+
+BUDGETS: dict[str, dict] = {
+    # quick: greedy only, so the layouts are nested and one run validates k = 1, 2, 3; on the reduced protocol
+    "quick": dict(
+        global_evals=70, local_evals=20, max_time=25.0, random_starts=4, select_candidates=0, strategy="greedy",
+        validation="reduced",
+    ),  # fmt: skip
+    "default": dict(
+        global_evals=400, local_evals=120, joint_evals=200, max_time=240.0, select_candidates=3, select_time=240.0,
+        polish_evals=90, confirm_candidates=3, screen_samples=4096,
+    ),  # fmt: skip
+    "thorough": dict(
+        global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16, screen_samples=16384,
+        screen_starts=12, screen_evals=60,
+        select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6,
+    ),  # fmt: skip
+}
+
+
+def config_from_budget(budget: str, sensors: tuple[int, ...], overrides: dict | None = None) -> SearchConfig:
+    """The config of a named budget for these sensor counts, with ``overrides`` (``[search]`` keys) on top."""
+    if budget not in BUDGETS:
+        raise ConfigError(f"unknown budget '{budget}' (use {', '.join(BUDGETS)})")
+    return SearchConfig(sensors=sensors, **{**BUDGETS[budget], **(overrides or {})})

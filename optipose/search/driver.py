@@ -1,0 +1,97 @@
+"""The NLopt driver: one way to run a global or local NLopt algorithm on [0, 1]ⁿ (SPEC §6).
+
+The objective records what it sees (a :class:`~optipose.search.study.SurrogateStudy` keeps the history
+and the best), so :func:`optimize` returns nothing; NLopt's own stops end quietly, a
+:class:`~optipose.search.study.Stop` (time up, Ctrl-C) propagates.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from optipose.errors import ConfigError
+from optipose.search.study import Stop
+
+__all__ = ["algorithm_code", "optimize", "local_best", "apart", "SubProblem"]
+
+log = logging.getLogger(__name__)
+
+
+def algorithm_code(name: str) -> int:
+    """NLopt's code of a derivative-free algorithm named like ``GN_DIRECT_L``; ConfigError otherwise."""
+    import nlopt
+
+    value = getattr(nlopt, name, None)
+    if not isinstance(value, int) or not name[:3] in ("GN_", "LN_", "GD_", "LD_", "G_M", "AUG"):
+        raise ConfigError(f"unknown NLopt algorithm '{name}' (e.g. GN_CRS2_LM, GN_DIRECT_L, GN_ISRES, LN_BOBYQA)")
+    if name.startswith(("GD_", "LD_")):
+        raise ConfigError(f"NLopt algorithm '{name}' needs gradients; the objective has none (use GN_*/LN_*)")
+    return value
+
+
+def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, local: str | None = None) -> None:
+    """One NLopt run of ``fn(u, grad)`` on [0, 1]^n from ``x0`` (n,), at most ``maxeval`` evaluations.
+
+    local : the local algorithm of a multi-start (MLSL) run.
+    """
+    import nlopt
+
+    n = len(x0)
+    opt = nlopt.opt(algorithm_code(algorithm), n)
+    opt.set_lower_bounds(np.zeros(n))
+    opt.set_upper_bounds(np.ones(n))
+    opt.set_min_objective(fn)
+    opt.set_maxeval(int(maxeval))
+    if algorithm.startswith(("LN_",)):
+        opt.set_initial_step(np.full(n, 0.08))
+        opt.set_xtol_rel(1e-5)
+    if algorithm.startswith("GN_MLSL") or algorithm.startswith("G_MLSL"):
+        sub = nlopt.opt(algorithm_code(local or "LN_BOBYQA"), n)
+        sub.set_xtol_rel(1e-4)
+        sub.set_maxeval(max(10, maxeval // 10))
+        opt.set_local_optimizer(sub)
+    if algorithm.startswith(("GN_CRS", "GN_ISRES")):
+        # NLopt's default populations (CRS2 10(n+1), ISRES 20(n+1)) would spend most of a small budget on
+        # one random generation; cap them at a fifth of the budget
+        opt.set_population(int(min(10 * (n + 1), max(n + 2, maxeval // 5))))
+    nlopt.srand(int(seed) % (2**31))
+    try:
+        opt.optimize(np.clip(x0, 0.0, 1.0))
+    except (Stop, nlopt.ForcedStop, nlopt.RoundoffLimited) as exc:
+        if isinstance(exc, Stop):
+            raise
+    except RuntimeError as exc:  # NLopt's generic failure: keep what was found
+        log.warning("NLopt %s stopped: %s", algorithm, exc)
+
+
+def local_best(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, history: list | None = None):
+    """Run a local NLopt search on ``fn`` (a study or a sub-problem of one, whose evaluations are recorded
+    in ``history``, by default ``fn.history``) and return the best feasible evaluation it produced, or
+    None when it met no feasible layout."""
+    history = fn.history if history is None else history
+    before = len(history)
+    optimize(fn, algorithm, x0, maxeval, seed)
+    rows = [r for r in history[before:] if r.feasible]
+    return min(rows, key=lambda r: r.value) if rows else None
+
+
+def apart(u: np.ndarray, others, min_distance: float) -> bool:
+    """``u`` lies more than ``min_distance`` from every one of ``others`` in some [0, 1] unit (max norm)."""
+    return all(np.max(np.abs(np.asarray(u) - np.asarray(o))) > min_distance for o in others)
+
+
+class SubProblem:
+    """The new sensor's 6 numbers as NLopt's variables, the sensors already ``placed`` (6(k-1),) fixed:
+    every evaluation is the full layout's, recorded by the study."""
+
+    def __init__(self, study, placed: np.ndarray):
+        self.study, self.placed = study, placed
+
+    @property
+    def history(self) -> list:
+        return self.study.history
+
+    def __call__(self, u6, grad=None) -> float:
+        return self.study(np.concatenate([self.placed, np.asarray(u6)]))

@@ -1,0 +1,132 @@
+"""The problem the search solves: score a layout (6k numbers in [0, 1]) on the surrogate, with constraints.
+
+A layout is **infeasible** when a sensor's laser line turns more than ``line_skew_max_deg`` from across the
+motion, its head comes within ``clearance`` of the part swept along the scan or of a keep-out, it returns
+fewer than ``min_points``, or two heads come within ``head_gap`` of each other. Its :class:`LayoutScore`
+then names the first violated constraint and how far (normalised, ≥ 0) the layout is from feasible;
+optimisers see ``PENALTY + violation`` (:attr:`LayoutScore.objective`), so they are led back toward
+feasibility, and an infeasible layout never becomes a result.
+
+The user wants a layout that is no worse than the hand-placed one on *any* axis, not only on the sum, and
+the sum is dominated by the worst axis (usually roll), so an unpenalised optimiser happily trades a good
+axis for it. Each axis predicted worse than ``hand_margin`` × the best hand-placed k-subset's (the
+``targets``) therefore adds ``hand_weight`` × the excess to the value (:meth:`SurrogateProblem.shortfall`).
+
+Every sensor pose's information (or violation) is cached by its parameters, so a repeated pose costs
+nothing and a resumed search replays its earlier evaluations from the cache (:mod:`optipose.io.search`
+saves it).
+"""
+
+from __future__ import annotations
+
+import itertools
+from types import MappingProxyType
+from typing import NamedTuple
+
+import numpy as np
+
+from optipose.evaluate.compare import weighted_excess
+from optipose.model.collision import collision_model, heads_clearance
+from optipose.search.config import SearchConfig
+from optipose.search.records import LayoutScore
+from optipose.search.space import PoseSpace
+from optipose.search.surrogate import SensorInfo, Surrogate, predicted_stats, protocol_turns
+
+__all__ = ["SurrogateProblem", "Violation"]
+
+
+class Violation(NamedTuple):
+    """A sensor pose that is infeasible on its own: which constraint, and by how much (≥ 1, normalised)."""
+
+    constraint: str
+    amount: float
+
+
+class SurrogateProblem:
+    """Scores layouts on the surrogate with constraints; caches per-sensor results.
+
+    part, objective : the part and the objective the layouts are for.
+    config : the search's settings (constraints, the hand-margin penalty).
+    surrogate : shared with another problem of the same part and objective (default: a new one).
+    cache : shared per-sensor cache (u key → :class:`SensorInfo` or :class:`Violation`), e.g. a resumed one.
+    targets : k → per-axis surrogate scores (deg) of the best hand-placed k-subset, for the shortfall.
+    """
+
+    def __init__(self, part, objective, config: SearchConfig, surrogate: Surrogate | None = None,
+                 cache: dict | None = None, targets: dict[int, np.ndarray] | None = None):  # fmt: skip
+        self.part, self.objective, self.config = part, objective, config
+        stat = objective.statistic
+        self.weights = (tuple(stat.weights), stat.median_weight, stat.p75_weight)
+        self.surrogate = surrogate or Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective))
+        self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
+        self.collision = collision_model(part)
+        self._cache: dict = {} if cache is None else cache
+        self._targets = dict(targets or {})
+
+    def with_targets(self, targets: dict[int, np.ndarray]) -> "SurrogateProblem":
+        """The same problem (surrogate, cache) measured against these per-axis targets."""
+        return SurrogateProblem(self.part, self.objective, self.config, self.surrogate, self._cache, targets)
+
+    @property
+    def cache(self):
+        """The per-sensor cache, read-only: u key (6 floats) → :class:`SensorInfo` or :class:`Violation`."""
+        return MappingProxyType(self._cache)
+
+    # --- one sensor ------------------------------------------------------------------------------
+    def sensor(self, u6: np.ndarray) -> SensorInfo | Violation:
+        """The sensor's information, or its constraint violation when it is infeasible on its own."""
+        key = tuple(np.round(np.asarray(u6, dtype=float), 9))
+        if key not in self._cache:
+            self._cache[key] = self._sensor(self.space.to_pose(np.asarray(key)))
+        return self._cache[key]
+
+    def _sensor(self, T: np.ndarray) -> SensorInfo | Violation:
+        cfg = self.config
+        skew, limit = abs(T[0, 0]), np.sin(np.deg2rad(cfg.line_skew_max_deg))  # |x_S · x_O|
+        if skew > limit + 1e-12:  # checked first: it needs no collision test and no scan
+            return Violation("line_skew", 1.0 + (skew - limit) / max(1.0 - limit, 1e-9))
+        if (gap := self.collision.clearance(T).distance) < cfg.clearance:
+            return Violation("clearance", 1.0 + min(cfg.clearance - gap, 1.0) / cfg.clearance)
+        info = self.surrogate.info(T)
+        short = cfg.min_points - info.n_points
+        return info if short <= 0 else Violation("min_points", short / cfg.min_points)
+
+    # --- a layout ----------------------------------------------------------------------------------
+    def score(self, u: np.ndarray, constrained: bool = True) -> LayoutScore:
+        """The surrogate's score of a layout (6k,).
+
+        ``constrained=False`` scores a given layout (the hand-placed one) whatever its clearances, without
+        the shortfall: it is the baseline.
+        """
+        if not constrained:
+            stats = predicted_stats([self.surrogate.info(T) for T in self.space.to_poses(u)], *self.weights)
+            return LayoutScore(stats["score"], stats)
+        k = len(u) // 6
+        parts = [self.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
+        violated = [p for p in parts if isinstance(p, Violation)]
+        violation = sum(p.amount for p in violated)
+        constraint = violated[0].constraint if violated else ""
+        if k > 1:
+            before, violation = violation, self._head_gaps(u, violation)
+            constraint = constraint or ("head_gap" if violation > before else "")
+        if violation > 0:
+            return LayoutScore(float("nan"), None, violation, constraint)
+        stats = predicted_stats(parts, *self.weights)
+        return LayoutScore(stats["score"] + self.shortfall(k, stats), stats)
+
+    def _head_gaps(self, u: np.ndarray, violation: float) -> float:
+        """``violation`` plus that of the head-to-head gap of every pair of sensors that is below ``head_gap``."""
+        poses = self.space.to_poses(u)
+        sensor = self.collision.sensor
+        for a, b in itertools.combinations(range(len(poses)), 2):
+            gap = heads_clearance(sensor, poses[a], sensor, poses[b])
+            if gap < self.config.head_gap:
+                violation += 1.0 + min(self.config.head_gap - gap, 0.1) * 10
+        return violation
+
+    def shortfall(self, k: int, stats: dict) -> float:
+        """The per-axis penalty (deg) for axes predicted worse than the margin times the hand layout's."""
+        target = self._targets.get(k, self._targets.get(max(self._targets, default=0)))
+        if target is None or self.config.hand_margin <= 0:
+            return 0.0
+        return float(self.config.hand_weight * weighted_excess(stats["axis_score"], target, self.config.hand_margin, self.weights[0]))

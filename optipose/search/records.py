@@ -1,0 +1,186 @@
+"""The search's records: what one evaluation gave, and what a stage found.
+
+In the spirit of optuna's ``FrozenTrial`` / ``TrialState``: a :class:`LayoutScore` is the frozen answer of
+the surrogate for one layout, with its :class:`EvalState` (feasible, or infeasible with the constraint it
+violates and by how much); an :class:`Evaluation` is one row of the search's history; a :class:`Found` is a
+layout a stage proposes. Sensors are identified by their place in the layout (``u[6i:6i+6]``); names
+(F1, F2, …) are given only when a layout is written.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from optipose.evaluate.compare import Verdict, one_versus_many
+
+__all__ = ["EvalState", "LayoutScore", "Evaluation", "Found", "IcpEvaluation", "SearchOutcome", "Validation", "SearchResult", "PENALTY"]
+
+# what an optimiser sees for an infeasible layout: PENALTY + violation (the global NLopt algorithms worth
+# using here take no constraints, so infeasibility is a wall that slopes back toward feasibility)
+PENALTY = 1e3
+
+
+class EvalState(enum.Enum):
+    FEASIBLE = "feasible"
+    INFEASIBLE = "infeasible"  # a constraint is violated: never a result
+    FAILED = "failed"  # the evaluation itself gave no answer (e.g. no registration of an axis succeeded)
+
+
+@dataclass(frozen=True)
+class LayoutScore:
+    """The surrogate's answer for one layout.
+
+    value : deg, the predicted score plus the per-axis shortfall against the hand layout (NaN when infeasible).
+    stats : the surrogate's Table 1 (:func:`optipose.search.surrogate.predicted_stats`), None when infeasible.
+    violation : ≥ 0, normalised, how far the layout is from feasible; constraint : which one (first found).
+    """
+
+    value: float
+    stats: dict | None = field(default=None, repr=False)
+    violation: float = 0.0
+    constraint: str = ""
+
+    @property
+    def state(self) -> EvalState:
+        return EvalState.FEASIBLE if self.stats is not None else EvalState.INFEASIBLE
+
+    @property
+    def feasible(self) -> bool:
+        return self.stats is not None
+
+    @property
+    def objective(self) -> float:
+        """What an optimiser minimises: the value, or PENALTY + violation for an infeasible layout."""
+        return self.value if self.stats is not None else PENALTY + self.violation
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One evaluation of the search's history (``history.csv``)."""
+
+    number: int
+    stage: str
+    k: int
+    u: tuple[float, ...]  # (6k,) in [0, 1], rounded to 9 decimals
+    state: EvalState
+    value: float  # what the optimiser saw (LayoutScore.objective)
+    best: float  # the best feasible value of k sensors so far (NaN before the first)
+    constraint: str = ""
+
+    @property
+    def feasible(self) -> bool:
+        return self.state is EvalState.FEASIBLE
+
+
+@dataclass(frozen=True)
+class Found:
+    """A layout of k sensors that a stage proposes, with its surrogate score.
+
+    strategy : where it came from (greedy, joint, history, ICP polish, …); u : (6k,) in [0, 1];
+    poses : k 4×4 ``T_O_S``; score : deg (LayoutScore.objective); stats : the surrogate's Table 1.
+    """
+
+    k: int
+    strategy: str
+    u: np.ndarray = field(repr=False)
+    poses: list[np.ndarray] = field(repr=False)
+    score: float
+    stats: dict = field(repr=False, default_factory=dict)
+
+    def sensor(self, i: int) -> np.ndarray:
+        """The six numbers of sensor ``i``."""
+        return self.u[6 * i : 6 * i + 6]
+
+
+@dataclass(frozen=True)
+class IcpEvaluation:
+    """One ICP evaluation of a candidate in the selection, polish or confirmation (``selection.csv``).
+
+    origin : where the layout came from; surrogate : its surrogate score (deg, NaN for the hand layout);
+    protocol : reduced | full; choice : its best choice of k sensors; dominates : no worse than the hand
+    layout on every axis on that protocol.
+    """
+
+    k: int
+    origin: str
+    surrogate: float
+    protocol: str
+    choice: object = field(repr=False)
+    dominates: bool
+
+    @property
+    def state(self) -> EvalState:
+        """FAILED when some axis had no subset that registered reliably (it is then unobservable)."""
+        return EvalState.FEASIBLE if all(a.observable for a in self.choice.axes) else EvalState.FAILED
+
+
+@dataclass
+class SearchOutcome:
+    """What the surrogate search found: per k the winner of greedy and joint, both, and the hand layout."""
+
+    found: dict[int, Found]
+    greedy: dict[int, Found]
+    joint: dict[int, Found]
+    hand: dict[int, Found]  # k -> the best hand-placed k-subset on the surrogate
+    targets: dict[int, np.ndarray]  # k -> per-axis surrogate scores (deg) a layout should beat
+    history: list[Evaluation]
+    interrupted: bool = False
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class Validation:
+    """Found vs. hand-placed on the held-out noise seed: per k the found layout's best choice of k sensors
+    and the hand layout's (a nested found layout is evaluated inside the larger one that holds it).
+
+    found : k → choice, in the order the layouts were evaluated; hand : k → choice, k ascending.
+    evaluations : the evaluations themselves, by folder name (``found_k3``, ``hand``); empty when loaded
+    from ``comparison.csv`` alone.
+    """
+
+    protocol: str  # full | reduced
+    seed: int
+    found: dict = field(default_factory=dict)
+    hand: dict = field(default_factory=dict)
+    evaluations: dict = field(default_factory=dict, repr=False)
+
+    def verdicts(self) -> list[Verdict]:
+        """Found vs. hand for every k that has both."""
+        return [Verdict(k, self.found[k], self.hand[k]) for k in sorted(self.found) if k in self.hand]
+
+    def verdict_lines(self) -> list[str]:
+        """One line per k (:meth:`Verdict.line`), then whether one found sensor beats the hand's largest choice."""
+        lines = [v.line() for v in self.verdicts()]
+        ks = sorted(self.found)
+        top = max(ks, default=0)
+        if 1 in self.found and top in self.hand and top > 1:
+            lines.append(one_versus_many(self.found[1], self.hand[top]))
+        return lines
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """A search as saved in its result folder (:func:`optipose.io.load_result`).
+
+    layouts : k → the found layout (sensors F1 … Fk); hand : the hand-placed layout, when the part has one;
+    validation : found vs. hand on the held-out seed (None when the search was interrupted before it).
+    """
+
+    folder: object
+    part: str
+    seed: int
+    budget: str
+    config: dict = field(repr=False)
+    layouts: dict = field(default_factory=dict, repr=False)
+    hand: object = field(default=None, repr=False)
+    validation: Validation | None = None
+
+    def verdicts(self) -> list[Verdict]:
+        """Found vs. hand per k (empty when there is no hand layout or no validation)."""
+        return self.validation.verdicts() if self.validation is not None else []
+
+    def verdict_lines(self) -> list[str]:
+        return self.validation.verdict_lines() if self.validation is not None else []

@@ -1,0 +1,142 @@
+"""Stage: pick each k's finalist by real ICP on a reduced protocol, polish it there, confirm it on the full one.
+
+The surrogate (:mod:`optipose.search.surrogate`) predicts the noise and the voxel-centroid bias of a
+registration from one nominal scan turned in place; it ranks well but its optimum is where its errors
+favour it most. So the search ends by running the objective's own registration: every candidate of k
+sensors (:mod:`optipose.search.candidates`) is evaluated on a reduced protocol — each sequence at its two
+end angles, 14 scans instead of 77 — with the *selection* noise seed. The kept one is, among the
+candidates no worse than the hand-placed layout on any axis, the lowest score (else simply the lowest).
+
+When the finalist is not yet no worse than the hand-placed layout on every axis and twice as good in sum
+(the product's promise), the ICP polish (:mod:`optipose.search.polish`) runs from the finalist, from the
+candidate closest to beating the hand layout on every axis and, for one sensor, from the hand-placed
+sensor, sharing ``polish_evals`` evaluations (half for k ≥ 2).
+
+When the best of a k beats the hand layout by less than ``polish_margin`` on some axis or ``clear_ratio``
+in sum, or when a polish ran (it minimised those very statistics, so its winner's are biased low), the
+confirmation (:mod:`optipose.search.confirm`) decides on the full protocol; with confirmation on, the bar
+every candidate and the polish are measured against is the hand layout on the full protocol. The full
+protocol with the held-out seed then reports the finalist (:mod:`optipose.search.validate`).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from optipose.evaluate.compare import excess, rank
+from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.objective import reduced_objective
+from optipose.search.candidates import candidates
+from optipose.search.confirm import Confirmer
+from optipose.search.polish import hand_start, polish
+from optipose.search.records import Found, IcpEvaluation, SearchOutcome
+from optipose.search.study import SurrogateStudy
+from optipose.seeds import selection_seed
+
+__all__ = ["select_finalists", "clear_win", "closest", "nearest"]
+
+log = logging.getLogger(__name__)
+
+Pool = list[tuple[tuple, Found, object]]  # (rank, layout, its choice) of every ICP evaluation of a k
+
+
+def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateStudy, seed: int, per_k: int = 3,
+                     max_time: float = np.inf, on_stage=None, jobs: int = 1) -> tuple[dict[int, Found], list[IcpEvaluation]]:  # fmt: skip
+    """The finalist per k (``strategy`` tells where each came from) and one record per ICP evaluation.
+
+    Every ICP run here uses the selection noise seed; the validation's seed stays unseen.
+    """
+    deadline = time.monotonic() + max_time
+    config = study.problem.config
+    finalists, records = {}, []
+    confirmer = Confirmer(part, objective, selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
+    with Evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
+        hand = evaluator(part.layouts["hand"]) if "hand" in part.layouts else None
+        for k in sorted(outcome.found):
+            reference = _reference(k, hand, confirmer, records, on_stage)
+            pool = _screen_candidates(study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage)
+            if not pool:
+                continue
+            key, best, choice = min(pool, key=lambda t: t[0])
+            polished = reference is not None and (key[0] or key[1] > reference.score / 2) and config.polish_evals > 0
+            if polished:  # not yet no worse on every axis and 2x better in sum
+                best, choice = _polish(study, part, evaluator, pool, best, reference, records, on_stage)
+            # a polish minimised these very 14-scan statistics, so its winner's are biased low: after a
+            # polish, always confirm
+            if confirmer is not None and reference is not None and (polished or not clear_win(choice, reference, config)):
+                pool_layouts = [(kk, f) for kk, f, _ in pool]
+                best = confirmer.pick(k, pool_layouts, config.confirm_candidates, records, on_stage, closest(pool, reference))
+            finalists[k] = best
+    if confirmer is not None:
+        confirmer.adopt_subsets(study.problem, finalists, records, on_stage)
+    return finalists, records
+
+
+def _reference(k: int, hand, confirmer: Confirmer | None, records: list[IcpEvaluation], on_stage):
+    """The bar of a k: the hand layout's choice, on the full protocol when confirmation is on (on 14 scans it
+    is itself a noisy draw, and a polish aimed at a lucky low chases noise instead of the axis)."""
+    reference = hand.table[k - 1] if hand is not None and k <= len(hand.table) else None
+    if reference is None:
+        return None
+    records.append(IcpEvaluation(k, "hand", np.nan, "reduced", reference, True))
+    if confirmer is not None:
+        reference = confirmer.reference(on_stage).table[k - 1]
+        records.append(IcpEvaluation(k, "hand", np.nan, "full", reference, True))
+    return reference
+
+
+def _screen_candidates(study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage) -> Pool:
+    """Every candidate of k on the reduced protocol, until the time is up (one at least)."""
+    pool: Pool = []
+    for cand in candidates(study.problem, study.history, outcome, k, per_k, finalists):
+        if time.monotonic() > deadline and pool:
+            log.info("selection for k=%d stopped by the time budget", k)
+            break
+        if on_stage:
+            on_stage(f"selecting k={k} on the reduced protocol ({cand.strategy})")
+        choice = evaluator(cand.poses).table[k - 1]
+        key = rank(choice, reference)
+        pool.append((key, cand, choice))
+        records.append(IcpEvaluation(k, cand.strategy, cand.score, "reduced", choice, not key[0]))
+    return pool
+
+
+def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records, on_stage) -> tuple[Found, object]:
+    """Polish from the finalist, the candidate closest to beating the hand layout and, for one sensor, the
+    hand-placed sensor, sharing the evaluations; the polished layouts join ``pool``. Returns the new best."""
+    config, k = study.problem.config, best.k
+    starts = [best] + nearest(pool, reference, best)
+    if k == 1 and "hand" in part.layouts:
+        starts += hand_start(study.problem, part.layouts["hand"], reference)
+    evals = config.polish_evals if k == 1 else config.polish_evals // 2
+    for start in starts:
+        found, choice, polish_records = polish(
+            study.problem, evaluator, start, reference, config, evals // len(starts), config.polish_time / len(starts), on_stage
+        )
+        records += polish_records
+        if found is not None:
+            pool.append((rank(choice, reference), found, choice))
+    _, best, choice = min(pool, key=lambda t: t[0])
+    return best, choice
+
+
+def clear_win(choice, reference, config) -> bool:
+    """The choice beats the reference with room to spare: every axis at most ``polish_margin`` × the
+    reference's and the sum at most ``clear_ratio`` × its sum. A win that wide on a 14-scan sample needs
+    no confirmation (unless a polish produced it); anything less does."""
+    return excess(choice, reference, config.polish_margin) == 0.0 and choice.score <= config.clear_ratio * reference.score
+
+
+def closest(pool: Pool, reference) -> Found:
+    """The candidate whose per-axis statistics exceed the reference's least (ties: the better rank)."""
+    return min(pool, key=lambda t: (excess(t[2], reference, 1.0), t[0]))[1]
+
+
+def nearest(pool: Pool, reference, best: Found) -> list[Found]:
+    """The closest candidate (:func:`closest`), when that is not ``best``: the lowest sum can sit far from
+    dominance while a slightly worse sum is one axis away from it."""
+    near = closest(pool, reference)
+    return [] if near is best else [near]

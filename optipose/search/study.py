@@ -1,0 +1,86 @@
+"""The live search: the one callable every NLopt run of the surrogate stages minimises.
+
+Like optuna's ``Study`` beside its frozen trials, a :class:`SurrogateStudy` wraps a
+:class:`~optipose.search.problem.SurrogateProblem` and keeps what the run has seen: every
+:class:`~optipose.search.records.Evaluation` in order, the best feasible layout per k, the stage now
+running, and the clock. Callbacks (``Callable[[Evaluation], None]``) follow it, e.g. a progress bar or a
+flush of the history to the result folder. Time up or Ctrl-C raise :class:`Stop` out of NLopt.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from typing import Callable
+
+import numpy as np
+
+from optipose.search.problem import SurrogateProblem
+from optipose.search.records import EvalState, Evaluation
+
+__all__ = ["SurrogateStudy", "Stop", "Callback"]
+
+Callback = Callable[[Evaluation], None]
+
+
+class Stop(Exception):
+    """Raised inside the objective to end the whole search (time is up, or Ctrl-C)."""
+
+
+class SurrogateStudy:
+    """Records and scores every layout the surrogate stages try.
+
+    problem : what a layout scores. callbacks : called with each :class:`Evaluation` as it is recorded.
+    """
+
+    def __init__(self, problem: SurrogateProblem, callbacks: list[Callback] | tuple = ()):
+        self.problem = problem
+        self.history: list[Evaluation] = []
+        self.callbacks = list(callbacks)
+        self.interrupted = False
+        self._best: dict[int, tuple[float, np.ndarray]] = {}
+        self._deadline = np.inf
+        self._stage = ""
+
+    @property
+    def stage(self) -> str:
+        return self._stage
+
+    @contextlib.contextmanager
+    def stage_named(self, name: str):
+        """Label the evaluations of the block with ``name`` (e.g. ``greedy:k=2``); the label stays after it."""
+        self._stage = name
+        yield self
+
+    def measure_against(self, targets: dict[int, np.ndarray]) -> None:
+        """From now on score layouts against these per-axis targets (k → deg): the hand layout's, once scored."""
+        self.problem = self.problem.with_targets(targets)
+
+    def start_clock(self, seconds: float) -> None:
+        """From now on the search may take ``seconds``; the evaluation after that raises :class:`Stop`."""
+        self._deadline = time.monotonic() + seconds
+
+    def best(self, k: int) -> tuple[float, np.ndarray] | None:
+        """The best feasible value and layout of k sensors seen so far."""
+        return self._best.get(k)
+
+    def __call__(self, u: np.ndarray, grad=None) -> float:
+        if time.monotonic() > self._deadline:
+            raise Stop("time budget used up")
+        try:
+            result = self.problem.score(np.asarray(u, dtype=float))
+        except KeyboardInterrupt:
+            self.interrupted = True
+            raise Stop("interrupted") from None
+        k, value = len(u) // 6, result.objective
+        if result.feasible and value < self._best.get(k, (np.inf,))[0]:
+            self._best[k] = (value, np.array(u, dtype=float))
+        record = Evaluation(
+            number=len(self.history), stage=self._stage, k=k, u=tuple(np.round(np.asarray(u, float), 9).tolist()),
+            state=result.state, value=value, best=self._best.get(k, (np.nan,))[0],
+            constraint=result.constraint if result.state is EvalState.INFEASIBLE else "",
+        )  # fmt: skip
+        self.history.append(record)
+        for callback in self.callbacks:
+            callback(record)
+        return float(value)

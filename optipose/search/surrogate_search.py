@@ -1,0 +1,101 @@
+"""The NLopt search over sensor poses on the surrogate (SPEC §6): greedy, then joint, for k = 1, 2, 3 …
+
+For every k, **greedy** places one more sensor given the ones already placed (:mod:`optipose.search.greedy`)
+and **joint** re-optimises all 6k variables at once from the greedy layout and from the best hand-placed
+k-subset (:mod:`optipose.search.joint`). The better of the two is kept per k; both are reported. Start
+points include the hand-placed sensors, so the search never ends worse than them on the surrogate.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import time
+
+import numpy as np
+
+from optipose.search.config import SearchConfig
+from optipose.search.greedy import greedy_stage
+from optipose.search.joint import joint_stage
+from optipose.search.problem import SurrogateProblem
+from optipose.search.records import Found, SearchOutcome
+from optipose.search.study import Stop, SurrogateStudy
+
+__all__ = ["run_search", "best_hand_subsets"]
+
+log = logging.getLogger(__name__)
+
+
+def run_search(part, objective, config: SearchConfig, seed: int = 0, study: SurrogateStudy | None = None) -> SearchOutcome:
+    """Greedy then joint NLopt search for every k in ``config.sensors`` (see the module doc).
+
+    study : the live search to record into (e.g. with a resumed cache and callbacks); default a new one.
+    Its problem is measured against the hand layout's targets from here on.
+    """
+    t0 = time.monotonic()
+    study = study or SurrogateStudy(SurrogateProblem(part, objective, config))
+    rng = np.random.default_rng(seed)
+    hand_poses = part.layouts["hand"].poses if "hand" in part.layouts else []
+    hand_u = [study.problem.space.from_pose(T) for T in hand_poses]
+    ks = sorted(set(config.sensors))
+    hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])
+    targets = {k: f.stats["axis_score"] for k, f in hand.items()}
+    study.measure_against(targets)
+    study.start_clock(config.max_time)  # after the hand layout is scored: that first scan also compiles the kernels
+    greedy, joint = {}, {}
+    try:
+        _place(study, config, max(ks), hand_u, hand, rng, seed, greedy, joint)
+    except Stop as why:
+        unplaced = [k for k in ks if study.best(k) is None]
+        (log.warning if unplaced else log.info)(
+            "search stopped: %s%s", why, f"; no layout of {unplaced} sensor(s) yet (raise max_time)" if unplaced else ""
+        )
+    found = {}
+    for k in ks:
+        options = [f for f in (greedy.get(k), joint.get(k), _as_found(study, k)) if f and f.stats]
+        if options:
+            found[k] = min(options, key=lambda f: f.score)
+    return SearchOutcome(found, greedy, joint, hand, targets, study.history, study.interrupted, time.monotonic() - t0)
+
+
+def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict) -> None:
+    """Fill ``greedy`` and ``joint`` for k = 1 … n (as far as the clock allows)."""
+    placed = np.zeros(0)
+    for k in range(1, n + 1):
+        if config.strategy in ("greedy", "both") or k == 1:
+            placed = greedy_stage(study, config, placed, hand_u, rng, seed * 1000 + k)
+            if study.best(k) is None:  # no feasible layout of k sensors: more sensors will not help
+                log.warning("no feasible layout of %d sensor(s) found; stopping", k)
+                break
+            score = study.problem.score(placed)
+            greedy[k] = Found(k, "greedy", placed.copy(), study.problem.space.to_poses(placed), score.objective, score.stats or {})
+        if k > 1 and config.strategy in ("joint", "both"):
+            joint[k] = joint_stage(study, config, k, greedy.get(k), hand.get(k), rng, seed * 1000 + 100 + k)
+            if config.strategy == "joint":
+                placed = joint[k].u
+
+
+def best_hand_subsets(problem: SurrogateProblem, hand_u: list[np.ndarray], ks) -> dict[int, Found]:
+    """The best k of the hand-placed sensors on the surrogate, scored as given (no constraint checks:
+    they are the baseline, e.g. the paper's three heads overlap in our default head-box model)."""
+    out = {}
+    for k in ks:
+        best = None
+        for combo in itertools.combinations(range(len(hand_u)), k):
+            u = np.concatenate([hand_u[i] for i in combo])
+            score = problem.score(u, constrained=False)
+            if score.stats is not None and (best is None or score.value < best.score):
+                best = Found(k, "hand", u, problem.space.to_poses(u), score.value, score.stats)
+        if best:
+            out[k] = best
+    return out
+
+
+def _as_found(study: SurrogateStudy, k: int) -> Found | None:
+    """The best feasible layout of k sensors seen anywhere (covers a search cut short mid-stage)."""
+    best = study.best(k)
+    if best is None:
+        return None
+    value, u = best
+    stats = study.problem.score(u).stats
+    return Found(k, study.stage.split(":")[0] or "search", u, study.problem.space.to_poses(u), value, stats or {})

@@ -1,0 +1,56 @@
+"""Stage: validation. The found layouts and the hand-placed one on the objective's protocol (``quick``: the
+reduced one) with a noise seed the search never saw (:func:`optipose.seeds.validation_seed`); these are
+the numbers reported."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from optipose.evaluate.assignment import choose, stats_by_key
+from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.objective import reduced_objective
+from optipose.model.layout import Layout
+from optipose.search.records import Validation
+from optipose.seeds import validation_seed
+
+__all__ = ["validate", "nested_groups"]
+
+
+def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full") -> Validation:
+    """Evaluate ``layouts`` (k → found layout) and the part's hand layout on the held-out seed of ``seed``."""
+    vseed = validation_seed(seed)
+    if protocol == "reduced":
+        objective = reduced_objective(objective)
+    found, hand, evaluations = {}, {}, {}
+    with Evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:
+        for members in nested_groups(layouts):
+            big = layouts[max(members)]
+            result = evaluations[f"found_k{max(members)}"] = evaluator(big)
+            by_key, n_scans = stats_by_key(result.stats), result.per_scan["scan"].nunique()
+            for k in members:
+                idx = tuple(_indices_in(layouts[k], big))
+                found[k] = choose(idx, big.names, by_key, objective.statistic, n_scans)
+        if "hand" in part.layouts:
+            result = evaluations["hand"] = evaluator(part.layouts["hand"])
+            hand = {choice.k: choice for choice in result.table if choice.k in layouts}
+    return Validation(protocol, vseed, found, hand, evaluations)
+
+
+def nested_groups(layouts: dict[int, Layout]) -> list[list[int]]:
+    """Which found layouts can share one evaluation: a layout whose poses all belong to a larger one.
+    Each group lists the largest k first."""
+    groups: list[tuple[list[np.ndarray], list[int]]] = []
+    for k in sorted(layouts, reverse=True):
+        poses = layouts[k].poses
+        for pool, members in groups:
+            if all(any(np.allclose(T, P) for P in pool) for T in poses):
+                members.append(k)
+                break
+        else:
+            groups.append((list(poses), [k]))
+    return [members for _, members in groups]
+
+
+def _indices_in(layout: Layout, big: Layout) -> list[int]:
+    """Indices in ``big`` of the poses of ``layout``."""
+    return [next(i for i, P in enumerate(big.poses) if np.allclose(T, P)) for T in layout.poses]
