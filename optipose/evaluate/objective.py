@@ -25,6 +25,7 @@ __all__ = [
     "load_objective",
     "objective_from_table",
     "reduced_objective",
+    "objective_from_dict",
     "OBJECTIVES_DIR",
     "AXES",
 ]
@@ -117,6 +118,23 @@ def load_objective(spec: str | Path) -> Objective:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"objective file {path}: {exc}") from None
     return objective_from_table(table, where=str(path), source_text=text, default_name=path.stem)
+
+
+def objective_from_dict(table: dict, source_text: str = "") -> Objective:
+    """The inverse of :meth:`Objective.to_dict`: a resolved (SI) objective as saved beside a result."""
+
+    def frozen(value):  # TOML gives lists where the config holds tuples
+        return tuple(frozen(v) for v in value) if isinstance(value, list) else value
+
+    def section(cls, values: dict):
+        return cls(**{k: frozen(v) for k, v in values.items() if k in cls.__dataclass_fields__})
+
+    return Objective(
+        name=str(table.get("name", "objective")), description=str(table.get("description", "")),
+        protocol=section(ProtocolConfig, table.get("protocol", {})),
+        registration=section(RegistrationConfig, table.get("registration", {})),
+        statistic=section(StatisticConfig, table.get("statistic", {})), source_text=source_text,
+    )  # fmt: skip
 
 
 def reduced_objective(objective: Objective) -> Objective:

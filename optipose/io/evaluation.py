@@ -37,19 +37,17 @@ def read_evaluation(folder: Path, config: dict | None = None):
     """The :class:`~optipose.evaluate.evaluator.EvaluationResult` saved in ``folder`` by
     :func:`write_evaluation`: the tables as written, Table 1 recomputed from the statistics (CSV floats
     round-trip exactly, so it is the table that was saved)."""
-    import tomllib
-
     import pandas as pd
 
     from optipose.evaluate.assignment import best_choices
     from optipose.evaluate.evaluator import EvaluationResult
-    from optipose.evaluate.objective import objective_from_table
+    from optipose.evaluate.objective import objective_from_dict
     from optipose.io.folders import read_config
     from optipose.model.layout import layout_from_table
 
     folder = Path(folder)
     config = config or read_config(folder)
-    objective = objective_from_table(tomllib.loads(config["objective_file"]), source_text=config["objective_file"])
+    objective = objective_from_dict(config["objective"], source_text=config.get("objective_file", ""))
     layout = layout_from_table(config["layout"], name=config["layout"]["name"], where=f"{folder}/config.toml")
     per_scan = pd.read_parquet(folder / "per_scan.parquet")
     stats = pd.read_csv(folder / "stats.csv")

@@ -1,0 +1,107 @@
+"""Result folders read back (optipose.io.load_result) and the verdict against the hand layout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optipose.errors import ConfigError
+from optipose.evaluate.assignment import AxisChoice, Choice
+from optipose.evaluate.compare import Verdict, dominates, excess, one_versus_many, rank
+from optipose.io import load_result
+from optipose.io.folders import write_config
+from optipose.io.search import write_layouts, write_validation
+from optipose.model.layout import Layout, SensorPose
+from optipose.search.records import SearchResult, Validation
+
+
+def _choice(sensors, names, per_axis_mdeg):
+    """A Choice of sensor indices with (median, p75) per axis in millidegrees, every axis on all of them."""
+    name = "".join(names[i] for i in sensors)
+    axes = tuple(AxisChoice(a, tuple(sensors), name, np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3))
+                 for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg))  # fmt: skip
+    return Choice(len(sensors), tuple(sensors), name, axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3)))
+
+
+F, S = ["F1", "F2", "F3"], ["S1", "S2", "S3"]
+VALIDATION = Validation(
+    "full", 1234,
+    found={3: _choice((0, 1, 2), F, [(0.05, 0.1)] * 3), 1: _choice((0,), F, [(0.1, 0.2), (0.1, 0.25), (0.05, 0.1)])},
+    hand={1: _choice((0,), S, [(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)]), 3: _choice((0, 1, 2), S, [(0.1, 0.2)] * 3)},
+)  # fmt: skip
+
+
+def test_the_verdict_names_every_worse_axis_and_what_to_keep():
+    one, three = VALIDATION.verdicts()
+    # by hand: hand 3 + 5 + 0.1 + 0.2 + 0.1 + 0.2 = 8.6 mdeg, found 0.1 + 0.2 + 0.1 + 0.25 + 0.05 + 0.1 = 0.8
+    assert one.ratio == pytest.approx(8.6 / 0.8) and not one.no_worse
+    assert [(g.axis, g.statistic) for g in one.worse] == [("pitch", "p75")]
+    assert one.line() == ("k=1: found F1 10.75x better in sum than hand S1, but worse on pitch p75 0.250 vs 0.200 mdeg: "
+                          "keep S1 if no axis may get worse")  # fmt: skip
+    assert three.no_worse and three.line() == "k=3: found F1F2F3 2.00x better in sum than hand S1S2S3, no worse on any axis"
+    assert VALIDATION.verdict_lines()[-1] == "one found sensor beats the hand-placed S1S2S3 in sum (0.800 vs 0.900 mdeg)"
+
+
+def test_dominance_excess_and_rank_agree():
+    hand, found = VALIDATION.hand[1], VALIDATION.found[1]
+    assert not dominates(found, hand) and dominates(hand, hand)
+    assert excess(found, hand) == pytest.approx(np.deg2rad(0.05e-3)) and excess(hand, hand) == 0.0
+    assert excess(hand, hand, 0.5) > 0  # a margin below 1 asks for a clear win
+    assert rank(VALIDATION.found[3], VALIDATION.hand[3]) < rank(found, hand)  # no worse anywhere ranks first
+    assert rank(found, None) == (False, found.score)
+    worse = Verdict(1, hand, found)  # the other way round: worse in sum and on axes
+    assert worse.line().startswith("k=1: found S1 10.75x worse in sum than hand F1 and worse on roll median")
+    assert worse.line().endswith(": keep F1")
+    assert one_versus_many(hand, VALIDATION.hand[3]).startswith("one found sensor does not beat")
+
+
+def _layout(name, n, prefix):
+    return Layout(tuple(SensorPose(f"{prefix}{i + 1}", np.eye(4) + np.diag([0, 0, 0, 0]) + _shift(i)) for i in range(n)), name=name)
+
+
+def _shift(i):
+    T = np.zeros((4, 4))
+    T[0, 3] = 0.01 * i
+    return T
+
+
+def test_a_search_folder_reads_back_with_the_same_verdicts(tmp_path):
+    write_config(tmp_path, {"command": "search", "part": {"name": "part_x", "source": ""}, "seed": 7, "budget": "quick",
+                            "validation_seed": 1234})  # fmt: skip
+    write_layouts(tmp_path, {1: _layout("found_k1", 1, "F"), 3: _layout("found_k3", 3, "F")}, _layout("hand", 3, "S"))
+    write_validation(tmp_path, VALIDATION)
+    result = load_result(tmp_path)
+    assert isinstance(result, SearchResult) and (result.part, result.seed, result.budget) == ("part_x", 7, "quick")
+    assert sorted(result.layouts) == [1, 3] and result.hand.names == S
+    assert result.verdict_lines() == VALIDATION.verdict_lines()
+    loaded = result.validation.found[1]
+    assert loaded.sensors == (0,) and [a.subset for a in loaded.axes] == [(0,)] * 3  # indices recovered from names
+    assert all(a.median == pytest.approx(b.median, rel=1e-15) for a, b in zip(loaded.axes, VALIDATION.found[1].axes))
+
+
+def test_an_evaluation_folder_reads_back_with_the_same_table(tmp_path):
+    from dataclasses import replace
+
+    from optipose.evaluate.evaluator import evaluate
+    from optipose.evaluate.objective import load_objective
+    from optipose.io.evaluation import write_evaluation
+    from optipose.model.part import load_part
+
+    objective = load_objective("paper")
+    objective = replace(objective, protocol=replace(objective.protocol, sequences=("R", "P"), step=objective.protocol.stop - objective.protocol.start))
+    part = load_part("part_b")
+    result = evaluate(part, replace(part.layouts["hand"], sensors=part.layouts["hand"].sensors[:2]), objective, seed=3)
+    write_config(tmp_path, {})  # overwritten by write_evaluation
+    write_evaluation(result, tmp_path, part_source="part_b")
+    loaded = load_result(tmp_path)
+    assert loaded.table == result.table  # the same choices, to the last bit
+    assert loaded.per_scan.equals(result.per_scan) and loaded.layout.names == result.layout.names
+    assert loaded.objective.protocol == objective.protocol and loaded.seed == 3
+
+
+def test_a_folder_that_is_not_a_result_is_refused_in_one_line(tmp_path):
+    with pytest.raises(ConfigError, match="no config.toml"):
+        load_result(tmp_path)
+    write_config(tmp_path, {"command": "scan"})
+    with pytest.raises(ConfigError, match="'scan' result"):
+        load_result(tmp_path)
