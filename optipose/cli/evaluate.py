@@ -1,38 +1,40 @@
 """``optipose evaluate``: the paper's protocol on one layout, printed as the paper's Table 1.
 
-The lead's ``optipose/cli.py`` calls :func:`register` to add the command; imports stay lazy so
-``optipose --help`` is instant.
+:func:`evaluate` is the Typer command (registered by :mod:`optipose.cli.app`), :func:`evaluate_command`
+the plain function behind it; imports stay lazy so ``optipose --help`` is instant.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
 
 import typer
 
-__all__ = ["register", "evaluate_command", "table1"]
+from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.errors import ConfigError
 
+__all__ = ["evaluate", "evaluate_command", "table1", "register"]
+
+
+@friendly_errors
+def evaluate(
+    part: Part,
+    units: Units = "auto",
+    layout: LayoutFile = None,
+    out: ResultFolder = None,
+    objective: Objective = "paper",
+    jobs: Jobs = 1,
+    seed: Seed = 0,
+) -> None:
+    """Scan a layout at every orientation of an objective's protocol, register every sensor subset with
+    ICP, and print the best subset per axis for 1, 2, 3 … sensors (the paper's Table 1)."""
+    evaluate_command(part, units, layout, out, objective, jobs, seed)
 
 
 def register(app: typer.Typer) -> None:
-    """Add ``evaluate`` to the ``optipose`` Typer app."""
-    from optipose.cli.app import friendly_errors
-
-    @app.command("evaluate")
-    @friendly_errors
-    def evaluate(
-        part: Annotated[str, typer.Argument(help="A shipped part name (see `optipose parts`), a part TOML or a mesh file.")],
-        units: Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 2 means mm), m, mm or in.")] = "auto",
-        layout: Annotated[Optional[Path], typer.Option(help="Layout TOML ([[sensors]] name/T_O_S); default: the part's hand-placed one.")] = None,
-        out: Annotated[Optional[Path], typer.Option(help="Result folder (default: results/<part>-evaluate-<timestamp>/, linked as results/latest).")] = None,
-        objective: Annotated[str, typer.Option(help="Objective name in objectives/ or a TOML path.")] = "paper",
-        jobs: Annotated[int, typer.Option(help="Worker processes over orientations.", min=1)] = 1,
-        seed: Annotated[int, typer.Option(help="Seed of the sensor noise (and of random protocols).")] = 0,
-    ) -> None:
-        """Scan a layout at every orientation of an objective's protocol, register every sensor subset with
-        ICP, and print the best subset per axis for 1, 2, 3 … sensors (the paper's Table 1)."""
-        evaluate_command(part, units, layout, out, objective, jobs, seed)
+    """Add ``evaluate`` to a Typer app of the caller's (tests build one); the ``optipose`` app registers its
+    commands in :mod:`optipose.cli.app`."""
+    app.command()(evaluate)
 
 
 def evaluate_command(part: str, units: str = "auto", layout: Path | None = None, out: Path | None = None,
@@ -40,7 +42,6 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     """Run the evaluation, print Table 1, save the result folder; returns the folder."""
     from rich.console import Console
 
-    from optipose.errors import ConfigError
     from optipose.evaluate.evaluator import Evaluator
     from optipose.model.layout import load_layout
     from optipose.evaluate.objective import load_objective

@@ -1,14 +1,47 @@
-"""Commands about parts: ``optipose parts``, ``optipose show PART``, ``optipose counts PART``.
+"""Commands about parts: ``optipose parts``, ``optipose show PART``, ``optipose counts [PART]``.
 
-Plain functions; :mod:`optipose.cli.app` registers them as typer commands (and turns errors into exit codes).
-Imports are lazy so the CLI's ``--help`` stays instant.
+Each command is a Typer function (registered by :mod:`optipose.cli.app`) over a plain ``*_command``
+function that scripts and tests call directly. Imports are lazy so the CLI's ``--help`` stays instant.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated, Optional
 
-__all__ = ["parts_command", "show_command", "counts_command", "counts_table"]
+import typer
+
+from optipose.cli.options import Part, Units, friendly_errors
+from optipose.errors import ConfigError
+
+__all__ = ["parts", "show", "counts", "parts_command", "show_command", "counts_command", "counts_table"]
+
+
+@friendly_errors
+def parts() -> None:
+    """List the shipped parts with their size, material, scanning length and layouts."""
+    parts_command()
+
+
+@friendly_errors
+def show(
+    part: Part,
+    out: Annotated[Optional[Path], typer.Option(help="PNG to write (default: ./<part>.png).")] = None,
+    layout: Annotated[str, typer.Option(help="Which of the part's layouts to draw, or a layout TOML.")] = "hand",
+    units: Units = "auto",
+) -> None:
+    """Draw a part with a layout's sensors (head boxes, laser fans, scanned points) to a PNG."""
+    show_command(part, out, units, layout)
+
+
+@friendly_errors
+def counts(
+    part: Part = None,
+    layout: Annotated[str, typer.Option(help="Which of the part's layouts to scan.")] = "hand",
+    markdown: Annotated[bool, typer.Option(help="Print a Markdown table (for the README).")] = False,
+) -> None:
+    """Point counts of a nominal scan per sensor for PART or every part (the paper's Figure 9 at zero offset)."""
+    counts_command(part, layout, markdown)
 
 
 def parts_command() -> None:
@@ -52,8 +85,6 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
     elif layout == "hand" and layout not in loaded.layouts:
         layout = None  # a bare mesh: draw the part alone
     elif layout not in loaded.layouts:
-        from optipose.errors import ConfigError
-
         raise ConfigError(f"part '{loaded.name}' has no layout '{layout}' (it has: {', '.join(loaded.layouts) or 'none'}; or give a .toml file)")
     path = render_part(loaded, out or Path(f"{loaded.name}.png"), layout)
     _console().print(f"wrote {path}")

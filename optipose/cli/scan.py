@@ -4,34 +4,87 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Optional, Sequence
 
-import numpy as np
+import typer
 
+from optipose.cli.options import LayoutFile, Part, Seed, Units, friendly_errors, parse_floats
 from optipose.errors import ConfigError
-from optipose.model.layout import Layout, SensorPose, load_layout
-from optipose.transforms import validate_pose
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from optipose.model.layout import Layout
+
+__all__ = ["scan", "scan_command", "poses_from_cli", "write_cloud", "CLOUD_SUFFIXES"]
 
 log = logging.getLogger(__name__)
 
 CLOUD_SUFFIXES = (".ply", ".pcd", ".xyz", ".npy")
 
 
+@friendly_errors
+def scan(
+    part: Part,
+    sensor_pose: Annotated[
+        Optional[list[str]],
+        typer.Option("--sensor-pose", "-p", help="A 4x4 T_O_S as 16 comma-separated numbers, row-major, metres. Repeatable."),
+    ] = None,
+    layout: LayoutFile = None,
+    material: Annotated[Optional[str], typer.Option(help="Material preset or a CSV (aoi_deg,intensity); default: the part's.")] = None,
+    sensor: Annotated[Optional[str], typer.Option(help="Sensor preset or TOML file; default: the part's.")] = None,
+    rpy: Annotated[str, typer.Option(help="Part orientation roll,pitch,yaw in degrees.")] = "0,0,0",
+    seed: Seed = 0,
+    noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise and Z quantisation.")] = True,
+    out: Annotated[Optional[Path], typer.Option(help="Write the merged cloud (PLY, PCD, XYZ or NPY), metres.")] = None,
+    raw: Annotated[Optional[Path], typer.Option(help="Write each sensor's raw profiles (device format) into this folder.")] = None,
+    units: Units = "auto",
+) -> None:
+    """Scan a part with one or more sensors and print what each sees."""
+    scan_command(part, sensor_pose, layout, material, sensor, parse_floats(rpy, 3, "--rpy"), seed, noise, out, raw, units)
+
+
+def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path | None = None, material: str | None = None,
+                 sensor: str | None = None, rpy_deg: Sequence[float] = (0.0, 0.0, 0.0), seed: int = 0, noise: bool = True,
+                 out: Path | None = None, raw_dir: Path | None = None, units: str = "auto") -> None:  # fmt: skip
+    """Scan ``part`` once at orientation ``rpy_deg`` (degrees), print a table per sensor, write the clouds.
+
+    sensor_pose : 4x4 T_O_S as text, 16 numbers each (metres); else ``layout``, else the part's hand layout.
+    out : the merged cloud (n, 3) in metres, frame O; raw_dir : one CSV of raw profiles per sensor.
+    """
+    import numpy as np
+    from rich.console import Console
+
+    from optipose.model.part import load_part
+
+    if out and out.suffix.lower() not in CLOUD_SUFFIXES:  # refuse before the work, not after
+        raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
+    the_part = load_part(part, units=units)
+    the_layout = poses_from_cli(sensor_pose, layout, the_part)
+    scanner = the_part.scanner(sensor, material)
+    rpy = np.deg2rad(rpy_deg)
+    scans = scanner.scan_many(the_layout.poses, the_part.motion, rpy, the_part.rotation_centre, rng=seed, noise=noise)
+
+    console = Console()
+    console.print(_summary_table(the_part, scanner, the_layout, scans, list(rpy_deg)))
+    if not any(len(s) for s in scans):
+        log.warning("no sensor returned a point: check the poses, the units and the material")
+    if raw_dir:
+        _write_raw(console, raw_dir, the_part, scanner, the_layout, scans)
+    if out:
+        merged = np.concatenate([s.points for s in scans]) if scans else np.zeros((0, 3))
+        write_cloud(out, merged)
+        console.print(f"cloud: {out} ({len(merged):,} points, metres, frame O)")
+
+
 def poses_from_cli(sensor_pose: list[str] | None, layout_path: Path | None, part) -> Layout:
     """The layout to scan with: ``--sensor-pose`` matrices, else ``--layout``, else the part's hand layout."""
+    from optipose.model.layout import Layout, SensorPose, load_layout
+
     if sensor_pose and layout_path:
         raise ConfigError("give either --sensor-pose or --layout, not both")
     if sensor_pose:
-        poses = []
-        for i, text in enumerate(sensor_pose):
-            try:
-                values = [float(v) for v in text.replace(";", ",").replace(" ", ",").split(",") if v]
-            except ValueError:
-                raise ConfigError(f"--sensor-pose {i + 1}: not a list of numbers: '{text}'") from None
-            if len(values) != 16:
-                raise ConfigError(f"--sensor-pose {i + 1}: expected 16 numbers (4x4, row-major), got {len(values)}")
-            T = validate_pose(np.reshape(values, (4, 4)), f"--sensor-pose {i + 1}")
-            poses.append(SensorPose(f"S{i + 1}", T))
-        return Layout(tuple(poses), name="cli")
+        return Layout(tuple(SensorPose(f"S{i + 1}", _pose(text, i + 1)) for i, text in enumerate(sensor_pose)), name="cli")
     if layout_path:
         return load_layout(layout_path)
     if "hand" in part.layouts:
@@ -41,8 +94,25 @@ def poses_from_cli(sensor_pose: list[str] | None, layout_path: Path | None, part
     raise ConfigError(f"part '{part.name}' has no layout: give --sensor-pose or --layout")
 
 
+def _pose(text: str, i: int) -> np.ndarray:
+    """The ``i``-th ``--sensor-pose`` (counting from 1) as a checked 4x4 rigid transform."""
+    import numpy as np
+
+    from optipose.transforms import validate_pose
+
+    try:
+        values = [float(v) for v in text.replace(";", ",").replace(" ", ",").split(",") if v]
+    except ValueError:
+        raise ConfigError(f"--sensor-pose {i}: not a list of numbers: '{text}'") from None
+    if len(values) != 16:
+        raise ConfigError(f"--sensor-pose {i}: expected 16 numbers (4x4, row-major), got {len(values)}")
+    return validate_pose(np.reshape(values, (4, 4)), f"--sensor-pose {i}")
+
+
 def write_cloud(path: Path, points: np.ndarray) -> Path:
     """Write points (n, 3) metres to PLY/PCD/XYZ (Open3D) or NPY."""
+    import numpy as np
+
     suffix = path.suffix.lower()
     if suffix not in CLOUD_SUFFIXES:
         raise ConfigError(f"--out {path}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
@@ -58,22 +128,11 @@ def write_cloud(path: Path, points: np.ndarray) -> Path:
     return path
 
 
-def run_scan(part_spec, sensor_pose, layout_path, material, sensor, rpy_deg, seed, noise, out, raw_dir, units):
-    from rich.console import Console
+def _summary_table(part, scanner, layout, scans, rpy_deg: list[float]):
+    """One row per sensor: points, profiles hit, fill of the sensor's grid, x range, mean intensity."""
+    import numpy as np
     from rich.table import Table
 
-    from optipose.model.part import load_part
-    from optipose.scan.profiles import write_profiles
-
-    if out and out.suffix.lower() not in CLOUD_SUFFIXES:  # refuse before the work, not after
-        raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
-    part = load_part(part_spec, units=units)
-    layout = poses_from_cli(sensor_pose, layout_path, part)
-    scanner = part.scanner(sensor, material)
-    rpy = np.deg2rad(rpy_deg)
-    scans = scanner.scan_many(layout.poses, part.motion, rpy, part.rotation_centre, rng=seed, noise=noise)
-
-    console = Console()
     table = Table(title=f"{part.name}: {scanner.sensor.name}, {scanner.material.name}, rpy = {rpy_deg} deg")
     for col in ("sensor", "points", "profiles hit", "fill %", "x range mm", "mean intensity"):
         table.add_column(col, justify="right" if col != "sensor" else "left")
@@ -83,17 +142,16 @@ def run_scan(part_spec, sensor_pose, layout_path, material, sensor, rpy_deg, see
         x = f"{s.points[:, 0].min() * 1e3:.1f} .. {s.points[:, 0].max() * 1e3:.1f}" if len(s) else "-"
         inten = f"{float(s.intensity.mean()):.3f}" if len(s) else "-"
         table.add_row(name, f"{len(s):,}", f"{hit_profiles}/{n_prof}", f"{100 * len(s) / (n_prof * n_col):.1f}", x, inten)
-    console.print(table)
-    if not any(len(s) for s in scans):
-        log.warning("no sensor returned a point: check the poses, the units and the material")
+    return table
 
-    if raw_dir:
-        raw_dir.mkdir(parents=True, exist_ok=True)
-        for name, s in zip(layout.names, scans):
-            header = f"optipose raw profiles: part={part.name} sensor={scanner.sensor.name} pose={name} step_mm={part.motion.step * 1e3}"
-            write_profiles(raw_dir / f"{name}.csv", s.raw, header=header)
-        console.print(f"raw profiles: {raw_dir}/<sensor>.csv ({n_prof} x {n_col} heights in mm, -9999.9999 = empty)")
-    if out:
-        merged = np.concatenate([s.points for s in scans]) if scans else np.zeros((0, 3))
-        write_cloud(out, merged)
-        console.print(f"cloud: {out} ({len(merged):,} points, metres, frame O)")
+
+def _write_raw(console, raw_dir: Path, part, scanner, layout, scans) -> None:
+    """One CSV of raw profiles (heights in mm, device format) per sensor."""
+    from optipose.scan.profiles import write_profiles
+
+    raw_dir.mkdir(parents=True, exist_ok=True)
+    for name, s in zip(layout.names, scans):
+        header = f"optipose raw profiles: part={part.name} sensor={scanner.sensor.name} pose={name} step_mm={part.motion.step * 1e3}"
+        write_profiles(raw_dir / f"{name}.csv", s.raw, header=header)
+    n_prof, n_col = part.motion.n_profiles, scanner.sensor.points_per_profile
+    console.print(f"raw profiles: {raw_dir}/<sensor>.csv ({n_prof} x {n_col} heights in mm, -9999.9999 = empty)")

@@ -1,4 +1,8 @@
-"""``optipose search``: place 1, 2, 3 sensors automatically and compare with the hand-placed layout."""
+"""``optipose search``: place 1, 2, 3 sensors automatically and compare with the hand-placed layout.
+
+:func:`search` is the Typer command (registered by :mod:`optipose.cli.app`), :func:`search_command` the
+plain function behind it; imports of the library stay lazy so ``optipose --help`` is instant.
+"""
 
 from __future__ import annotations
 
@@ -9,35 +13,89 @@ from typing import Annotated, Optional
 
 import typer
 
-__all__ = ["register", "search_command"]
+from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.errors import ConfigError
+
+__all__ = ["search", "search_command", "verdicts"]
 
 
-def register(app: typer.Typer) -> None:
-    from optipose.cli.app import friendly_errors
+@friendly_errors
+def search(
+    part: Part = None,
+    units: Units = "auto",
+    sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
+    budget: Annotated[str, typer.Option(help="quick (under a minute, validated on the 14-scan reduced protocol), default (under 10 min) or thorough.")] = "default",
+    objective: Objective = "paper",
+    seed: Seed = 0,
+    jobs: Jobs = None,
+    out: ResultFolder = None,
+    resume: Annotated[Optional[Path], typer.Option(help="Continue the search in this result folder (same settings; PART is then not needed).")] = None,
+    config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with a search table overriding the budget (algorithms, evaluations, constraints).")] = None,
+) -> None:
+    """Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
+    the full ICP protocol (quick: the reduced one) with a held-out noise seed, and print found vs.
+    hand-placed per axis (the paper's Table 1 shape)."""
+    search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config)
 
-    @app.command("search")
-    @friendly_errors
-    def search(
-        part: Annotated[Optional[str], typer.Argument(help="A shipped part name, a part TOML or a mesh file (STL/OBJ/PLY); not needed with --resume.")] = None,
-        units: Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 2 means mm), m, mm or in.")] = "auto",
-        sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
-        budget: Annotated[str, typer.Option(help="quick (under a minute, validated on the 14-scan reduced protocol), default (under 10 min) or thorough.")] = "default",
-        objective: Annotated[str, typer.Option(help="Objective name in objectives/ or a TOML path.")] = "paper",
-        seed: Annotated[int, typer.Option(help="Seed of the search (validation uses a held-out seed derived from it).")] = 0,
-        jobs: Annotated[Optional[int], typer.Option(help="Worker processes for the ICP stages (selection, polish, validation); default: one per core.", min=1)] = None,
-        out: Annotated[Optional[Path], typer.Option(help="Result folder (default: results/<part>-search-<timestamp>/).")] = None,
-        resume: Annotated[Optional[Path], typer.Option(help="Continue the search in this result folder (same settings).")] = None,
-        config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with [search] keys overriding the budget (algorithms, evaluations, constraints).")] = None,
-    ) -> None:
-        """Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
-        the full ICP protocol (quick: the reduced one) with a held-out noise seed, and print found vs.
-        hand-placed per axis (the paper's Table 1 shape)."""
-        search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config)
+
+def search_command(part: str | None = None, units: str = "auto", sensors: str = "1,2,3", budget: str = "default",
+                   objective: str = "paper", seed: int = 0, jobs: int | None = None, out: Path | None = None,
+                   resume: Path | None = None, config: Path | None = None) -> Path:  # fmt: skip
+    """Run the search, print found vs. hand-placed, keep everything in the result folder; returns the folder.
+
+    With ``resume`` the part, budget, seed, objective and search settings come from that folder's config.toml.
+    """
+    from rich.console import Console
+
+    from optipose.evaluate.objective import load_objective
+    from optipose.io.folders import make_result_dir
+    from optipose.model.part import load_part
+    from optipose.search.pipeline import config_from_budget
+
+    console = Console(stderr=True)
+    jobs = jobs or os.cpu_count() or 1
+    if part is None and resume is None:
+        raise ConfigError("give a PART to search (a shipped part name or a mesh file), or --resume DIR")
+    if resume:
+        part, search_config, budget, seed, the_objective = _resumed_settings(resume)
+    else:
+        search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config))
+        the_objective = load_objective(objective)
+    the_part = load_part(part, units=units)
+    folder = resume or make_result_dir(the_part.name, "search", out)
+
+    try:
+        report = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
+    except KeyboardInterrupt:
+        console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
+                      f"continue with `optipose search --resume {folder}`")  # fmt: skip
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    _print_report(Console(), report, the_part)
+    if report.outcome.interrupted:
+        console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
+                      f"`optipose search --resume {folder}`")  # fmt: skip
+        raise typer.Exit(EXIT_INTERRUPTED)
+    console.print(f"results: {folder}")
+    return folder
+
+
+def _resumed_settings(resume: Path):
+    """(part, search config, budget, seed, objective) as saved in a search result folder's config.toml."""
+    from optipose.evaluate.objective import objective_from_table
+    from optipose.search.core import SearchConfig
+
+    saved = _resumed(resume)
+    part = saved["part"]["source"] or saved["part"]["name"]
+    cfg = dict(saved["search"])
+    cfg["sensors"] = tuple(cfg["sensors"])
+    search_config = SearchConfig(**cfg)
+    budget, seed = saved["budget"], int(saved["seed"])
+    the_objective = objective_from_table(tomllib.loads(saved["objective_file"]), source_text=saved["objective_file"])
+    return part, search_config, budget, seed, the_objective
 
 
 def _parse_sensors(text: str) -> tuple[int, ...]:
-    from optipose.errors import ConfigError
-
+    """``--sensors 1,2,3`` as sorted, distinct sensor counts."""
     try:
         values = tuple(sorted({int(v) for v in text.split(",") if v.strip()}))
     except ValueError:
@@ -48,7 +106,7 @@ def _parse_sensors(text: str) -> tuple[int, ...]:
 
 
 def _overrides(path: Path | None) -> dict:
-    from optipose.errors import ConfigError
+    """The ``[search]`` table of a ``--search-config`` TOML, its keys checked against SearchConfig's."""
     from optipose.search.core import SearchConfig
 
     if path is None:
@@ -69,8 +127,7 @@ def _overrides(path: Path | None) -> dict:
 
 
 def _resumed(resume: Path) -> dict:
-    from optipose.errors import ConfigError
-
+    """The config.toml of a search result folder (refusing any other folder)."""
     path = resume / "config.toml"
     if not path.is_file():
         raise ConfigError(f"--resume {resume}: no config.toml there (not a search result folder)")
@@ -80,53 +137,8 @@ def _resumed(resume: Path) -> dict:
     return table
 
 
-def search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config) -> Path:
-    from rich.console import Console
-
-    from optipose.evaluate.objective import load_objective, objective_from_table
-    from optipose.model.part import load_part
-    from optipose.io.folders import make_result_dir
-    from optipose.search.core import SearchConfig
-    from optipose.search.pipeline import config_from_budget
-
-    console = Console(stderr=True)
-    jobs = jobs or os.cpu_count() or 1
-    if part is None and resume is None:
-        from optipose.errors import ConfigError
-
-        raise ConfigError("give a PART to search (a shipped part name or a mesh file), or --resume DIR")
-    if resume:
-        saved = _resumed(resume)
-        part = saved["part"]["source"] or saved["part"]["name"]
-        cfg = dict(saved["search"])
-        cfg["sensors"] = tuple(cfg["sensors"])
-        search_config = SearchConfig(**cfg)
-        budget, seed = saved["budget"], int(saved["seed"])
-        the_objective = objective_from_table(tomllib.loads(saved["objective_file"]), source_text=saved["objective_file"])
-        folder = resume
-    else:
-        search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config))
-        the_objective = load_objective(objective)
-    the_part = load_part(part, units=units)
-    if not resume:
-        folder = make_result_dir(the_part.name, "search", out)
-
-    try:
-        report = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
-    except KeyboardInterrupt:
-        console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
-                      f"continue with `optipose search --resume {folder}`")  # fmt: skip
-        raise typer.Exit(130) from None
-    _print_report(Console(), report, the_part)
-    if report.outcome.interrupted:
-        console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
-                      f"`optipose search --resume {folder}`")  # fmt: skip
-        raise typer.Exit(130)
-    console.print(f"results: {folder}")
-    return folder
-
-
 def _run_with_progress(console, part, objective, config, seed, folder, budget, jobs, resume):
+    """Run the search pipeline with a progress bar on ``console`` over the surrogate's evaluations."""
     import numpy as np
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -182,29 +194,46 @@ def verdicts(rows: list[dict]) -> list[str]:
 
 
 def _print_report(console, report, part) -> None:
+    """Found vs. hand-placed on the validation protocol with a verdict per k, the surrogate's strategies, and
+    the found layouts' poses."""
+    if report.validated:
+        console.print(_validation_table(report, part))
+        for line in verdicts(report.rows):
+            console.print(line)
+    console.print(_strategies_table(report.outcome))
+    for k, layout in sorted(report.layouts.items()):
+        console.print(f"[bold]found k={k}[/] (T_O_S, metres):")
+        for name, T in zip(layout.names, layout.poses):
+            console.print(f"  {name}:\n" + "\n".join("    [" + "  ".join(f"{v: .5f}" for v in row) + "]" for row in T))
+
+
+def _validation_table(report, part):
+    """One row per k and layout (found, hand): median/p75 and subset per axis, and the score, in mdeg."""
     from rich.table import Table
 
-    outcome = report.outcome
-    if report.validated:
-        protocol = "full protocol" if report.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
-        table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed "
-                            "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
-        for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
-            table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")
-        rows = report.rows
-        for k in sorted({r["k"] for r in rows}):
-            for label in ("found", "hand"):
-                mine = [r for r in rows if r["k"] == k and r["layout"] == label]
-                if not mine:
-                    continue
-                cells = {r["axis"]: f"{1e3 * r['median_deg']:.3f}/{1e3 * r['p75_deg']:.3f} {r['subset']}" for r in mine}
-                table.add_row(
-                    str(k), label, mine[0]["sensors"], cells.get("roll", "-"), cells.get("pitch", "-"),
-                    cells.get("yaw", "-"), f"{1e3 * mine[0]['score_deg']:.3f}",
-                )  # fmt: skip
-        console.print(table)
-        for line in verdicts(rows):
-            console.print(line)
+    protocol = "full protocol" if report.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
+    table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed "
+                        "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
+    for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
+        table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")
+    rows = report.rows
+    for k in sorted({r["k"] for r in rows}):
+        for label in ("found", "hand"):
+            mine = [r for r in rows if r["k"] == k and r["layout"] == label]
+            if not mine:
+                continue
+            cells = {r["axis"]: f"{1e3 * r['median_deg']:.3f}/{1e3 * r['p75_deg']:.3f} {r['subset']}" for r in mine}
+            table.add_row(
+                str(k), label, mine[0]["sensors"], cells.get("roll", "-"), cells.get("pitch", "-"),
+                cells.get("yaw", "-"), f"{1e3 * mine[0]['score_deg']:.3f}",
+            )  # fmt: skip
+    return table
+
+
+def _strategies_table(outcome):
+    """The surrogate's predicted score per k for greedy, joint and hand, and which strategy won."""
+    from rich.table import Table
+
     strategies = Table(title="surrogate: predicted score (millidegrees) of greedy vs. joint vs. hand; "
                              "the winner is chosen on it plus the penalty for axes not clearly better than the hand's")  # fmt: skip
     for col in ("k", "greedy", "joint", "hand", "winner"):
@@ -213,8 +242,4 @@ def _print_report(console, report, part) -> None:
         g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
         fmt = lambda f: f"{1e3 * f.stats['score']:.3f}" if f is not None and f.stats else "-"  # noqa: E731
         strategies.add_row(str(k), fmt(g), fmt(j), fmt(h), outcome.found[k].strategy)
-    console.print(strategies)
-    for k, layout in sorted(report.layouts.items()):
-        console.print(f"[bold]found k={k}[/] (T_O_S, metres):")
-        for name, T in zip(layout.names, layout.poses):
-            console.print(f"  {name}:\n" + "\n".join("    [" + "  ".join(f"{v: .5f}" for v in row) + "]" for row in T))
+    return strategies
