@@ -33,14 +33,14 @@ class SearchConfig:
     alpha_max_deg: float = 60.0
     # the laser line may turn at most this far from across the motion (the angle between the line and the
     # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers less
-    # of the part across the motion, and fools the surrogate (part B, line 66° from across: predicted
-    # 0.51 mdeg, 18.9 mdeg in ICP); 90 turns the constraint off
+    # of the part across the motion, and fools the surrogate (README, "The line-turn limit"); 90 turns the
+    # constraint off
     line_skew_max_deg: float = 60.0
     random_starts: int = 8  # extra random start points scored before each greedy stage
     # before each greedy stage: score this many space-filling (scrambled Sobol) poses of the new sensor on the
     # surrogate, and polish the best screen_starts distinct ones locally (screen_evals each). DIRECT-L
     # refines around one basin; the screen finds the others, which the ICP selection then compares (so
-    # quick, which has no ICP selection, skips it: with 256 points it cost 8 s and changed no layout on B)
+    # quick, which has no ICP selection, skips it)
     screen_samples: int = 0
     screen_starts: int = 6
     screen_evals: int = 30

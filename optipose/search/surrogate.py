@@ -23,8 +23,8 @@ What the surrogate models, and why:
 * **the voxel bias.** Noise is not what limits the evaluator: a voxel that holds points of two faces
   (an edge, a step, a hole's rim) has its centroid off the surface, by up to a quarter voxel, and these
   residuals pull the registration systematically. Along an edge parallel to the scan axis every voxel
-  sits at the same offset from the edge, so the pulls add up instead of averaging out. With noise off,
-  part B's hand S1 still ends 2–12 mdeg off in roll, against 0.08 mdeg with noise but no voxels
+  sits at the same offset from the edge, so the pulls add up instead of averaging out: with noise off,
+  part B's hand S1 still ends off in roll by far more than with noise but no voxels
   (``tests/test_surrogate.py`` checks both). The surrogate therefore turns the noise-free nominal scan
   by ``turns`` of the objective's protocol orientations (each with a random shift of the voxel grid: a
   turn of the part about its centre moves every edge across the grid), voxelises it in the fixed grid,
@@ -33,8 +33,8 @@ What the surrogate models, and why:
   registration's error at that orientation. Sums over sensors give a subset's δ exactly (one grid for
   all sensors). The predicted errors are |δ + σ·z| over the turns and fixed standard-normal quantiles z.
   Turning a scan is not re-scanning the turned part (which points are seen and how densely change a
-  little), but it moves the edges through the grid as the protocol does; on part B's hand and found
-  poses it predicts pitch and yaw within about 2× of ICP, where grid shifts alone were 5× low.
+  little), but it moves the edges through the grid as the protocol does; how close it comes to ICP is
+  measured by ``benchmarks/bench_surrogate_ranking.py`` (figures in the README).
 
 It ranks layouts; the full ICP protocol (:mod:`optipose.evaluate.evaluator`) gives the numbers that are reported.
 """
