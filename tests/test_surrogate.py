@@ -8,7 +8,8 @@ import pytest
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.registration.reference import SurfaceReference
-from optipose.registration.icp import register, voxel_down
+from optipose.registration import register, voxel_down
+from optipose.scan.scanner import part_scanner
 from optipose.search.surrogate import Surrogate, SensorInfo, bias_rotation, predicted_stats
 from optipose.transforms import invert_T, matrix_to_rpy
 
@@ -23,7 +24,7 @@ def part_b():
 
 
 def _roll_errors_mdeg(part, cfg, reference, T, voxel: float, noise: bool) -> np.ndarray:
-    scanner = part.scanner()
+    scanner = part_scanner(part)
     out = []
     for i, rpy in enumerate(np.deg2rad(np.array(TURNS, dtype=float))):
         scan = scanner.scan(T, part.motion, rpy=rpy, centre=part.rotation_centre, rng=i + 1, noise=noise)

@@ -93,7 +93,8 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
 
 def counts_table(parts: list[str], layout: str = "hand") -> list[dict]:
     """Nominal-scan point counts per sensor: rows {part, sensor, points, profiles, per_profile}."""
-    from optipose.model.part import load_part, nominal_scans
+    from optipose.model.part import load_part
+    from optipose.scan.scanner import nominal_scans
 
     rows = []
     for name in parts:

@@ -56,12 +56,13 @@ def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path |
     from rich.console import Console
 
     from optipose.model.part import load_part
+    from optipose.scan.scanner import part_scanner
 
     if out and out.suffix.lower() not in CLOUD_SUFFIXES:  # refuse before the work, not after
         raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
     the_part = load_part(part, units=units)
     the_layout = poses_from_cli(sensor_pose, layout, the_part)
-    scanner = the_part.scanner(sensor, material)
+    scanner = part_scanner(the_part, sensor, material)
     rpy = np.deg2rad(rpy_deg)
     scans = scanner.scan_many(the_layout.poses, the_part.motion, rpy, the_part.rotation_centre, rng=seed, noise=noise)
 

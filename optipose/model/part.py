@@ -49,7 +49,7 @@ from optipose.model.mesh import load_mesh
 from optipose.model.motion import ScanMotion
 from optipose.model.sensor import load_sensor
 
-__all__ = ["Part", "Keepout", "load_part", "list_parts", "nominal_scans", "PARTS_DIR", "DEFAULT_MATERIAL", "DEFAULT_SENSOR"]
+__all__ = ["Part", "Keepout", "load_part", "list_parts", "PARTS_DIR", "DEFAULT_MATERIAL", "DEFAULT_SENSOR"]
 
 PARTS_DIR = Path(__file__).resolve().parents[2] / "parts"
 DEFAULT_MATERIAL = "milled-aluminium-ra1.6"
@@ -104,12 +104,6 @@ class Part:
     def occluders(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """The keep-outs as boxes that block the laser and the receiver (the flange hides what it covers)."""
         return [(np.asarray(k.lo, float), np.asarray(k.hi, float)) for k in self.keepouts]
-
-    def scanner(self, sensor=None, material=None, **kwargs):
-        """A :class:`optipose.scan.scanner.Scanner` of this part, its keep-outs as occluders."""
-        from optipose.scan.scanner import Scanner
-
-        return Scanner(self.mesh, sensor or self.sensor, material or self.material, occluders=self.occluders, **kwargs)
 
 
 def list_parts() -> list[str]:
@@ -256,21 +250,3 @@ def _layouts(tables, where: str) -> dict[str, Layout]:
         name: layout_from_table(table, name=name, where=f"{where} [layouts.{name}]")
         for name, table in tables.items()
     }
-
-
-def nominal_scans(part: Part, layout: str = "hand") -> dict:
-    """One scan per sensor of ``part.layouts[layout]`` at the nominal orientation: {sensor name: Scan}.
-
-    Each sensor uses its own model when the layout names one, else the part's.
-    """
-    if layout not in part.layouts:
-        have = ", ".join(part.layouts) or "none"
-        raise ConfigError(f"part '{part.name}' has no layout '{layout}' (layouts: {have})")
-    scanners: dict = {}
-    out = {}
-    for pose in part.layouts[layout].sensors:
-        model = pose.sensor or part.sensor
-        if model not in scanners:
-            scanners[model] = part.scanner(model)
-        out[pose.name] = scanners[model].scan(pose.T_O_S, part.motion, centre=part.rotation_centre)
-    return out

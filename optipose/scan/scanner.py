@@ -29,7 +29,7 @@ from optipose.scan.raycast import default_threads, face_planes, make_caster
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
-__all__ = ["ScanMotion", "Scan", "Scanner"]
+__all__ = ["ScanMotion", "Scan", "Scanner", "part_scanner", "nominal_scans"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count
@@ -246,6 +246,32 @@ class Scanner:
         start = p + _SHADOW_OFFSET * normal
         receiver = view.receiver_P - step
         return ~self.caster.occluded(start, receiver - start, np.ones(len(T)))
+
+
+def part_scanner(part, sensor=None, material=None, **kwargs) -> Scanner:
+    """The :class:`Scanner` of a :class:`~optipose.model.part.Part` (its sensor and material unless given),
+    its keep-outs as occluders (the flange hides what it covers)."""
+    return Scanner(part.mesh, sensor or part.sensor, material or part.material, occluders=part.occluders, **kwargs)
+
+
+def nominal_scans(part, layout: str = "hand") -> dict:
+    """One scan per sensor of ``part.layouts[layout]`` at the nominal orientation: {sensor name: Scan}.
+
+    Each sensor uses its own model when the layout names one, else the part's.
+    """
+    from optipose.errors import ConfigError
+
+    if layout not in part.layouts:
+        have = ", ".join(part.layouts) or "none"
+        raise ConfigError(f"part '{part.name}' has no layout '{layout}' (layouts: {have})")
+    scanners: dict = {}
+    out = {}
+    for pose in part.layouts[layout].sensors:
+        model = pose.sensor or part.sensor
+        if model not in scanners:
+            scanners[model] = part_scanner(part, model)
+        out[pose.name] = scanners[model].scan(pose.T_O_S, part.motion, centre=part.rotation_centre)
+    return out
 
 
 @dataclass(frozen=True)
