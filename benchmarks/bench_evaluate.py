@@ -89,13 +89,13 @@ def main() -> None:
     print(f"speed-up of optipose evaluate over the naive loop: {per * len(p) / wall:.1f}x")
 
     # optipose in one process on the same orientations, for a like-for-like per-orientation figure
-    from optipose.evaluate.evaluator import _run_chunk
+    from optipose.evaluate.worker import run_chunk
 
-    tasks = [(int(i), p.rpy[i], p.offset[i], int(p.seeds[i]), str(p.label[i])) for i in picks]
     with Evaluator(part, objective, seed=0, jobs=1) as one:
-        _run_chunk(one._setup, layout.poses, layout.names, tasks[:1])  # build the scanner and reference
+        tasks = [one.tasks()[i] for i in picks]
+        run_chunk(one.setup, layout, tasks[:1])  # build the scanner and reference
         t0 = time.perf_counter()
-        _, _, timing = _run_chunk(one._setup, layout.poses, layout.names, tasks)
+        _, _, timing = run_chunk(one.setup, layout, tasks)
         own = (time.perf_counter() - t0) / len(picks)
     print(f"optipose, one process, same orientations: {own:.2f} s per orientation "
           f"(scan {timing['scan'] / len(picks):.2f} s, register {timing['register'] / len(picks):.2f} s) -> {per / own:.1f}x the naive loop")

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -15,11 +13,11 @@ from optipose.evaluate.evaluator import Evaluator
 from optipose.model.layout import Layout, SensorPose
 from optipose.evaluate.objective import StatisticConfig, load_objective, objective_from_table
 from optipose.evaluate.protocol import perturbations
-from optipose.registration.reference import SampledReference, SurfaceReference, sample_surface
-from optipose.registration.icp import Matches, _register_plain, information_matrix, register, voxel_down
+from optipose.registration.reference import SurfaceReference, sample_surface
+from optipose.registration import information_matrix, voxel_down
 from optipose.scan.scanner import ScanMotion
 from optipose.evaluate.statistics import unobservable_axes
-from optipose.transforms import invert_T, matrix_to_rpy, part_motion, transform_points
+from optipose.transforms import part_motion, transform_points
 
 DEG = np.pi / 180
 
@@ -116,39 +114,6 @@ def surface(block):
     return SurfaceReference(block.mesh.vertices, block.mesh.faces)
 
 
-def _estimate(cloud, reference, **cfg):
-    reg = register(cloud, reference, replace(load_objective("paper").registration, **cfg))
-    assert reg.ok, reg.failure
-    return matrix_to_rpy(invert_T(reg.T_target_source)[:3, :3]), reg
-
-
-def test_a_cloud_registered_to_itself_gives_zero(block):
-    points, normals = sample_surface(block.mesh.vertices, block.mesh.faces, 1e-3, seed=2)
-    rpy, reg = _estimate(points, SampledReference(points, normals))
-    assert np.abs(rpy).max() < 1e-9 and reg.rmse < 1e-12
-
-
-@pytest.mark.parametrize("axis", [0, 1, 2])
-@pytest.mark.parametrize("method", ["point_to_plane", "point_to_point"])
-def test_applied_plus_one_degree_comes_back_with_sign_and_axis(block, surface, axis, method):
-    points, _ = sample_surface(block.mesh.vertices, block.mesh.faces, 1e-3, seed=2)
-    rpy = np.zeros(3)
-    rpy[axis] = 1 * DEG
-    scan = transform_points(part_motion(rpy, block.rotation_centre), points)  # the rotated part, in O
-    est, _ = _estimate(scan, surface, method=method, max_iterations=500)
-    np.testing.assert_allclose(np.rad2deg(est), np.rad2deg(rpy), atol=2e-4)
-
-
-def test_fast_and_open3d_backends_agree(block, surface):
-    points, _ = sample_surface(block.mesh.vertices, block.mesh.faces, 0.7e-3, seed=4)
-    rpy = np.array([0.6, -0.4, 0.8]) * DEG
-    scan = transform_points(part_motion(rpy, block.rotation_centre), points)
-    fast, _ = _estimate(scan, surface, method="point_to_plane")
-    o3d, _ = _estimate(scan, surface, method="point_to_plane", backend="open3d", reference_spacing=0.25e-3)
-    np.testing.assert_allclose(np.rad2deg(fast), np.rad2deg(rpy), atol=1e-4)
-    np.testing.assert_allclose(np.rad2deg(o3d), np.rad2deg(rpy), atol=5e-3)
-
-
 def test_voxel_down_keeps_one_centroid_per_voxel():
     p = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [1.5, 0.2, 0.2]]) * 1e-3
     np.testing.assert_allclose(voxel_down(p, 1e-3), [[0.2e-3] * 3, [1.5e-3, 0.2e-3, 0.2e-3]])
@@ -182,19 +147,6 @@ def test_nearest_answers_what_closest_does(block, surface, guess):
     np.testing.assert_array_equal(q, q0)
     np.testing.assert_array_equal(n, n0)
     assert (ids == ids0).mean() > 0.999  # a point on an edge may name either face; its q and n agree
-
-
-@pytest.mark.parametrize("method", ["point_to_plane", "point_to_point"])
-def test_compiled_icp_agrees_with_the_plain_numpy_reference(block, surface, method):
-    """The compiled fast path and the plain one run the same iterations to the same pose (summation order only)."""
-    scan = _tilted_scan(block, [0.9, -0.7, 1.1])
-    cfg = replace(load_objective("paper").registration, method=method, max_iterations=300)
-    start = Matches(*surface.closest(scan))
-    fast, plain = register(scan, surface, cfg, start), _register_plain(scan, surface, cfg, start)
-    assert fast.ok and plain.ok and fast.iterations == plain.iterations
-    np.testing.assert_allclose(fast.T_target_source, plain.T_target_source, rtol=0, atol=1e-12)
-    assert fast.fitness == plain.fitness and abs(fast.rmse - plain.rmse) < 1e-12
-    np.testing.assert_allclose(fast.information, plain.information, rtol=1e-10, atol=1e-12)
 
 
 # -- observability --------------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ STAT_COLUMNS = ("median", "p75", "mean", "max")
 def unobservable_axes(information: np.ndarray, scale: float, tolerance: float = 1e-6) -> np.ndarray:
     """(6,) bool: roll, pitch, yaw, x, y, z the cloud cannot constrain.
 
-    information : (6, 6) ``H`` from :func:`optipose.registration.icp.information_matrix`.
+    information : (6, 6) ``H`` from :func:`optipose.registration.preprocess.information_matrix`.
     scale : m, a length for the cloud (its RMS radius), making rotation and translation comparable.
     """
     if not np.any(information):

@@ -1,1 +1,19 @@
-"""registration."""
+"""Registration of a scan (source, floating) onto a reference (target, fixed): ICP from identity.
+
+- :mod:`~optipose.registration.reference` — the reference and its search structure, built once per part;
+- :mod:`~optipose.registration.preprocess` — voxel down-sampling, outlier removal, the information matrix;
+- :mod:`~optipose.registration.backends` — :func:`register` and the back-ends by name
+  (:mod:`~optipose.registration.fast`, :mod:`~optipose.registration.open3d_icp`);
+- :mod:`~optipose.registration.result` — the :class:`Registration` and :class:`Matches` records.
+
+Importing this package is light: SciPy, numba and Open3D load when a back-end first runs.
+"""
+
+from optipose.registration.backends import BACKENDS, RegistrationBackend, backend_for, get_backend, register, register_backend
+from optipose.registration.preprocess import information_matrix, remove_outliers, voxel_down
+from optipose.registration.result import Matches, Registration
+
+__all__ = [
+    "register", "Registration", "Matches", "RegistrationBackend", "BACKENDS", "get_backend", "register_backend",
+    "backend_for", "voxel_down", "remove_outliers", "information_matrix",
+]  # fmt: skip

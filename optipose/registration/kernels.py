@@ -1,6 +1,6 @@
 """Compiled kernels of registration (numba, ``nogil``): voxel centroids, closest points on a planar-faced
 mesh and the point-to-plane normal equations, each one pass over the cloud instead of a dozen numpy
-temporaries. The arithmetic is documented in :mod:`optipose.registration.icp` and :mod:`optipose.registration.reference`;
+temporaries. The arithmetic is documented in :mod:`optipose.registration.fast` and :mod:`optipose.registration.reference`;
 compiled once per machine and cached next to this file (``cache=True``).
 """
 

@@ -1,0 +1,220 @@
+"""The evaluator's work on a chunk of orientations, as it runs in a worker process: scan, down-sample,
+register every sensor subset, and turn each registration into a row of errors.
+
+A worker rebuilds the scanner(s) and the reference from a picklable :class:`WorkerSetup` once per process
+and keeps them between chunks (one evaluator's state per process at a time). Each sensor is scanned with
+its own model when the layout names one (``SensorPose.sensor``), else with the part's: one
+``Scanner.scan_many`` call per model. The part's model keeps the orientation's noise seed, so a layout
+of the part's model alone is scanned exactly as in one call; every other model's sensors are scanned with
+a seed of their own (:func:`group_seed`), so no two models share noise draws.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from optipose.evaluate.assignment import all_subsets, subset_name
+from optipose.evaluate.objective import AXES, RegistrationConfig
+from optipose.evaluate.statistics import unobservable_axes
+from optipose.model.layout import Layout
+from optipose.registration import Matches, backend_for, register, remove_outliers, voxel_down
+from optipose.seeds import derived_seed, nominal_reference_seed
+from optipose.transforms import invert_T, matrix_to_rpy, part_motion
+
+__all__ = ["WorkerSetup", "run_chunk", "group_seed", "sensor_groups"]
+
+_TRANSLATION = ("x", "y", "z")
+_SENSOR_MODEL = 0x5E4500  # seed tag of a sensor model's group, plus the group's index
+
+
+@dataclass(frozen=True)
+class WorkerSetup:
+    """Everything a worker process needs to rebuild the scanners and reference (picklable).
+
+    token : identifies the evaluator (a worker keeps one evaluator's state at a time).
+    vertices (v, 3) m, faces (f, 3) : the part's mesh. sensor, material : the part's models or names.
+    centre : (3,) m, the rotation centre. threads : ray-casting threads per scan (None: all cores).
+    occluders : the part's keep-outs, (lo, hi) boxes in m that hide what they cover.
+    """
+
+    token: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    sensor: object
+    material: object
+    motion: object
+    centre: np.ndarray
+    registration: RegistrationConfig
+    observability_tolerance: float
+    seed: int
+    threads: int | None
+    occluders: tuple = ()
+
+
+def group_seed(seed: int, group: int) -> int:
+    """The noise seed of sensor-model group ``group`` of a scan with seed ``seed``: group 0 (the part's
+    model) keeps ``seed``; each other model (1, 2, … in the layout's order) gets a derived one."""
+    return int(seed) if group == 0 else derived_seed(seed, _SENSOR_MODEL + group)
+
+
+def sensor_groups(models: list, default) -> list[tuple[object, list[int]]]:
+    """The layout's sensors grouped by model: [(model, sensor indices)].
+
+    models : each sensor's preset name, ``None`` (or ``default``, the part's) for the part's model.
+    Group 0 is always the part's model (``None``, its list possibly empty); the other models follow in
+    the order they first appear.
+    """
+    groups: dict = {None: []}
+    for j, model in enumerate(models):
+        groups.setdefault(None if model is None or model == default else model, []).append(j)
+    return list(groups.items())
+
+
+_STATE: dict[str, "_Worker"] = {}  # per process: the live scanners and reference of one evaluator
+
+
+class _Worker:
+    """One evaluator's live scanners (one per sensor model, built on first use) and reference in this process."""
+
+    def __init__(self, setup: WorkerSetup):
+        import trimesh
+
+        from optipose.registration.reference import SampledReference, SurfaceReference, sample_surface
+
+        self.setup = setup
+        self.mesh = trimesh.Trimesh(setup.vertices, setup.faces, process=False)
+        self.scanners = {None: self._scanner(setup.sensor)}
+        cfg = setup.registration
+        if cfg.reference == "cad-sample":
+            self.reference = SampledReference(*sample_surface(setup.vertices, setup.faces, cfg.reference_spacing), kind="cad-sample")
+        else:  # the CAD surface; also answers the observability normals for nominal-scan references
+            self.reference = SurfaceReference(setup.vertices, setup.faces)
+        self._nominal: dict = {}
+
+    def _scanner(self, model):
+        from optipose.scan.scanner import Scanner
+
+        s = self.setup
+        return Scanner(self.mesh, model, s.material, threads=s.threads, occluders=list(s.occluders))
+
+    def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None) -> list:
+        """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
+        orientation ``rpy`` (rad) and ``offset`` (m); ``seed`` is the orientation's noise seed."""
+        groups = sensor_groups(models, self.setup.sensor)
+        scans = [None] * len(poses)
+        for g, (model, idx) in enumerate(groups):
+            if not idx:
+                continue
+            if model not in self.scanners:
+                self.scanners[model] = self._scanner(model)
+            scanner = self.scanners[model]
+            out = scanner.scan_many([poses[j] for j in idx], self.setup.motion, rpy=rpy, centre=self.setup.centre,
+                                    offset=offset, rng=group_seed(seed, g))  # fmt: skip
+            for j, scan in zip(idx, out):
+                scans[j] = scan
+        return scans
+
+    def references(self, models: list, poses: list[np.ndarray], subsets) -> list:
+        """The reference of each subset: the part's, or the nominal scan of the subset's sensors."""
+        if self.setup.registration.reference != "nominal-scan":
+            return [self.reference] * len(subsets)
+        key = (np.asarray(poses).tobytes(), tuple(map(str, models)))
+        if key not in self._nominal:
+            self._nominal[key] = self._nominal_references(models, poses, subsets)
+        return self._nominal[key]
+
+    def _nominal_references(self, models, poses, subsets) -> list:
+        from optipose.registration.reference import SampledReference
+
+        cfg = self.setup.registration
+        scans = self.scan(models, poses, nominal_reference_seed(self.setup.seed))
+        clouds = [_with_normals(voxel_down(s.points, cfg.reference_spacing), T[:3, 2]) for s, T in zip(scans, poses)]
+        return [
+            SampledReference(np.vstack([clouds[i][0] for i in s]), np.vstack([clouds[i][1] for i in s]), kind="nominal-scan")
+            for s in subsets
+        ]
+
+
+def _with_normals(points: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normals of a scanned cloud (Open3D, 20 neighbours), turned back toward the sensor (against ``view``)."""
+    import open3d as o3d
+
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
+    normals = np.asarray(pcd.normals)
+    normals[normals @ view > 0] *= -1
+    return points, normals
+
+
+def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[list[dict], list[dict], dict]:
+    """Scan and register a list of orientations of ``layout``.
+
+    tasks : (scan index, rpy (3,) rad, offset (3,) m, noise seed, label) per orientation.
+    Returns rows per (scan, subset), rows per (scan, sensor) and the seconds spent ("scan", "register").
+    """
+    worker = _STATE.get(setup.token)
+    if worker is None:
+        _STATE.clear()  # one evaluator's state per process at a time
+        worker = _STATE[setup.token] = _Worker(setup)
+    poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
+    subsets = all_subsets(len(poses))
+    references = worker.references(models, poses, subsets)
+    rows, point_rows, timing = [], [], {"scan": 0.0, "register": 0.0}
+    for i, rpy, offset, seed, label in tasks:
+        t0 = time.perf_counter()
+        scans = worker.scan(models, poses, seed, rpy=rpy, offset=offset)
+        t1 = time.perf_counter()
+        rows += _register_subsets(worker, setup, scans, subsets, references, names, i, rpy, offset, label, point_rows)
+        timing["scan"] += t1 - t0
+        timing["register"] += time.perf_counter() - t1
+    return rows, point_rows, timing
+
+
+def _register_subsets(worker, setup, scans, subsets, references, names, i, rpy, offset, label, point_rows) -> list[dict]:
+    cfg = setup.registration
+    clouds = []
+    for j, scan in enumerate(scans):
+        cloud = voxel_down(scan.points, cfg.voxel_size)
+        if cfg.outlier_removal:
+            cloud = remove_outliers(cloud, cfg.outlier_neighbors, cfg.outlier_std_ratio)
+        clouds.append(cloud)
+        point_rows.append({"scan": i, "label": label, "sensor_index": j, "sensor": names[j],
+                           "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip
+    # every subset against the part's reference: each sensor's matches at identity are searched once
+    shared = references[0] is references[-1] and backend_for(cfg).takes_initial
+    initial = [Matches(*worker.reference.nearest(c)) if shared and len(c) else None for c in clouds]
+    T_O_P = part_motion(rpy, setup.centre, offset)
+    rows = []
+    for s_index, (subset, reference) in enumerate(zip(subsets, references)):
+        source = np.vstack([clouds[j] for j in subset])
+        start = Matches.concat([initial[j] for j in subset]) if shared and all(initial[j] for j in subset) else None
+        reg = register(source, reference, cfg, start)
+        row = {"scan": i, "label": label, "subset_index": s_index, "subset": subset_name(subset, names),
+               "n_points": len(source), "ok": reg.ok, "converged": reg.converged, "failure": reg.failure,
+               "iterations": reg.iterations, "fitness": reg.fitness, "rmse": reg.rmse}  # fmt: skip
+        rows.append(row | _errors(reg, source, rpy, T_O_P, setup.observability_tolerance))
+    return rows
+
+
+def _errors(reg, source: np.ndarray, rpy: np.ndarray, T_O_P: np.ndarray, tolerance: float) -> dict:
+    """Set and estimated angles, signed errors (rad, m) and observability flags of one registration."""
+    T_est = invert_T(reg.T_target_source)  # the part's estimated motion T_O_P
+    est = matrix_to_rpy(T_est[:3, :3])
+    scale = float(np.sqrt(((source - source.mean(axis=0)) ** 2).sum(axis=1).mean())) if len(source) else 1.0
+    blind = unobservable_axes(reg.information, scale, tolerance)
+    row = {}
+    for a, axis in enumerate(AXES):
+        row[f"{axis}_set"], row[f"{axis}_est"] = float(rpy[a]), float(est[a])
+        row[f"err_{axis}"] = float(_wrap(est[a] - rpy[a]))
+    for a, axis in enumerate(_TRANSLATION):
+        row[f"err_{axis}"] = float(T_est[a, 3] - T_O_P[a, 3])
+    for a, axis in enumerate(AXES + _TRANSLATION):
+        row[f"unobservable_{axis}"] = bool(blind[a])
+    return row
+
+
+def _wrap(angle: float) -> float:
+    return (angle + np.pi) % (2 * np.pi) - np.pi

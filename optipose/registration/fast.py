@@ -1,0 +1,198 @@
+"""ICP written here, on a reference built once per part (:mod:`optipose.registration.reference`):
+point-to-point (Kabsch on closest points, the paper's method) or point-to-plane (a linearised 6×6 solve
+per step), from identity.
+
+:class:`FastBackend` (``fast``) runs each step as three compiled passes (:mod:`optipose.registration.kernels`):
+move the cloud, find closest points from the faces of the previous step (``reference.nearest``), sum the
+normal equations, whose ``AᵀA`` at the last step is also the information matrix.
+:class:`PlainBackend` (``plain``) is the same loop in numpy on ``closest``/``follow``: the readable
+reference the compiled one is tested against (same iterations, same pose up to summation order).
+Generalized ICP has no path here (:mod:`optipose.registration.open3d_icp` runs it).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from optipose.registration.preprocess import information_matrix
+from optipose.registration.result import MIN_POINTS, Matches, Registration
+
+if TYPE_CHECKING:
+    from optipose.evaluate.objective import RegistrationConfig
+
+__all__ = ["FastBackend", "PlainBackend"]
+
+_TWIST_LENGTH = 0.03  # m: weighs rotation against translation when comparing ICP steps
+
+
+class FastBackend:
+    """Compiled ICP (``fast``): point-to-point or point-to-plane; see the module doc."""
+
+    methods = ("point_to_point", "point_to_plane")
+    takes_initial = True
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration:
+        """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity."""
+        from optipose.registration import kernels
+
+        source = np.ascontiguousarray(source, dtype=np.float64)
+        T = np.eye(4)
+        ids = None
+        max_d2 = cfg.max_correspondence_distance**2
+        converged, it, history = False, 0, None
+        for it in range(1, cfg.max_iterations + 1):
+            p = kernels.transform(source, T)
+            if it == 1 and initial is not None:
+                q, n, ids = initial.q, initial.n, initial.ids.copy()
+            else:
+                q, n, ids = reference.nearest(p, ids)
+            inlier, c, AtA, Atb, sum_d2 = kernels.normal_equations(p, q, n, max_d2)
+            n_in = int(inlier.sum())
+            if n_in < MIN_POINTS:
+                return Registration.failed(len(source), f"{n_in} points within the correspondence distance", T, it)
+            if cfg.method == "point_to_point":
+                delta = _kabsch(p[inlier], q[inlier])
+            else:
+                delta = _solve_point_to_plane(AtA, Atb, c)
+            if delta is None:
+                return Registration.failed(len(source), "degenerate step", T, it)
+            T = delta @ T
+            if _small_step(delta, cfg):
+                converged = True
+                break
+            if cfg.method == "point_to_point":
+                T, history = _accelerate(T, delta, c, history)
+        return Registration(
+            T_target_source=T,
+            converged=converged,
+            iterations=it,
+            fitness=n_in / len(source),
+            rmse=float(np.sqrt(sum_d2 / n_in)),
+            n_points=len(source),
+            information=AtA,
+            failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
+        )
+
+
+class PlainBackend:
+    """The same ICP in plain numpy (``plain``): slow, readable, the cross-check of :class:`FastBackend`."""
+
+    methods = ("point_to_point", "point_to_plane")
+    takes_initial = True
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration:
+        """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity."""
+        T = np.eye(4)
+        ids = None
+        max_d2 = cfg.max_correspondence_distance**2
+        step = _kabsch if cfg.method == "point_to_point" else _point_to_plane
+        converged, it, history = False, 0, None
+        for it in range(1, cfg.max_iterations + 1):
+            p = source @ T[:3, :3].T + T[:3, 3]
+            if it == 1 and initial is not None:
+                q, n, ids = initial.q, initial.n, initial.ids.copy()
+            elif ids is None:
+                q, n, ids = reference.closest(p)
+            else:
+                q, n, ok = reference.follow(p, ids)
+                stale = np.flatnonzero(~ok)
+                if len(stale):
+                    q[stale], n[stale], ids[stale] = reference.closest(p[stale])
+            inlier = np.einsum("ij,ij->i", p - q, p - q) <= max_d2
+            if inlier.sum() < MIN_POINTS:
+                return Registration.failed(len(source), f"{int(inlier.sum())} points within the correspondence distance", T, it)
+            delta = step(p[inlier], q[inlier], n[inlier])
+            if delta is None:
+                return Registration.failed(len(source), "degenerate step", T, it)
+            T = delta @ T
+            if _small_step(delta, cfg):
+                converged = True
+                break
+            if cfg.method == "point_to_point":
+                T, history = _accelerate(T, delta, p[inlier].mean(axis=0), history)
+        d2 = np.einsum("ij,ij->i", p - q, p - q)
+        inlier = d2 <= max_d2
+        return Registration(
+            T_target_source=T,
+            converged=converged,
+            iterations=it,
+            fitness=float(inlier.mean()),
+            rmse=float(np.sqrt(d2[inlier].mean())),
+            n_points=len(source),
+            information=information_matrix(p[inlier], n[inlier]),
+            failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
+        )
+
+
+# ---------------------------------------------------------------------------------------------------------
+def _small_step(delta: np.ndarray, cfg: RegistrationConfig) -> bool:
+    """The ICP step turned less than the rotation tolerance and moved less than the translation one."""
+    angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
+    return bool(angle < cfg.tolerance_rotation and np.linalg.norm(delta[:3, 3]) < cfg.tolerance_translation)
+
+
+def _accelerate(T: np.ndarray, delta: np.ndarray, c: np.ndarray, previous: np.ndarray | None):
+    """Besl & McKay's accelerated ICP: when two successive steps point the same way and shrink by a
+    steady ratio ρ, jump ahead by the rest of the geometric series, ρ/(1−ρ) steps (at most 20).
+
+    Point-to-point ICP crawls toward its fixed point (ρ ≈ 0.8 here); the jump lands near the same fixed
+    point and plain iterations take over again, so convergence is still judged on unextrapolated steps.
+    A step is the twist (rotation vector, motion of the centroid ``c`` of the matched points).
+    Returns the new ``T`` and the step to compare the next one with.
+    """
+    R = delta[:3, :3]
+    c_new = R @ c + delta[:3, 3]
+    w = Rotation.from_matrix(R).as_rotvec()
+    x = np.concatenate([w * _TWIST_LENGTH, c_new - c])
+    if previous is not None:
+        norm = np.linalg.norm(x) * np.linalg.norm(previous)
+        rho = np.linalg.norm(x) / max(np.linalg.norm(previous), 1e-300)
+        if norm > 0 and x @ previous / norm > 0.99 and rho < 0.98:
+            s = min(rho / (1.0 - rho), 20.0)
+            R_jump = Rotation.from_rotvec(s * w).as_matrix()
+            return _make_T(R_jump, c_new + s * (c_new - c) - R_jump @ c_new) @ T, None
+    return T, x
+
+
+def _kabsch(p: np.ndarray, q: np.ndarray, _n=None) -> np.ndarray | None:
+    """Rigid transform (4, 4) minimising Σ |R pᵢ + t − qᵢ|² (Arun / Umeyama without scale)."""
+    mp, mq = p.mean(axis=0), q.mean(axis=0)
+    U, _, Vt = np.linalg.svd((p - mp).T @ (q - mq))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return _make_T(R, mq - R @ mp)
+
+
+def _point_to_plane(p: np.ndarray, q: np.ndarray, n: np.ndarray) -> np.ndarray | None:
+    """One Gauss-Newton step of Σ ((R pᵢ + t − qᵢ)·nᵢ)², linearised about the centroid c of p.
+
+    Directions the normals cannot see (a plate's in-plane motion) get no motion: minimum-norm solution.
+    """
+    c = p.mean(axis=0)
+    A = np.hstack([np.cross(p - c, n), n])
+    b = np.einsum("ij,ij->i", q - p, n)
+    return _solve_point_to_plane(A.T @ A, A.T @ b, c)
+
+
+def _solve_point_to_plane(AtA: np.ndarray, Atb: np.ndarray, c: np.ndarray) -> np.ndarray | None:
+    """The step (4, 4) from the normal equations about c: rotation vector then translation."""
+    x, *_ = np.linalg.lstsq(AtA, Atb, rcond=1e-12)
+    if not np.all(np.isfinite(x)):
+        return None
+    R = Rotation.from_rotvec(x[:3]).as_matrix()
+    return _make_T(R, c + x[3:] - R @ c)
+
+
+def _make_T(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T

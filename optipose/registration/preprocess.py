@@ -1,0 +1,51 @@
+"""What is done to a scan before and after registration: voxel down-sampling, statistical outlier removal
+and the point-to-plane information matrix (observability of the six motions)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["voxel_down", "remove_outliers", "information_matrix"]
+
+
+def voxel_down(points: np.ndarray, size: float) -> np.ndarray:
+    """Centroid of the points in each cube of side ``size`` (m) of a grid anchored at O's origin.
+
+    points : (n, 3) float, m. Returns (m, 3) float64, m ≤ n; ``points`` unchanged when ``size`` ≤ 0.
+
+    The grid is fixed in O (Open3D's moves with the cloud's bounding box), so a voxel's content does not
+    depend on what else was scanned. Output order is the voxels' sorted keys: deterministic.
+    """
+    from optipose.registration.kernels import voxel_centroids
+
+    points = np.asarray(points, dtype=np.float64)
+    if size <= 0 or len(points) == 0:
+        return points
+    return voxel_centroids(np.ascontiguousarray(points), float(size))
+
+
+def remove_outliers(points: np.ndarray, neighbors: int = 20, std_ratio: float = 2.0) -> np.ndarray:
+    """Open3D's statistical outlier removal: drop points whose mean distance to their ``neighbors`` nearest
+    points is more than ``std_ratio`` standard deviations above the cloud's average.
+
+    points : (n, 3) float, m. Returns the kept points (m, 3) in their input order.
+    """
+    import open3d as o3d
+
+    if len(points) <= neighbors:
+        return points
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    _, keep = pcd.remove_statistical_outlier(nb_neighbors=neighbors, std_ratio=std_ratio)
+    return points[np.sort(np.asarray(keep, dtype=np.int64))]
+
+
+def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Point-to-plane information ``H = Σ JᵢᵀJᵢ`` (6, 6), ``Jᵢ = [((pᵢ − c) × nᵢ)ᵀ, nᵢᵀ]``, c = centroid.
+
+    points : (n, 3) m; normals : (n, 3) unit. Rotation first (rad), then translation (m); taken about the
+    centroid so a rotation the cloud cannot see is not mixed with a translation by the choice of origin.
+    """
+    if len(points) == 0:
+        return np.zeros((6, 6))
+    J = np.hstack([np.cross(points - points.mean(axis=0), normals), normals])
+    return J.T @ J

@@ -1,0 +1,149 @@
+"""Where the evaluator's work runs (executors) and how a worker scans (each sensor with its own model).
+
+The part is a 30 x 25 x 2 mm plate seen from straight above: the Keyence LJ-X8080's 35 mm line overhangs
+its 25 mm width, the LJ-X8060's 16 mm line lies wholly on it, so the two models return different counts
+from the same pose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+import trimesh
+
+from optipose.errors import ConfigError
+from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.executors import EXECUTORS, JoblibExecutor, SerialExecutor, make_executor, register_executor
+from optipose.evaluate.objective import objective_from_table
+from optipose.evaluate.worker import group_seed, sensor_groups
+from optipose.model.layout import Layout, SensorPose
+from optipose.model.motion import ScanMotion
+from optipose.registration import voxel_down
+from optipose.scan.scanner import Scanner
+
+DOWN = np.array([[0, 1, 0, 0.015], [1, 0, 0, 0.0], [0, 0, -1, 0.002], [0, 0, 0, 1.0]])  # R on the top face
+TILTED = np.array([[0, 1, 0, 0.015], [0.8, 0, 0.6, -0.004], [0.6, 0, -0.8, 0.002], [0, 0, 0, 1.0]])
+
+
+class _Part:
+    """A minimal stand-in for optipose.model.part.Part: the plate, the LJ-X8080 by default."""
+
+    def __init__(self):
+        self.mesh = trimesh.creation.box([0.030, 0.025, 0.002])
+        self.mesh.apply_translation([0.015, 0.0, 0.001])
+        self.name, self.material, self.sensor = "plate", "white-diffuse", "keyence-lj-x8080"
+        self.motion = ScanMotion(0.020)
+        self.rotation_centre = np.array([0.015, 0.0, 0.001])
+        self.layouts = {}
+
+
+@pytest.fixture(scope="module")
+def plate():
+    return _Part()
+
+
+@pytest.fixture(scope="module")
+def objective():
+    return objective_from_table({"protocol": {"sequences": ["R", "P"], "start_deg": -1.0, "stop_deg": 1.0, "step_deg": 1.0}})
+
+
+def _layout(*sensors: str | None) -> Layout:
+    poses = (DOWN, TILTED, DOWN)
+    return Layout(tuple(SensorPose(f"S{i + 1}", poses[i], sensor) for i, sensor in enumerate(sensors)), name="test")
+
+
+@pytest.fixture(scope="module")
+def serial(plate, objective):
+    with Evaluator(plate, objective, seed=2, executor=SerialExecutor()) as ev:
+        return ev(_layout(None, None))
+
+
+class _Recording(SerialExecutor):
+    """Runs serially but says it has two workers, and keeps what it was given."""
+
+    n_workers = 2
+
+    def __init__(self):
+        self.chunks, self.closed = [], False
+
+    def map(self, fn, items):
+        items = list(items)
+        self.chunks += items
+        return super().map(fn, items)
+
+    def close(self):
+        self.closed = True
+
+
+# -- executors ------------------------------------------------------------------------------------------
+def test_make_executor_picks_by_jobs_and_name(monkeypatch):
+    assert isinstance(make_executor(1), SerialExecutor) and isinstance(make_executor(0), SerialExecutor)
+    pool = make_executor(3)
+    assert isinstance(pool, JoblibExecutor) and pool.n_workers == 3
+    mine = SerialExecutor()
+    assert make_executor(mine) is mine
+    with pytest.raises(ConfigError, match="unknown executor 'dask'"):
+        make_executor(2, "dask")
+    monkeypatch.setitem(EXECUTORS, "dask", None)  # restored after the test
+    register_executor("dask", lambda n: _Recording())
+    assert isinstance(make_executor(2, "dask"), _Recording)
+
+
+def test_serial_and_two_loky_workers_give_identical_tables(plate, objective, serial):
+    with Evaluator(plate, objective, seed=2, executor=JoblibExecutor(2)) as ev:
+        assert ev.jobs == 2 and ev.setup.threads == 1
+        parallel = ev(_layout(None, None))
+        again = ev(_layout(None, None))  # the pool is reused
+    pd.testing.assert_frame_equal(parallel.per_scan, serial.per_scan, check_exact=True)
+    pd.testing.assert_frame_equal(parallel.points, serial.points, check_exact=True)
+    pd.testing.assert_frame_equal(again.per_scan, serial.per_scan, check_exact=True)
+
+
+def test_a_given_executor_is_used_and_left_open(plate, objective, serial):
+    executor = _Recording()
+    with Evaluator(plate, objective, seed=2, executor=executor) as ev:
+        result = ev(_layout(None, None))
+        tasks = ev.tasks()
+    assert [[t[0] for t in chunk] for chunk in executor.chunks] == [[0, 4], [1, 5], [2], [3]]  # 2 per worker, interleaved
+    assert [t[0] for t in tasks] == [0, 1, 2, 3, 4, 5]
+    assert not executor.closed  # the caller's to close
+    pd.testing.assert_frame_equal(result.per_scan, serial.per_scan, check_exact=True)
+
+
+def test_jobs_still_builds_the_executor(plate, objective):
+    with Evaluator(plate, objective, jobs=2, quiet=True) as ev:
+        assert isinstance(ev.executor, JoblibExecutor) and ev.jobs == 2
+    with Evaluator(plate, objective) as ev:
+        assert isinstance(ev.executor, SerialExecutor) and ev.jobs == 1 and ev.setup.threads is None
+
+
+# -- each sensor with its own model ----------------------------------------------------------------------
+def test_sensors_are_grouped_by_model_the_parts_first():
+    assert sensor_groups([None, "b", "a", "b"], "a") == [(None, [0, 2]), ("b", [1, 3])]
+    assert sensor_groups(["b"], "a") == [(None, []), ("b", [0])]
+    assert group_seed(7, 0) == 7 and group_seed(7, 1) not in (7, group_seed(7, 2))
+
+
+def test_naming_the_parts_own_model_changes_nothing(plate, objective, serial):
+    with Evaluator(plate, objective, seed=2) as ev:
+        named = ev(_layout("keyence-lj-x8080", None))
+    pd.testing.assert_frame_equal(named.per_scan, serial.per_scan, check_exact=True)
+    pd.testing.assert_frame_equal(named.points, serial.points, check_exact=True)
+
+
+def test_a_sensor_naming_another_model_is_scanned_with_it(plate, objective, serial):
+    with Evaluator(plate, objective, seed=2) as ev:
+        mixed = ev(_layout(None, None, "keyence-lj-x8060"))
+        tasks = ev.tasks()
+    counts = mixed.points.pivot(index="scan", columns="sensor", values="n_points")
+    assert (counts["S1"] != counts["S3"]).all()  # same pose, other model
+    assert (counts["S3"] == 40 * 3200).all()  # the LJ-X8060's whole line on the plate, in each of 40 profiles
+    # S1 and S2 are scanned as without S3; S3 as if alone with its model, under its group's seed
+    pd.testing.assert_frame_equal(mixed.points[mixed.points["sensor_index"] < 2].reset_index(drop=True), serial.points)
+    alone = Scanner(plate.mesh, "keyence-lj-x8060", plate.material)
+    for i, rpy, offset, seed, _ in tasks:
+        scan = alone.scan(DOWN, plate.motion, rpy=rpy, centre=plate.rotation_centre, offset=offset, rng=group_seed(seed, 1))
+        row = mixed.points[(mixed.points["scan"] == i) & (mixed.points["sensor"] == "S3")].iloc[0]
+        assert row["n_points"] == len(scan.points)
+        assert row["n_points_down"] == len(voxel_down(scan.points, ev.objective.registration.voxel_size))
