@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed"]
+__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed", "group_seed"]
 
 _SELECTION = 0x5E1EC7
 _VALIDATION = 0x7A11D
 _NOMINAL_REFERENCE = 7
+_SENSOR_MODEL = 0x5E4500  # plus the group's index
 
 
 def derived_seed(seed: int, tag: int) -> int:
@@ -37,3 +38,10 @@ def nominal_reference_seed(seed: int) -> int:
     """The noise seed of the nominal-orientation scan that serves as the reference (``reference =
     "nominal-scan"``): a scan of its own, not one of the protocol's."""
     return derived_seed(seed, _NOMINAL_REFERENCE)
+
+
+def group_seed(seed: int, group: int) -> int:
+    """The noise seed of sensor-model group ``group`` of a scan with seed ``seed``: group 0 (the part's
+    model) keeps ``seed``; each other model (1, 2, … in the layout's order) gets a derived one, so sensors
+    of different models never share a noise draw."""
+    return int(seed) if group == 0 else derived_seed(seed, _SENSOR_MODEL + group)

@@ -15,7 +15,7 @@ from optipose.evaluate.objective import StatisticConfig, load_objective, objecti
 from optipose.evaluate.protocol import perturbations
 from optipose.registration.reference import SurfaceReference, sample_surface
 from optipose.registration import information_matrix, voxel_down
-from optipose.scan.scanner import ScanMotion
+from optipose.model.motion import ScanMotion
 from optipose.evaluate.statistics import unobservable_axes
 from optipose.transforms import part_motion, transform_points
 
@@ -254,18 +254,21 @@ def test_assignment_picks_each_axis_its_subset_like_table1():
         "S1S2S3": [(1, 2), (2, 3), (2, 3)],
     })  # fmt: skip
     one, two, three = best_choices(stats, names, StatisticConfig(), 77)
-    assert (one.sensors, [a.subset for a in one.axes]) == ("S1", ["S1", "S1", "S1"])
+    assert (one.name, [a.name for a in one.axes]) == ("S1", ["S1", "S1", "S1"])
+    assert (one.sensors, [a.subset for a in one.axes]) == ((0,), [(0,), (0,), (0,)])  # by index
     # by hand: {S1,S2} scores (2+3)+(4+5)+(1+2) = 17, {S1,S3} (2+9)+(2+3)+(1+2) = 19, {S2,S3} 26
-    assert (two.sensors, [a.subset for a in two.axes]) == ("S1S2", ["S1S2", "S1S2", "S1"])
+    assert (two.name, [a.name for a in two.axes]) == ("S1S2", ["S1S2", "S1S2", "S1"])
+    assert (two.sensors, [a.subset for a in two.axes]) == ((0, 1), [(0, 1), (0, 1), (0,)])
     assert two.score == pytest.approx(17.0)
-    assert [a.subset for a in three.axes] == ["S1S2S3", "S2S3", "S1"]
+    assert [a.name for a in three.axes] == ["S1S2S3", "S2S3", "S1"]
+    assert [a.subset for a in three.axes] == [(0, 1, 2), (1, 2), (0,)]
     assert three.score <= two.score <= one.score
 
 
 def test_assignment_breaks_median_ties_by_p75():
     stats = _stats({"S1": [(1, 5), (1, 1), (1, 1)], "S2": [(1, 2), (1, 1), (1, 1)], "S1S2": [(1, 3), (1, 1), (1, 1)]})
     _, both = best_choices(stats, ["S1", "S2"], StatisticConfig(), 77)
-    assert both.axes[0].subset == "S2"
+    assert both.axes[0].name == "S2" and both.axes[0].subset == (1,)
 
 
 # -- CLI ------------------------------------------------------------------------------------------------

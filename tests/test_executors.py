@@ -16,7 +16,8 @@ from optipose.errors import ConfigError
 from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.executors import EXECUTORS, JoblibExecutor, SerialExecutor, make_executor, register_executor
 from optipose.evaluate.objective import objective_from_table
-from optipose.evaluate.worker import group_seed, sensor_groups
+from optipose.evaluate.worker import sensor_groups
+from optipose.seeds import group_seed
 from optipose.model.layout import Layout, SensorPose
 from optipose.model.motion import ScanMotion
 from optipose.registration import voxel_down

@@ -6,7 +6,7 @@ and keeps them between chunks (one evaluator's state per process at a time). Eac
 its own model when the layout names one (``SensorPose.sensor``), else with the part's: one
 ``Scanner.scan_many`` call per model. The part's model keeps the orientation's noise seed, so a layout
 of the part's model alone is scanned exactly as in one call; every other model's sensors are scanned with
-a seed of their own (:func:`group_seed`), so no two models share noise draws.
+a seed of their own (:func:`optipose.seeds.group_seed`), so no two models share noise draws.
 """
 
 from __future__ import annotations
@@ -21,15 +21,12 @@ from optipose.evaluate.objective import AXES, RegistrationConfig
 from optipose.evaluate.statistics import unobservable_axes
 from optipose.model.layout import Layout
 from optipose.registration import Matches, backend_for, register, remove_outliers, voxel_down
-from optipose.seeds import derived_seed, nominal_reference_seed
+from optipose.seeds import group_seed, nominal_reference_seed
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 
-__all__ = ["WorkerSetup", "run_chunk", "group_seed", "sensor_groups"]
+__all__ = ["WorkerSetup", "run_chunk", "sensor_groups"]
 
 _TRANSLATION = ("x", "y", "z")
-_SENSOR_MODEL = 0x5E4500  # seed tag of a sensor model's group, plus the group's index
-
-
 @dataclass(frozen=True)
 class WorkerSetup:
     """Everything a worker process needs to rebuild the scanners and reference (picklable).
@@ -52,12 +49,6 @@ class WorkerSetup:
     seed: int
     threads: int | None
     occluders: tuple = ()
-
-
-def group_seed(seed: int, group: int) -> int:
-    """The noise seed of sensor-model group ``group`` of a scan with seed ``seed``: group 0 (the part's
-    model) keeps ``seed``; each other model (1, 2, … in the layout's order) gets a derived one."""
-    return int(seed) if group == 0 else derived_seed(seed, _SENSOR_MODEL + group)
 
 
 def sensor_groups(models: list, default) -> list[tuple[object, list[int]]]:
