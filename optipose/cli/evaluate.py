@@ -46,7 +46,8 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     from optipose.model.layout import load_layout
     from optipose.evaluate.objective import load_objective
     from optipose.model.part import load_part
-    from optipose.io.folders import make_result_dir, write_evaluation
+    from optipose.io.evaluation import write_evaluation
+    from optipose.io.folders import make_result_dir
 
     the_part = load_part(part, units=units)
     if layout is not None:
@@ -84,8 +85,8 @@ def table1(result):
         table.add_column(f"{axis} [deg]", justify="right")
     for choice in result.table:
         cells = [
-            f"{np.rad2deg(a.median):.5f} / {np.rad2deg(a.p75):.5f} {a.subset}" if a.observable else "[red]unobservable[/]"
+            f"{np.rad2deg(a.median):.5f} / {np.rad2deg(a.p75):.5f} {a.name}" if a.observable else "[red]unobservable[/]"
             for a in choice.axes
         ]
-        table.add_row(str(choice.k), choice.sensors, *cells)
+        table.add_row(str(choice.k), choice.name, *cells)
     return table

@@ -50,7 +50,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     from optipose.evaluate.objective import load_objective
     from optipose.io.folders import make_result_dir
     from optipose.model.part import load_part
-    from optipose.search.pipeline import config_from_budget
+    from optipose.search.config import config_from_budget
 
     console = Console(stderr=True)
     jobs = jobs or os.cpu_count() or 1
@@ -82,7 +82,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
 def _resumed_settings(resume: Path):
     """(part, search config, budget, seed, objective) as saved in a search result folder's config.toml."""
     from optipose.evaluate.objective import objective_from_table
-    from optipose.search.core import SearchConfig
+    from optipose.search.config import SearchConfig
 
     saved = _resumed(resume)
     part = saved["part"]["source"] or saved["part"]["name"]
@@ -107,7 +107,7 @@ def _parse_sensors(text: str) -> tuple[int, ...]:
 
 def _overrides(path: Path | None) -> dict:
     """The ``[search]`` table of a ``--search-config`` TOML, its keys checked against SearchConfig's."""
-    from optipose.search.core import SearchConfig
+    from optipose.search.config import SearchConfig
 
     if path is None:
         return {}
@@ -150,9 +150,9 @@ def _run_with_progress(console, part, objective, config, seed, folder, budget, j
     with Progress(*columns, console=console, transient=False) as progress:
         task = progress.add_task(f"{part.name}: surrogate search", total=total, best="-")
 
-        def on_eval(row):
-            best = f"k={row['k']}: {row['best']:.4f} deg" if np.isfinite(row["best"]) else "-"
-            progress.update(task, advance=1, best=best, description=f"{part.name}: {row['stage']}")
+        def on_eval(evaluation):
+            best = f"k={evaluation.k}: {evaluation.best:.4f} deg" if np.isfinite(evaluation.best) else "-"
+            progress.update(task, advance=1, best=best, description=f"{part.name}: {evaluation.stage}")
 
         def on_stage(text):
             progress.update(task, description=f"{part.name}: {text}")
@@ -197,8 +197,11 @@ def _print_report(console, report, part) -> None:
     """Found vs. hand-placed on the validation protocol with a verdict per k, the surrogate's strategies, and
     the found layouts' poses."""
     if report.validated:
-        console.print(_validation_table(report, part))
-        for line in verdicts(report.rows):
+        from optipose.io.tables import comparison_frame
+
+        rows = comparison_frame(report.validation).to_dict("records")  # comparison.csv's rows
+        console.print(_validation_table(rows, report.validation.protocol, part))
+        for line in verdicts(rows):
             console.print(line)
     console.print(_strategies_table(report.outcome))
     for k, layout in sorted(report.layouts.items()):
@@ -207,16 +210,15 @@ def _print_report(console, report, part) -> None:
             console.print(f"  {name}:\n" + "\n".join("    [" + "  ".join(f"{v: .5f}" for v in row) + "]" for row in T))
 
 
-def _validation_table(report, part):
+def _validation_table(rows: list[dict], protocol: str, part):
     """One row per k and layout (found, hand): median/p75 and subset per axis, and the score, in mdeg."""
     from rich.table import Table
 
-    protocol = "full protocol" if report.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
+    protocol = "full protocol" if protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
     table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed "
                         "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
     for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
         table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")
-    rows = report.rows
     for k in sorted({r["k"] for r in rows}):
         for label in ("found", "hand"):
             mine = [r for r in rows if r["k"] == k and r["layout"] == label]
