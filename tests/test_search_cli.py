@@ -90,8 +90,8 @@ def test_resume_replays_from_the_cache_to_the_same_layout(searched):
 
 def test_quick_budget_validates_on_the_reduced_protocol_and_says_so():
     from optipose.evaluate.objective import load_objective
-    from optipose.search.refine import reduced_objective
-    from optipose.search.pipeline import config_from_budget
+    from optipose.evaluate.objective import reduced_objective
+    from optipose.search.config import config_from_budget
 
     assert config_from_budget("quick", (1, 2, 3)).validation == "reduced"
     assert config_from_budget("default", (1, 2, 3)).validation == "full"
