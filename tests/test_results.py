@@ -42,6 +42,15 @@ def test_the_verdict_names_every_worse_axis_and_what_to_keep():
     assert VALIDATION.verdict_lines()[-1] == "one found sensor beats the hand-placed S1S2S3 in sum (0.800 vs 0.900 mdeg)"
 
 
+def test_a_found_layout_worse_in_sum_says_keep_and_a_bare_part_gets_no_verdict():
+    pair = Validation("full", 1, found={2: _choice((0, 1), F, [(0.5, 0.6), (0.1, 0.2), (0.1, 0.2)])},
+                      hand={2: _choice((0, 1), S, [(0.4, 0.5), (0.1, 0.2), (0.1, 0.2)])})  # fmt: skip
+    (line,) = pair.verdict_lines()
+    assert line.startswith("k=2: found F1F2 1.13x worse in sum than hand S1S2 and worse on roll median 0.500 vs 0.400")
+    assert line.endswith(": keep S1S2")
+    assert Validation("full", 1, found=VALIDATION.found).verdict_lines() == []  # a bare STL: no hand layout, no verdict
+
+
 def test_dominance_excess_and_rank_agree():
     hand, found = VALIDATION.hand[1], VALIDATION.found[1]
     assert not dominates(found, hand) and dominates(hand, hand)

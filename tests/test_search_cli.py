@@ -99,24 +99,3 @@ def test_quick_budget_validates_on_the_reduced_protocol_and_says_so():
     from optipose.evaluate.protocol import perturbations
 
     assert len(perturbations(reduced_objective(load_objective("paper")).protocol, 0)) == 14
-
-
-def test_verdicts_name_every_worse_axis_and_say_when_to_keep_the_hand_layout():
-    from optipose.cli.search import verdicts
-
-    def rows(k, layout, sensors, stats):
-        score = sum(m + p for m, p in stats)
-        return [{"k": k, "layout": layout, "sensors": sensors, "axis": a, "median_deg": m, "p75_deg": p, "score_deg": score}
-                for a, (m, p) in zip(("roll", "pitch", "yaw"), stats)]  # fmt: skip
-
-    table = (rows(1, "found", "F1", [(0.1, 0.2), (0.1, 0.25), (0.05, 0.1)]) + rows(1, "hand", "S1", [(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])
-             + rows(2, "found", "F1F2", [(0.5, 0.6), (0.1, 0.2), (0.1, 0.2)]) + rows(2, "hand", "S1S2", [(0.4, 0.5), (0.1, 0.2), (0.1, 0.2)])
-             + rows(3, "found", "F1F2F3", [(0.05, 0.1), (0.05, 0.1), (0.05, 0.1)]) + rows(3, "hand", "S1S2S3", [(0.1, 0.2), (0.1, 0.2), (0.1, 0.2)]))  # fmt: skip
-    lines = verdicts(table)
-    assert lines[0].startswith("k=1: found F1 10.75x better in sum than hand S1, but worse on pitch p75 250.000 vs 200.000 mdeg")
-    assert lines[0].endswith("keep S1 if no axis may get worse")
-    assert lines[1].startswith("k=2: found F1F2 1.13x worse in sum than hand S1S2 and worse on roll median")
-    assert lines[1].endswith(": keep S1S2")
-    assert lines[2] == "k=3: found F1F2F3 2.00x better in sum than hand S1S2S3, no worse on any axis"
-    assert lines[3] == "one found sensor beats the hand-placed S1S2S3 in sum (800.000 vs 900.000 mdeg)"
-    assert verdicts([r for r in table if r["layout"] == "found"]) == []  # a bare STL: no hand layout, no verdict

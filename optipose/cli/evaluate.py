@@ -46,6 +46,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     from optipose.model.layout import load_layout
     from optipose.evaluate.objective import load_objective
     from optipose.model.part import load_part
+    from optipose.io import load_result
     from optipose.io.evaluation import write_evaluation
     from optipose.io.folders import make_result_dir
 
@@ -63,7 +64,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
             result = evaluator(the_layout)
     folder = make_result_dir(the_part.name, "evaluate", out)
     write_evaluation(result, folder, part_source=str(part), layout_source=str(layout or "part:hand"))
-    Console().print(table1(result))
+    Console().print(table1(load_result(folder)))  # what the folder holds, as a report will read it
     n = len(result.per_scan)
     if result.n_failed:
         console.print(f"[yellow]{result.n_failed} of {n} registrations failed or did not converge; kept out of the statistics (see per_scan.csv)[/]")

@@ -16,7 +16,7 @@ import typer
 from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
 from optipose.errors import ConfigError
 
-__all__ = ["search", "search_command", "verdicts"]
+__all__ = ["search", "search_command"]
 
 
 @friendly_errors
@@ -160,48 +160,15 @@ def _run_with_progress(console, part, objective, config, seed, folder, budget, j
         return run(part, objective, config, seed, folder, budget, jobs, resume, on_eval, on_stage)
 
 
-def verdicts(rows: list[dict]) -> list[str]:
-    """One line per k on the validation rows (comparison.csv's): the ratio of the hand layout's score to the
-    found one's and every axis where the found layout is worse, so a user sees at once whether to keep the
-    hand-placed sensors; and whether the found one sensor beats the hand-placed largest layout."""
-    lines = []
-    by = {(r["k"], r["layout"], r["axis"]): r for r in rows}
-    ks = sorted({r["k"] for r in rows})
-    for k in ks:
-        found = [by.get((k, "found", a)) for a in ("roll", "pitch", "yaw")]
-        hand = [by.get((k, "hand", a)) for a in ("roll", "pitch", "yaw")]
-        if None in found or None in hand:
-            continue
-        ratio = hand[0]["score_deg"] / found[0]["score_deg"]
-        worse = [
-            f"{f['axis']} {stat} {1e3 * f[col]:.3f} vs {1e3 * h[col]:.3f}"
-            for f, h in zip(found, hand) for stat, col in (("median", "median_deg"), ("p75", "p75_deg")) if f[col] > h[col]
-        ]  # fmt: skip
-        than = f"x {'better' if ratio >= 1 else 'worse'} in sum than hand {hand[0]['sensors']}"
-        head = f"k={k}: found {found[0]['sensors']} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
-        if worse and ratio < 1:
-            lines.append(f"{head} and worse on {'; '.join(worse)} mdeg: keep {hand[0]['sensors']}")
-        elif worse:
-            lines.append(f"{head}, but worse on {'; '.join(worse)} mdeg: keep {hand[0]['sensors']} if no axis may get worse")
-        else:
-            lines.append(f"{head}, no worse on any axis")
-    one, top = by.get((1, "found", "roll")), by.get((max(ks, default=0), "hand", "roll"))
-    if one is not None and top is not None and max(ks) > 1:
-        beats = one["score_deg"] < top["score_deg"]
-        lines.append(f"one found sensor {'beats' if beats else 'does not beat'} the hand-placed {top['sensors']} in sum "
-                     f"({1e3 * one['score_deg']:.3f} vs {1e3 * top['score_deg']:.3f} mdeg)")  # fmt: skip
-    return lines
-
-
 def _print_report(console, report, part) -> None:
-    """Found vs. hand-placed on the validation protocol with a verdict per k, the surrogate's strategies, and
-    the found layouts' poses."""
+    """Found vs. hand-placed on the validation protocol with a verdict per k, as saved in the result folder
+    (read back with :func:`optipose.io.load_result`), the surrogate's strategies, and the found layouts' poses."""
     if report.validated:
-        from optipose.io.tables import comparison_frame
+        from optipose.io import load_result
 
-        rows = comparison_frame(report.validation).to_dict("records")  # comparison.csv's rows
-        console.print(_validation_table(rows, report.validation.protocol, part))
-        for line in verdicts(rows):
+        saved = load_result(report.folder)
+        console.print(_validation_table(saved.validation, part))
+        for line in saved.verdict_lines():
             console.print(line)
     console.print(_strategies_table(report.outcome))
     for k, layout in sorted(report.layouts.items()):
@@ -210,25 +177,24 @@ def _print_report(console, report, part) -> None:
             console.print(f"  {name}:\n" + "\n".join("    [" + "  ".join(f"{v: .5f}" for v in row) + "]" for row in T))
 
 
-def _validation_table(rows: list[dict], protocol: str, part):
+def _validation_table(validation, part):
     """One row per k and layout (found, hand): median/p75 and subset per axis, and the score, in mdeg."""
+    import numpy as np
     from rich.table import Table
 
-    protocol = "full protocol" if protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
+    mdeg = lambda rad: 1e3 * float(np.rad2deg(rad))  # noqa: E731
+    protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
     table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed "
                         "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
     for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
         table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")
-    for k in sorted({r["k"] for r in rows}):
-        for label in ("found", "hand"):
-            mine = [r for r in rows if r["k"] == k and r["layout"] == label]
-            if not mine:
+    for k in sorted({*validation.found, *validation.hand}):
+        for label, choices in (("found", validation.found), ("hand", validation.hand)):
+            if k not in choices:
                 continue
-            cells = {r["axis"]: f"{1e3 * r['median_deg']:.3f}/{1e3 * r['p75_deg']:.3f} {r['subset']}" for r in mine}
-            table.add_row(
-                str(k), label, mine[0]["sensors"], cells.get("roll", "-"), cells.get("pitch", "-"),
-                cells.get("yaw", "-"), f"{1e3 * mine[0]['score_deg']:.3f}",
-            )  # fmt: skip
+            choice = choices[k]
+            cells = [f"{mdeg(a.median):.3f}/{mdeg(a.p75):.3f} {a.name or 'unobservable'}" for a in choice.axes]
+            table.add_row(str(k), label, choice.name, *cells, f"{mdeg(choice.score):.3f}")
     return table
 
 
