@@ -10,7 +10,7 @@ from optipose.evaluate.assignment import AxisChoice, Choice
 from optipose.evaluate.compare import Verdict, dominates, excess, one_versus_many, rank
 from optipose.io import load_result
 from optipose.io.folders import write_config
-from optipose.io.search import write_layouts, write_validation
+from optipose.io.search import SearchFolder
 from optipose.model.layout import Layout, SensorPose
 from optipose.search.records import SearchResult, Validation
 
@@ -77,8 +77,9 @@ def _shift(i):
 def test_a_search_folder_reads_back_with_the_same_verdicts(tmp_path):
     write_config(tmp_path, {"command": "search", "part": {"name": "part_x", "source": ""}, "seed": 7, "budget": "quick",
                             "validation_seed": 1234})  # fmt: skip
-    write_layouts(tmp_path, {1: _layout("found_k1", 1, "F"), 3: _layout("found_k3", 3, "F")}, _layout("hand", 3, "S"))
-    write_validation(tmp_path, VALIDATION)
+    sink = SearchFolder(tmp_path)
+    sink.layouts({1: _layout("found_k1", 1, "F"), 3: _layout("found_k3", 3, "F")}, _layout("hand", 3, "S"))
+    sink.validation(VALIDATION)
     result = load_result(tmp_path)
     assert isinstance(result, SearchResult) and (result.part, result.seed, result.budget) == ("part_x", 7, "quick")
     assert sorted(result.layouts) == [1, 3] and result.hand.names == S

@@ -7,6 +7,7 @@ import pytest
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.search.config import config_from_budget
+from optipose.io.search import SearchFolder
 from optipose.search.pipeline import run
 
 
@@ -18,7 +19,7 @@ from optipose.search.pipeline import run
 def test_default_search_beats_the_hand_placed_layout(tmp_path, part, ks):
     # README "Results on parts A, B and C": these found layouts are >= 2x better than the hand-placed
     # sensors and no worse on any axis, on the held-out validation seed (C k = 1 is not).
-    report = run(load_part(part), load_objective("paper"), config_from_budget("default", (1, 2, 3)), 0, tmp_path, jobs=2)
+    report = run(load_part(part), load_objective("paper"), config_from_budget("default", (1, 2, 3)), 0, SearchFolder(tmp_path), jobs=2)
     verdicts = {v.k: v for v in report.validation.verdicts()}
     for k in ks:
         assert verdicts[k].ratio >= 2 and verdicts[k].no_worse

@@ -70,7 +70,9 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
                       f"continue with `optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(EXIT_INTERRUPTED) from None
-    _print_report(Console(), report, the_part)
+    if report.validated:
+        _draw_layouts(folder, the_part, report.layouts)
+    _print_report(Console(), folder, report, the_part)
     if report.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
@@ -157,16 +159,33 @@ def _run_with_progress(console, part, objective, config, seed, folder, budget, j
         def on_stage(text):
             progress.update(task, description=f"{part.name}: {text}")
 
-        return run(part, objective, config, seed, folder, budget, jobs, resume, on_eval, on_stage)
+        from optipose.io.search import SearchFolder
+
+        return run(part, objective, config, seed, SearchFolder(folder), budget, jobs, resume, on_eval, on_stage)
 
 
-def _print_report(console, report, part) -> None:
+def _draw_layouts(folder: Path, part, layouts) -> None:
+    """``layouts/found_k*.png`` beside the TOML files: each found layout drawn as ``optipose show`` does."""
+    import logging
+    from dataclasses import replace
+
+    from optipose.report.views import render_part
+
+    shown = replace(part, layouts={**part.layouts, **{f"found_k{k}": lay for k, lay in layouts.items()}})
+    for k in layouts:
+        try:
+            render_part(shown, folder / "layouts" / f"found_k{k}.png", f"found_k{k}")
+        except Exception as exc:  # a picture must never cost the results
+            logging.getLogger(__name__).warning("could not draw found_k%d: %s", k, exc)
+
+
+def _print_report(console, folder: Path, report, part) -> None:
     """Found vs. hand-placed on the validation protocol with a verdict per k, as saved in the result folder
     (read back with :func:`optipose.io.load_result`), the surrogate's strategies, and the found layouts' poses."""
     if report.validated:
         from optipose.io import load_result
 
-        saved = load_result(report.folder)
+        saved = load_result(folder)
         console.print(_validation_table(saved.validation, part))
         for line in saved.verdict_lines():
             console.print(line)

@@ -16,6 +16,7 @@ import numpy as np
 
 from optipose.errors import ConfigError
 from optipose.registration.backends import BACKENDS as REGISTRATION_BACKENDS
+from optipose.registration.config import RegistrationConfig
 
 __all__ = [
     "ProtocolConfig",
@@ -56,24 +57,6 @@ class ProtocolConfig:
     count: int = 77
     range_rpy: tuple[float, float, float] = (2 * _DEG, 2 * _DEG, 2 * _DEG)
     range_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
-class RegistrationConfig:
-    """ICP settings (SI). See :mod:`optipose.registration`; ``backend`` names one of its registry."""
-
-    method: str = "point_to_plane"
-    backend: str = "fast"
-    reference: str = "cad-surface"
-    reference_spacing: float = 0.2 * _MM
-    voxel_size: float = 0.5 * _MM
-    outlier_removal: bool = False
-    outlier_neighbors: int = 20
-    outlier_std_ratio: float = 2.0
-    max_correspondence_distance: float = 5 * _MM
-    max_iterations: int = 100
-    tolerance_rotation: float = 1e-5 * _DEG
-    tolerance_translation: float = 1e-5 * _MM
 
 
 @dataclass(frozen=True)

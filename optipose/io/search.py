@@ -17,13 +17,53 @@ from optipose.io.folders import versions, write_config
 from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame
 from optipose.model.layout import Layout, write_layout
 
-__all__ = [
-    "write_search_config", "save_cache", "load_cache", "write_history", "write_layouts", "write_selection",
-    "write_surrogate_scores", "write_validation",
-]  # fmt: skip
+__all__ = ["SearchFolder", "save_cache", "load_cache"]
 
 
-def write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int) -> Path:
+class SearchFolder:
+    """A search's result folder as the pipeline's sink (:class:`optipose.search.pipeline.ResultSink`):
+    each stage's records are written here the moment they exist."""
+
+    def __init__(self, folder: Path):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+
+    def start(self, part, objective, config, budget: str, seed: int, validation_seed: int) -> None:
+        _write_search_config(self.folder, part, objective, config, budget, seed, validation_seed)
+
+    def load_cache(self, space_version: int) -> dict:
+        return load_cache(self.folder, space_version)
+
+    def flush(self, history, cache, space_version: int) -> None:
+        """History and cache to disk: what was computed is never lost."""
+        history_frame(history).to_csv(self.folder / "history.csv", index=False)
+        save_cache(self.folder, cache, space_version)
+
+    def layouts(self, layouts: dict[int, Layout], hand: Layout | None) -> None:
+        """``layouts/found_k*.toml`` and, when the part has one, ``layouts/hand.toml``."""
+        layout_dir = self.folder / "layouts"
+        layout_dir.mkdir(exist_ok=True)
+        for k, layout in layouts.items():
+            write_layout(layout, layout_dir / f"found_k{k}.toml")
+        if hand is not None:
+            write_layout(hand, layout_dir / "hand.toml")
+
+    def selection(self, records) -> None:
+        selection_frame(records).to_csv(self.folder / "selection.csv", index=False)
+
+    def surrogate_scores(self, outcome) -> None:
+        surrogate_frame(outcome).to_csv(self.folder / "surrogate_scores.csv", index=False)
+
+    def validation(self, validation) -> None:
+        """``validation/<layout>/`` per evaluation and ``comparison.csv``."""
+        for name, result in validation.evaluations.items():
+            sub = self.folder / "validation" / name
+            sub.mkdir(parents=True, exist_ok=True)
+            write_evaluation(result, sub)
+        comparison_frame(validation).to_csv(self.folder / "comparison.csv", index=False)
+
+
+def _write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int) -> Path:
     from dataclasses import asdict
 
     return write_config(folder, {
@@ -86,34 +126,3 @@ def load_cache(folder: Path, space_version: int) -> dict:
     for u, ok, H, (n_points, n_voxels), violation, A, G, why in rows:
         out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G) if ok else Violation(str(why), float(violation))
     return out
-
-
-def write_history(folder: Path, history) -> None:
-    history_frame(history).to_csv(folder / "history.csv", index=False)
-
-
-def write_layouts(folder: Path, layouts: dict[int, Layout], hand: Layout | None) -> None:
-    """``layouts/found_k*.toml`` and, when the part has one, ``layouts/hand.toml``."""
-    layout_dir = folder / "layouts"
-    layout_dir.mkdir(exist_ok=True)
-    for k, layout in layouts.items():
-        write_layout(layout, layout_dir / f"found_k{k}.toml")
-    if hand is not None:
-        write_layout(hand, layout_dir / "hand.toml")
-
-
-def write_selection(folder: Path, records) -> None:
-    selection_frame(records).to_csv(folder / "selection.csv", index=False)
-
-
-def write_surrogate_scores(folder: Path, outcome) -> None:
-    surrogate_frame(outcome).to_csv(folder / "surrogate_scores.csv", index=False)
-
-
-def write_validation(folder: Path, validation) -> None:
-    """``validation/<layout>/`` per evaluation and ``comparison.csv``."""
-    for name, result in validation.evaluations.items():
-        sub = folder / "validation" / name
-        sub.mkdir(parents=True, exist_ok=True)
-        write_evaluation(result, sub)
-    comparison_frame(validation).to_csv(folder / "comparison.csv", index=False)

@@ -26,7 +26,7 @@ from optipose.errors import ConfigError
 from optipose.registration.result import MIN_POINTS, Matches, Registration
 
 if TYPE_CHECKING:
-    from optipose.evaluate.objective import RegistrationConfig
+    from optipose.registration.config import RegistrationConfig
 
 __all__ = ["RegistrationBackend", "BACKENDS", "get_backend", "register_backend", "backend_for", "register"]
 

@@ -21,7 +21,7 @@ from optipose.registration.preprocess import information_matrix
 from optipose.registration.result import MIN_POINTS, Matches, Registration
 
 if TYPE_CHECKING:
-    from optipose.evaluate.objective import RegistrationConfig
+    from optipose.registration.config import RegistrationConfig
 
 __all__ = ["FastBackend", "PlainBackend"]
 

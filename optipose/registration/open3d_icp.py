@@ -15,7 +15,7 @@ from optipose.registration.preprocess import information_matrix
 from optipose.registration.result import Matches, Registration
 
 if TYPE_CHECKING:
-    from optipose.evaluate.objective import RegistrationConfig
+    from optipose.registration.config import RegistrationConfig
 
 __all__ = ["Open3DBackend"]
 

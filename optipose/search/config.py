@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from optipose.errors import ConfigError
 from optipose.model.collision import DEFAULT_MARGIN
 
-__all__ = ["SearchConfig", "BUDGETS", "config_from_budget"]
+__all__ = ["SearchConfig", "BUDGETS", "config_from_budget", "algorithm_code"]
 
 
 @dataclass(frozen=True)
@@ -67,8 +67,6 @@ class SearchConfig:
     validation: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
 
     def __post_init__(self) -> None:
-        from optipose.search.driver import algorithm_code
-
         if not self.sensors or min(self.sensors) < 1 or max(self.sensors) > 6:
             raise ConfigError("--sensors: give sensor counts between 1 and 6, e.g. 1,2,3")
         if self.validation not in ("full", "reduced"):
@@ -102,3 +100,15 @@ def config_from_budget(budget: str, sensors: tuple[int, ...], overrides: dict | 
     if budget not in BUDGETS:
         raise ConfigError(f"unknown budget '{budget}' (use {', '.join(BUDGETS)})")
     return SearchConfig(sensors=sensors, **{**BUDGETS[budget], **(overrides or {})})
+
+
+def algorithm_code(name: str) -> int:
+    """NLopt's code of a derivative-free algorithm named like ``GN_DIRECT_L``; ConfigError otherwise."""
+    import nlopt
+
+    value = getattr(nlopt, name, None)
+    if not isinstance(value, int) or not name[:3] in ("GN_", "LN_", "GD_", "LD_", "G_M", "AUG"):
+        raise ConfigError(f"unknown NLopt algorithm '{name}' (e.g. GN_CRS2_LM, GN_DIRECT_L, GN_ISRES, LN_BOBYQA)")
+    if name.startswith(("GD_", "LD_")):
+        raise ConfigError(f"NLopt algorithm '{name}' needs gradients; the objective has none (use GN_*/LN_*)")
+    return value

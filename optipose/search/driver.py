@@ -11,24 +11,12 @@ import logging
 
 import numpy as np
 
-from optipose.errors import ConfigError
+from optipose.search.config import algorithm_code
 from optipose.search.study import Stop
 
-__all__ = ["algorithm_code", "optimize", "local_best", "apart", "SubProblem"]
+__all__ = ["optimize", "local_best", "apart", "SubProblem"]
 
 log = logging.getLogger(__name__)
-
-
-def algorithm_code(name: str) -> int:
-    """NLopt's code of a derivative-free algorithm named like ``GN_DIRECT_L``; ConfigError otherwise."""
-    import nlopt
-
-    value = getattr(nlopt, name, None)
-    if not isinstance(value, int) or not name[:3] in ("GN_", "LN_", "GD_", "LD_", "G_M", "AUG"):
-        raise ConfigError(f"unknown NLopt algorithm '{name}' (e.g. GN_CRS2_LM, GN_DIRECT_L, GN_ISRES, LN_BOBYQA)")
-    if name.startswith(("GD_", "LD_")):
-        raise ConfigError(f"NLopt algorithm '{name}' needs gradients; the objective has none (use GN_*/LN_*)")
-    return value
 
 
 def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, local: str | None = None) -> None:

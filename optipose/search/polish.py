@@ -14,8 +14,7 @@ import time
 import numpy as np
 
 from optipose.evaluate.compare import dominates, excess
-from optipose.search.config import SearchConfig
-from optipose.search.driver import algorithm_code
+from optipose.search.config import SearchConfig, algorithm_code
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import PENALTY, Found, IcpEvaluation
 

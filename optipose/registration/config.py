@@ -1,0 +1,29 @@
+"""The registration's settings (SI units), as an objective file's ``[registration]`` table resolves them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["RegistrationConfig"]
+
+_MM, _DEG = 1e-3, np.pi / 180
+
+
+@dataclass(frozen=True)
+class RegistrationConfig:
+    """ICP settings (SI). See :mod:`optipose.registration`; ``backend`` names one of its registry."""
+
+    method: str = "point_to_plane"
+    backend: str = "fast"
+    reference: str = "cad-surface"
+    reference_spacing: float = 0.2 * _MM
+    voxel_size: float = 0.5 * _MM
+    outlier_removal: bool = False
+    outlier_neighbors: int = 20
+    outlier_std_ratio: float = 2.0
+    max_correspondence_distance: float = 5 * _MM
+    max_iterations: int = 100
+    tolerance_rotation: float = 1e-5 * _DEG
+    tolerance_translation: float = 1e-5 * _MM
