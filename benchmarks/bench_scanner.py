@@ -42,7 +42,6 @@ from rich.table import Table
 from optipose.scan.raycast import EmbreeCaster, Open3DCaster
 from optipose.model.motion import ScanMotion
 from optipose.scan.scanner import Scanner
-from optipose.transforms import part_motion
 
 BLOCK_EXTENTS = (0.060, 0.041, 0.0176)  # m, part B's envelope
 SENSOR, MATERIAL = "keyence-lj-x8080", "black-pla"

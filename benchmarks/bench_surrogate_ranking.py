@@ -19,9 +19,8 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from optipose.evaluate.evaluator import Evaluator
-from optipose.evaluate.objective import load_objective
+from optipose.evaluate.objective import load_objective, reduced_objective
 from optipose.model.part import load_part
-from optipose.evaluate.objective import reduced_objective
 from optipose.search.config import SearchConfig
 from optipose.search.problem import SurrogateProblem
 from optipose.search.surrogate import Surrogate, predicted_stats

@@ -88,7 +88,7 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
 
     # rank and polish on the search's own score with its per-axis penalty at margin 1 and weight 20
     config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)
-    problem = SurrogateProblem(part, objective, config, problem.surrogate, targets={1: target})
+    problem = SurrogateProblem(part, objective, config, problem.surrogate, cache=dict(problem.cache), targets={1: target})
     key = lambda t: t[0] + problem.shortfall(1, {"axis_score": t[1]})  # noqa: E731
     starts: list[np.ndarray] = []
     for t in sorted(scored, key=key):

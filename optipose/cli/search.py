@@ -72,7 +72,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         raise typer.Exit(EXIT_INTERRUPTED) from None
     if report.validated:
         _draw_layouts(folder, the_part, report.layouts)
-    _print_report(Console(), folder, report, the_part)
+    _print_report(Console(), report, the_part)
     if report.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
@@ -130,10 +130,11 @@ def _overrides(path: Path | None) -> dict:
 
 def _resumed(resume: Path) -> dict:
     """The config.toml of a search result folder (refusing any other folder)."""
-    path = resume / "config.toml"
-    if not path.is_file():
+    from optipose.io.folders import read_config
+
+    if not (resume / "config.toml").is_file():
         raise ConfigError(f"--resume {resume}: no config.toml there (not a search result folder)")
-    table = tomllib.loads(path.read_text())
+    table = read_config(resume)
     if table.get("command") != "search":
         raise ConfigError(f"--resume {resume}: that folder holds a '{table.get('command')}' result, not a search")
     return table
@@ -179,15 +180,13 @@ def _draw_layouts(folder: Path, part, layouts) -> None:
             logging.getLogger(__name__).warning("could not draw found_k%d: %s", k, exc)
 
 
-def _print_report(console, folder: Path, report, part) -> None:
-    """Found vs. hand-placed on the validation protocol with a verdict per k, as saved in the result folder
-    (read back with :func:`optipose.io.load_result`), the surrogate's strategies, and the found layouts' poses."""
+def _print_report(console, report, part) -> None:
+    """Found vs. hand-placed on the validation protocol with a verdict per k (the records ``comparison.csv``
+    was written from, which :func:`optipose.io.load_result` reads back), the surrogate's strategies, and
+    the found layouts' poses."""
     if report.validated:
-        from optipose.io import load_result
-
-        saved = load_result(folder)
-        console.print(_validation_table(saved.validation, part))
-        for line in saved.verdict_lines():
+        console.print(_validation_table(report.validation, part))
+        for line in report.validation.verdict_lines():
             console.print(line)
     console.print(_strategies_table(report.outcome))
     for k, layout in sorted(report.layouts.items()):
@@ -198,10 +197,10 @@ def _print_report(console, folder: Path, report, part) -> None:
 
 def _validation_table(validation, part):
     """One row per k and layout (found, hand): median/p75 and subset per axis, and the score, in mdeg."""
-    import numpy as np
     from rich.table import Table
 
-    mdeg = lambda rad: 1e3 * float(np.rad2deg(rad))  # noqa: E731
+    from optipose.evaluate.compare import mdeg
+
     protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
     table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed "
                         "(millidegrees, median/75th pct and the subset used)")  # fmt: skip

@@ -14,9 +14,9 @@ import numpy as np
 
 from optipose.evaluate.assignment import Choice
 
-__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "one_versus_many"]
+__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "one_versus_many", "mdeg"]
 
-_STATISTICS = (("median", "median"), ("p75", "p75"))
+_STATISTICS = ("median", "p75")
 
 
 def dominates(choice: Choice, reference: Choice) -> bool:
@@ -66,21 +66,22 @@ class Verdict:
 
     @property
     def worse(self) -> tuple[AxisGap, ...]:
+        """Every axis statistic on which the found choice is worse (what :func:`dominates` tests)."""
         return tuple(
-            AxisGap(f.axis, stat, getattr(f, attr), getattr(r, attr))
-            for f, r in zip(self.found.axes, self.reference.axes) for stat, attr in _STATISTICS
-            if float(np.rad2deg(getattr(f, attr))) > float(np.rad2deg(getattr(r, attr)))
+            AxisGap(f.axis, stat, getattr(f, stat), getattr(r, stat))
+            for f, r in zip(self.found.axes, self.reference.axes) for stat in _STATISTICS
+            if getattr(f, stat) > getattr(r, stat)
         )  # fmt: skip
 
     @property
     def no_worse(self) -> bool:
         """No axis statistic worse than the reference's: replacing the reference loses nothing."""
-        return not self.worse
+        return dominates(self.found, self.reference)
 
     def line(self) -> str:
         """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace."""
         ratio, name, ref = self.ratio, self.found.name, self.reference.name
-        worse = [f"{g.axis} {g.statistic} {_mdeg(g.found):.3f} vs {_mdeg(g.reference):.3f}" for g in self.worse]
+        worse = [f"{g.axis} {g.statistic} {mdeg(g.found):.3f} vs {mdeg(g.reference):.3f}" for g in self.worse]
         than = f"x {'better' if ratio >= 1 else 'worse'} in sum than hand {ref}"
         head = f"k={self.k}: found {name} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
         if worse and ratio < 1:
@@ -92,10 +93,11 @@ class Verdict:
 
 def one_versus_many(one: Choice, many: Choice) -> str:
     """Whether one found sensor beats the reference's largest choice in sum: fewer sensors to buy."""
-    beats = float(np.rad2deg(one.score)) < float(np.rad2deg(many.score))
+    beats = one.score < many.score
     return (f"one found sensor {'beats' if beats else 'does not beat'} the hand-placed {many.name} in sum "
-            f"({_mdeg(one.score):.3f} vs {_mdeg(many.score):.3f} mdeg)")  # fmt: skip
+            f"({mdeg(one.score):.3f} vs {mdeg(many.score):.3f} mdeg)")  # fmt: skip
 
 
-def _mdeg(rad: float) -> float:
+def mdeg(rad: float) -> float:
+    """Radians in millidegrees, the unit of the terminal's tables."""
     return 1e3 * float(np.rad2deg(rad))

@@ -27,6 +27,8 @@ from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 __all__ = ["WorkerSetup", "run_chunk", "sensor_groups"]
 
 _TRANSLATION = ("x", "y", "z")
+
+
 @dataclass(frozen=True)
 class WorkerSetup:
     """Everything a worker process needs to rebuild the scanners and reference (picklable).

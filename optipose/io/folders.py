@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["make_result_dir", "write_config", "read_config", "write_table", "versions", "RESULTS_DIR"]
+__all__ = ["make_result_dir", "write_config", "read_config", "versions", "RESULTS_DIR"]
 
 log = logging.getLogger(__name__)
 RESULTS_DIR = Path("results")
@@ -80,12 +80,6 @@ def read_config(folder: Path) -> dict:
         return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: {exc}") from None
-
-
-def write_table(frame, path: Path) -> Path:
-    """A table as CSV (index dropped)."""
-    frame.to_csv(path, index=False)
-    return path
 
 
 def _plain(value):

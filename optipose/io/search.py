@@ -54,12 +54,14 @@ class SearchFolder:
     def surrogate_scores(self, outcome) -> None:
         surrogate_frame(outcome).to_csv(self.folder / "surrogate_scores.csv", index=False)
 
+    def evaluation(self, name: str, result) -> None:
+        """``validation/<name>/``: one evaluation of the validation, as soon as it ends."""
+        sub = self.folder / "validation" / name
+        sub.mkdir(parents=True, exist_ok=True)
+        write_evaluation(result, sub)
+
     def validation(self, validation) -> None:
-        """``validation/<layout>/`` per evaluation and ``comparison.csv``."""
-        for name, result in validation.evaluations.items():
-            sub = self.folder / "validation" / name
-            sub.mkdir(parents=True, exist_ok=True)
-            write_evaluation(result, sub)
+        """``comparison.csv``: found vs. hand per k and axis."""
         comparison_frame(validation).to_csv(self.folder / "comparison.csv", index=False)
 
 

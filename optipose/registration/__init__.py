@@ -4,7 +4,8 @@
 - :mod:`~optipose.registration.preprocess` — voxel down-sampling, outlier removal, the information matrix;
 - :mod:`~optipose.registration.backends` — :func:`register` and the back-ends by name
   (:mod:`~optipose.registration.fast`, :mod:`~optipose.registration.open3d_icp`);
-- :mod:`~optipose.registration.result` — the :class:`Registration` and :class:`Matches` records.
+- :mod:`~optipose.registration.result` — the :class:`Registration` and :class:`Matches` records;
+- :mod:`~optipose.registration.config` — :class:`RegistrationConfig`, the settings an objective file resolves to.
 
 Importing this package is light: SciPy, numba and Open3D load when a back-end first runs.
 """

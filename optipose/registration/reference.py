@@ -58,7 +58,7 @@ class SurfaceReference:
         self._face_grid = None
 
     def _grid(self) -> tuple:
-        """The faces near each cell of a ``_CELL`` grid over the part (see :func:`_icp_kernels.face_grid`),
+        """The faces near each cell of a ``_CELL`` grid over the part (see :func:`optipose.registration.kernels.face_grid`),
         with the faces' bounding boxes; built on first use."""
         if self._face_grid is None:
             from optipose.registration.kernels import face_grid

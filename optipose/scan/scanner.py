@@ -29,7 +29,7 @@ from optipose.scan.raycast import default_threads, face_planes, make_caster
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
-__all__ = ["ScanMotion", "Scan", "Scanner", "part_scanner", "nominal_scans"]
+__all__ = ["Scan", "Scanner", "part_scanner", "nominal_scans"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count

@@ -51,7 +51,7 @@ class SearchConfig:
     # (0 turns it off; < 1 leaves room for the surrogate's error)
     hand_margin: float = 0.5
     hand_weight: float = 5.0
-    # the ICP polish of a finalist that is not yet no worse than the hand layout on every axis (refine.py)
+    # the ICP polish of a finalist that is not yet no worse than the hand layout on every axis (search/polish.py)
     polish_algorithm: str = "LN_COBYLA"
     polish_evals: int = 0  # evaluations for k = 1 (half for larger k); 0: no polish
     polish_time: float = 150.0  # s per k, a safety net: the evaluations should end the polish

@@ -19,10 +19,13 @@ __all__ = ["optimize", "local_best", "apart", "SubProblem"]
 log = logging.getLogger(__name__)
 
 
-def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, local: str | None = None) -> None:
+def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int | None, local: str | None = None,
+             step: float = 0.08, xtol_rel: float | None = 1e-5, xtol_abs: float | None = None) -> None:  # fmt: skip
     """One NLopt run of ``fn(u, grad)`` on [0, 1]^n from ``x0`` (n,), at most ``maxeval`` evaluations.
 
-    local : the local algorithm of a multi-start (MLSL) run.
+    seed : NLopt's random seed (None: leave it as it is). local : the local algorithm of a multi-start
+    (MLSL) run. step, xtol_rel, xtol_abs : a local algorithm's initial step and stopping tolerances in
+    [0, 1] units (None: NLopt's default).
     """
     import nlopt
 
@@ -33,8 +36,11 @@ def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, local:
     opt.set_min_objective(fn)
     opt.set_maxeval(int(maxeval))
     if algorithm.startswith(("LN_",)):
-        opt.set_initial_step(np.full(n, 0.08))
-        opt.set_xtol_rel(1e-5)
+        opt.set_initial_step(np.full(n, step))
+        if xtol_rel is not None:
+            opt.set_xtol_rel(xtol_rel)
+        if xtol_abs is not None:
+            opt.set_xtol_abs(xtol_abs)
     if algorithm.startswith("GN_MLSL") or algorithm.startswith("G_MLSL"):
         sub = nlopt.opt(algorithm_code(local or "LN_BOBYQA"), n)
         sub.set_xtol_rel(1e-4)
@@ -44,7 +50,8 @@ def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, local:
         # NLopt's default populations (CRS2 10(n+1), ISRES 20(n+1)) would spend most of a small budget on
         # one random generation; cap them at a fifth of the budget
         opt.set_population(int(min(10 * (n + 1), max(n + 2, maxeval // 5))))
-    nlopt.srand(int(seed) % (2**31))
+    if seed is not None:
+        nlopt.srand(int(seed) % (2**31))
     try:
         opt.optimize(np.clip(x0, 0.0, 1.0))
     except (Stop, nlopt.ForcedStop, nlopt.RoundoffLimited) as exc:

@@ -55,6 +55,8 @@ class ResultSink(Protocol):
 
     def surrogate_scores(self, outcome: SearchOutcome) -> None: ...
 
+    def evaluation(self, name: str, result) -> None: ...
+
     def validation(self, validation: Validation) -> None: ...
 
 
@@ -106,7 +108,7 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
     from optipose.search.validate import validate
 
     stage(f"validating on the {config.validation} protocol (held-out noise seed)")
-    report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation)
+    report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, sink.evaluation)
     sink.validation(report.validation)
     return report
 

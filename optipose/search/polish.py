@@ -8,19 +8,17 @@ net), so a seed gives the same layout on a busy machine.
 
 from __future__ import annotations
 
-import logging
 import time
 
 import numpy as np
 
 from optipose.evaluate.compare import dominates, excess
-from optipose.search.config import SearchConfig, algorithm_code
+from optipose.search.config import SearchConfig
+from optipose.search.driver import optimize
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import PENALTY, Found, IcpEvaluation
 
 __all__ = ["polish", "hand_start"]
-
-log = logging.getLogger(__name__)
 
 
 def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config: SearchConfig, max_evals: int,
@@ -55,7 +53,8 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
                      f"{'' if not best[0][0] else ' (not yet no worse than hand on every axis)'}")  # fmt: skip
         return value if value < PENALTY else PENALTY
 
-    _run_local(f, config, start.u, max_evals)
+    # its own step and an absolute tolerance; NLopt's seed is left alone (the local algorithms draw none)
+    optimize(f, config.polish_algorithm, start.u, max_evals, None, step=config.polish_step, xtol_rel=None, xtol_abs=1e-4)
     if best[1] is None:
         return None, None, records
     u = best[1]
@@ -63,31 +62,9 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
     return Found(k, "ICP polish", u, problem.space.to_poses(u), score.objective, score.stats or {}), best[2], records
 
 
-def _run_local(f, config: SearchConfig, x0: np.ndarray, max_evals: int) -> None:
-    """The polish's NLopt run: its own initial step and absolute tolerance, stopped by ``f`` or the budget."""
-    import nlopt
-
-    n = len(x0)
-    opt = nlopt.opt(algorithm_code(config.polish_algorithm), n)
-    opt.set_lower_bounds(np.zeros(n))
-    opt.set_upper_bounds(np.ones(n))
-    opt.set_min_objective(f)
-    opt.set_maxeval(int(max_evals))
-    opt.set_initial_step(np.full(n, config.polish_step))
-    opt.set_xtol_abs(1e-4)
-    try:
-        opt.optimize(np.clip(x0, 0.0, 1.0))
-    except (nlopt.ForcedStop, nlopt.RoundoffLimited):
-        pass
-    except RuntimeError as exc:
-        log.warning("ICP polish stopped: %s", exc)
-
-
 def hand_start(problem: SurrogateProblem, hand_layout, reference) -> list[Found]:
     """The hand-placed sensors of the reference choice (e.g. ``S3``) as a polish start: it is no worse than
     itself on every axis, so a local search from it that keeps that while lowering the sum is what a user
     who already owns these mounts wants."""
-    if len(reference.sensors) != reference.k or max(reference.sensors, default=-1) >= len(hand_layout):
-        return []
     u = np.concatenate([problem.space.from_pose(hand_layout.poses[i]) for i in reference.sensors])
     return [Found(reference.k, "hand start", u, problem.space.to_poses(u), problem.score(u).objective, {})]

@@ -125,7 +125,6 @@ class SearchOutcome:
     greedy: dict[int, Found]
     joint: dict[int, Found]
     hand: dict[int, Found]  # k -> the best hand-placed k-subset on the surrogate
-    targets: dict[int, np.ndarray]  # k -> per-axis surrogate scores (deg) a layout should beat
     history: list[Evaluation]
     interrupted: bool = False
     seconds: float = 0.0
@@ -137,15 +136,12 @@ class Validation:
     and the hand layout's (a nested found layout is evaluated inside the larger one that holds it).
 
     found : k → choice, in the order the layouts were evaluated; hand : k → choice, k ascending.
-    evaluations : the evaluations themselves, by folder name (``found_k3``, ``hand``); empty when loaded
-    from ``comparison.csv`` alone.
     """
 
     protocol: str  # full | reduced
     seed: int
     found: dict = field(default_factory=dict)
     hand: dict = field(default_factory=dict)
-    evaluations: dict = field(default_factory=dict, repr=False)
 
     def verdicts(self) -> list[Verdict]:
         """Found vs. hand for every k that has both."""

@@ -109,7 +109,7 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
     hand-placed sensor, sharing the evaluations; the polished layouts join ``pool``. Returns the new best."""
     config, k = study.problem.config, best.k
     starts = [best] + nearest(pool, reference, best)
-    if k == 1 and "hand" in part.layouts:
+    if k == 1:  # a reference means the part has a hand layout
         starts += hand_start(study.problem, part.layouts["hand"], reference)
     evals = config.polish_evals if k == 1 else config.polish_evals // 2
     for start in starts:

@@ -39,8 +39,7 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
     hand_u = [study.problem.space.from_pose(T) for T in hand_poses]
     ks = sorted(set(config.sensors))
     hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])
-    targets = {k: f.stats["axis_score"] for k, f in hand.items()}
-    study.measure_against(targets)
+    study.measure_against({k: f.stats["axis_score"] for k, f in hand.items()})
     study.start_clock(config.max_time)  # after the hand layout is scored: that first scan also compiles the kernels
     greedy, joint = {}, {}
     try:
@@ -55,7 +54,7 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
         options = [f for f in (greedy.get(k), joint.get(k), _as_found(study, k)) if f and f.stats]
         if options:
             found[k] = min(options, key=lambda f: f.score)
-    return SearchOutcome(found, greedy, joint, hand, targets, study.history, study.interrupted, time.monotonic() - t0)
+    return SearchOutcome(found, greedy, joint, hand, study.history, study.interrupted, time.monotonic() - t0)
 
 
 def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict) -> None:

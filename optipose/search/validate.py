@@ -16,24 +16,32 @@ from optipose.seeds import validation_seed
 __all__ = ["validate", "nested_groups"]
 
 
-def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full") -> Validation:
-    """Evaluate ``layouts`` (k → found layout) and the part's hand layout on the held-out seed of ``seed``."""
+def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full",
+             on_evaluation=None) -> Validation:  # fmt: skip
+    """Evaluate ``layouts`` (k → found layout) and the part's hand layout on the held-out seed of ``seed``.
+
+    on_evaluation(name, result) : told of each evaluation as it ends (``found_k3``, ``hand``), so it can
+    be saved before the next one starts.
+    """
     vseed = validation_seed(seed)
     if protocol == "reduced":
         objective = reduced_objective(objective)
-    found, hand, evaluations = {}, {}, {}
+    done = on_evaluation or (lambda name, result: None)
+    found, hand = {}, {}
     with Evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:
         for members in nested_groups(layouts):
             big = layouts[max(members)]
-            result = evaluations[f"found_k{max(members)}"] = evaluator(big)
+            result = evaluator(big)
+            done(f"found_k{max(members)}", result)
             by_key, n_scans = stats_by_key(result.stats), result.per_scan["scan"].nunique()
             for k in members:
                 idx = tuple(_indices_in(layouts[k], big))
                 found[k] = choose(idx, big.names, by_key, objective.statistic, n_scans)
         if "hand" in part.layouts:
-            result = evaluations["hand"] = evaluator(part.layouts["hand"])
+            result = evaluator(part.layouts["hand"])
+            done("hand", result)
             hand = {choice.k: choice for choice in result.table if choice.k in layouts}
-    return Validation(protocol, vseed, found, hand, evaluations)
+    return Validation(protocol, vseed, found, hand)
 
 
 def nested_groups(layouts: dict[int, Layout]) -> list[list[int]]:
