@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed", "group_seed"]
+__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed", "group_seed", "mounting_seed", "zeroing_seed"]
 
 _SELECTION = 0x5E1EC7
 _VALIDATION = 0x7A11D
 _NOMINAL_REFERENCE = 7
 _SENSOR_MODEL = 0x5E4500  # plus the group's index
+_MOUNTING = 0xB4AC7E7
 
 
 def derived_seed(seed: int, tag: int) -> int:
@@ -45,3 +46,13 @@ def group_seed(seed: int, group: int) -> int:
     model) keeps ``seed``; each other model (1, 2, … in the layout's order) gets a derived one, so sensors
     of different models never share a noise draw."""
     return int(seed) if group == 0 else derived_seed(seed, _SENSOR_MODEL + group)
+
+
+def mounting_seed(seed: int, draw: int, sensor: int) -> int:
+    """The seed of the bracket error of sensor ``sensor`` (its index in the layout) in mounting draw ``draw``."""
+    return int(np.random.SeedSequence([int(seed), _MOUNTING, int(draw), int(sensor)]).generate_state(1)[0])
+
+
+def zeroing_seed(seed: int, draw: int) -> int:
+    """The noise seed of the master-part scan that zeroes the cell in mounting draw ``draw``."""
+    return int(np.random.SeedSequence([int(seed), _MOUNTING, int(draw), -1 % 2**32]).generate_state(1)[0])

@@ -15,7 +15,7 @@ from typing import Annotated
 
 import typer
 
-from optipose.cli import evaluate, parts, scan, search
+from optipose.cli import evaluate, parts, robustness, scan, search
 
 app = typer.Typer(
     name="optipose",
@@ -44,6 +44,7 @@ app.command()(parts.show)
 app.command()(parts.counts)
 app.command()(evaluate.evaluate)
 app.command()(search.search)
+app.command()(robustness.robustness)
 
 
 def main() -> None:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from optipose.evaluate.conditions import Condition
 from optipose.evaluate.assignment import Choice, best_choices
 from optipose.evaluate.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
@@ -100,10 +101,12 @@ class Evaluator:
     executor : where the orientations run (:mod:`optipose.evaluate.executors`); default
         ``make_executor(jobs)``. An executor given here is the caller's to close; one made from
         ``jobs`` is closed with the evaluator.
+    condition : the noise scale and bracket errors to scan under (:mod:`optipose.evaluate.conditions`);
+        default the nominal one, the objective's own numbers.
     """
 
     def __init__(self, part, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1, quiet: bool = False,
-                 executor: Executor | None = None):  # fmt: skip
+                 executor: Executor | None = None, condition: Condition | None = None):  # fmt: skip
         self.part = part
         self.objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.seed = int(seed)
@@ -125,6 +128,7 @@ class Evaluator:
             seed=self.seed,
             threads=None if self.jobs == 1 else 1,
             occluders=tuple(getattr(part, "occluders", ())),
+            condition=condition or Condition(),
         )
 
     def __enter__(self):

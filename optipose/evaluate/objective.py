@@ -16,6 +16,7 @@ import numpy as np
 
 from optipose.errors import ConfigError
 from optipose.registration.backends import BACKENDS as REGISTRATION_BACKENDS
+from optipose.evaluate.conditions import ConditionsConfig, conditions_from_table
 from optipose.registration.config import RegistrationConfig
 
 __all__ = [
@@ -76,6 +77,7 @@ class Objective:
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     statistic: StatisticConfig = field(default_factory=StatisticConfig)
+    conditions: ConditionsConfig = field(default_factory=ConditionsConfig)
     source_text: str = field(default="", repr=False, compare=False)  # the file as written, saved with results
 
     def to_dict(self) -> dict:
@@ -116,7 +118,8 @@ def objective_from_dict(table: dict, source_text: str = "") -> Objective:
         name=str(table.get("name", "objective")), description=str(table.get("description", "")),
         protocol=section(ProtocolConfig, table.get("protocol", {})),
         registration=section(RegistrationConfig, table.get("registration", {})),
-        statistic=section(StatisticConfig, table.get("statistic", {})), source_text=source_text,
+        statistic=section(StatisticConfig, table.get("statistic", {})),
+        conditions=section(ConditionsConfig, table.get("conditions", {})), source_text=source_text,
     )  # fmt: skip
 
 
@@ -131,13 +134,14 @@ def reduced_objective(objective: Objective) -> Objective:
 
 def objective_from_table(table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective") -> Objective:
     """Validate a parsed objective table; every problem is a :class:`ConfigError` naming the key."""
-    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic"}, where)
+    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "conditions"}, where)
     return Objective(
         name=str(table.get("name", default_name)),
         description=str(table.get("description", "")),
         protocol=_protocol(table.get("protocol", {}), f"{where} [protocol]"),
         registration=_registration(table.get("registration", {}), f"{where} [registration]"),
         statistic=_statistic(table.get("statistic", {}), f"{where} [statistic]"),
+        conditions=conditions_from_table(table.get("conditions", {}), f"{where} [conditions]"),
         source_text=source_text,
     )
 

@@ -7,21 +7,27 @@ its own model when the layout names one (``SensorPose.sensor``), else with the p
 ``Scanner.scan_many`` call per model. The part's model keeps the orientation's noise seed, so a layout
 of the part's model alone is scanned exactly as in one call; every other model's sensors are scanned with
 a seed of their own (:func:`optipose.seeds.group_seed`), so no two models share noise draws.
+
+Under a :class:`~optipose.evaluate.conditions.Condition` the sensors' noise is scaled, and when the
+brackets are off each sensor scans from its true pose while its cloud is rebuilt with the drawn one
+(:func:`optipose.scan.scanner.rebuilt_with`); the cell is then zeroed on a master-part scan at the nominal
+orientation: each subset's registration of it is the constant bias, taken off every estimate.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from optipose.evaluate.assignment import all_subsets, subset_name
+from optipose.evaluate.conditions import Condition, mounting_error
 from optipose.evaluate.objective import AXES, RegistrationConfig
 from optipose.evaluate.statistics import unobservable_axes
 from optipose.model.layout import Layout
 from optipose.registration import Matches, backend_for, register, remove_outliers, voxel_down
-from optipose.seeds import group_seed, nominal_reference_seed
+from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 
 __all__ = ["WorkerSetup", "run_chunk", "sensor_groups"]
@@ -37,6 +43,7 @@ class WorkerSetup:
     vertices (v, 3) m, faces (f, 3) : the part's mesh. sensor, material : the part's models or names.
     centre : (3,) m, the rotation centre. threads : ray-casting threads per scan (None: all cores).
     occluders : the part's keep-outs, (lo, hi) boxes in m that hide what they cover.
+    condition : the noise scale and bracket errors the layouts are scanned under (default: nominal).
     """
 
     token: str
@@ -51,6 +58,7 @@ class WorkerSetup:
     seed: int
     threads: int | None
     occluders: tuple = ()
+    condition: Condition = field(default_factory=Condition)
 
 
 def sensor_groups(models: list, default) -> list[tuple[object, list[int]]]:
@@ -86,17 +94,25 @@ class _Worker:
         else:  # the CAD surface; also answers the observability normals for nominal-scan references
             self.reference = SurfaceReference(setup.vertices, setup.faces)
         self._nominal: dict = {}
+        self._zero: dict = {}
 
     def _scanner(self, model):
+        from optipose.model.sensor import load_sensor
         from optipose.scan.scanner import Scanner
 
         s = self.setup
+        if s.condition.noise_scale != 1.0:
+            model = load_sensor(model)
+            model = replace(model, noise_sigma=model.noise_sigma * s.condition.noise_scale)
         return Scanner(self.mesh, model, s.material, threads=s.threads, occluders=list(s.occluders))
 
     def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m); ``seed`` is the orientation's noise seed."""
         groups = sensor_groups(models, self.setup.sensor)
+        condition, nominal = self.setup.condition, poses
+        if condition.draw is not None:  # each sensor stands at its true pose
+            poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
         scans = [None] * len(poses)
         for g, (model, idx) in enumerate(groups):
             if not idx:
@@ -108,7 +124,25 @@ class _Worker:
                                     offset=offset, rng=group_seed(seed, g))  # fmt: skip
             for j, scan in zip(idx, out):
                 scans[j] = scan
+        if condition.draw is not None:  # ... and the cell rebuilds its cloud with the drawn pose
+            from optipose.scan.scanner import rebuilt_with
+
+            shifts = self.setup.motion.offsets()
+            scans = [rebuilt_with(scan, T, shifts) for scan, T in zip(scans, nominal)]
         return scans
+
+    def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
+        """Per subset, the part's estimated motion T_O_P (4, 4) on a master-part scan at the nominal
+        orientation: the cell's constant bias when the brackets are off, identity when they are not."""
+        condition = self.setup.condition
+        if condition.draw is None:
+            return [np.eye(4)] * len(subsets)
+        key = (np.asarray(poses).tobytes(), tuple(map(str, models)))
+        if key not in self._zero:
+            scans = self.scan(models, poses, zeroing_seed(self.setup.seed, condition.draw))
+            clouds = _clouds(self.setup.registration, scans)
+            self._zero[key] = [invert_T(_register(self, clouds, s, r)[0].T_target_source) for s, r in zip(subsets, references)]
+        return self._zero[key]
 
     def references(self, models: list, poses: list[np.ndarray], subsets) -> list:
         """The reference of each subset: the part's, or the nominal scan of the subset's sensors."""
@@ -155,46 +189,62 @@ def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[l
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
     subsets = all_subsets(len(poses))
     references = worker.references(models, poses, subsets)
+    zeros = worker.zero(models, poses, subsets, references)
     rows, point_rows, timing = [], [], {"scan": 0.0, "register": 0.0}
     for i, rpy, offset, seed, label in tasks:
         t0 = time.perf_counter()
         scans = worker.scan(models, poses, seed, rpy=rpy, offset=offset)
         t1 = time.perf_counter()
-        rows += _register_subsets(worker, setup, scans, subsets, references, names, i, rpy, offset, label, point_rows)
+        rows += _register_subsets(worker, setup, scans, subsets, references, zeros, names, i, rpy, offset, label, point_rows)
         timing["scan"] += t1 - t0
         timing["register"] += time.perf_counter() - t1
     return rows, point_rows, timing
 
 
-def _register_subsets(worker, setup, scans, subsets, references, names, i, rpy, offset, label, point_rows) -> list[dict]:
-    cfg = setup.registration
+def _clouds(cfg: RegistrationConfig, scans) -> list[np.ndarray]:
+    """Each sensor's scan down-sampled (and cleaned of outliers when the objective asks): (m, 3) m each."""
     clouds = []
-    for j, scan in enumerate(scans):
+    for scan in scans:
         cloud = voxel_down(scan.points, cfg.voxel_size)
         if cfg.outlier_removal:
             cloud = remove_outliers(cloud, cfg.outlier_neighbors, cfg.outlier_std_ratio)
         clouds.append(cloud)
+    return clouds
+
+
+def _register(worker, clouds, subset, reference, initial=None):
+    """One subset's floating cloud registered onto its reference (``initial``: each sensor's matches at identity)."""
+    source = np.vstack([clouds[j] for j in subset])
+    start = Matches.concat([initial[j] for j in subset]) if initial and all(initial[j] for j in subset) else None
+    return register(source, reference, worker.setup.registration, start), source
+
+
+def _register_subsets(worker, setup, scans, subsets, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
+    cfg = setup.registration
+    clouds = _clouds(cfg, scans)
+    for j, (scan, cloud) in enumerate(zip(scans, clouds)):
         point_rows.append({"scan": i, "label": label, "sensor_index": j, "sensor": names[j],
                            "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip
     # every subset against the part's reference: each sensor's matches at identity are searched once
     shared = references[0] is references[-1] and backend_for(cfg).takes_initial
-    initial = [Matches(*worker.reference.nearest(c)) if shared and len(c) else None for c in clouds]
+    initial = [Matches(*worker.reference.nearest(c)) if shared and len(c) else None for c in clouds] if shared else None
     T_O_P = part_motion(rpy, setup.centre, offset)
     rows = []
-    for s_index, (subset, reference) in enumerate(zip(subsets, references)):
-        source = np.vstack([clouds[j] for j in subset])
-        start = Matches.concat([initial[j] for j in subset]) if shared and all(initial[j] for j in subset) else None
-        reg = register(source, reference, cfg, start)
+    for s_index, (subset, reference, zero) in enumerate(zip(subsets, references, zeros)):
+        reg, source = _register(worker, clouds, subset, reference, initial)
         row = {"scan": i, "label": label, "subset_index": s_index, "subset": subset_name(subset, names),
                "n_points": len(source), "ok": reg.ok, "converged": reg.converged, "failure": reg.failure,
                "iterations": reg.iterations, "fitness": reg.fitness, "rmse": reg.rmse}  # fmt: skip
-        rows.append(row | _errors(reg, source, rpy, T_O_P, setup.observability_tolerance))
+        rows.append(row | _errors(reg, source, rpy, T_O_P, setup.observability_tolerance, zero))
     return rows
 
 
-def _errors(reg, source: np.ndarray, rpy: np.ndarray, T_O_P: np.ndarray, tolerance: float) -> dict:
-    """Set and estimated angles, signed errors (rad, m) and observability flags of one registration."""
+def _errors(reg, source: np.ndarray, rpy: np.ndarray, T_O_P: np.ndarray, tolerance: float, zero: np.ndarray) -> dict:
+    """Set and estimated angles, signed errors (rad, m) and observability flags of one registration, the
+    cell's ``zero`` (its estimate of the nominal pose, 4×4) taken off the estimate."""
     T_est = invert_T(reg.T_target_source)  # the part's estimated motion T_O_P
+    if zero is not None and not np.array_equal(zero, np.eye(4)):
+        T_est = invert_T(zero) @ T_est
     est = matrix_to_rpy(T_est[:3, :3])
     scale = float(np.sqrt(((source - source.mean(axis=0)) ** 2).sum(axis=1).mean())) if len(source) else 1.0
     blind = unobservable_axes(reg.information, scale, tolerance)

@@ -17,7 +17,7 @@ through the same code that reads real raw profiles (:mod:`optipose.scan.profiles
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -29,7 +29,7 @@ from optipose.scan.raycast import default_threads, face_planes, make_caster
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
-__all__ = ["Scan", "Scanner", "part_scanner", "nominal_scans"]
+__all__ = ["Scan", "Scanner", "part_scanner", "nominal_scans", "rebuilt_with"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count
@@ -246,6 +246,19 @@ class Scanner:
         start = p + _SHADOW_OFFSET * normal
         receiver = view.receiver_P - step
         return ~self.caster.occluded(start, receiver - start, np.ones(len(T)))
+
+
+def rebuilt_with(scan: Scan, T_O_S: np.ndarray, shifts: np.ndarray) -> Scan:
+    """The scan of a sensor that stood at ``scan.T_O_S`` rebuilt as if it stood at ``T_O_S``: what a cell
+    reports when a bracket is off its drawing (the device measures in its own frame; the cell turns that
+    into O with the pose it believes). ``shifts`` (n_profiles,) m are the motion's offsets."""
+    T_true, s = scan.T_O_S, np.asarray(shifts, dtype=float)[scan.profile]
+    moved = scan.points.copy()
+    moved[:, 0] += s  # back to where the part was when the profile was taken
+    p_S = (moved - T_true[:3, 3]) @ T_true[:3, :3]
+    points = p_S @ T_O_S[:3, :3].T + T_O_S[:3, 3]
+    points[:, 0] -= s
+    return replace(scan, points=points, T_O_S=T_O_S)
 
 
 def part_scanner(part, sensor=None, material=None, **kwargs) -> Scanner:

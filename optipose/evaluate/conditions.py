@@ -1,0 +1,122 @@
+"""Conditions a layout must survive (SPEC §9): a band of sensor noise and the brackets' mounting tolerance.
+
+An objective file's ``[conditions]`` table says which::
+
+    [conditions]
+    noise_scale = [1.0, 3.0, 5.0]    # the sensor's noise σ (at full intensity) times each of these
+    mounting_translation_mm = 0.2    # each sensor's true pose is off the drawn one by up to ± this per axis
+    mounting_rotation_deg = 0.1      # ... and turned by up to ± this about each of its axes
+    mounting_draws = 2               # independent bracket-error draws per noise level
+    aggregate = "worst"              # or a quantile in (0, 1], e.g. 0.9: over the conditions, per statistic
+
+A condition is one noise level with one draw of mounting errors (none when the tolerance is zero). Under
+it, each sensor scans from its true pose while the cloud is rebuilt with the drawn (nominal) pose, and the
+cell is zeroed on the part at its nominal orientation: a master-part scan's registration is the constant
+bias, and it is taken off every later estimate, as a cell's calibration would. What remains and is scored
+is the distortion between sensors and how it changes with the part's orientation.
+
+The defaults (one level at the preset's σ, zero tolerance) are exactly the objective without conditions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from optipose.errors import ConfigError
+from optipose.seeds import mounting_seed
+from optipose.transforms import make_T, rpy_to_matrix
+
+__all__ = ["ConditionsConfig", "Condition", "conditions", "mounting_error", "conditions_from_table", "aggregate"]
+
+_MM, _DEG = 1e-3, np.pi / 180
+
+
+@dataclass(frozen=True)
+class ConditionsConfig:
+    """The band of conditions (SI). See the module doc for the file keys."""
+
+    noise_scales: tuple[float, ...] = (1.0,)
+    mounting_translation: float = 0.0  # m, ± per axis
+    mounting_rotation: float = 0.0  # rad, ± about each axis
+    mounting_draws: int = 1
+    aggregate: str | float = "worst"  # "worst" or a quantile in (0, 1]
+
+    @property
+    def mounted(self) -> bool:
+        """Whether the brackets are off at all."""
+        return self.mounting_translation > 0 or self.mounting_rotation > 0
+
+    @property
+    def trivial(self) -> bool:
+        """One condition that is the nominal one: the objective without conditions."""
+        return self.noise_scales == (1.0,) and not self.mounted
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One condition: the noise scale and, when the brackets are off, the draw whose errors apply."""
+
+    noise_scale: float = 1.0
+    draw: int | None = None  # None: every sensor exactly where it was drawn
+    translation: float = 0.0  # m, the tolerance the draw is within
+    rotation: float = 0.0  # rad
+
+    @property
+    def label(self) -> str:
+        mount = "" if self.draw is None else f", mounting draw {self.draw}"
+        return f"noise x{self.noise_scale:g}{mount}"
+
+    @property
+    def nominal(self) -> bool:
+        return self.noise_scale == 1.0 and self.draw is None
+
+
+def conditions(cfg: ConditionsConfig) -> list[Condition]:
+    """Every condition of the band: each noise level with each mounting draw (noise levels first)."""
+    draws = list(range(cfg.mounting_draws)) if cfg.mounted else [None]
+    return [Condition(s, d, cfg.mounting_translation, cfg.mounting_rotation) for s in cfg.noise_scales for d in draws]
+
+
+def mounting_error(condition: Condition, seed: int, sensor: int) -> np.ndarray:
+    """The 4×4 ``T_S_true`` of sensor ``sensor`` (its index in the layout) under ``condition``: the true pose
+    is ``T_O_S @ T_S_true``. Uniform within the tolerance on each axis, from the run's seed, the draw and
+    the sensor's index only, so the same bracket is off the same way in every layout and every run."""
+    if condition.draw is None:
+        return np.eye(4)
+    rng = np.random.default_rng(mounting_seed(seed, condition.draw, sensor))
+    t = rng.uniform(-1.0, 1.0, 3) * condition.translation
+    r = rng.uniform(-1.0, 1.0, 3) * condition.rotation
+    return make_T(rpy_to_matrix(r), t)
+
+
+def aggregate(values: np.ndarray, how: str | float) -> np.ndarray:
+    """The robust aggregate over conditions (axis 0): the worst, or a quantile."""
+    values = np.asarray(values, dtype=float)
+    return np.max(values, axis=0) if how == "worst" else np.quantile(values, float(how), axis=0)
+
+
+def conditions_from_table(t: dict, where: str) -> ConditionsConfig:
+    """``[conditions]`` of an objective file (degrees and millimetres) as a :class:`ConditionsConfig`."""
+    keys = {"noise_scale", "mounting_translation_mm", "mounting_rotation_deg", "mounting_draws", "aggregate"}
+    unknown = set(t) - keys
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(keys))})")
+    scales = t.get("noise_scale", [1.0])
+    scales = scales if isinstance(scales, list) else [scales]
+    try:
+        scales = tuple(float(s) for s in scales)
+        translation = float(t.get("mounting_translation_mm", 0.0)) * _MM
+        rotation = float(t.get("mounting_rotation_deg", 0.0)) * _DEG
+        draws = int(t.get("mounting_draws", 1))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: noise_scale, mounting_* must be numbers") from None
+    if not scales or min(scales) <= 0 or not all(np.isfinite(scales)):
+        raise ConfigError(f"{where}: noise_scale must be a non-empty list of positive numbers")
+    if translation < 0 or rotation < 0 or draws < 1:
+        raise ConfigError(f"{where}: mounting tolerances must be >= 0 and mounting_draws >= 1")
+    how = t.get("aggregate", "worst")
+    if how != "worst" and not (isinstance(how, (int, float)) and 0 < how <= 1):
+        raise ConfigError(f"{where}: aggregate must be \"worst\" or a quantile in (0, 1], got {how!r}")
+    return ConditionsConfig(scales, translation, rotation, draws, how if how == "worst" else float(how))
