@@ -10,13 +10,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from optipose.io.folders import versions, write_config
+from optipose.io.tables import robustness_frame
 from optipose.model.layout import write_layout
 
-__all__ = ["write_robustness", "robustness_frame"]
+__all__ = ["write_robustness"]
 
 
 def write_robustness(folder: Path, part, objective, seed: int, results: dict, hand: str = "hand", sources=()) -> pd.DataFrame:
@@ -36,30 +36,3 @@ def write_robustness(folder: Path, part, objective, seed: int, results: dict, ha
     frame = robustness_frame(results, hand, objective.conditions.aggregate)
     frame.to_csv(folder / "robustness.csv", index=False)
     return frame
-
-
-def robustness_frame(results: dict, hand: str = "hand", aggregate="worst") -> pd.DataFrame:
-    """The rows of ``robustness.csv`` (see the module doc), hand layout first."""
-    robust_label = "worst" if aggregate == "worst" else f"quantile {aggregate:g}"
-    hand_result = results[hand]
-    n_hand = len(hand_result.table)
-    given = {name: min(len(r.layout), n_hand) for name, r in results.items() if name != hand}
-    # the hand layout's best k for every k a given layout is compared at (every k when none is given)
-    jobs = [(hand, k) for k in sorted(set(given.values()) or range(1, n_hand + 1))] + list(given.items())
-    rows = []
-    for name, k in jobs:
-        result = results[name]
-        choice, reference = result.table[k - 1], hand_result.table[k - 1]
-        for (condition, c), (_, h) in zip(result.under(choice), hand_result.under(reference)):
-            rows += _rows(name, k, condition.label, c, h.score)
-        rows += _rows(name, k, robust_label, choice, reference.score)
-    return pd.DataFrame(rows)
-
-
-def _rows(layout: str, k: int, condition: str, choice, hand_score: float) -> list[dict]:
-    return [
-        {"layout": layout, "k": k, "condition": condition, "sensors": choice.name, "axis": a.axis,
-         "subset": a.name or "unobservable", "median_deg": float(np.rad2deg(a.median)), "p75_deg": float(np.rad2deg(a.p75)),
-         "score_deg": float(np.rad2deg(choice.score)), "hand_score_deg": float(np.rad2deg(hand_score))}
-        for a in choice.axes
-    ]  # fmt: skip

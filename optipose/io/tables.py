@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["table1_frame", "comparison_frame", "selection_frame", "history_frame", "surrogate_frame"]
+__all__ = ["table1_frame", "comparison_frame", "selection_frame", "history_frame", "surrogate_frame", "robustness_frame"]
 
 
 def table1_frame(choices) -> pd.DataFrame:
@@ -69,4 +69,27 @@ def surrogate_frame(outcome) -> pd.DataFrame:
         for label, g in (("found", f), ("greedy", outcome.greedy.get(k)), ("joint", outcome.joint.get(k)), ("hand", outcome.hand.get(k))):
             if g is not None and g.stats:
                 rows.append({"k": k, "layout": label, "fidelity": "surrogate", "score_deg": g.stats["score"], "penalised_deg": g.score})
+    return pd.DataFrame(rows)
+
+
+def robustness_frame(results: dict, hand: str = "hand", aggregate="worst") -> pd.DataFrame:
+    """Layouts under every condition (``robustness.csv``): per layout, k, condition and axis the layout's
+    choice of k sensors, and the hand layout's score for as many under the same condition; the condition
+    ``worst`` (or ``quantile <q>``) is the robust statistic. The hand layout's rows come first, for every k a
+    given layout is compared at (every k when none is given).
+
+    results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the hand layout's under ``hand``.
+    """
+    robust_label = "worst" if aggregate == "worst" else f"quantile {aggregate:g}"
+    hand_result = results[hand]
+    n_hand = len(hand_result.table)
+    given = {name: min(len(r.layout), n_hand) for name, r in results.items() if name != hand}
+    jobs = [(hand, k) for k in sorted(set(given.values()) or range(1, n_hand + 1))] + list(given.items())
+    rows = []
+    for name, k in jobs:
+        choice, reference = results[name].table[k - 1], hand_result.table[k - 1]
+        pairs = [(c.label, mine, theirs.score) for (c, mine), (_, theirs) in zip(results[name].under(choice), hand_result.under(reference))]
+        for label, mine, hand_score in pairs + [(robust_label, choice, reference.score)]:
+            extra = {"condition": label, "hand_score_deg": float(np.rad2deg(hand_score))}
+            rows += [row | extra for row in _choice_rows(name, k, mine)]
     return pd.DataFrame(rows)
