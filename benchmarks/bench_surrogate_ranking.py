@@ -7,7 +7,7 @@ protocol (14 scans, as the search's selection stage). Prints Spearman's rank cor
 score and per axis, the median factor between predicted and ICP per-axis scores, the agreement on the best
 layout, and the time per evaluation of each fidelity.
 
-    .venv/bin/python benchmarks/bench_surrogate_ranking.py [--part part_b] [--layouts 16] [--seed 0]
+    .venv/bin/python benchmarks/bench_surrogate_ranking.py [--part part_b] [--layouts 16] [--seed 0] [--noise-scale 5]
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import time
 import numpy as np
 from scipy.stats import spearmanr
 
+from optipose.evaluate.conditions import Condition
 from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import load_objective, reduced_objective
 from optipose.model.part import load_part
@@ -33,7 +34,9 @@ def main() -> None:
     ap.add_argument("--part", default="part_b")
     ap.add_argument("--layouts", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--noise-scale", type=float, default=1.0, help="the sensor noise sigma times this, in ICP and the surrogate")
     args = ap.parse_args()
+    scales = (args.noise_scale,)
 
     part, objective = load_part(args.part), load_objective("paper")
     problem = SurrogateProblem(part, objective, SearchConfig())
@@ -48,11 +51,11 @@ def main() -> None:
     layouts += [(problem.space.from_pose(T), problem.score(problem.space.from_pose(T), constrained=False).value) for T in hand]
     n_hand = len(hand)
     t0 = time.perf_counter()
-    bias_stats = [predicted_stats([problem.surrogate.info(problem.space.to_pose(u))], *problem.weights) for u, _ in layouts]
+    bias_stats = [predicted_stats([problem.surrogate.info(problem.space.to_pose(u))], *problem.weights, noise_scales=scales) for u, _ in layouts]
     t_bias = time.perf_counter() - t0
     layouts = [(u, s["score"]) for (u, _), s in zip(layouts, bias_stats)]
     t_icp, icp, icp_axes = 0.0, [], []
-    with Evaluator(part, reduced_objective(objective), seed=args.seed + 1) as evaluator:
+    with Evaluator(part, reduced_objective(objective), seed=args.seed + 1, condition=Condition(args.noise_scale)) as evaluator:
         for u, _ in layouts:
             t0 = time.perf_counter()
             result = evaluator([problem.space.to_pose(u)])
@@ -64,7 +67,7 @@ def main() -> None:
     plain = Surrogate(part, voxel=objective.registration.voxel_size, turns=np.zeros((0, 3)))
     weights = (tuple(objective.statistic.weights), objective.statistic.median_weight, objective.statistic.p75_weight)
     t0 = time.perf_counter()
-    noise_only = [predicted_stats([plain.info(problem.space.to_pose(u))], *weights) for u, _ in layouts]
+    noise_only = [predicted_stats([plain.info(problem.space.to_pose(u))], *weights, noise_scales=scales) for u, _ in layouts]
     t_plain = time.perf_counter() - t0
     models = {
         "noise only": (np.array([s["score"] for s in noise_only]), np.array([s["axis_score"] for s in noise_only])),
@@ -72,7 +75,7 @@ def main() -> None:
     }
     icp, icp_axes = np.array(icp), np.array(icp_axes)
     print(f"bench_surrogate_ranking: {args.part}, {len(layouts) - n_hand} random feasible one-sensor layouts "
-          f"+ {n_hand} hand-placed sensors, seed {args.seed}")
+          f"+ {n_hand} hand-placed sensors, seed {args.seed}, noise x{args.noise_scale:g}")
     print(f"{'layout':>6} {'noise only':>11} {'with bias':>11} {'ICP (14 scans)':>15}   (scores in mdeg)")
     for i in np.argsort(icp):
         label = f"hand{i - len(layouts) + n_hand + 1}" if i >= len(layouts) - n_hand else str(i)

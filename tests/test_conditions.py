@@ -160,3 +160,16 @@ def test_robustness_puts_a_layout_beside_the_hand_one_under_every_condition(tmp_
     assert (hand_rows["score_deg"] == hand_rows["hand_score_deg"]).all()
     assert "only_s2 (worst over the band): k=1: found S2" in result.stdout and "than hand S1" in result.stdout
     assert (out / "layouts" / "only_s2.toml").is_file() and "robustness" in (out / "config.toml").read_text()
+
+
+def test_the_surrogate_predicts_across_the_noise_band_without_rescanning():
+    from optipose.search.surrogate import SensorInfo, predicted_stats
+
+    # a pure-noise information matrix (no bias turns): sigma grows with the noise scale, the prior aside
+    H = np.diag([1e12, 4e12, 9e12, 1e14, 1e14, 1e14])
+    one = predicted_stats([SensorInfo(H, 10_000, 1_000)])
+    five = predicted_stats([SensorInfo(H / 25, 10_000, 1_000)])
+    band = predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0, 3.0, 5.0))
+    assert np.array_equal(band["median_deg"], five["median_deg"]) and band["score"] == five["score"]  # the worst is x5
+    assert np.allclose(five["median_deg"] / one["median_deg"], 5.0, rtol=1e-3)
+    assert np.array_equal(predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0,))["p75_deg"], one["p75_deg"])

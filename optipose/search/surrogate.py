@@ -190,18 +190,26 @@ def _axis_stats(sigma: np.ndarray, delta: np.ndarray | None) -> tuple[np.ndarray
     return np.median(e, axis=0), np.percentile(e, 75, axis=0)
 
 
-def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_weight=1.0, p75_weight=1.0) -> dict:
+def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_weight=1.0, p75_weight=1.0,
+                    noise_scales: tuple[float, ...] = (1.0,)) -> dict:  # fmt: skip
     """The surrogate's Table 1 for a layout: every non-empty subset's predicted per-axis median and 75th
     percentile (degrees), each axis's best subset, its per-axis score and the weighted score of the per-axis
-    best."""
+    best.
+
+    noise_scales : the sensor noise σ times each of these; each statistic is the worst over them. The
+    information matrix scales with 1/σ² and the voxel bias not at all, so a band costs one more 6×6 inverse
+    per level, no scan.
+    """
     k = len(infos)
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
     median, p75 = np.zeros((len(subsets), 3)), np.zeros((len(subsets), 3))
     for s, c in enumerate(subsets):
-        sigma = rotation_sigma(sum(infos[i].H for i in c))
+        H = sum(infos[i].H for i in c)
         have_bias = all(infos[i].G is not None for i in c)
         delta = bias_rotation(sum(infos[i].A for i in c), sum(infos[i].G for i in c)) if have_bias else None
-        median[s], p75[s] = _axis_stats(sigma, delta)
+        for n, scale in enumerate(noise_scales):
+            m, q = _axis_stats(rotation_sigma(H if scale == 1.0 else H / scale**2), delta)
+            median[s], p75[s] = (m, q) if n == 0 else (np.maximum(median[s], m), np.maximum(p75[s], q))
     median, p75 = np.rad2deg(median), np.rad2deg(p75)
     best = [min(range(len(subsets)), key=lambda s: (median[s, a], p75[s, a])) for a in range(3)]
     axis = np.array([median_weight * median[s, a] + p75_weight * p75[s, a] for a, s in enumerate(best)])
