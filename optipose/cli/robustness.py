@@ -92,16 +92,20 @@ def _verdicts(results: dict) -> list[str]:
 
 
 def _table(rows, part_name: str):
-    """One row per layout and condition: per axis median/p75 (mdeg), the score, and hand / this."""
+    """One row per layout and condition: per axis median/p75 (mdeg), the score, and hand / this; narrow
+    enough for an 80-column terminal (conditions as ``x3 m1``: noise times 3, mounting draw 1)."""
+    from rich import box
     from rich.table import Table
 
-    table = Table(title=f"{part_name}: layouts under every condition (millidegrees, median/75th pct; "
-                        "'worst' is the robust statistic)")  # fmt: skip
-    for col in ("layout", "k", "condition", "roll", "pitch", "yaw", "score", "hand/this"):
-        table.add_column(col, justify="left" if col in ("layout", "condition") else "right")
+    table = Table(title=f"{part_name}: under every condition, mdeg median/p75 (x: noise scale, m: bracket draw)",
+                  box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)  # fmt: skip
+    for col in ("layout", "cond.", "roll", "pitch", "yaw", "score", "hand/it"):
+        table.add_column(col, justify="left" if col in ("layout", "cond.") else "right", no_wrap=True)
     for (layout, k, condition), group in rows.groupby(["layout", "k", "condition"], sort=False):
-        cells = {r.axis: f"{1e3 * r.median_deg:.3f}/{1e3 * r.p75_deg:.3f}" for r in group.itertuples()}
+        cells = {r.axis: f"{1e3 * r.median_deg:.2f}/{1e3 * r.p75_deg:.2f}" for r in group.itertuples()}
         first = group.iloc[0]
         ratio = "" if layout == "hand" else f"{first['hand_score_deg'] / first['score_deg']:.2f}x"
-        table.add_row(layout, str(k), condition, cells["roll"], cells["pitch"], cells["yaw"], f"{1e3 * first['score_deg']:.3f}", ratio)
+        short = condition.replace("noise x", "x").replace(", mounting draw ", " m")
+        name = f"{layout} k{k}" if layout == "hand" else layout
+        table.add_row(name, short, cells["roll"], cells["pitch"], cells["yaw"], f"{1e3 * first['score_deg']:.2f}", ratio)
     return table
