@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, friendly_errors, warn_if_band
 from optipose.errors import ConfigError
 
 __all__ = ["evaluate", "evaluate_command", "table1", "register"]
@@ -58,6 +58,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     else:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give one with --layout")
     the_objective = load_objective(objective)
+    warn_if_band(the_objective, "evaluate")
     console = Console(stderr=True)
     with console.status(f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"):
         with Evaluator(the_part, the_objective, seed=seed, jobs=jobs) as evaluator:

@@ -2,7 +2,8 @@
 
 Each layout is evaluated under every condition of the objective's ``[conditions]`` (default objective:
 ``robust``: noise at 1, 3 and 5 times the preset's, brackets off by up to 0.2 mm and 0.1°); per layout and
-condition the table shows its choice of all its sensors against the hand layout's choice of as many, and
+condition the table shows its robust choice of all its sensors (at most as many as the hand layout has)
+against the hand layout's robust choice of as many, each axis on a fixed subset, and
 a verdict on the robust statistic (the worst over the conditions) says whether to keep the hand sensors.
 """
 

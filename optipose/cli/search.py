@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors, warn_if_band
 from optipose.errors import ConfigError
 
 __all__ = ["search", "search_command"]
@@ -61,6 +61,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     else:
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config))
         the_objective = load_objective(objective)
+        warn_if_band(the_objective, "search")
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
 

@@ -19,7 +19,7 @@ import pandas as pd
 from optipose.evaluate.objective import AXES, StatisticConfig
 
 __all__ = [
-    "all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "choose", "stats_by_key",
+    "all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "choose", "restated", "stats_by_key",
     "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY",
 ]  # fmt: skip
 
@@ -111,6 +111,21 @@ def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: Statis
         axes.append(AxisChoice(axis, tuple(s), best.subset, best.median, best.p75))
         score += weight * (cfg.median_weight * best.median + cfg.p75_weight * best.p75)
     return Choice(len(sensors), tuple(sensors), subset_name(sensors, names), tuple(axes), float(score))
+
+
+def restated(choice: Choice, by_key: dict, cfg: StatisticConfig) -> Choice:
+    """The same choice (sensors and each axis's subset, fixed) with the statistics of another evaluation of
+    the same layout, e.g. under another condition; an axis it left unobservable stays so."""
+    axes, score = [], 0.0
+    for a, weight in zip(choice.axes, cfg.weights):
+        if not a.observable:
+            axes.append(a)
+            score += weight * UNOBSERVABLE_PENALTY * (cfg.median_weight + cfg.p75_weight)
+            continue
+        row = by_key[(a.name, a.axis)]
+        axes.append(AxisChoice(a.axis, a.subset, a.name, row.median, row.p75))
+        score += weight * (cfg.median_weight * row.median + cfg.p75_weight * row.p75)
+    return Choice(choice.k, choice.sensors, choice.name, tuple(axes), float(score))
 
 
 def _eligible(row, n_scans: int) -> bool:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import pandas as pd
 
-from optipose.evaluate.assignment import Choice, best_choices, choose, stats_by_key
+from optipose.evaluate.assignment import Choice, best_choices, restated, stats_by_key
 from optipose.evaluate.conditions import Condition, aggregate, conditions
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 
@@ -33,21 +33,23 @@ class RobustResult:
         return self.results[0][1].layout
 
     def under(self, choice: Choice) -> list[tuple[Condition, Choice]]:
-        """The same sensors as ``choice`` under each condition, each axis with that condition's best subset."""
-        out = []
-        for condition, result in self.results:
-            n_scans = result.per_scan["scan"].nunique()
-            by_key = stats_by_key(result.stats)
-            out.append((condition, choose(choice.sensors, result.layout.names, by_key, result.objective.statistic, n_scans)))
-        return out
+        """``choice`` (its sensors and each axis's subset, as one deployed cell fixes them) under each
+        condition: with the worst aggregate, the robust statistic is the largest of these."""
+        return [(c, restated(choice, stats_by_key(r.stats), r.objective.statistic)) for c, r in self.results]
 
 
 def evaluate_robust(part, layout, objective, seed: int = 0, jobs: int = 1, quiet: bool = False) -> RobustResult:
-    """Evaluate ``layout`` under every condition of ``objective.conditions`` (see the module doc)."""
-    results = []
-    for condition in conditions(objective.conditions):
-        with Evaluator(part, objective, seed=seed, jobs=jobs, quiet=quiet, condition=condition) as evaluator:
-            results.append((condition, evaluator(layout)))
+    """Evaluate ``layout`` under every condition of ``objective.conditions`` (see the module doc); one pool
+    of workers serves every condition."""
+    from optipose.evaluate.executors import make_executor
+
+    executor, results = make_executor(jobs), []
+    try:
+        for condition in conditions(objective.conditions):
+            with Evaluator(part, objective, seed=seed, quiet=quiet, executor=executor, condition=condition) as evaluator:
+                results.append((condition, evaluator(layout)))
+    finally:
+        executor.close()
     stats = robust_stats([r.stats for _, r in results], objective.conditions.aggregate)
     n_scans = results[0][1].per_scan["scan"].nunique()
     return RobustResult(results, stats, best_choices(stats, layout.names, objective.statistic, n_scans))
@@ -60,6 +62,8 @@ def robust_stats(frames: list[pd.DataFrame], how: str | float = "worst") -> pd.D
     if len(frames) == 1:
         return frames[0]
     keys = frames[0][["subset", "axis"]]
+    if not all(f[["subset", "axis"]].equals(keys) for f in frames):
+        raise ValueError("statistics of different layouts or protocols cannot be aggregated")
     out = keys.copy()
     for column in ("median", "p75", "mean", "max"):
         out[column] = aggregate([f[column].to_numpy() for f in frames], how)

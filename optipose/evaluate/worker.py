@@ -16,6 +16,7 @@ orientation: each subset's registration of it is the constant bias, taken off ev
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field, replace
 
@@ -32,6 +33,7 @@ from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 
 __all__ = ["WorkerSetup", "run_chunk", "sensor_groups"]
 
+log = logging.getLogger(__name__)
 _TRANSLATION = ("x", "y", "z")
 
 
@@ -141,7 +143,13 @@ class _Worker:
         if key not in self._zero:
             scans = self.scan(models, poses, zeroing_seed(self.setup.seed, condition.draw))
             clouds = _clouds(self.setup.registration, scans)
-            self._zero[key] = [invert_T(_register(self, clouds, s, r)[0].T_target_source) for s, r in zip(subsets, references)]
+            zero = []
+            for subset, reference in zip(subsets, references):
+                reg, _ = _register(self, clouds, subset, reference)
+                if not reg.ok:  # its estimate still stands in for the bias; say so
+                    log.warning("zeroing subset %s on the master scan: %s", subset, reg.failure or "did not converge")
+                zero.append(invert_T(reg.T_target_source))
+            self._zero[key] = zero
         return self._zero[key]
 
     def references(self, models: list, poses: list[np.ndarray], subsets) -> list:
@@ -227,7 +235,7 @@ def _register_subsets(worker, setup, scans, subsets, references, zeros, names, i
                            "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip
     # every subset against the part's reference: each sensor's matches at identity are searched once
     shared = references[0] is references[-1] and backend_for(cfg).takes_initial
-    initial = [Matches(*worker.reference.nearest(c)) if shared and len(c) else None for c in clouds] if shared else None
+    initial = [Matches(*worker.reference.nearest(c)) if len(c) else None for c in clouds] if shared else None
     T_O_P = part_motion(rpy, setup.centre, offset)
     rows = []
     for s_index, (subset, reference, zero) in enumerate(zip(subsets, references, zeros)):

@@ -1,4 +1,7 @@
-"""A robustness result folder: ``config.toml``, the layouts, and ``robustness.csv``.
+"""A robustness result folder: ``config.toml``, the layouts, ``robustness.csv`` and ``conditions.csv``.
+
+``conditions.csv`` holds every layout's statistics per condition, sensor subset and axis (radians), from
+which any other choice can be restated.
 
 ``robustness.csv`` has one row per layout, k, condition and axis: the median and 75th percentile (degrees)
 of the layout's choice of k sensors under that condition, the subset used, the choice's score, and the
@@ -35,4 +38,9 @@ def write_robustness(folder: Path, part, objective, seed: int, results: dict, ha
     })  # fmt: skip
     frame = robustness_frame(results, hand, objective.conditions.aggregate)
     frame.to_csv(folder / "robustness.csv", index=False)
+    per_condition = [
+        result.stats.assign(layout=name, condition=condition.label)
+        for name, robust in results.items() for condition, result in robust.results
+    ]  # fmt: skip
+    pd.concat(per_condition, ignore_index=True).to_csv(folder / "conditions.csv", index=False)
     return frame

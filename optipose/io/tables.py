@@ -74,9 +74,10 @@ def surrogate_frame(outcome) -> pd.DataFrame:
 
 def robustness_frame(results: dict, hand: str = "hand", aggregate="worst") -> pd.DataFrame:
     """Layouts under every condition (``robustness.csv``): per layout, k, condition and axis the layout's
-    choice of k sensors, and the hand layout's score for as many under the same condition; the condition
-    ``worst`` (or ``quantile <q>``) is the robust statistic. The hand layout's rows come first, for every k a
-    given layout is compared at (every k when none is given).
+    robust choice of k sensors (k: its own size, at most the hand layout's), each axis's subset fixed as a
+    deployed cell fixes it, and the hand layout's robust choice of as many under the same condition; the
+    condition ``worst`` (or ``quantile <q>``) is the robust statistic. The hand layout's rows come first, for
+    every k a given layout is compared at (every k when none is given).
 
     results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the hand layout's under ``hand``.
     """
