@@ -10,7 +10,7 @@ costs ``UNOBSERVABLE_PENALTY`` instead.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
@@ -62,6 +62,8 @@ class Choice:
     """The best k sensors and, per axis, the subset of them to use.
 
     sensors : the k sensor indices in the layout; name : them for display, e.g. "S1S3"; score : rad.
+    under : under a band of conditions (:mod:`optipose.evaluate.robust`), the same choice restated under
+        each condition, ``((label, Choice), …)``; empty otherwise.
     """
 
     k: int
@@ -69,6 +71,7 @@ class Choice:
     name: str
     axes: tuple[AxisChoice, ...]
     score: float
+    under: tuple = field(default=(), repr=False, compare=False)
 
     def __repr__(self) -> str:
         cells = ", ".join(

@@ -2,7 +2,9 @@
 
 The user's question is whether to keep the sensors they have or buy the found ones. A found choice of k
 sensors wins outright when every axis's median and 75th percentile is at most the reference's; how far
-it misses is the summed excess. The search ranks and polishes with these, the CLI prints a
+it misses is the summed excess. Under a band of conditions (choices that carry ``under``, from
+:mod:`optipose.evaluate.robust`) both tests hold condition by condition: no worse on any axis at *every*
+condition, the excess summed over them; the score compared is the robust one. The search ranks and polishes with these, the CLI prints a
 :class:`Verdict` per k, and :func:`optipose.io.load_result` gives a saved search's verdicts back.
 """
 
@@ -20,13 +22,26 @@ _STATISTICS = ("median", "p75")
 
 
 def dominates(choice: Choice, reference: Choice) -> bool:
-    """Every axis's median and 75th percentile at most the reference's."""
-    return all(a.median <= b.median and a.p75 <= b.p75 for a, b in zip(choice.axes, reference.axes))
+    """Every axis's median and 75th percentile at most the reference's (at every condition of a band)."""
+    return all(
+        a.median <= b.median and a.p75 <= b.p75 for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes)
+    )  # fmt: skip
 
 
 def excess(choice: Choice, reference: Choice, margin: float = 1.0) -> float:
-    """How far (rad, summed) the choice's per-axis medians and 75th percentiles exceed margin × the reference's."""
-    return float(sum(max(0.0, a.median - margin * b.median) + max(0.0, a.p75 - margin * b.p75) for a, b in zip(choice.axes, reference.axes)))
+    """How far (rad, summed) the choice's per-axis medians and 75th percentiles exceed margin × the
+    reference's (summed over the conditions of a band)."""
+    return float(sum(
+        max(0.0, a.median - margin * b.median) + max(0.0, a.p75 - margin * b.p75)
+        for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes)
+    ))  # fmt: skip
+
+
+def _pairs(choice: Choice, reference: Choice) -> list[tuple[Choice, Choice]]:
+    """The choices to compare: condition by condition when both were evaluated under the same band."""
+    if choice.under and len(choice.under) == len(reference.under):
+        return [(c, r) for (_, c), (_, r) in zip(choice.under, reference.under)]
+    return [(choice, reference)]
 
 
 def rank(choice: Choice, reference: Choice | None) -> tuple[bool, float]:
@@ -49,6 +64,7 @@ class AxisGap:
     statistic: str  # median | p75
     found: float
     reference: float
+    condition: str = ""  # under a band, the condition's label
 
 
 @dataclass(frozen=True)
@@ -67,11 +83,19 @@ class Verdict:
     @property
     def worse(self) -> tuple[AxisGap, ...]:
         """Every axis statistic on which the found choice is worse (what :func:`dominates` tests)."""
+        pairs = _pairs(self.found, self.reference)
+        labels = [label for label, _ in self.found.under] if len(pairs) > 1 else [""]
         return tuple(
-            AxisGap(f.axis, stat, getattr(f, stat), getattr(r, stat))
-            for f, r in zip(self.found.axes, self.reference.axes) for stat in _STATISTICS
+            AxisGap(f.axis, stat, getattr(f, stat), getattr(r, stat), label)
+            for label, (c, ref) in zip(labels, pairs)
+            for f, r in zip(c.axes, ref.axes) for stat in _STATISTICS
             if getattr(f, stat) > getattr(r, stat)
         )  # fmt: skip
+
+    def ratios(self) -> list[tuple[str, float]]:
+        """Under a band, (condition label, reference score over found score) per condition; else []."""
+        return [(label, float(r.score / c.score)) for (label, c), (_, r) in zip(self.found.under, self.reference.under)
+                if len(self.found.under) == len(self.reference.under)]  # fmt: skip
 
     @property
     def no_worse(self) -> bool:
@@ -81,8 +105,13 @@ class Verdict:
     def line(self) -> str:
         """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace."""
         ratio, name, ref = self.ratio, self.found.name, self.reference.name
-        worse = [f"{g.axis} {g.statistic} {mdeg(g.found):.3f} vs {mdeg(g.reference):.3f}" for g in self.worse]
-        than = f"x {'better' if ratio >= 1 else 'worse'} in sum than hand {ref}"
+        gaps = sorted(self.worse, key=lambda g: g.reference / g.found)  # the widest first
+        worse = [f"{g.axis} {g.statistic} {mdeg(g.found):.3f} vs {mdeg(g.reference):.3f}"
+                 + (f" ({g.condition})" if g.condition else "") for g in gaps[:3]]  # fmt: skip
+        if len(gaps) > 3:
+            worse.append(f"{len(gaps) - 3} more")
+        robust = " at the worst over the band" if self.ratios() else ""
+        than = f"x {'better' if ratio >= 1 else 'worse'} in sum{robust} than hand {ref}"
         head = f"k={self.k}: found {name} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
         if worse and ratio < 1:
             return f"{head} and worse on {'; '.join(worse)} mdeg: keep {ref}"

@@ -62,11 +62,15 @@ class Condition:
     draw: int | None = None  # None: every sensor exactly where it was drawn
     translation: float = 0.0  # m, the tolerance the draw is within
     rotation: float = 0.0  # rad
+    zeroed: bool = True  # the cell is zeroed on a master part (False: the constant bias stays in)
+    only: tuple[int, ...] | None = None  # the sensors whose brackets are off (None: every sensor)
 
     @property
     def label(self) -> str:
         mount = "" if self.draw is None else f", mounting draw {self.draw}"
-        return f"noise x{self.noise_scale:g}{mount}"
+        if self.draw is not None and self.only is not None:
+            mount += f" of sensor{'s' if len(self.only) > 1 else ''} {', '.join(str(j + 1) for j in self.only)}"
+        return f"noise x{self.noise_scale:g}{mount}{'' if self.zeroed else ', not zeroed'}"
 
     @property
     def nominal(self) -> bool:
@@ -82,8 +86,9 @@ def conditions(cfg: ConditionsConfig) -> list[Condition]:
 def mounting_error(condition: Condition, seed: int, sensor: int) -> np.ndarray:
     """The 4×4 ``T_S_true`` of sensor ``sensor`` (its index in the layout) under ``condition``: the true pose
     is ``T_O_S @ T_S_true``. Uniform within the tolerance on each axis, from the run's seed, the draw and
-    the sensor's index only, so the same bracket is off the same way in every layout and every run."""
-    if condition.draw is None:
+    the sensor's index only, so the same bracket is off the same way in every layout and every run (and
+    with ``only``, whichever other brackets are off)."""
+    if condition.draw is None or (condition.only is not None and sensor not in condition.only):
         return np.eye(4)
     rng = np.random.default_rng(mounting_seed(seed, condition.draw, sensor))
     t = rng.uniform(-1.0, 1.0, 3) * condition.translation

@@ -19,7 +19,7 @@ import functools
 import logging
 import time
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -59,6 +59,10 @@ class EvaluationResult:
     stats: pd.DataFrame = field(repr=False)
     table: list[Choice] = field(repr=False)
     timings: dict = field(repr=False, default_factory=dict)
+
+    @property
+    def n_scans(self) -> int:
+        return int(self.per_scan["scan"].nunique())
 
     @property
     def n_failed(self) -> int:
@@ -147,13 +151,15 @@ class Evaluator:
         p = self.perturbations
         return [(i, p.rpy[i], p.offset[i], int(p.seeds[i]), str(p.label[i])) for i in range(len(p))]
 
-    def __call__(self, layout: Layout | list[np.ndarray]) -> EvaluationResult:
-        """Evaluate a layout (or a list of 4×4 ``T_O_S``, named S1, S2, …)."""
+    def __call__(self, layout: Layout | list[np.ndarray], condition: Condition | None = None) -> EvaluationResult:
+        """Evaluate a layout (or a list of 4×4 ``T_O_S``, named S1, S2, …), under ``condition`` when given
+        (default: the evaluator's); the workers keep their scanners and reference across conditions."""
         if not isinstance(layout, Layout):
             layout = Layout(tuple(SensorPose(f"S{i + 1}", np.asarray(T, float)) for i, T in enumerate(layout)), name="poses")
         t0 = time.perf_counter()
         chunks = _chunks(self.tasks(), self.jobs)
-        outputs = self.executor.map(functools.partial(run_chunk, self.setup, layout), chunks)
+        setup = self.setup if condition is None else replace(self.setup, condition=condition)
+        outputs = self.executor.map(functools.partial(run_chunk, setup, layout), chunks)
         rows = [r for out in outputs for r in out[0]]
         point_rows = [r for out in outputs for r in out[1]]
         per_scan = pd.DataFrame(rows).sort_values(["scan", "subset_index"], kind="stable").reset_index(drop=True)

@@ -9,7 +9,7 @@ because it is good at every noise level and bracket draw, not at the nominal one
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import pandas as pd
 
@@ -17,12 +17,13 @@ from optipose.evaluate.assignment import Choice, best_choices, restated, stats_b
 from optipose.evaluate.conditions import Condition, aggregate, conditions
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 
-__all__ = ["RobustResult", "evaluate_robust", "robust_stats"]
+__all__ = ["RobustResult", "RobustEvaluator", "make_evaluator", "evaluate_robust", "robust_stats"]
 
 
 @dataclass
 class RobustResult:
-    """A layout's evaluations under each condition, and the aggregated statistics and Table 1."""
+    """A layout's evaluations under each condition, and the aggregated statistics and Table 1 (each choice
+    carries itself restated under every condition, ``Choice.under``)."""
 
     results: list[tuple[Condition, EvaluationResult]] = field(repr=False)
     stats: pd.DataFrame = field(repr=False)
@@ -32,28 +33,70 @@ class RobustResult:
     def layout(self):
         return self.results[0][1].layout
 
+    @property
+    def n_scans(self) -> int:
+        return self.results[0][1].n_scans
+
+    @property
+    def timings(self) -> dict:
+        return {key: sum(r.timings.get(key, 0.0) for _, r in self.results) for key in ("scan", "register", "wall")}
+
     def under(self, choice: Choice) -> list[tuple[Condition, Choice]]:
         """``choice`` (its sensors and each axis's subset, as one deployed cell fixes them) under each
         condition: with the worst aggregate, the robust statistic is the largest of these."""
         return [(c, restated(choice, stats_by_key(r.stats), r.objective.statistic)) for c, r in self.results]
 
 
+class RobustEvaluator:
+    """An :class:`Evaluator` that scores a layout under every condition of its objective's band: the same
+    protocol and noise seed each time, one set of workers (and their scanners and reference) for all.
+    ``RobustEvaluator(part, objective)(layout) -> RobustResult``; the arguments are the Evaluator's."""
+
+    def __init__(self, part, objective, seed: int = 0, jobs: int = 1, quiet: bool = False, executor=None):
+        self.evaluator = Evaluator(part, objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
+        self.objective, self.seed = self.evaluator.objective, self.evaluator.seed
+        self.conditions = conditions(self.objective.conditions)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        self.evaluator.close()
+
+    def __call__(self, layout) -> RobustResult:
+        return robust_result([(c, self.evaluator(layout, c)) for c in self.conditions], self.objective)
+
+
+def make_evaluator(part, objective, seed: int = 0, jobs: int = 1, quiet: bool = False, executor=None):
+    """The evaluator an objective asks for: a plain :class:`Evaluator` when its band is trivial (one
+    condition, the nominal one), else a :class:`RobustEvaluator`. Both give results with ``table``,
+    ``stats``, ``layout`` and ``n_scans``."""
+    evaluator = Evaluator(part, objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
+    if evaluator.objective.conditions.trivial:
+        return evaluator
+    evaluator.close()
+    return RobustEvaluator(part, evaluator.objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
+
+
 def evaluate_robust(part, layout, objective, seed: int = 0, jobs: int = 1, quiet: bool = False) -> RobustResult:
-    """Evaluate ``layout`` under every condition of ``objective.conditions`` (see the module doc); one pool
-    of workers serves every condition."""
-    from optipose.evaluate.executors import make_executor
+    """Evaluate ``layout`` under every condition of ``objective.conditions`` (see the module doc)."""
+    with RobustEvaluator(part, objective, seed=seed, jobs=jobs, quiet=quiet) as evaluator:
+        return evaluator(layout)
 
-    executor, results = make_executor(jobs), []
-    try:
-        for condition in conditions(objective.conditions):
-            with Evaluator(part, objective, seed=seed, quiet=quiet, executor=executor, condition=condition) as evaluator:
-                results.append((condition, evaluator(layout)))
-    finally:
-        executor.close()
+
+def robust_result(results: list[tuple[Condition, EvaluationResult]], objective) -> RobustResult:
+    """The evaluations of one layout under each condition, aggregated; every choice of the robust Table 1
+    restated under each condition (``Choice.under``)."""
     stats = robust_stats([r.stats for _, r in results], objective.conditions.aggregate)
-    n_scans = results[0][1].per_scan["scan"].nunique()
-    return RobustResult(results, stats, best_choices(stats, layout.names, objective.statistic, n_scans))
-
+    first = results[0][1]
+    table = best_choices(stats, first.layout.names, objective.statistic, first.n_scans)
+    by_condition = [(c.label, stats_by_key(r.stats)) for c, r in results]
+    table = [replace(ch, under=tuple((label, restated(ch, by_key, objective.statistic)) for label, by_key in by_condition))
+             for ch in table]  # fmt: skip
+    return RobustResult(results, stats, table)
 
 def robust_stats(frames: list[pd.DataFrame], how: str | float = "worst") -> pd.DataFrame:
     """Per (subset, axis) the aggregate over conditions of median, p75, mean and max; a subset counts as

@@ -41,7 +41,7 @@ _TRANSLATION = ("x", "y", "z")
 class WorkerSetup:
     """Everything a worker process needs to rebuild the scanners and reference (picklable).
 
-    token : identifies the evaluator (a worker keeps one evaluator's state at a time).
+    token : identifies the evaluator (a worker keeps one evaluator's state at a time, whatever the condition).
     vertices (v, 3) m, faces (f, 3) : the part's mesh. sensor, material : the part's models or names.
     centre : (3,) m, the rotation centre. threads : ray-casting threads per scan (None: all cores).
     occluders : the part's keep-outs, (lo, hi) boxes in m that hide what they cover.
@@ -88,8 +88,9 @@ class _Worker:
         from optipose.registration.reference import SampledReference, SurfaceReference, sample_surface
 
         self.setup = setup
+        self.condition = setup.condition  # the condition of the chunk being run (run_chunk sets it)
         self.mesh = trimesh.Trimesh(setup.vertices, setup.faces, process=False)
-        self.scanners = {None: self._scanner(setup.sensor)}
+        self.scanners: dict = {}  # (model, noise scale) -> Scanner
         cfg = setup.registration
         if cfg.reference == "cad-sample":
             self.reference = SampledReference(*sample_surface(setup.vertices, setup.faces, cfg.reference_spacing), kind="cad-sample")
@@ -99,29 +100,32 @@ class _Worker:
         self._zero: dict = {}
 
     def _scanner(self, model):
+        """The scanner of a sensor model (``None``: the part's) at the condition's noise scale, built once."""
         from optipose.model.sensor import load_sensor
         from optipose.scan.scanner import Scanner
 
-        s = self.setup
-        if s.condition.noise_scale != 1.0:
-            model = load_sensor(model)
-            model = replace(model, noise_sigma=model.noise_sigma * s.condition.noise_scale)
-        return Scanner(self.mesh, model, s.material, threads=s.threads, occluders=list(s.occluders))
+        s, scale = self.setup, self.condition.noise_scale
+        key = (model, scale)
+        if key not in self.scanners:
+            sensor = s.sensor if model is None else model
+            if scale != 1.0:
+                sensor = load_sensor(sensor)
+                sensor = replace(sensor, noise_sigma=sensor.noise_sigma * scale)
+            self.scanners[key] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders))
+        return self.scanners[key]
 
     def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m); ``seed`` is the orientation's noise seed."""
         groups = sensor_groups(models, self.setup.sensor)
-        condition, nominal = self.setup.condition, poses
+        condition, nominal = self.condition, poses
         if condition.draw is not None:  # each sensor stands at its true pose
             poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
         scans = [None] * len(poses)
         for g, (model, idx) in enumerate(groups):
             if not idx:
                 continue
-            if model not in self.scanners:
-                self.scanners[model] = self._scanner(model)
-            scanner = self.scanners[model]
+            scanner = self._scanner(model)
             out = scanner.scan_many([poses[j] for j in idx], self.setup.motion, rpy=rpy, centre=self.setup.centre,
                                     offset=offset, rng=group_seed(seed, g))  # fmt: skip
             for j, scan in zip(idx, out):
@@ -136,10 +140,10 @@ class _Worker:
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
         """Per subset, the part's estimated motion T_O_P (4, 4) on a master-part scan at the nominal
         orientation: the cell's constant bias when the brackets are off, identity when they are not."""
-        condition = self.setup.condition
-        if condition.draw is None:
+        condition = self.condition
+        if condition.draw is None or not condition.zeroed:
             return [np.eye(4)] * len(subsets)
-        key = (np.asarray(poses).tobytes(), tuple(map(str, models)))
+        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), condition)
         if key not in self._zero:
             scans = self.scan(models, poses, zeroing_seed(self.setup.seed, condition.draw))
             clouds = _clouds(self.setup.registration, scans)
@@ -156,7 +160,7 @@ class _Worker:
         """The reference of each subset: the part's, or the nominal scan of the subset's sensors."""
         if self.setup.registration.reference != "nominal-scan":
             return [self.reference] * len(subsets)
-        key = (np.asarray(poses).tobytes(), tuple(map(str, models)))
+        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), self.condition)  # taught with the cell's own brackets
         if key not in self._nominal:
             self._nominal[key] = self._nominal_references(models, poses, subsets)
         return self._nominal[key]
@@ -194,6 +198,7 @@ def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[l
     if worker is None:
         _STATE.clear()  # one evaluator's state per process at a time
         worker = _STATE[setup.token] = _Worker(setup)
+    worker.condition = setup.condition
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
     subsets = all_subsets(len(poses))
     references = worker.references(models, poses, subsets)

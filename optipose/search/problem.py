@@ -62,6 +62,8 @@ class SurrogateProblem:
         self.collision = collision_model(part)
         self._cache: dict = {} if cache is None else cache
         self._targets = dict(targets or {})
+        # the objective's band (SPEC §9): every predicted statistic is the worst over it
+        self.band = dict(noise_scales=objective.conditions.noise_scales)
 
     def with_targets(self, targets: dict[int, np.ndarray]) -> "SurrogateProblem":
         """The same problem (surrogate, cache) measured against these per-axis targets."""
@@ -99,7 +101,7 @@ class SurrogateProblem:
         the shortfall: it is the baseline.
         """
         if not constrained:
-            stats = predicted_stats([self.surrogate.info(T) for T in self.space.to_poses(u)], *self.weights)
+            stats = predicted_stats([self.surrogate.info(T) for T in self.space.to_poses(u)], *self.weights, **self.band)
             return LayoutScore(stats["score"], stats)
         k = len(u) // 6
         parts = [self.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
@@ -111,7 +113,7 @@ class SurrogateProblem:
             constraint = constraint or ("head_gap" if violation > before else "")
         if violation > 0:
             return LayoutScore(float("nan"), None, violation, constraint)
-        stats = predicted_stats(parts, *self.weights)
+        stats = predicted_stats(parts, *self.weights, **self.band)
         return LayoutScore(stats["score"] + self.shortfall(k, stats), stats)
 
     def _head_gaps(self, u: np.ndarray, violation: float) -> float:
