@@ -46,6 +46,7 @@ class FastBackend:
         ids = None
         max_d2 = cfg.max_correspondence_distance**2
         converged, it, history = False, 0, None
+        cycle = Cycle(cfg)
         for it in range(1, cfg.max_iterations + 1):
             p = kernels.transform(source, T)
             if it == 1 and initial is not None:
@@ -65,6 +66,9 @@ class FastBackend:
             T = delta @ T
             if _small_step(delta, cfg):
                 converged = True
+                break
+            if (middle := cycle(T)) is not None:
+                T, converged = middle, True
                 break
             if cfg.method == "point_to_point":
                 T, history = _accelerate(T, delta, c, history)
@@ -96,6 +100,7 @@ class PlainBackend:
         max_d2 = cfg.max_correspondence_distance**2
         step = _kabsch if cfg.method == "point_to_point" else _point_to_plane
         converged, it, history = False, 0, None
+        cycle = Cycle(cfg)
         for it in range(1, cfg.max_iterations + 1):
             p = source @ T[:3, :3].T + T[:3, 3]
             if it == 1 and initial is not None:
@@ -117,6 +122,9 @@ class PlainBackend:
             if _small_step(delta, cfg):
                 converged = True
                 break
+            if (middle := cycle(T)) is not None:
+                T, converged = middle, True
+                break
             if cfg.method == "point_to_point":
                 T, history = _accelerate(T, delta, p[inlier].mean(axis=0), history)
         d2 = np.einsum("ij,ij->i", p - q, p - q)
@@ -134,6 +142,45 @@ class PlainBackend:
 
 
 # ---------------------------------------------------------------------------------------------------------
+class Cycle:
+    """An ICP caught in a cycle. Where the clouds of several sensors disagree (a bracket off its drawn
+    pose), some points sit on the edge between two faces' closest-point regions and change sides every
+    few steps: the pose then repeats with a period of 2 to ~10 steps, or jitters about one place, and
+    the steps never fall below the tolerance. The registration has settled as far as it can when
+
+    * the pose comes back within the tolerances to one it had up to ``window`` steps ago (a cycle), or
+    * over ``window`` steps it has moved net less than one step on average (jitter; a converging or
+      drifting ICP moves net about the sum of its steps);
+
+    the mean of the poses of the cycle (or of the window) is then its estimate.
+    """
+
+    def __init__(self, cfg: RegistrationConfig, window: int = 12):
+        self.cfg, self.window, self.poses, self.steps = cfg, window, [], []
+
+    def __call__(self, T: np.ndarray) -> np.ndarray | None:
+        """The mean pose of the cycle ``T`` closes (or of the jitter it ends), or None."""
+        for lag, P in enumerate(reversed(self.poses), start=1):
+            if lag > 1 and _small_step(T @ np.linalg.inv(P), self.cfg):
+                return _mean_pose(self.poses[-lag + 1 :] + [T])
+        if self.poses:
+            self.steps = (self.steps + [_twist_length(T @ np.linalg.inv(self.poses[-1]))])[-self.window :]
+        if len(self.poses) == self.window and _twist_length(T @ np.linalg.inv(self.poses[0])) < np.mean(self.steps):
+            return _mean_pose(self.poses[1:] + [T])
+        self.poses = (self.poses + [T])[-self.window :]
+        return None
+
+
+def _twist_length(delta: np.ndarray) -> float:
+    """A rigid motion's size: its angle times ``_TWIST_LENGTH`` plus its translation (m)."""
+    angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
+    return float(angle * _TWIST_LENGTH + np.linalg.norm(delta[:3, 3]))
+
+
+def _mean_pose(poses: list[np.ndarray]) -> np.ndarray:
+    return _make_T(Rotation.from_matrix([Q[:3, :3] for Q in poses]).mean().as_matrix(), np.mean([Q[:3, 3] for Q in poses], axis=0))
+
+
 def _small_step(delta: np.ndarray, cfg: RegistrationConfig) -> bool:
     """The ICP step turned less than the rotation tolerance and moved less than the translation one."""
     angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
