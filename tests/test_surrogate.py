@@ -1,6 +1,9 @@
-"""The surrogate's voxel-bias model: the error it predicts exists, has the right size, and adds up."""
+"""The surrogate's voxel-bias model (the error it predicts exists, has the right size, and adds up) and its
+bracket mounting term (linear in the bracket errors, zeroed with the cell, kept in the search cache)."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -94,3 +97,116 @@ def test_plane_seen_head_on_has_no_voxel_bias(flat_plate):
     plate, down = flat_plate
     info = Surrogate(plate).info(down)
     assert np.abs(info.G).max() < 1e-12 * np.abs(info.A).max()
+
+
+# --- the bracket mounting term ---------------------------------------------------------------------------
+MOUNTING = (0.2e-3, np.deg2rad(0.1))  # the robust objective's tolerance: ±0.2 mm, ±0.1°
+
+
+@pytest.fixture(scope="module")
+def hand_b_infos(part_b):
+    from optipose.search.surrogate import protocol_turns
+
+    part, cfg, _ = part_b
+    surrogate = Surrogate(part, voxel=cfg.voxel_size, turns=protocol_turns(load_objective("robust")))
+    return [surrogate.info(T) for T in part.layouts["hand"].poses]
+
+
+def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
+    # independent reference: the scanner's own rebuild of a cloud whose sensor stood off its drawn pose
+    from optipose.scan.scanner import rebuilt_with
+    from optipose.search.mounting import displacement
+    from optipose.transforms import make_T, rpy_to_matrix
+
+    part, _, _ = part_b
+    T = part.layouts["hand"].poses[0]
+    scan = part_scanner(part).scan(T, part.motion, centre=part.rotation_centre, noise=False)
+    xi = np.array([3e-5, -2e-5, 4e-5, 2e-6, -3e-6, 1e-6])  # small: the rebuild is linear in it to ~1e-5
+    true = replace(scan, T_O_S=T @ make_T(rpy_to_matrix(xi[:3]), xi[3:]))
+    moved = rebuilt_with(true, T, part.motion.offsets()).points - scan.points
+    predicted = displacement(scan.points, T) @ xi
+    assert np.abs(moved).max() > 1e-6  # the rotation's shear along the scan is in it, up to ~2 µm
+    assert np.abs(predicted - moved).max() < 1e-3 * np.abs(moved).max()
+
+
+def test_without_mounting_the_prediction_is_todays(hand_b_infos):
+    # today's formula written out: the bias step over the summed equations, noise σ from H / scale²
+    from optipose.search.surrogate import _axis_stats, rotation_sigma
+
+    stats = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0))
+    assert all(np.array_equal(stats[key], predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=None)[key])
+               for key in ("median_deg", "p75_deg", "axis_score"))  # fmt: skip
+    for s, c in enumerate(stats["subsets"]):
+        delta = bias_rotation(sum(hand_b_infos[i].A for i in c), sum(hand_b_infos[i].G for i in c))
+        H = sum(hand_b_infos[i].H for i in c)
+        m = np.maximum(*[_axis_stats(rotation_sigma(H / k**2), delta)[0] for k in (1.0, 5.0)])
+        assert np.array_equal(stats["median_deg"][s], np.rad2deg(m))
+    # a zero tolerance is no term at all
+    zero = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=(0.0, 0.0))
+    assert np.array_equal(zero["median_deg"], stats["median_deg"]) and np.array_equal(zero["p75_deg"], stats["p75_deg"])
+
+
+def test_one_sensors_bracket_translation_is_zeroed_away(hand_b_infos):
+    # a bracket shifted but not turned moves that sensor's whole cloud rigidly (no shear: that needs a turn),
+    # so alone the step recovers exactly that motion at every orientation and the master scan takes it off;
+    # two sensors viewing different faces disagree, and their compromise moves as the part turns
+    from optipose.search.mounting import mounting_variance
+
+    S1, S3 = hand_b_infos[0], hand_b_infos[2]
+    alone = mounting_variance([S1.A_turns], [S1.N_turns], MOUNTING[0], 0.0)
+    pair = mounting_variance([S1.A_turns, S3.A_turns], [S1.N_turns, S3.N_turns], MOUNTING[0], 0.0)
+    assert np.sqrt(alone).max() < 1e-6 * np.sqrt(pair).max()
+    assert np.rad2deg(np.sqrt(pair).max()) > 1e-3  # over a millidegree from 0.2 mm
+    # with the turn too, one sensor's term (the shear, the frame turning) stays well below the pair's
+    alone = mounting_variance([S1.A_turns], [S1.N_turns], *MOUNTING)
+    pair = mounting_variance([S1.A_turns, S3.A_turns], [S1.N_turns, S3.N_turns], *MOUNTING)
+    assert np.sqrt(alone.max(axis=0)).sum() < np.sqrt(pair.max(axis=0)).sum() / 3
+
+
+def test_mounting_term_grows_linearly_with_the_tolerance(hand_b_infos):
+    from optipose.search.mounting import mounting_variance
+
+    A, N = [hand_b_infos[0].A_turns, hand_b_infos[2].A_turns], [hand_b_infos[0].N_turns, hand_b_infos[2].N_turns]
+    assert np.array_equal(mounting_variance(A, N, 0.0, 0.0), np.zeros((len(A[0]) - 1, 3)))
+    one, two = mounting_variance(A, N, *MOUNTING), mounting_variance(A, N, 2 * MOUNTING[0], 2 * MOUNTING[1])
+    assert np.allclose(np.sqrt(two), 2 * np.sqrt(one), rtol=1e-9)  # standard deviation ∝ tolerance
+    # in the prediction: the pair's error grows with the tolerance, toward the term alone when it dominates
+    pair = [hand_b_infos[0], hand_b_infos[2]]
+    p75 = [predicted_stats(pair, mounting=(f * MOUNTING[0], f * MOUNTING[1]))["p75_deg"][2] for f in (0.0, 1.0, 4.0, 8.0)]
+    assert np.all(np.diff(np.array(p75), axis=0) >= 0) and np.all(p75[3] > p75[0])
+    assert np.allclose(p75[3] / p75[2], 2.0, rtol=0.15)
+
+
+def test_search_cache_keeps_the_mounting_term(tmp_path, hand_b_infos):
+    from optipose.io.search import load_cache, save_cache
+    from optipose.search.problem import Violation
+    from optipose.search.space import SPACE_VERSION
+
+    bare = SensorInfo(np.eye(6), 10, 5)  # an empty scan: no bias, no mounting term
+    cache = {(0.1,) * 6: hand_b_infos[0], (0.2,) * 6: hand_b_infos[2], (0.3,) * 6: Violation("clearance", 1.5), (0.4,) * 6: bare}
+    save_cache(tmp_path, cache, SPACE_VERSION)
+    loaded = load_cache(tmp_path, SPACE_VERSION)
+    for key in ((0.1,) * 6, (0.2,) * 6):
+        assert all(np.array_equal(getattr(loaded[key], f), getattr(cache[key], f)) for f in ("H", "A", "G", "A_turns", "N_turns"))
+    assert loaded[(0.4,) * 6].N_turns is None and loaded[(0.3,) * 6] == ("clearance", 1.5)
+    pair = [loaded[(0.1,) * 6], loaded[(0.2,) * 6]]
+    assert np.array_equal(predicted_stats(pair, mounting=MOUNTING)["p75_deg"],
+                          predicted_stats([hand_b_infos[0], hand_b_infos[2]], mounting=MOUNTING)["p75_deg"])  # fmt: skip
+    # a cache from before the mounting term is not reused: its poses would score without it
+    data = dict(np.load(tmp_path / "cache.npz"))
+    np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k not in ("A_turns", "N_turns")})
+    assert load_cache(tmp_path, SPACE_VERSION) == {}
+
+
+def test_problem_band_carries_the_tolerance_only_when_mounted(part_b):
+    from dataclasses import replace as change
+
+    from optipose.search.config import SearchConfig
+    from optipose.search.problem import SurrogateProblem
+
+    part = part_b[0]
+    robust = load_objective("robust")
+    problem = SurrogateProblem(part, robust, SearchConfig())
+    assert problem.band["mounting"] == (robust.conditions.mounting_translation, robust.conditions.mounting_rotation)
+    plain = change(robust, conditions=change(robust.conditions, mounting_translation=0.0, mounting_rotation=0.0))
+    assert SurrogateProblem(part, plain, SearchConfig(), surrogate=problem.surrogate).band["mounting"] is None

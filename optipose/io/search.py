@@ -99,6 +99,9 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
         constraint=np.array(["" if isinstance(v, SensorInfo) else v.constraint for v in infos], dtype=str),
         A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(len(infos), 6, 6),
         G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
+        # the mounting term's per-turn matrices (n_phases + 1 with the nominal orientation; NaN: none)
+        A_turns=np.array([_or_nan(v, "A_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(len(infos), n_phases + 1, 6, 6),
+        N_turns=np.array([_or_nan(v, "N_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(len(infos), n_phases + 1, 6, 6),
         space=space_version,
     )
 
@@ -106,6 +109,11 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
 def _or_zeros(info, name: str, shape: tuple) -> np.ndarray:
     value = getattr(info, name, None)  # a Violation has neither
     return np.zeros(shape) if value is None else value
+
+
+def _or_nan(info, name: str, shape: tuple) -> np.ndarray:
+    value = getattr(info, name, None)
+    return np.full(shape, np.nan) if value is None else value
 
 
 def load_cache(folder: Path, space_version: int) -> dict:
@@ -118,13 +126,15 @@ def load_cache(folder: Path, space_version: int) -> dict:
     if not path.is_file():
         return {}
     data = np.load(path)
-    if "G" not in data:  # a cache from before the surrogate modelled the voxel bias: scores differ, start over
+    if "G" not in data or "N_turns" not in data:  # from before the voxel bias or the mounting term: scores differ, start over
         return {}
     if (int(data["space"]) if "space" in data else 1) != space_version:  # its u keys name other poses: start over
         return {}
     constraint = data["constraint"] if "constraint" in data else np.full(len(data["u"]), "infeasible")
     out = {}
-    rows = zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"], data["A"], data["G"], constraint)
-    for u, ok, H, (n_points, n_voxels), violation, A, G, why in rows:
-        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G) if ok else Violation(str(why), float(violation))
+    rows = zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"], data["A"], data["G"],
+               data["A_turns"], data["N_turns"], constraint)  # fmt: skip
+    for u, ok, H, (n_points, n_voxels), violation, A, G, A_turns, N_turns, why in rows:
+        turns = (None, None) if np.isnan(N_turns).any() else (A_turns, N_turns)
+        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G, *turns) if ok else Violation(str(why), float(violation))
     return out

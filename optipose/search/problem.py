@@ -62,8 +62,9 @@ class SurrogateProblem:
         self.collision = collision_model(part)
         self._cache: dict = {} if cache is None else cache
         self._targets = dict(targets or {})
-        # the objective's band (SPEC §9): every predicted statistic is the worst over it
-        self.band = dict(noise_scales=objective.conditions.noise_scales)
+        # the objective's band (SPEC §9): every predicted statistic is the worst over it, brackets off by the tolerance
+        band = objective.conditions
+        self.band = dict(noise_scales=band.noise_scales, mounting=(band.mounting_translation, band.mounting_rotation) if band.mounted else None)
 
     def with_targets(self, targets: dict[int, np.ndarray]) -> "SurrogateProblem":
         """The same problem (surrogate, cache) measured against these per-axis targets."""

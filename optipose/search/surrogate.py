@@ -35,6 +35,10 @@ What the surrogate models, and why:
   Turning a scan is not re-scanning the turned part (which points are seen and how densely change a
   little), but it moves the edges through the grid as the protocol does; how close it comes to ICP is
   measured by ``benchmarks/bench_surrogate_ranking.py`` (figures in the README).
+* **the brackets.** Under an objective whose band has a mounting tolerance, a sensor's true pose is off
+  its drawing and the cell is zeroed on a master part; the change with orientation of the compromise
+  between sensors whose clouds disagree is linearised in the bracket errors at the same turns and added as
+  a variance (:mod:`optipose.search.mounting`, which says what it leaves out).
 
 It ranks layouts; the full ICP protocol (:mod:`optipose.evaluate.evaluator`) gives the numbers that are reported.
 """
@@ -49,6 +53,7 @@ from scipy.stats import norm
 
 from optipose.model.motion import ScanMotion
 from optipose.scan.scanner import Scanner
+from optipose.search.mounting import mounting_maps, mounting_variance
 from optipose.transforms import part_motion
 
 __all__ = ["Surrogate", "SensorInfo", "protocol_turns", "bias_rotation", "MEDIAN_PER_SIGMA", "P75_PER_SIGMA", "predicted_stats"]
@@ -79,6 +84,9 @@ class SensorInfo:
     n_voxels: int
     A: np.ndarray | None = None  # (6, 6) unweighted point-to-plane normal matrix ΣJᵀJ of the voxel centroids
     G: np.ndarray | None = None  # (turns, 6) ΣJᵀr of the voxel centroids' residuals, per turn
+    # the bracket mounting term (:mod:`optipose.search.mounting`), in O at each turn, index 0 the nominal orientation
+    A_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀJ of the voxel centroids
+    N_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀr per unit bracket error (r rad, t m; sensor frame)
 
 
 class Surrogate:
@@ -129,28 +137,32 @@ class Surrogate:
         # the number of points a full-fidelity scan puts there; its tangential spread does not matter
         var = self.full_sensor.noise_sigma**2 / inten / (counts * self.scale) + self.extra_variance
         J = np.hstack([np.cross(p, n), n]) / np.sqrt(var)[:, None]
-        A, G = self._bias(scan.points)
-        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G)
+        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), *self._bias(scan.points, T_O_S))
 
-    def _bias(self, points: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc)."""
+    def _bias(self, points: np.ndarray, T_O_S: np.ndarray) -> tuple:
+        """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and
+        per turn and at the nominal orientation, the mounting term's normal matrices and maps."""
         if not len(self.motions):
-            return None, None
+            return None, None, None, None
         from optipose.registration.kernels import voxel_centroids
         from optipose.registration.reference import SurfaceReference
 
         if self._reference is None:
             self._reference = SurfaceReference(self.part.mesh.vertices, self.part.mesh.faces)
         A, G = np.zeros((6, 6)), np.zeros((len(self.motions), 6))
-        for m, T in enumerate(self.motions):
+        A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
+        for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
             turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel)
             v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
             q, n, _ = self._reference.nearest(v)
+            A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
+            if m == 0:
+                continue
             r = np.einsum("ij,ij->i", v - q, n)
             J = np.hstack([np.cross(v - self.centre, n), n])
-            G[m] = J.T @ r
+            G[m - 1] = J.T @ r
             A += J.T @ J / len(self.motions)
-        return A, G
+        return A, G, A_turns, N_turns
 
 
 def _voxels(points: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -183,15 +195,17 @@ _Z = norm.ppf((np.arange(16) + 0.5) / 16)  # 16 equal-probability stand-ins for 
 
 
 def _axis_stats(sigma: np.ndarray, delta: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Median and 75th percentile (3,) rad of |error| per axis: noise σ (3,) plus the bias δ (turns, 3)."""
+    """Median and 75th percentile (3,) rad of |error| per axis: noise σ (3,) or per turn (turns, 3), plus
+    the bias δ (turns, 3)."""
     if delta is None or not len(delta):
         return sigma * MEDIAN_PER_SIGMA, sigma * P75_PER_SIGMA
-    e = np.abs(delta[:, None, :] + sigma[None, None, :] * _Z[None, :, None]).reshape(-1, 3)
+    sigma = np.broadcast_to(sigma, delta.shape)
+    e = np.abs(delta[:, None, :] + sigma[:, None, :] * _Z[None, :, None]).reshape(-1, 3)
     return np.median(e, axis=0), np.percentile(e, 75, axis=0)
 
 
 def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_weight=1.0, p75_weight=1.0,
-                    noise_scales: tuple[float, ...] = (1.0,)) -> dict:  # fmt: skip
+                    noise_scales: tuple[float, ...] = (1.0,), mounting: tuple[float, float] | None = None) -> dict:  # fmt: skip
     """The surrogate's Table 1 for a layout: every non-empty subset's predicted per-axis median and 75th
     percentile (degrees), each axis's best subset, its per-axis score and the weighted score of the per-axis
     best.
@@ -199,6 +213,9 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     noise_scales : the sensor noise σ times each of these; each statistic is the worst over them. The
     information matrix scales with 1/σ² and the voxel bias not at all, so a band costs one more 6×6 inverse
     per level, no scan.
+    mounting : (translation m, rotation rad), the brackets' tolerance (± per axis), or None: the zeroed
+    cell's error from bracket errors (:mod:`optipose.search.mounting`) adds its variance, the same at every
+    noise level, to the noise's at each turn. It needs the turns (``A_turns``); without them it is left out.
     """
     k = len(infos)
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
@@ -207,8 +224,12 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
         H = sum(infos[i].H for i in c)
         have_bias = all(infos[i].G is not None for i in c)
         delta = bias_rotation(sum(infos[i].A for i in c), sum(infos[i].G for i in c)) if have_bias else None
+        mount = None
+        if mounting is not None and delta is not None and all(infos[i].A_turns is not None for i in c):
+            mount = mounting_variance([infos[i].A_turns for i in c], [infos[i].N_turns for i in c], *mounting)
         for n, scale in enumerate(noise_scales):
-            m, q = _axis_stats(rotation_sigma(H if scale == 1.0 else H / scale**2), delta)
+            sigma = rotation_sigma(H if scale == 1.0 else H / scale**2)
+            m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), delta)
             median[s], p75[s] = (m, q) if n == 0 else (np.maximum(median[s], m), np.maximum(p75[s], q))
     median, p75 = np.rad2deg(median), np.rad2deg(p75)
     best = [min(range(len(subsets)), key=lambda s: (median[s, a], p75[s, a])) for a in range(3)]
