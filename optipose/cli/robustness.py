@@ -5,6 +5,11 @@ Each layout is evaluated under every condition of the objective's ``[conditions]
 condition the table shows its robust choice of all its sensors (at most as many as the hand layout has)
 against the hand layout's robust choice of as many, each axis on a fixed subset, and
 a verdict on the robust statistic (the worst over the conditions) says whether to keep the hand sensors.
+
+When the band has a mounting tolerance (``--brackets``, the default then), each layout's bracket
+sensitivity follows (:mod:`optipose.evaluate.sensitivity`, on the reduced protocol at the preset's noise):
+how far each axis spreads with the brackets off, the bias an un-zeroed cell sees, and which sensor's
+bracket to make precise.
 """
 
 from __future__ import annotations
@@ -23,6 +28,11 @@ Layouts = Annotated[
     Optional[list[Path]],
     typer.Option("--layout", help="A layout TOML to compare with the hand-placed one (repeatable), e.g. a search's layouts/found_k2.toml."),
 ]
+Brackets = Annotated[
+    Optional[bool],
+    typer.Option("--brackets/--no-brackets", help="Each layout's bracket sensitivity (reduced protocol, noise x1): spread, "
+                 "un-zeroed bias, the sensor to mount precisely. Default: on when the objective has a mounting tolerance."),
+]  # fmt: skip
 
 
 @friendly_errors
@@ -34,14 +44,15 @@ def robustness(
     out: ResultFolder = None,
     jobs: Jobs = 1,
     seed: Seed = 0,
+    brackets: Brackets = None,
 ) -> None:
     """Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
     levels, bracket tolerances) and say, per layout, whether it stays no worse than the hand one."""
-    robustness_command(part, layout or [], objective, units, out, jobs or 1, seed)
+    robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets)
 
 
 def robustness_command(part: str, layouts: list[Path], objective: str = "robust", units: str = "auto",
-                       out: Path | None = None, jobs: int = 1, seed: int = 0) -> Path:  # fmt: skip
+                       out: Path | None = None, jobs: int = 1, seed: int = 0, brackets: bool | None = None) -> Path:  # fmt: skip
     """Run the evaluations, print the table and the verdicts, save the result folder; returns the folder."""
     from rich.console import Console
 
@@ -56,6 +67,11 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     if "hand" not in the_part.layouts:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout to compare with")
     the_objective = load_objective(objective)
+    if brackets is None:
+        brackets = the_objective.conditions.mounted
+    elif brackets and not the_objective.conditions.mounted:
+        raise ConfigError(f"--brackets: objective '{the_objective.name}' has no mounting tolerance (mounting_translation_mm, "
+                          "mounting_rotation_deg in [conditions])")  # fmt: skip
     given = [load_layout(p) for p in layouts]
     console = Console(stderr=True)
     results = {}
@@ -68,8 +84,28 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     Console().print(_table(rows, the_part.name))
     for line in _verdicts(results):
         Console().print(line)
+    if brackets:
+        _brackets(the_part, the_objective, seed, jobs, results, folder, console)
     console.print(f"results: {folder}")
     return folder
+
+
+def _brackets(part, objective, seed: int, jobs: int, results: dict, folder: Path, console) -> None:
+    """Each layout's bracket sensitivity (its robust choice per k), printed and saved beside the rest."""
+    from rich.console import Console
+
+    from optipose.evaluate.sensitivity import BracketEvaluator
+    from optipose.io.robustness import write_brackets
+
+    found = {}
+    with BracketEvaluator(part, objective, seed=seed, jobs=jobs) as evaluator:
+        for name, result in results.items():
+            n = len(result.layout)
+            with console.status(f"{part.name}: {name}'s brackets ({1 + objective.conditions.mounting_draws * (3 + n)} evaluations)"):
+                found[name] = evaluator(result.layout, result.table)
+    write_brackets(folder, found)
+    for renderable in _bracket_tables(found, part.name):
+        Console().print(renderable)
 
 
 def _conditions(objective):
@@ -110,3 +146,64 @@ def _table(rows, part_name: str):
         name = f"{layout} k{k}" if layout == "hand" else layout
         table.add_row(name, short, cells["roll"], cells["pitch"], cells["yaw"], f"{1e3 * first['score_deg']:.2f}", ratio)
     return table
+
+
+def _bracket_tables(found: dict, part_name: str) -> list:
+    """Per layout (its choice of all its sensors): each axis's spread with perfect and off brackets (mdeg
+    median/p75, zeroed) and the mean error of an un-zeroed cell per draw and its worst magnitude (mdeg; µm
+    for x, y, z), narrow enough for an 80-column terminal; then each
+    sensor's score change with its bracket alone off, and per layout the bracket to make precise."""
+    import numpy as np
+    from rich import box
+    from rich.table import Table
+
+    first = next(iter(found.values()))
+    protocol = f"{'reduced protocol, ' if first.reduced else ''}{first.n_scans} scans"
+    axes = Table(title=f"{part_name}: brackets off by ±{1e3 * first.translation:g} mm, ±{np.rad2deg(first.rotation):g}° "
+                       f"({len(first.draws)} draw{'s' if len(first.draws) > 1 else ''}, noise x1, {protocol}); mdeg, µm for x y z",
+                 box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)  # fmt: skip
+    for col in ("layout", "axis", "subset", "perfect", "off", "bias per draw", "worst"):
+        axes.add_column(col, justify="left" if col in ("layout", "axis", "subset") else "right", no_wrap=True)
+    sensors = Table(title="one bracket off at a time: change of each axis's median+p75 and of the score, mdeg (worst draw)",
+                    box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)  # fmt: skip
+    for col in ("layout", "sensor", "roll", "pitch", "yaw", "score", "rank"):
+        sensors.add_column(col, justify="left" if col in ("layout", "sensor") else "right", no_wrap=True)
+    lines = []
+    for name, sens in found.items():
+        k = len(sens.names)
+        label = f"{name} k{k}" if name == "hand" else name
+        for i, row in enumerate(_axis_rows(sens, k)):
+            axes.add_row(label if i == 0 else "", *row)
+        ranking = sens.ranking(k)
+        for rank, s in enumerate(ranking, start=1):
+            sensors.add_row(label if rank == 1 else "", s.name, *(_mdeg(c, signed=True) for c in s.change),
+                            _mdeg(s.score_change, signed=True), str(rank))  # fmt: skip
+        best = ranking[0]
+        lines.append(f"{label}: make {best.name}'s bracket precise (score {_mdeg(best.score_change, signed=True)} mdeg with it alone off)")
+    return [axes, sensors, *lines]
+
+
+def _axis_rows(sens, k: int) -> list[tuple[str, ...]]:
+    """The cells of the axes table for the choice of k sensors: rotations in mdeg, translations in µm."""
+    worst = sens.worst_bias(k)
+    spread = {s.axis: s for s in sens.spread if s.k == k}
+    rows = []
+    for axis in dict.fromkeys(b.axis for b in sens.bias):
+        biases = [b for b in sens.bias if b.k == k and b.axis == axis]
+        rotation = axis in spread
+        value = _mdeg if rotation else (lambda v, signed=False: f"{1e6 * v:+.1f}" if signed else f"{1e6 * v:.1f}")
+        if rotation:
+            s = spread[axis]
+            perfect, off = f"{_mdeg(s.nominal_median)}/{_mdeg(s.nominal_p75)}", f"{_mdeg(s.mounted_median)}/{_mdeg(s.mounted_p75)}"
+        else:
+            perfect = off = ""
+        rows.append((axis, biases[0].subset or "-", perfect, off, " ".join(value(b.bias, signed=True) for b in biases), value(worst[axis])))
+    return rows
+
+
+def _mdeg(rad: float, signed: bool = False) -> str:
+    import numpy as np
+
+    if not np.isfinite(rad):
+        return "n/a"
+    return f"{1e3 * np.rad2deg(rad):+.2f}" if signed else f"{1e3 * np.rad2deg(rad):.2f}"

@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors, warn_if_band
+from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
 from optipose.errors import ConfigError
 
 __all__ = ["search", "search_command"]
@@ -61,7 +61,6 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     else:
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config))
         the_objective = load_objective(objective)
-        warn_if_band(the_objective, "search")
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
 
@@ -187,6 +186,8 @@ def _print_report(console, report, part) -> None:
     the found layouts' poses."""
     if report.validated:
         console.print(_validation_table(report.validation, part))
+        if any(v.ratios() for v in report.validation.verdicts()):
+            console.print(_band_table(report.validation, part))
         for line in report.validation.verdict_lines():
             console.print(line)
     console.print(_strategies_table(report.outcome))
@@ -203,7 +204,8 @@ def _validation_table(validation, part):
     from optipose.evaluate.compare import mdeg
 
     protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
-    table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed "
+    band = ", the worst over the band of conditions" if any(c.under for c in validation.found.values()) else ""
+    table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed{band} "
                         "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
     for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
         table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")
@@ -214,6 +216,27 @@ def _validation_table(validation, part):
             choice = choices[k]
             cells = [f"{mdeg(a.median):.3f}/{mdeg(a.p75):.3f} {a.name or 'unobservable'}" for a in choice.axes]
             table.add_row(str(k), label, choice.name, *cells, f"{mdeg(choice.score):.3f}")
+    return table
+
+
+def _band_table(validation, part):
+    """Per k and condition of the band: hand / found in sum, and whether found is no worse on every axis."""
+    from rich.table import Table
+
+    from optipose.evaluate.compare import dominates
+
+    verdicts = [v for v in validation.verdicts() if v.ratios()]
+    table = Table(title=f"{part.name}: hand / found score per condition of the band (held-out seed); "
+                        "* = found worse on some axis there")  # fmt: skip
+    table.add_column("condition", justify="left")
+    for v in verdicts:
+        table.add_column(f"k={v.k}", justify="right")
+    for n, (label, _) in enumerate(verdicts[0].found.under):
+        cells = []
+        for v in verdicts:
+            (_, found), (_, hand) = v.found.under[n], v.reference.under[n]
+            cells.append(f"{hand.score / found.score:.2f}{'' if dominates(found, hand) else '*'}")
+        table.add_row(label, *cells)
     return table
 
 

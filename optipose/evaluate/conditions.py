@@ -20,7 +20,7 @@ The defaults (one level at the preset's σ, zero tolerance) are exactly the obje
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -28,7 +28,7 @@ from optipose.errors import ConfigError
 from optipose.seeds import mounting_seed
 from optipose.transforms import make_T, rpy_to_matrix
 
-__all__ = ["ConditionsConfig", "Condition", "conditions", "mounting_error", "conditions_from_table", "aggregate"]
+__all__ = ["ConditionsConfig", "Condition", "conditions", "band_ends", "mounting_error", "conditions_from_table", "aggregate"]
 
 _MM, _DEG = 1e-3, np.pi / 180
 
@@ -73,6 +73,13 @@ class Condition:
         return f"noise x{self.noise_scale:g}{mount}{'' if self.zeroed else ', not zeroed'}"
 
     @property
+    def slug(self) -> str:
+        """The label as a folder name, e.g. ``noise-x3-draw-1``."""
+        mount = "" if self.draw is None else f"-draw-{self.draw}"
+        only = "" if self.only is None or self.draw is None else "-of-" + "-".join(str(j + 1) for j in self.only)
+        return f"noise-x{self.noise_scale:g}{mount}{only}{'' if self.zeroed else '-unzeroed'}"
+
+    @property
     def nominal(self) -> bool:
         return self.noise_scale == 1.0 and self.draw is None
 
@@ -81,6 +88,15 @@ def conditions(cfg: ConditionsConfig) -> list[Condition]:
     """Every condition of the band: each noise level with each mounting draw (noise levels first)."""
     draws = list(range(cfg.mounting_draws)) if cfg.mounted else [None]
     return [Condition(s, d, cfg.mounting_translation, cfg.mounting_rotation) for s in cfg.noise_scales for d in draws]
+
+
+def band_ends(cfg: ConditionsConfig) -> ConditionsConfig:
+    """The band cut to its lowest and highest noise level (with every mounting draw): the search's cheaper
+    band. An error's square is about bias² + s²·σ² at noise scale s, so the difference between two layouts
+    is affine in s²: a layout no worse than another at both ends of the band is no worse anywhere in it,
+    and the worst over the band is (about) the worst over its ends."""
+    scales = tuple(sorted({min(cfg.noise_scales), max(cfg.noise_scales)}))
+    return replace(cfg, noise_scales=scales)
 
 
 def mounting_error(condition: Condition, seed: int, sensor: int) -> np.ndarray:

@@ -13,11 +13,11 @@ from dataclasses import dataclass, field, replace
 
 import pandas as pd
 
-from optipose.evaluate.assignment import Choice, best_choices, restated, stats_by_key
+from optipose.evaluate.assignment import Choice, best_choices, choose, restated, stats_by_key
 from optipose.evaluate.conditions import Condition, aggregate, conditions
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 
-__all__ = ["RobustResult", "RobustEvaluator", "make_evaluator", "evaluate_robust", "robust_stats"]
+__all__ = ["RobustResult", "RobustEvaluator", "make_evaluator", "evaluate_robust", "robust_result", "choice_of", "robust_stats"]
 
 
 @dataclass
@@ -97,6 +97,16 @@ def robust_result(results: list[tuple[Condition, EvaluationResult]], objective) 
     table = [replace(ch, under=tuple((label, restated(ch, by_key, objective.statistic)) for label, by_key in by_condition))
              for ch in table]  # fmt: skip
     return RobustResult(results, stats, table)
+
+def choice_of(result, sensors: tuple[int, ...]) -> Choice:
+    """The choice of exactly these sensors of an evaluated layout (each axis its best subset of them), from
+    an :class:`EvaluationResult` or a :class:`RobustResult` (then restated under every condition)."""
+    objective = result.objective if isinstance(result, EvaluationResult) else result.results[0][1].objective
+    choice = choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), objective.statistic, result.n_scans)
+    if isinstance(result, EvaluationResult):
+        return choice
+    return replace(choice, under=tuple((c.label, restated(choice, stats_by_key(r.stats), objective.statistic)) for c, r in result.results))
+
 
 def robust_stats(frames: list[pd.DataFrame], how: str | float = "worst") -> pd.DataFrame:
     """Per (subset, axis) the aggregate over conditions of median, p75, mean and max; a subset counts as

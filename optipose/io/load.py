@@ -9,6 +9,7 @@ results through here, never by parsing CSV columns of their own.
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -59,19 +60,28 @@ def load_search(folder: Path, config: dict | None = None):
 
 
 def choices_from_comparison(rows: pd.DataFrame, names: list[str]) -> dict[int, Choice]:
-    """k → Choice from ``comparison.csv`` rows of one layout (degrees back to radians), in file order."""
+    """k → Choice from ``comparison.csv`` rows of one layout (degrees back to radians), in file order;
+    under a band (a ``condition`` column) the robust choice, carrying its statistics per condition."""
+    if "condition" not in rows:
+        return {k: _choice(group, k, names) for k, group in rows.groupby("k", sort=False)}
     out = {}
     for k, group in rows.groupby("k", sort=False):
-        by_axis = {r.axis: r for r in group.itertuples(index=False)}
-        axes = []
-        for axis in AXES:
-            r = by_axis[axis]
-            name = "" if r.subset == "unobservable" else str(r.subset)
-            axes.append(AxisChoice(axis, _indices(name, names), name, float(np.deg2rad(r.median_deg)), float(np.deg2rad(r.p75_deg))))
-        first = group.iloc[0]
-        sensors = str(first["sensors"])
-        out[int(k)] = Choice(int(k), _indices(sensors, names), sensors, tuple(axes), float(np.deg2rad(first["score_deg"])))
+        labels = list(dict.fromkeys(group["condition"]))
+        under = tuple((label, _choice(group[group.condition == label], k, names)) for label in labels if label != "band")
+        out[int(k)] = replace(_choice(group[group.condition == "band"], k, names), under=under)
     return out
+
+
+def _choice(group: pd.DataFrame, k, names: list[str]) -> Choice:
+    by_axis = {r.axis: r for r in group.itertuples(index=False)}
+    axes = []
+    for axis in AXES:
+        r = by_axis[axis]
+        name = "" if r.subset == "unobservable" else str(r.subset)
+        axes.append(AxisChoice(axis, _indices(name, names), name, float(np.deg2rad(r.median_deg)), float(np.deg2rad(r.p75_deg))))
+    first = group.iloc[0]
+    sensors = str(first["sensors"])
+    return Choice(int(k), _indices(sensors, names), sensors, tuple(axes), float(np.deg2rad(first["score_deg"])))
 
 
 def _indices(name: str, names: list[str]) -> tuple[int, ...]:

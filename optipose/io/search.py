@@ -14,7 +14,7 @@ import numpy as np
 
 from optipose.io.evaluation import write_evaluation
 from optipose.io.folders import versions, write_config
-from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame
+from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame, table1_frame
 from optipose.model.layout import Layout, write_layout
 
 __all__ = ["SearchFolder", "save_cache", "load_cache"]
@@ -55,10 +55,19 @@ class SearchFolder:
         surrogate_frame(outcome).to_csv(self.folder / "surrogate_scores.csv", index=False)
 
     def evaluation(self, name: str, result) -> None:
-        """``validation/<name>/``: one evaluation of the validation, as soon as it ends."""
+        """``validation/<name>/``: one evaluation of the validation, as soon as it ends; under a band, one
+        evaluation folder per condition (``validation/<name>/noise-x3-draw-1/``) and the robust statistics
+        and Table 1 beside them."""
         sub = self.folder / "validation" / name
         sub.mkdir(parents=True, exist_ok=True)
-        write_evaluation(result, sub)
+        if not hasattr(result, "results"):
+            write_evaluation(result, sub)
+            return
+        for condition, each in result.results:
+            (sub / condition.slug).mkdir(exist_ok=True)
+            write_evaluation(each, sub / condition.slug)
+        result.stats.to_csv(sub / "stats.csv", index=False)
+        table1_frame(result.table).to_csv(sub / "table1.csv", index=False)
 
     def validation(self, validation) -> None:
         """``comparison.csv``: found vs. hand per k and axis."""

@@ -27,7 +27,8 @@ import time
 import numpy as np
 
 from optipose.evaluate.compare import excess, rank
-from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.conditions import conditions
+from optipose.evaluate.robust import make_evaluator
 from optipose.evaluate.objective import reduced_objective
 from optipose.search.candidates import candidates
 from optipose.search.confirm import Confirmer
@@ -53,7 +54,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
     config = study.problem.config
     finalists, records = {}, []
     confirmer = Confirmer(part, objective, selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
-    with Evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
+    with make_evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
         hand = evaluator(part.layouts["hand"]) if "hand" in part.layouts else None
         for k in sorted(outcome.found):
             reference = _reference(k, hand, confirmer, records, on_stage)
@@ -111,7 +112,9 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
     starts = [best] + nearest(pool, reference, best)
     if k == 1:  # a reference means the part has a hand layout
         starts += hand_start(study.problem, part.layouts["hand"], reference)
-    evals = config.polish_evals if k == 1 else config.polish_evals // 2
+    # under a band each evaluation runs every condition: the polish gets as many conditions' worth of work
+    evals = (config.polish_evals if k == 1 else config.polish_evals // 2) // len(conditions(evaluator.objective.conditions))
+    starts = starts[: evals // (6 * k + 2)]  # COBYLA needs 6k + 1 evaluations before its first step
     for start in starts:
         found, choice, polish_records = polish(
             study.problem, evaluator, start, reference, config, evals // len(starts), config.polish_time / len(starts), on_stage

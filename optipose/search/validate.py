@@ -1,13 +1,13 @@
 """Stage: validation. The found layouts and the hand-placed one on the objective's protocol (``quick``: the
 reduced one) with a noise seed the search never saw (:func:`optipose.seeds.validation_seed`); these are
-the numbers reported."""
+the numbers reported. Under a band of conditions every layout is evaluated at each of them (the bracket
+errors drawn from the held-out seed too), and each choice carries its statistics per condition."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from optipose.evaluate.assignment import choose, stats_by_key
-from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.robust import choice_of, make_evaluator
 from optipose.evaluate.objective import reduced_objective
 from optipose.model.layout import Layout
 from optipose.search.records import Validation
@@ -28,15 +28,13 @@ def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int =
         objective = reduced_objective(objective)
     done = on_evaluation or (lambda name, result: None)
     found, hand = {}, {}
-    with Evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:
+    with make_evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:
         for members in nested_groups(layouts):
             big = layouts[max(members)]
             result = evaluator(big)
             done(f"found_k{max(members)}", result)
-            by_key, n_scans = stats_by_key(result.stats), result.per_scan["scan"].nunique()
             for k in members:
-                idx = tuple(_indices_in(layouts[k], big))
-                found[k] = choose(idx, big.names, by_key, objective.statistic, n_scans)
+                found[k] = choice_of(result, tuple(_indices_in(layouts[k], big)))
         if "hand" in part.layouts:
             result = evaluator(part.layouts["hand"])
             done("hand", result)
