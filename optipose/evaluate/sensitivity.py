@@ -111,7 +111,11 @@ class BracketSensitivity:
     def worst_bias(self, k: int) -> dict[str, float]:
         """Per axis the largest |bias| over the draws of the choice of k sensors (rad or m)."""
         rows = [b for b in self.bias if b.k == k]
-        return {axis: float(np.nanmax([abs(b.bias) for b in rows if b.axis == axis] or [np.nan])) for axis in BIAS_AXES}
+        out = {}
+        for axis in BIAS_AXES:
+            values = [abs(b.bias) for b in rows if b.axis == axis and np.isfinite(b.bias)]
+            out[axis] = max(values) if values else float("nan")
+        return out
 
     def ranking(self, k: int | None = None) -> list[SensorSensitivity]:
         """The sensors of the choice of k (default: all the layout's sensors), most sensitive first; a
