@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 from optipose.errors import PoseError
 
 __all__ = [
+    "mean_pose",
     "rpy_to_matrix",
     "matrix_to_rpy",
     "make_T",
@@ -96,3 +97,11 @@ def part_motion(rpy: np.ndarray, centre: np.ndarray, offset: np.ndarray | None =
     if offset is not None:
         t = t + np.asarray(offset, dtype=float)
     return make_T(R, t)
+
+
+def mean_pose(poses: list[np.ndarray]) -> np.ndarray:
+    """The mean of nearby rigid motions (4, 4): the rotations' mean, the translations' mean."""
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_matrix([Q[:3, :3] for Q in poses]).mean().as_matrix()
+    return make_T(R, np.mean([Q[:3, 3] for Q in poses], axis=0))

@@ -114,12 +114,14 @@ class _Worker:
             self.scanners[key] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders))
         return self.scanners[key]
 
-    def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None) -> list:
+    def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None, exact=False) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
-        orientation ``rpy`` (rad) and ``offset`` (m); ``seed`` is the orientation's noise seed."""
+        orientation ``rpy`` (rad) and ``offset`` (m); ``seed`` is the orientation's noise seed; ``exact``:
+        as if the brackets were exact, whatever the condition."""
         groups = sensor_groups(models, self.setup.sensor)
         condition, nominal = self.condition, poses
-        if condition.draw is not None:  # each sensor stands at its true pose
+        mounted = condition.draw is not None and not exact
+        if mounted:  # each sensor stands at its true pose
             poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
         scans = [None] * len(poses)
         for g, (model, idx) in enumerate(groups):
@@ -130,7 +132,7 @@ class _Worker:
                                     offset=offset, rng=group_seed(seed, g))  # fmt: skip
             for j, scan in zip(idx, out):
                 scans[j] = scan
-        if condition.draw is not None:  # ... and the cell rebuilds its cloud with the drawn pose
+        if mounted:  # ... and the cell rebuilds its cloud with the drawn pose
             from optipose.scan.scanner import rebuilt_with
 
             shifts = self.setup.motion.offsets()
@@ -138,21 +140,31 @@ class _Worker:
         return scans
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
-        """Per subset, the part's estimated motion T_O_P (4, 4) on a master-part scan at the nominal
-        orientation: the cell's constant bias when the brackets are off, identity when they are not."""
+        """Per subset, the constant bias Z (4, 4) the brackets give a cell, so that a later estimate T is
+        reported as Z⁻¹ T: identity when the brackets are not off (or the cell is not zeroed).
+
+        The cell is zeroed on a master part at the nominal orientation: Z is the estimate of the mounted
+        cell there relative to that of a cell with exact brackets, from the same scan (same noise seed).
+        The comparison takes off only what the brackets add; a master registration's own error (its noise,
+        and at exactly the nominal orientation the down-sampling grid lying along the part's edges, a
+        bias of several millidegrees on part B that no other orientation shares) is not the brackets',
+        and would otherwise shift every later measurement of the condition."""
         condition = self.condition
         if condition.draw is None or not condition.zeroed:
             return [np.eye(4)] * len(subsets)
         key = (np.asarray(poses).tobytes(), tuple(map(str, models)), condition)
         if key not in self._zero:
-            scans = self.scan(models, poses, zeroing_seed(self.setup.seed, condition.draw))
-            clouds = _clouds(self.setup.registration, scans)
+            seed = zeroing_seed(self.setup.seed, condition.draw)
+            cfg = self.setup.registration
+            mounted = _clouds(cfg, self.scan(models, poses, seed))
+            exact = _clouds(cfg, self.scan(models, poses, seed, exact=True))
             zero = []
             for subset, reference in zip(subsets, references):
-                reg, _ = _register(self, clouds, subset, reference)
-                if not reg.ok:  # its estimate still stands in for the bias; say so
-                    log.warning("zeroing subset %s on the master scan: %s", subset, reg.failure or "did not converge")
-                zero.append(invert_T(reg.T_target_source))
+                off, _ = _register(self, mounted, subset, reference)
+                on, _ = _register(self, exact, subset, reference)
+                if not (off.ok and on.ok):  # its estimate still stands in for the bias; say so
+                    log.warning("zeroing subset %s on the master scan: %s", subset, off.failure or on.failure or "did not converge")
+                zero.append(invert_T(off.T_target_source) @ on.T_target_source)
             self._zero[key] = zero
         return self._zero[key]
 

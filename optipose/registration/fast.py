@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from optipose.registration.preprocess import information_matrix
+from optipose.transforms import mean_pose
 from optipose.registration.result import MIN_POINTS, Matches, Registration
 
 if TYPE_CHECKING:
@@ -162,11 +163,11 @@ class Cycle:
         """The mean pose of the cycle ``T`` closes (or of the jitter it ends), or None."""
         for lag, P in enumerate(reversed(self.poses), start=1):
             if lag > 1 and _small_step(T @ np.linalg.inv(P), self.cfg):
-                return _mean_pose(self.poses[-lag + 1 :] + [T])
+                return mean_pose(self.poses[-lag + 1 :] + [T])
         if self.poses:
             self.steps = (self.steps + [_twist_length(T @ np.linalg.inv(self.poses[-1]))])[-self.window :]
         if len(self.poses) == self.window and _twist_length(T @ np.linalg.inv(self.poses[0])) < np.mean(self.steps):
-            return _mean_pose(self.poses[1:] + [T])
+            return mean_pose(self.poses[1:] + [T])
         self.poses = (self.poses + [T])[-self.window :]
         return None
 
@@ -175,10 +176,6 @@ def _twist_length(delta: np.ndarray) -> float:
     """A rigid motion's size: its angle times ``_TWIST_LENGTH`` plus its translation (m)."""
     angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
     return float(angle * _TWIST_LENGTH + np.linalg.norm(delta[:3, 3]))
-
-
-def _mean_pose(poses: list[np.ndarray]) -> np.ndarray:
-    return _make_T(Rotation.from_matrix([Q[:3, :3] for Q in poses]).mean().as_matrix(), np.mean([Q[:3, 3] for Q in poses], axis=0))
 
 
 def _small_step(delta: np.ndarray, cfg: RegistrationConfig) -> bool:
