@@ -178,3 +178,30 @@ def test_importing_registration_loads_no_heavy_dependency():
     code = "import sys, optipose.registration; print(sorted({'open3d', 'numba', 'scipy'} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_an_icp_caught_in_a_cycle_settles_on_the_cycles_mean():
+    from optipose.registration.config import RegistrationConfig
+    from optipose.registration.fast import Cycle
+    from optipose.transforms import make_T, rpy_to_matrix
+
+    cfg = RegistrationConfig()
+    a, b, c = (make_T(rpy_to_matrix(np.deg2rad([x, 0, 0]) * 1e-3), np.array([0, x * 1e-6, 0])) for x in (1.0, 1.6, 1.3))
+    cycle = Cycle(cfg)
+    # a period-3 cycle, each step 0.3 to 0.6 mdeg (far above the 1e-5 deg tolerance): settles on the 4th pose
+    assert [cycle(T) for T in (a, b, c)] == [None, None, None]
+    middle = cycle(a.copy())
+    assert middle is not None
+    assert np.rad2deg(np.arccos(middle[1, 1])) * 1e3 == pytest.approx((1.0 + 1.6 + 1.3) / 3, rel=1e-6)
+    assert middle[1, 3] == pytest.approx((1.0 + 1.6 + 1.3) / 3 * 1e-6)
+    # a steadily converging ICP (each step 0.8 of the last, until the tolerance would stop it) is no cycle
+    steady, T = Cycle(cfg), np.eye(4)
+    for n in range(30):
+        T = make_T(rpy_to_matrix(np.deg2rad([0.8**n, 0, 0]) * 1e-2), np.zeros(3)) @ T
+        assert steady(T) is None
+    # a pose that jitters about one place without repeating settles within two windows, on about that place
+    rng, jitter, settled = np.random.default_rng(3), Cycle(cfg), None
+    for n in range(24):
+        out = jitter(make_T(rpy_to_matrix(np.deg2rad([5 + rng.normal(0, 0.3), 0, 0]) * 1e-3), np.zeros(3)))
+        settled = out if settled is None else settled
+    assert settled is not None and np.rad2deg(np.arccos(settled[1, 1])) * 1e3 == pytest.approx(5.0, abs=0.5)
