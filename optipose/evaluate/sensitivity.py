@@ -5,8 +5,8 @@ For one layout, at the preset's noise (scale 1) and with each of the objective's
 
 - **spread**: each axis's median and 75th percentile of the layout's choice per k (each axis on its fixed
   subset, :func:`~optipose.evaluate.assignment.restated`) with the brackets off by the tolerance, against
-  the same cell with perfect brackets. Both cells are zeroed on the same master-part scan (the draw's), so
-  the difference is the tolerance alone, not the zeroing scan's own noise; the worst over the draws.
+  the same cell with perfect brackets. Both cells are zeroed the same way, on the draw's master-part scan,
+  so the difference is the tolerance alone; the worst over the draws.
 - **bias**: the mean signed error per axis (roll, pitch, yaw in rad; x, y, z in m) an un-zeroed cell sees,
   per draw; rotation axes on the choice's subset for that axis, translations on all the choice's sensors.
   Beside it, the same cell's mean with perfect brackets (the ICP and voxel bias it has anyway).
