@@ -1,4 +1,5 @@
-"""Print the found-vs-hand table (Markdown) of one or more search result folders, in millidegrees.
+"""Print the found-vs-hand table (Markdown) of one or more search result folders, in millidegrees; a search
+under a band of conditions (``--objective robust``) also gets hand / found per part, k and condition.
 
     .venv/bin/python scripts/search_table.py results/search-default-part_a results/search-default-part_b ...
 """
@@ -32,6 +33,30 @@ def main(folders: list[str]) -> None:
         lines = result.verdict_lines()
         if lines and lines[-1].startswith("one found sensor"):
             print(f"<!-- {result.part}: {lines[-1]} -->")
+    band(folders)
+
+
+def band(folders: list[str]) -> None:
+    """hand / found per condition of the band (rows) and part and k (columns); * marks a condition where
+    found is worse than hand on some axis."""
+    from optipose.evaluate.compare import dominates
+
+    columns = []
+    for folder in folders:
+        result = load_result(folder)
+        columns += [(result.part, v) for v in result.verdicts() if v.ratios()]
+    if not columns:
+        return
+    print()
+    print("| condition | " + " | ".join(f"{part} k={v.k}" for part, v in columns) + " |")
+    print("| --- |" + " ---: |" * len(columns))
+    for n, (label, _) in enumerate(columns[0][1].found.under):
+        cells = []
+        for _, v in columns:
+            (_, found), (_, hand) = v.found.under[n], v.reference.under[n]
+            cells.append(f"{hand.score / found.score:.2f}{'' if dominates(found, hand) else '*'}")
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    print("| **worst over the band** | " + " | ".join(f"**{v.ratio:.2f}{'' if v.no_worse else '*'}**" for _, v in columns) + " |")
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ def _short(objective, sequences=("R", "P")):
 def test_the_shipped_objectives_and_the_trivial_band(part_b):
     assert load_objective("paper").conditions.trivial
     robust = load_objective("robust").conditions
-    assert robust.noise_scales == (1.0, 3.0, 5.0) and robust.mounting_draws == 2 and not robust.trivial
+    assert robust.noise_scales == (1.0, 5.0) and robust.mounting_draws == 2 and not robust.trivial
     assert robust.mounting_translation == pytest.approx(0.2e-3) and robust.mounting_rotation == pytest.approx(np.deg2rad(0.1))
     assert len(conditions(robust)) == 6 and conditions(robust)[0].label == "noise x1, mounting draw 0"
     assert conditions(ConditionsConfig()) == [Condition()] and Condition().nominal
@@ -176,3 +176,20 @@ def test_the_surrogate_predicts_across_the_noise_band_without_rescanning():
     assert np.array_equal(band["median_deg"], five["median_deg"]) and band["score"] == five["score"]  # the worst is x5
     assert np.allclose(five["median_deg"] / one["median_deg"], 5.0, rtol=1e-3)
     assert np.array_equal(predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0,))["p75_deg"], one["p75_deg"])
+
+
+def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():
+    from optipose.evaluate.conditions import ConditionsConfig, band_ends
+    from optipose.search.config import config_from_budget
+    from optipose.search.pipeline import search_objective
+
+    band = ConditionsConfig((3.0, 1.0, 5.0, 2.0), 2e-4, 1e-3, 2)
+    assert band_ends(band) == ConditionsConfig((1.0, 5.0), 2e-4, 1e-3, 2)
+    assert [c.noise_scale for c in conditions(band_ends(band))] == [1.0, 1.0, 5.0, 5.0]
+    paper = load_objective("paper")
+    assert search_objective(paper) is paper
+    assert search_objective(replace(paper, conditions=band)).conditions.noise_scales == (1.0, 5.0)
+    nominal, banded = config_from_budget("default", (1, 2, 3)), config_from_budget("default", (1, 2, 3), band=True)
+    assert nominal.polish_evals > 0 and banded.polish_evals == 0 and banded.confirm_candidates == 0
+    assert config_from_budget("default", (1,), {"polish_evals": 12}, band=True).polish_evals == 12  # the user's word last
+    assert config_from_budget("quick", (1,), band=True) == config_from_budget("quick", (1,))

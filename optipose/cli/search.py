@@ -59,8 +59,8 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     if resume:
         part, search_config, budget, seed, the_objective = _resumed_settings(resume)
     else:
-        search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config))
         the_objective = load_objective(objective)
+        search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
 
