@@ -39,7 +39,7 @@ def test_the_shipped_objectives_and_the_trivial_band(part_b):
     robust = load_objective("robust").conditions
     assert robust.noise_scales == (1.0, 5.0) and robust.mounting_draws == 2 and not robust.trivial
     assert robust.mounting_translation == pytest.approx(0.2e-3) and robust.mounting_rotation == pytest.approx(np.deg2rad(0.1))
-    assert len(conditions(robust)) == 6 and conditions(robust)[0].label == "noise x1, mounting draw 0"
+    assert len(conditions(robust)) == 4 and conditions(robust)[0].label == "noise x1, mounting draw 0"
     assert conditions(ConditionsConfig()) == [Condition()] and Condition().nominal
 
 
