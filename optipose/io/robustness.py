@@ -23,11 +23,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from optipose.io.folders import versions, write_config
-from optipose.io.tables import robustness_frame
+from optipose.io.tables import bracket_sensors_frame, brackets_frame, robustness_frame
 from optipose.model.layout import write_layout
 
 __all__ = ["write_robustness", "write_brackets", "brackets_frame", "bracket_sensors_frame"]
@@ -66,40 +65,3 @@ def write_brackets(folder: Path, sensitivities: dict) -> tuple[pd.DataFrame, pd.
     axes.to_csv(Path(folder) / "brackets.csv", index=False)
     sensors.to_csv(Path(folder) / "bracket_sensors.csv", index=False)
     return axes, sensors
-
-
-# The two tables below belong in io.tables with the others (kept here while that module is being edited).
-def brackets_frame(sensitivities: dict) -> pd.DataFrame:
-    """Per layout, k and axis: spread (rotations, degrees) and un-zeroed bias (see the module doc)."""
-    rows = []
-    for name, sens in sensitivities.items():
-        spread = {(s.k, s.axis): s for s in sens.spread}
-        for k in sorted({b.k for b in sens.bias}):
-            worst = sens.worst_bias(k)
-            for axis in dict.fromkeys(b.axis for b in sens.bias):
-                biases = [b for b in sens.bias if b.k == k and b.axis == axis]
-                scale = np.rad2deg(1.0) if axis in ("roll", "pitch", "yaw") else 1.0
-                row = {"layout": name, "k": k, "axis": axis, "subset": biases[0].subset or "unobservable",
-                       "unit": "deg" if scale != 1.0 else "m"}  # fmt: skip
-                if (k, axis) in spread:
-                    s = spread[(k, axis)]
-                    row |= {"perfect_median_deg": scale * s.nominal_median, "perfect_p75_deg": scale * s.nominal_p75,
-                            "mounted_median_deg": scale * s.mounted_median, "mounted_p75_deg": scale * s.mounted_p75}  # fmt: skip
-                row |= {f"bias_draw{b.draw}": scale * b.bias for b in biases}
-                row |= {"worst_abs_bias": scale * worst[axis], "perfect_bias": scale * biases[0].nominal}
-                row |= {"tolerance_mm": 1e3 * sens.translation, "tolerance_deg": float(np.rad2deg(sens.rotation)),
-                        "draws": len(sens.draws), "n_scans": sens.n_scans, "reduced_protocol": sens.reduced}  # fmt: skip
-                rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def bracket_sensors_frame(sensitivities: dict) -> pd.DataFrame:
-    """Per layout, k and sensor: the change (degrees) when that sensor's bracket alone is off, and its rank."""
-    rows = []
-    for name, sens in sensitivities.items():
-        for k in sorted({s.k for s in sens.sensors}):
-            for rank, s in enumerate(sens.ranking(k), start=1):
-                rows.append({"layout": name, "k": k, "sensor": s.name, "sensor_index": s.sensor, "rank": rank,
-                             **{f"change_{axis}_deg": float(np.rad2deg(c)) for axis, c in zip(("roll", "pitch", "yaw"), s.change)},
-                             "score_change_deg": float(np.rad2deg(s.score_change))})  # fmt: skip
-    return pd.DataFrame(rows)
