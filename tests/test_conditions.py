@@ -125,6 +125,27 @@ def test_a_layout_better_at_one_noise_level_only_loses_the_robust_choice():
     assert median.loc[(median.subset == "S1") & (median.axis == "roll"), "median"].item() == pytest.approx(5.5)
 
 
+def test_layouts_are_compared_per_noise_level_over_its_bracket_draws():
+    from types import SimpleNamespace
+
+    from optipose.evaluate.robust import by_level
+
+    def stats(roll):  # one sensor, roll (median, p75) as given, pitch and yaw 1
+        rows = [{"subset": "S1", "axis": a, "median": m, "p75": p, "mean": m, "max": p, "n_ok": 14, "n_failed": 0,
+                 "unobservable": False} for a, (m, p) in zip(("roll", "pitch", "yaw"), (roll, (1, 1), (1, 1)))]  # fmt: skip
+        return pd.DataFrame(rows)
+
+    band = [(Condition(1.0, 0), stats((1, 2))), (Condition(1.0, 1), stats((3, 1))), (Condition(5.0, 0), stats((5, 6))),
+            (Condition(5.0, 1), stats((4, 7)))]  # fmt: skip
+    results = [(c, SimpleNamespace(stats=frame)) for c, frame in band]
+    levels = by_level(results, "worst")
+    assert [label for label, _ in levels] == ["noise x1, worst of 2 bracket draws", "noise x5, worst of 2 bracket draws"]
+    roll = [frame.loc[frame.axis == "roll", ["median", "p75"]].to_numpy().tolist() for _, frame in levels]
+    assert roll == [[[3, 2]], [[5, 7]]]  # each statistic the worst of its level's draws, the levels apart
+    (label, _), = by_level(results[:1], "worst")
+    assert label == "noise x1, bracket draw 0"
+
+
 BAND = """name = "band"
 [protocol]
 sequences = ["R", "Y"]

@@ -3,8 +3,9 @@
 The user's question is whether to keep the sensors they have or buy the found ones. A found choice of k
 sensors wins outright when every axis's median and 75th percentile is at most the reference's; how far
 it misses is the summed excess. Under a band of conditions (choices that carry ``under``, from
-:mod:`optipose.evaluate.robust`) both tests hold condition by condition: no worse on any axis at *every*
-condition, the excess summed over them; the score compared is the robust one. The search ranks and polishes with these, the CLI prints a
+:mod:`optipose.evaluate.robust`: each noise level, its bracket draws aggregated) both tests hold level by
+level: no worse on any axis at *every* level, the excess summed over them; the score compared is the
+robust one. The search ranks and polishes with these, the CLI prints a
 :class:`Verdict` per k, and :func:`optipose.io.load_result` gives a saved search's verdicts back.
 """
 

@@ -4,7 +4,8 @@
 same protocol and noise seed each time: only the condition differs) and aggregates, per sensor subset and
 axis, each statistic over the conditions with the objective's ``aggregate`` (the worst by default). The
 robust Table 1 is the paper's assignment on those aggregated statistics: a subset is chosen for an axis
-because it is good at every noise level and bracket draw, not at the nominal one alone.
+because it is good at every noise level and bracket draw, not at the nominal one alone. Layouts are
+compared (:mod:`optipose.evaluate.compare`) at each noise level, over its bracket draws (:func:`by_level`).
 """
 
 from __future__ import annotations
@@ -17,13 +18,13 @@ from optipose.evaluate.assignment import Choice, best_choices, choose, restated,
 from optipose.evaluate.conditions import Condition, aggregate, conditions
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 
-__all__ = ["RobustResult", "RobustEvaluator", "make_evaluator", "evaluate_robust", "robust_result", "choice_of", "robust_stats"]
+__all__ = ["RobustResult", "RobustEvaluator", "make_evaluator", "evaluate_robust", "robust_result", "by_level", "choice_of", "robust_stats"]
 
 
 @dataclass
 class RobustResult:
     """A layout's evaluations under each condition, and the aggregated statistics and Table 1 (each choice
-    carries itself restated under every condition, ``Choice.under``)."""
+    carries itself restated at every noise level of the band, the bracket draws aggregated, ``Choice.under``)."""
 
     results: list[tuple[Condition, EvaluationResult]] = field(repr=False)
     stats: pd.DataFrame = field(repr=False)
@@ -89,23 +90,46 @@ def evaluate_robust(part, layout, objective, seed: int = 0, jobs: int = 1, quiet
 
 def robust_result(results: list[tuple[Condition, EvaluationResult]], objective) -> RobustResult:
     """The evaluations of one layout under each condition, aggregated; every choice of the robust Table 1
-    restated under each condition (``Choice.under``)."""
+    restated at each noise level of the band (``Choice.under``, see :func:`by_level`)."""
     stats = robust_stats([r.stats for _, r in results], objective.conditions.aggregate)
     first = results[0][1]
     table = best_choices(stats, first.layout.names, objective.statistic, first.n_scans)
-    by_condition = [(c.label, stats_by_key(r.stats)) for c, r in results]
-    table = [replace(ch, under=tuple((label, restated(ch, by_key, objective.statistic)) for label, by_key in by_condition))
-             for ch in table]  # fmt: skip
-    return RobustResult(results, stats, table)
+    return RobustResult(results, stats, [_restated_by_level(ch, results, objective) for ch in table])
+
+
+def by_level(results: list[tuple[Condition, EvaluationResult]], how) -> list[tuple[str, pd.DataFrame]]:
+    """(label, statistics) per noise level: each statistic aggregated (``how``) over the level's bracket draws.
+
+    A layout is compared with another at each noise level, not at each bracket draw: a draw is one sample of
+    errors within the tolerance, drawn per sensor index, so draw d turns the hand layout's S3 and a found
+    layout's F1 by different errors, and no draw is a condition both share. What both share is the
+    tolerance; over the draws, the worst (or a quantile) of each statistic is what the tolerance can do.
+    """
+    levels = list(dict.fromkeys(c.noise_scale for c, _ in results))
+    out = []
+    for level in levels:
+        group = [(c, r) for c, r in results if c.noise_scale == level]
+        draws = [c.draw for c, _ in group if c.draw is not None]
+        agg = "worst" if how == "worst" else f"quantile {how:g}"
+        label = f"noise x{level:g}" + (f", {agg} of {len(draws)} bracket draws" if len(draws) > 1 else
+                                       (f", bracket draw {draws[0]}" if draws else ""))  # fmt: skip
+        out.append((label, robust_stats([r.stats for _, r in group], how)))
+    return out
+
+
+def _restated_by_level(choice: Choice, results, objective) -> Choice:
+    levels = by_level(results, objective.conditions.aggregate)
+    return replace(choice, under=tuple((label, restated(choice, stats_by_key(stats), objective.statistic)) for label, stats in levels))
+
 
 def choice_of(result, sensors: tuple[int, ...]) -> Choice:
     """The choice of exactly these sensors of an evaluated layout (each axis its best subset of them), from
-    an :class:`EvaluationResult` or a :class:`RobustResult` (then restated under every condition)."""
-    objective = result.objective if isinstance(result, EvaluationResult) else result.results[0][1].objective
-    choice = choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), objective.statistic, result.n_scans)
+    an :class:`EvaluationResult` or a :class:`RobustResult` (then restated at each noise level)."""
     if isinstance(result, EvaluationResult):
-        return choice
-    return replace(choice, under=tuple((c.label, restated(choice, stats_by_key(r.stats), objective.statistic)) for c, r in result.results))
+        return choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), result.objective.statistic, result.n_scans)
+    objective = result.results[0][1].objective
+    choice = choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), objective.statistic, result.n_scans)
+    return _restated_by_level(choice, result.results, objective)
 
 
 def robust_stats(frames: list[pd.DataFrame], how: str | float = "worst") -> pd.DataFrame:

@@ -50,14 +50,16 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
 
     Every ICP run here uses the selection noise seed; the validation's seed stays unseen.
     """
-    deadline = time.monotonic() + max_time
+    end = time.monotonic() + max_time
     config = study.problem.config
     finalists, records = {}, []
     confirmer = Confirmer(part, objective, selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
     with make_evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
         hand = evaluator(part.layouts["hand"]) if "hand" in part.layouts else None
-        for k in sorted(outcome.found):
+        ks = sorted(outcome.found)
+        for n, k in enumerate(ks):
             reference = _reference(k, hand, confirmer, records, on_stage)
+            deadline = time.monotonic() + max(0.0, end - time.monotonic()) / (len(ks) - n)  # a fair share of what is left
             pool = _screen_candidates(study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage)
             if not pool:
                 continue
