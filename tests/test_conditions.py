@@ -93,8 +93,8 @@ def test_a_cloud_rebuilt_with_another_pose_is_what_the_raw_profiles_give(part_b)
 def test_the_zeroed_cell_takes_the_constant_bias_off(part_b):
     # one sensor turned 0.2 deg on its bracket, noise all but off: the rebuilt cloud is the true one turned
     # rigidly (and sheared along the scan), so without zeroing every scan would be off by about that much;
-    # the master-part scan at the nominal orientation measures what the bracket adds there and zeroing
-    # takes it off: at that orientation the cell reports what a cell with exact brackets reports
+    # noise-free master-part scans at the nominal orientation measure what the bracket adds there and
+    # zeroing takes it off: at that orientation the cell reports what a cell with exact brackets reports
     objective = replace(_short(load_objective("paper"), ("R",)), protocol=replace(
         load_objective("paper").protocol, sequences=("R",), start=-np.deg2rad(2.0), stop=np.deg2rad(2.0), step=np.deg2rad(2.0)))  # fmt: skip
     layout = _one_sensor(part_b)
@@ -107,7 +107,9 @@ def test_the_zeroed_cell_takes_the_constant_bias_off(part_b):
     errors = np.rad2deg(rows[["err_roll", "err_pitch", "err_yaw"]].abs().to_numpy())
     at_zero = rows["roll_set"].abs().to_numpy() < 1e-12
     exact_errors = np.rad2deg(exact[["err_roll", "err_pitch", "err_yaw"]].abs().to_numpy())
-    assert np.abs(errors[at_zero] - exact_errors[at_zero]).max() < 1e-6  # the master scan is this scan, noise aside
+    # at the master's orientation the cell reports what an exact cell does, up to the difference between a
+    # noise-free master scan and a quantised one (the exact cell's own error there is that size, ~1 mdeg)
+    assert np.abs(errors[at_zero] - exact_errors[at_zero]).max() < 2 * max(exact_errors[at_zero].max(), 1e-4) < tilt / 50
     assert errors.max() < tilt / 5  # what is left at +-2 deg is the distortion's change, far below the bias
 
 

@@ -114,10 +114,11 @@ class _Worker:
             self.scanners[key] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders))
         return self.scanners[key]
 
-    def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None, exact=False) -> list:
+    def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None, exact=False,
+             noise=True) -> list:  # fmt: skip
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m); ``seed`` is the orientation's noise seed; ``exact``:
-        as if the brackets were exact, whatever the condition."""
+        as if the brackets were exact, whatever the condition; ``noise=False``: exact surface points."""
         groups = sensor_groups(models, self.setup.sensor)
         condition, nominal = self.condition, poses
         mounted = condition.draw is not None and not exact
@@ -129,7 +130,7 @@ class _Worker:
                 continue
             scanner = self._scanner(model)
             out = scanner.scan_many([poses[j] for j in idx], self.setup.motion, rpy=rpy, centre=self.setup.centre,
-                                    offset=offset, rng=group_seed(seed, g))  # fmt: skip
+                                    offset=offset, rng=group_seed(seed, g), noise=noise)  # fmt: skip
             for j, scan in zip(idx, out):
                 scans[j] = scan
         if mounted:  # ... and the cell rebuilds its cloud with the drawn pose
@@ -144,11 +145,12 @@ class _Worker:
         reported as Z⁻¹ T: identity when the brackets are not off (or the cell is not zeroed).
 
         The cell is zeroed on a master part at the nominal orientation: Z is the estimate of the mounted
-        cell there relative to that of a cell with exact brackets, from the same scan (same noise seed).
-        The comparison takes off only what the brackets add; a master registration's own error (its noise,
-        and at exactly the nominal orientation the down-sampling grid lying along the part's edges, a
-        bias of several millidegrees on part B that no other orientation shares) is not the brackets',
-        and would otherwise shift every later measurement of the condition."""
+        cell there relative to that of a cell with exact brackets, both from noise-free scans (a cell
+        averages enough master scans that the zero's noise is negligible). The comparison takes off only
+        what the brackets add; a master registration's own error (one scan's noise, and at exactly the
+        nominal orientation the down-sampling grid lying along the part's edges, a bias of several
+        millidegrees on part B that no other orientation shares) is not the brackets', and would shift
+        every later measurement of the condition by one draw of it."""
         condition = self.condition
         if condition.draw is None or not condition.zeroed:
             return [np.eye(4)] * len(subsets)
@@ -156,8 +158,8 @@ class _Worker:
         if key not in self._zero:
             seed = zeroing_seed(self.setup.seed, condition.draw)
             cfg = self.setup.registration
-            mounted = _clouds(cfg, self.scan(models, poses, seed))
-            exact = _clouds(cfg, self.scan(models, poses, seed, exact=True))
+            mounted = _clouds(cfg, self.scan(models, poses, seed, noise=False))
+            exact = _clouds(cfg, self.scan(models, poses, seed, exact=True, noise=False))
             zero = []
             for subset, reference in zip(subsets, references):
                 off, _ = _register(self, mounted, subset, reference)

@@ -13,7 +13,7 @@ from optipose.model.layout import Layout
 from optipose.search.records import Validation
 from optipose.seeds import validation_seed
 
-__all__ = ["validate", "nested_groups"]
+__all__ = ["validate", "nested_groups", "indices_in"]
 
 
 def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full",
@@ -34,7 +34,7 @@ def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int =
             result = evaluator(big)
             done(f"found_k{max(members)}", result)
             for k in members:
-                found[k] = choice_of(result, tuple(_indices_in(layouts[k], big)))
+                found[k] = choice_of(result, tuple(indices_in(layouts[k], big)))
         if "hand" in part.layouts:
             result = evaluator(part.layouts["hand"])
             done("hand", result)
@@ -57,6 +57,6 @@ def nested_groups(layouts: dict[int, Layout]) -> list[list[int]]:
     return [members for _, members in groups]
 
 
-def _indices_in(layout: Layout, big: Layout) -> list[int]:
+def indices_in(layout: Layout, big: Layout) -> list[int]:
     """Indices in ``big`` of the poses of ``layout``."""
     return [next(i for i, P in enumerate(big.poses) if np.allclose(T, P)) for T in layout.poses]
