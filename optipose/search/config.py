@@ -101,7 +101,7 @@ BUDGETS: dict[str, dict] = {
 # confirmation; the selection's statistic already pools every condition's scans (README, "The search
 # under the band").
 BAND_BUDGETS: dict[str, dict] = {
-    "default": dict(max_time=120.0, select_time=100.0, polish_evals=0, confirm_candidates=0),
+    "default": dict(max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0),
 }
 
 
