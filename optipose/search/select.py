@@ -17,6 +17,11 @@ in sum, or when a polish ran (it minimised those very statistics, so its winner'
 confirmation (:mod:`optipose.search.confirm`) decides on the full protocol; with confirmation on, the bar
 every candidate and the polish are measured against is the hand layout on the full protocol. The full
 protocol with the held-out seed then reports the finalist (:mod:`optipose.search.validate`).
+
+Under a band of conditions the objective given here is the band's ends (``pipeline.search_objective``):
+every evaluation runs each of its conditions (:func:`optipose.evaluate.robust.make_evaluator`), scores the
+worst over them, and is compared with the hand layout noise level by noise level; the polish's evaluations
+are divided by the number of conditions, so it costs about what it does without a band.
 """
 
 from __future__ import annotations

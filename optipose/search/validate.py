@@ -1,7 +1,8 @@
 """Stage: validation. The found layouts and the hand-placed one on the objective's protocol (``quick``: the
 reduced one) with a noise seed the search never saw (:func:`optipose.seeds.validation_seed`); these are
 the numbers reported. Under a band of conditions every layout is evaluated at each of them (the bracket
-errors drawn from the held-out seed too), and each choice carries its statistics per condition."""
+errors drawn from the held-out seed too), and each choice carries its statistics per noise level (the
+worst over that level's bracket draws: :func:`optipose.evaluate.robust.by_level`)."""
 
 from __future__ import annotations
 
