@@ -33,7 +33,7 @@ from optipose.evaluate.statistics import summarize
 from optipose.evaluate.worker import WorkerSetup, run_chunk
 from optipose.model.layout import Layout, SensorPose
 
-__all__ = ["Evaluator", "EvaluationResult", "evaluate"]
+__all__ = ["Evaluator", "EvaluatorWrapper", "EvaluationResult", "evaluate"]
 
 log = logging.getLogger(__name__)
 
@@ -173,6 +173,22 @@ class Evaluator:
             reasons = per_scan.loc[~per_scan["ok"], "failure"].value_counts().to_dict()
             log.log(self._failure_level, "%d of %d registrations failed or did not converge: %s", failed, len(per_scan), reasons)
         return EvaluationResult(self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings)
+
+
+class EvaluatorWrapper:
+    """Base of an evaluator built on an :class:`Evaluator` (``self.evaluator``, e.g. the robust and the
+    bracket ones): a context manager whose ``close`` releases that evaluator's workers."""
+
+    evaluator: Evaluator
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        self.evaluator.close()
 
 
 def _chunks(tasks: list, n_workers: int) -> list[list]:

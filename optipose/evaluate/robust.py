@@ -16,7 +16,8 @@ import pandas as pd
 
 from optipose.evaluate.assignment import Choice, best_choices, choose, restated, stats_by_key
 from optipose.evaluate.conditions import Condition, aggregate, conditions
-from optipose.evaluate.evaluator import EvaluationResult, Evaluator
+from optipose.evaluate.evaluator import EvaluationResult, Evaluator, EvaluatorWrapper
+from optipose.evaluate.objective import Objective, load_objective
 
 __all__ = ["RobustResult", "RobustEvaluator", "make_evaluator", "evaluate_robust", "robust_result", "by_level", "choice_of", "robust_stats"]
 
@@ -48,7 +49,7 @@ class RobustResult:
         return [(c, restated(choice, stats_by_key(r.stats), r.objective.statistic)) for c, r in self.results]
 
 
-class RobustEvaluator:
+class RobustEvaluator(EvaluatorWrapper):
     """An :class:`Evaluator` that scores a layout under every condition of its objective's band: the same
     protocol and noise seed each time, one set of workers (and their scanners and reference) for all.
     ``RobustEvaluator(part, objective)(layout) -> RobustResult``; the arguments are the Evaluator's."""
@@ -58,15 +59,6 @@ class RobustEvaluator:
         self.objective, self.seed = self.evaluator.objective, self.evaluator.seed
         self.conditions = conditions(self.objective.conditions)
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def close(self) -> None:
-        self.evaluator.close()
-
     def __call__(self, layout) -> RobustResult:
         return robust_result([(c, self.evaluator(layout, c)) for c in self.conditions], self.objective)
 
@@ -75,11 +67,9 @@ def make_evaluator(part, objective, seed: int = 0, jobs: int = 1, quiet: bool = 
     """The evaluator an objective asks for: a plain :class:`Evaluator` when its band is trivial (one
     condition, the nominal one), else a :class:`RobustEvaluator`. Both give results with ``table``,
     ``stats``, ``layout`` and ``n_scans``."""
-    evaluator = Evaluator(part, objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
-    if evaluator.objective.conditions.trivial:
-        return evaluator
-    evaluator.close()
-    return RobustEvaluator(part, evaluator.objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
+    objective = objective if isinstance(objective, Objective) else load_objective(objective)
+    kind = Evaluator if objective.conditions.trivial else RobustEvaluator
+    return kind(part, objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
 
 
 def evaluate_robust(part, layout, objective, seed: int = 0, jobs: int = 1, quiet: bool = False) -> RobustResult:
@@ -94,7 +84,8 @@ def robust_result(results: list[tuple[Condition, EvaluationResult]], objective) 
     stats = robust_stats([r.stats for _, r in results], objective.conditions.aggregate)
     first = results[0][1]
     table = best_choices(stats, first.layout.names, objective.statistic, first.n_scans)
-    return RobustResult(results, stats, [_restated_by_level(ch, results, objective) for ch in table])
+    levels = _levels_by_key(results, objective)
+    return RobustResult(results, stats, [_restated_by_level(ch, levels, objective) for ch in table])
 
 
 def by_level(results: list[tuple[Condition, EvaluationResult]], how) -> list[tuple[str, pd.DataFrame]]:
@@ -117,9 +108,13 @@ def by_level(results: list[tuple[Condition, EvaluationResult]], how) -> list[tup
     return out
 
 
-def _restated_by_level(choice: Choice, results, objective) -> Choice:
-    levels = by_level(results, objective.conditions.aggregate)
-    return replace(choice, under=tuple((label, restated(choice, stats_by_key(stats), objective.statistic)) for label, stats in levels))
+def _levels_by_key(results, objective) -> list[tuple[str, dict]]:
+    """:func:`by_level`'s statistics, each as :func:`stats_by_key` gives them."""
+    return [(label, stats_by_key(stats)) for label, stats in by_level(results, objective.conditions.aggregate)]
+
+
+def _restated_by_level(choice: Choice, levels: list[tuple[str, dict]], objective) -> Choice:
+    return replace(choice, under=tuple((label, restated(choice, by_key, objective.statistic)) for label, by_key in levels))
 
 
 def choice_of(result, sensors: tuple[int, ...]) -> Choice:
@@ -129,7 +124,7 @@ def choice_of(result, sensors: tuple[int, ...]) -> Choice:
         return choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), result.objective.statistic, result.n_scans)
     objective = result.results[0][1].objective
     choice = choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), objective.statistic, result.n_scans)
-    return _restated_by_level(choice, result.results, objective)
+    return _restated_by_level(choice, _levels_by_key(result.results, objective), objective)
 
 
 def robust_stats(frames: list[pd.DataFrame], how: str | float = "worst") -> pd.DataFrame:

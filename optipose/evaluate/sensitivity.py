@@ -29,7 +29,7 @@ import numpy as np
 
 from optipose.evaluate.assignment import Choice, best_choices, restated, stats_by_key, subset_name
 from optipose.evaluate.conditions import Condition
-from optipose.evaluate.evaluator import EvaluationResult, Evaluator
+from optipose.evaluate.evaluator import EvaluationResult, Evaluator, EvaluatorWrapper
 from optipose.evaluate.objective import AXES, Objective, load_objective, reduced_objective
 from optipose.evaluate.robust import robust_stats
 
@@ -129,7 +129,7 @@ class BracketSensitivity:
         return self.ranking(k)[0].sensor
 
 
-class BracketEvaluator:
+class BracketEvaluator(EvaluatorWrapper):
     """A part and an objective with a mounting tolerance, ready to measure layouts' bracket sensitivity:
     ``BracketEvaluator(part, objective)(layout, choices) -> BracketSensitivity``. The workers keep their
     scanners and reference across layouts and conditions. reduced : run the objective's reduced protocol."""
@@ -139,15 +139,6 @@ class BracketEvaluator:
         objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.objective, self.reduced = (reduced_objective(objective) if reduced else objective), reduced
         self.evaluator = Evaluator(part, self.objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def close(self) -> None:
-        self.evaluator.close()
 
     def __call__(self, layout, choices: list[Choice] | None = None) -> BracketSensitivity:
         """Measure ``layout``; ``choices`` : its choice per k (k = 1 … n, e.g. a robust Table 1), default
