@@ -37,25 +37,19 @@ def main(folders: list[str]) -> None:
 
 
 def band(folders: list[str]) -> None:
-    """hand / found per condition of the band (rows) and part and k (columns); * marks a condition where
+    """hand / found per noise level of the band (rows) and part and k (columns); * marks a level where
     found is worse than hand on some axis."""
-    from optipose.evaluate.compare import dominates
-
     columns = []
     for folder in folders:
         result = load_result(folder)
-        columns += [(result.part, v) for v in result.verdicts() if v.ratios()]
+        columns += [(result.part, v) for v in result.verdicts() if v.levels()]
     if not columns:
         return
     print()
     print("| condition | " + " | ".join(f"{part} k={v.k}" for part, v in columns) + " |")
     print("| --- |" + " ---: |" * len(columns))
-    for n, (label, _) in enumerate(columns[0][1].found.under):
-        cells = []
-        for _, v in columns:
-            (_, found), (_, hand) = v.found.under[n], v.reference.under[n]
-            cells.append(f"{hand.score / found.score:.2f}{'' if dominates(found, hand) else '*'}")
-        print(f"| {label} | " + " | ".join(cells) + " |")
+    for row in zip(*(v.levels() for _, v in columns)):
+        print(f"| {row[0][0]} | " + " | ".join(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row) + " |")
     print("| **worst over the band** | " + " | ".join(f"**{v.ratio:.2f}{'' if v.no_worse else '*'}**" for _, v in columns) + " |")
 
 

@@ -220,23 +220,17 @@ def _validation_table(validation, part):
 
 
 def _band_table(validation, part):
-    """Per k and condition of the band: hand / found in sum, and whether found is no worse on every axis."""
+    """Per k and noise level of the band: hand / found in sum, and whether found is no worse on every axis."""
     from rich.table import Table
 
-    from optipose.evaluate.compare import dominates
-
-    verdicts = [v for v in validation.verdicts() if v.ratios()]
+    verdicts = [v for v in validation.verdicts() if v.levels()]
     table = Table(title=f"{part.name}: hand / found score per condition of the band (held-out seed); "
                         "* = found worse on some axis there")  # fmt: skip
     table.add_column("condition", justify="left")
     for v in verdicts:
         table.add_column(f"k={v.k}", justify="right")
-    for n, (label, _) in enumerate(verdicts[0].found.under):
-        cells = []
-        for v in verdicts:
-            (_, found), (_, hand) = v.found.under[n], v.reference.under[n]
-            cells.append(f"{hand.score / found.score:.2f}{'' if dominates(found, hand) else '*'}")
-        table.add_row(label, *cells)
+    for row in zip(*(v.levels() for v in verdicts)):
+        table.add_row(row[0][0], *(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row))
     return table
 
 

@@ -93,10 +93,16 @@ class Verdict:
             if getattr(f, stat) > getattr(r, stat)
         )  # fmt: skip
 
+    def levels(self) -> list[tuple[str, float, bool]]:
+        """Under a band, per noise level: its label, reference score over found score, and whether found is
+        no worse on every axis there; else []."""
+        if len(self.found.under) != len(self.reference.under):
+            return []
+        return [(label, float(r.score / c.score), dominates(c, r)) for (label, c), (_, r) in zip(self.found.under, self.reference.under)]
+
     def ratios(self) -> list[tuple[str, float]]:
-        """Under a band, (condition label, reference score over found score) per condition; else []."""
-        return [(label, float(r.score / c.score)) for (label, c), (_, r) in zip(self.found.under, self.reference.under)
-                if len(self.found.under) == len(self.reference.under)]  # fmt: skip
+        """Under a band, (level label, reference score over found score) per noise level; else []."""
+        return [(label, ratio) for label, ratio, _ in self.levels()]
 
     @property
     def no_worse(self) -> bool:
