@@ -10,8 +10,9 @@ a seed of their own (:func:`optipose.seeds.group_seed`), so no two models share 
 
 Under a :class:`~optipose.evaluate.conditions.Condition` the sensors' noise is scaled, and when the
 brackets are off each sensor scans from its true pose while its cloud is rebuilt with the drawn one
-(:func:`optipose.scan.scanner.rebuilt_with`); the cell is then zeroed on a master-part scan at the nominal
-orientation: each subset's registration of it is the constant bias, taken off every estimate.
+(:func:`optipose.scan.scanner.rebuilt_with`); the cell is then zeroed on a master part at the nominal
+orientation: what the brackets add to each subset's estimate there is taken off every estimate
+(:meth:`_Worker.zero`).
 """
 
 from __future__ import annotations
@@ -98,6 +99,7 @@ class _Worker:
             self.reference = SurfaceReference(setup.vertices, setup.faces)
         self._nominal: dict = {}
         self._zero: dict = {}
+        self._exact_master: dict = {}
 
     def _scanner(self, model):
         """The scanner of a sensor model (``None``: the part's) at the condition's noise scale, built once."""
@@ -154,21 +156,28 @@ class _Worker:
         condition = self.condition
         if condition.draw is None or not condition.zeroed:
             return [np.eye(4)] * len(subsets)
-        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), condition)
+        layout = (np.asarray(poses).tobytes(), tuple(map(str, models)))
+        if any(r is not self.reference for r in references):  # nominal-scan references: each condition its own
+            layout = (*layout, condition)
+        key = (*layout, replace(condition, noise_scale=1.0))  # noise-free scans: the noise level does not matter
         if key not in self._zero:
-            seed = zeroing_seed(self.setup.seed, condition.draw)
-            cfg = self.setup.registration
-            mounted = _clouds(cfg, self.scan(models, poses, seed, noise=False))
-            exact = _clouds(cfg, self.scan(models, poses, seed, exact=True, noise=False))
-            zero = []
-            for subset, reference in zip(subsets, references):
-                off, _ = _register(self, mounted, subset, reference)
-                on, _ = _register(self, exact, subset, reference)
-                if not (off.ok and on.ok):  # its estimate still stands in for the bias; say so
-                    log.warning("zeroing subset %s on the master scan: %s", subset, off.failure or on.failure or "did not converge")
-                zero.append(invert_T(off.T_target_source) @ on.T_target_source)
-            self._zero[key] = zero
+            if layout not in self._exact_master:  # the exact cell's, the same for every draw
+                self._exact_master[layout] = self._master(models, poses, subsets, references, exact=True)
+            mounted = self._master(models, poses, subsets, references, exact=False)
+            self._zero[key] = [invert_T(off) @ on for off, on in zip(mounted, self._exact_master[layout])]
         return self._zero[key]
+
+    def _master(self, models, poses, subsets, references, exact: bool) -> list[np.ndarray]:
+        """Per subset, ``T_target_source`` of a noise-free master scan at the nominal orientation, by the
+        mounted cell of this condition's draw or (``exact``) by a cell with exact brackets."""
+        scans = self.scan(models, poses, zeroing_seed(self.setup.seed, self.condition.draw), exact=exact, noise=False)
+        clouds, out = _clouds(self.setup.registration, scans), []
+        for subset, reference in zip(subsets, references):
+            reg, _ = _register(self, clouds, subset, reference)
+            if not reg.ok:  # its estimate still stands in for the bias; say so
+                log.warning("zeroing subset %s on the master scan: %s", subset, reg.failure or "did not converge")
+            out.append(reg.T_target_source)
+        return out
 
     def references(self, models: list, poses: list[np.ndarray], subsets) -> list:
         """The reference of each subset: the part's, or the nominal scan of the subset's sensors."""
