@@ -161,21 +161,25 @@ class Cycle:
 
     def __call__(self, T: np.ndarray) -> np.ndarray | None:
         """The mean pose of the cycle ``T`` closes (or of the jitter it ends), or None."""
-        for lag, P in enumerate(reversed(self.poses), start=1):
-            if lag > 1 and _small_step(T @ np.linalg.inv(P), self.cfg):
-                return mean_pose(self.poses[-lag + 1 :] + [T])
-        if self.poses:
-            self.steps = (self.steps + [_twist_length(T @ np.linalg.inv(self.poses[-1]))])[-self.window :]
-        if len(self.poses) == self.window and _twist_length(T @ np.linalg.inv(self.poses[0])) < np.mean(self.steps):
-            return mean_pose(self.poses[1:] + [T])
+        if self.poses:  # T's motion from each kept pose, oldest first, in one pass (this runs every ICP step)
+            angle, shift = _motions_from(T, np.asarray(self.poses))
+            back = np.flatnonzero((angle[:-1] < self.cfg.tolerance_rotation) & (shift[:-1] < self.cfg.tolerance_translation))
+            if len(back):  # the most recent pose T is back at, two steps ago or more
+                return mean_pose(self.poses[back[-1] + 1 :] + [T])
+            twist = angle * _TWIST_LENGTH + shift
+            self.steps = (self.steps + [float(twist[-1])])[-self.window :]
+            if len(self.poses) == self.window and twist[0] < np.mean(self.steps):
+                return mean_pose(self.poses[1:] + [T])
         self.poses = (self.poses + [T])[-self.window :]
         return None
 
 
-def _twist_length(delta: np.ndarray) -> float:
-    """A rigid motion's size: its angle times ``_TWIST_LENGTH`` plus its translation (m)."""
-    angle = np.arccos(np.clip(0.5 * (np.trace(delta[:3, :3]) - 1.0), -1.0, 1.0))
-    return float(angle * _TWIST_LENGTH + np.linalg.norm(delta[:3, 3]))
+def _motions_from(T: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The angle (rad) and translation (m) of ``T @ inv(P)`` for each rigid ``P`` of ``poses`` (m, 4, 4)."""
+    R, t = poses[:, :3, :3], poses[:, :3, 3]
+    trace = np.einsum("ij,mij->m", T[:3, :3], R)  # trace(R_T Rᵀ)
+    shift = T[:3, 3] - np.einsum("ij,mkj,mk->mi", T[:3, :3], R, t)  # t_T − R_T Rᵀ t
+    return np.arccos(np.clip(0.5 * (trace - 1.0), -1.0, 1.0)), np.linalg.norm(shift, axis=1)
 
 
 def _small_step(delta: np.ndarray, cfg: RegistrationConfig) -> bool:
