@@ -235,3 +235,35 @@ def test_an_occluder_hides_what_it_covers_and_returns_no_points():
     x = hidden.points[:, 0]
     assert not np.any((x > -5 * MM) & (x < 5 * MM))  # nothing behind the box
     assert np.any(x < -8 * MM) and np.any(x > 8 * MM)
+
+
+@pytest.mark.parametrize("part_name", ["part_a", "part_b", "part_c"])
+def test_casting_only_anchor_columns_gives_the_same_points_as_casting_every_column(part_name):
+    """Columns between two anchors that hit one triangle are filled, not cast, and their shadow rays are
+    skipped when both anchors see the receiver: the shipped parts' scans (edges, holes, shadows, the
+    flange) come out bit-identical to casting every column, at a turned orientation too."""
+    from optipose.model.part import load_part
+    from optipose.scan.scanner import part_scanner
+
+    part = load_part(part_name)
+    poses = part.layouts["hand"].poses
+    every, anchors = part_scanner(part, column_stride=1), part_scanner(part, column_stride=8)
+    for rpy_deg in ([0.0, 0.0, 0.0], [1.7, -1.3, 0.9]):
+        rpy = np.deg2rad(rpy_deg)
+        a = every.scan_many(poses, part.motion, rpy=rpy, centre=part.rotation_centre, rng=3)
+        b = anchors.scan_many(poses, part.motion, rpy=rpy, centre=part.rotation_centre, rng=3)
+        for x, y in zip(a, b):
+            assert len(x) > 10_000
+            np.testing.assert_array_equal(x.points, y.points)
+            np.testing.assert_array_equal(x.raw, y.raw)
+
+
+def test_a_step_shadow_is_the_same_with_anchor_columns():
+    """The step of the shadow test turned 30° about z, so its shadow's boundary runs across the line's
+    columns: the hits between anchors there are traced, and the cloud is the one of every column cast."""
+    mesh = trimesh.util.concatenate([box([-20, -30, -5], [20, 30, 0]), box([2, -30, 0], [20, 30, 10])])
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.deg2rad(30.0), [0, 0, 1]))
+    motion = ScanMotion(16 * MM, 0.05 * MM)
+    every, anchors = (Scanner(mesh, SENSOR, "white-diffuse", column_stride=s).scan(T_DOWN, motion, noise=False) for s in (1, 8))
+    assert len(every) < 320 * 3200  # a shadow was cast
+    np.testing.assert_array_equal(every.points, anchors.points)

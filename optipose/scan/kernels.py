@@ -62,6 +62,37 @@ def measure_hits(
     return out_idx[:n], out_T[:n], out_int[:n], out_tri[:n], out_shadow[:n]
 
 
+@njit(cache=True, nogil=True)
+def fill_columns(anchor_tri, cols, n_col):
+    """The first triangles of a block's rays (m·n_col,) from those of its anchor columns (m, a) only.
+
+    cols : (a,) the anchor columns, increasing, the first and last column among them. Between two
+    neighbouring anchors of a profile that hit the same triangle (or both miss), every ray hits that
+    triangle too: the rays lie in the laser plane between the two, so their hits lie on the segment
+    between the anchors' hits, inside the (convex) triangle; only a feature thinner than the anchors'
+    spacing could stand in between. Returns the filled triangles and ``need`` (n,), the rays between
+    anchors that disagree, which must be cast.
+    """
+    m, a = anchor_tri.shape
+    tri = np.empty(m * n_col, anchor_tri.dtype)
+    need = np.empty(m * n_col, np.int64)
+    n = 0
+    for k in range(m):
+        base = k * n_col
+        for j in range(a):
+            tri[base + cols[j]] = anchor_tri[k, j]
+        for j in range(a - 1):
+            t0 = anchor_tri[k, j]
+            same = t0 == anchor_tri[k, j + 1]
+            for c in range(cols[j] + 1, cols[j + 1]):
+                if same:
+                    tri[base + c] = t0
+                else:
+                    need[n] = base + c
+                    n += 1
+    return tri, need[:n]
+
+
 # Standard normal quantiles at the centres of 2^16 equal-probability cells: a draw is the inverse CDF of a
 # uniform, interpolated between neighbouring quantiles (tails end at ±4.3σ, where a 2 µm σ is 9 µm).
 _N_CELLS = 1 << 16

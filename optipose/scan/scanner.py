@@ -23,7 +23,7 @@ import numpy as np
 
 from optipose.model.material import Material, load_material
 from optipose.model.motion import ScanMotion
-from optipose.scan.kernels import NORMAL_QUANTILES, measure_hits, write_points
+from optipose.scan.kernels import NORMAL_QUANTILES, fill_columns, measure_hits, write_points
 from optipose.scan.profiles import EMPTY, ray_lines
 from optipose.scan.raycast import default_threads, face_planes, make_caster
 from optipose.model.sensor import SensorModel, load_sensor
@@ -33,6 +33,7 @@ __all__ = ["Scan", "Scanner", "part_scanner", "nominal_scans", "rebuilt_with"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count
+COLUMN_STRIDE = 8  # cast every this many columns, and the columns between only where their anchors disagree
 
 
 @dataclass
@@ -75,6 +76,10 @@ class Scanner:
     occluders : axis-aligned boxes ``(lo (3,), hi (3,))`` in the part's frame, m, that travel with the part
         (a part's keep-outs: the flange it is held by). They cast shadows and hide what is behind them but
         are never measured.
+    column_stride : cast every ``column_stride``-th column of a profile (the anchors); the columns between
+        two anchors that hit the same triangle hit it too and are not cast (:func:`fill_columns`), the
+        others are. 1 casts every column. The points are the same either way, but for a feature thinner
+        than the anchors' spacing (stride × the column pitch).
     """
 
     def __init__(
@@ -85,6 +90,7 @@ class Scanner:
         backend: str = "auto",
         threads: int | None = None,
         occluders: list[tuple[np.ndarray, np.ndarray]] | None = None,
+        column_stride: int = COLUMN_STRIDE,
     ):
         self.n_part_faces = len(mesh.faces)
         if occluders:  # keep-outs (the flange) block the laser and the receiver but return no points
@@ -111,6 +117,9 @@ class Scanner:
         s = self.sensor
         t_max = ((s.z_far - s.window_z) / self._ray_d_S[:, 2]).astype(np.float32)
         self._t_max_tiled = np.tile(t_max, _BLOCK_PROFILES)
+        n_col, stride = self.sensor.points_per_profile, max(1, int(column_stride))
+        self.column_stride = stride
+        self._anchors = np.unique(np.r_[np.arange(0, n_col, stride), n_col - 1]) if stride > 1 else None
         # intensity as a function of cos(AoI), tabulated once: one interp per hit instead of a formula
         self._intensity_grid = self.material.intensity(np.arccos(np.linspace(0.0, 1.0, 8193)))
 
@@ -221,18 +230,53 @@ class Scanner:
         s, n_col, m = self.sensor, self.sensor.points_per_profile, k1 - k0
         shift_b = shifts[k0:k1]
         origins = (view.o_P32[None] - (shift_b[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
-        tri = self.caster.first_triangle(origins, view.d_tiled[: m * n_col], self._t_max_tiled[: m * n_col])
+        ray_tri = self._first_triangles(view, origins, m)
         idx, T, inten, tri, test = measure_hits(
-            tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
+            ray_tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
             self._on_hull, s.apex_z, s.z_near, s.z_far, self._intensity_grid, s.detection_threshold, s.saturation,
         )  # fmt: skip
         test = np.flatnonzero(test)
         if len(test):
-            sub = idx[test]
             keep = np.ones(len(idx), dtype=bool)
+            if self._anchors is not None:  # anchors first; between two that see the receiver on one triangle, so does every hit
+                test = self._shadows_between_anchors(view, idx, T, tri, test, ray_tri, shift_b, keep)
+            sub = idx[test]
             keep[test] = self._receiver_sees(view, T[test], sub % n_col, shift_b[sub // n_col], tri[test])
             idx, T, inten, tri = idx[keep], T[keep], inten[keep], tri[keep]
         return idx, T, inten, tri
+
+    def _shadows_between_anchors(self, view, idx, T, tri, test, ray_tri, shift_b, keep) -> np.ndarray:
+        """Trace the shadow rays of the anchor columns' hits (into ``keep``) and return the hits still to
+        trace: those whose two anchors are not both seen by the receiver on the hit's own triangle. Between
+        two such anchors the hits lie on one segment of one triangle, and a shadow edge would have to
+        cross it and come back within the anchors' spacing."""
+        n_col, stride = self.sensor.points_per_profile, self.column_stride
+        col = idx[test] % n_col
+        at_anchor = (col % stride == 0) | (col == n_col - 1)
+        first, rest = test[at_anchor], test[~at_anchor]
+        sub = idx[first]
+        keep[first] = self._receiver_sees(view, T[first], sub % n_col, shift_b[sub // n_col], tri[first])
+        if not len(rest):
+            return rest
+        seen = np.zeros(len(ray_tri), dtype=bool)  # per ray of the block: a measured hit the receiver sees
+        seen[idx[keep]] = True
+        ray = idx[rest]
+        left = ray - (ray % n_col) % stride
+        right = np.minimum(left + stride, ray - ray % n_col + n_col - 1)
+        sure = seen[left] & seen[right] & (ray_tri[left] == tri[rest]) & (ray_tri[right] == tri[rest])
+        return rest[~sure]
+
+    def _first_triangles(self, view: "_SensorView", origins: np.ndarray, m: int) -> np.ndarray:
+        """The first triangle (-1: none) of each of a block's ``m`` profiles × columns rays (see ``column_stride``)."""
+        n_col, caster, t_max = self.sensor.points_per_profile, self.caster, self._t_max_tiled
+        if self._anchors is None:
+            return caster.first_triangle(origins, view.d_tiled[: m * n_col], t_max[: m * n_col])
+        rays = (np.arange(m)[:, None] * n_col + self._anchors[None]).ravel()
+        anchor_tri = caster.first_triangle(origins[rays], view.d_tiled[rays], t_max[rays])
+        tri, need = fill_columns(np.asarray(anchor_tri).reshape(m, len(self._anchors)), self._anchors, n_col)
+        if len(need):
+            tri[need] = caster.first_triangle(origins[need], view.d_tiled[need], t_max[need])
+        return tri
 
     def _receiver_sees(self, view, T, col, shift, tri) -> np.ndarray:
         """(n,) bool: nothing blocks the segment from each hit to the receiver (no triangulation shadow).
