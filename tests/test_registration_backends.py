@@ -205,3 +205,37 @@ def test_an_icp_caught_in_a_cycle_settles_on_the_cycles_mean():
         out = jitter(make_T(rpy_to_matrix(np.deg2rad([5 + rng.normal(0, 0.3), 0, 0]) * 1e-3), np.zeros(3)))
         settled = out if settled is None else settled
     assert settled is not None and np.rad2deg(np.arccos(settled[1, 1])) * 1e3 == pytest.approx(5.0, abs=0.5)
+
+
+def test_combined_start_adds_the_clouds_quadratic_models():
+    """Cloud 1 sees only roll (and translation) and sits at roll a; cloud 2 sees only pitch and yaw and
+    sits at pitch b. Their models add: the combined pose has roll a and pitch b (to second order), and
+    yaw stays where both left it. One cloud alone starts where it stands, whatever its centroid."""
+    from scipy.spatial.transform import Rotation
+
+    from optipose.registration.backends import combined_start
+
+    a, b = 1.5e-3, -2.0e-3
+    T1, T2 = np.eye(4), np.eye(4)
+    T1[:3, :3] = Rotation.from_rotvec([a, 0, 0]).as_matrix()
+    T2[:3, :3] = Rotation.from_rotvec([0, b, 0]).as_matrix()
+    H1, H2 = np.diag([4.0, 0, 0, 1, 1, 1]), np.diag([0, 3.0, 2.0, 1, 1, 1])
+    T = combined_start([(T1, H1, np.zeros(3)), (T2, H2, np.zeros(3))])
+    rotvec = Rotation.from_matrix(T[:3, :3]).as_rotvec()
+    np.testing.assert_allclose(rotvec, [a, b, 0.0], atol=1e-5)
+    np.testing.assert_allclose(T[:3, 3], 0.0, atol=1e-9)
+    T3 = part_motion(np.array([0.3, -0.2, 0.5]) * DEG, CENTRE)
+    np.testing.assert_allclose(combined_start([(T3, np.diag([1.0, 2, 3, 4, 5, 6]), np.array([0.05, -0.02, 0.01]))]), T3, atol=1e-12)
+
+
+def test_combined_start_moves_each_model_to_a_common_origin():
+    """Two clouds far apart (centroids 0.2 m on either side) that both sit at the same translated pose:
+    their models, each about its own centroid, agree once moved to a common origin, so the start is
+    that pose (adding them about the wrong origin would turn it)."""
+    from optipose.registration.backends import combined_start
+
+    T = part_motion(np.array([0.0, 0.0, 0.8]) * DEG, np.zeros(3))
+    T[:3, 3] += [1e-4, -2e-4, 3e-4]
+    H = np.diag([1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+    start = combined_start([(T, H, np.array([0.2, 0.0, 0.0])), (T, 2 * H, np.array([-0.2, 0.1, 0.0]))])
+    np.testing.assert_allclose(start, T, atol=1e-12)

@@ -133,6 +133,7 @@ class Evaluator:
             threads=None if self.jobs == 1 else 1,
             occluders=tuple(getattr(part, "occluders", ())),
             condition=condition or Condition(),
+            column_stride=self.objective.scan.column_stride,
         )
 
     def __enter__(self):

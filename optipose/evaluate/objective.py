@@ -20,6 +20,7 @@ from optipose.evaluate.conditions import ConditionsConfig, conditions_from_table
 from optipose.registration.config import RegistrationConfig
 
 __all__ = [
+    "ScanConfig",
     "ProtocolConfig",
     "RegistrationConfig",
     "StatisticConfig",
@@ -61,6 +62,14 @@ class ProtocolConfig:
 
 
 @dataclass(frozen=True)
+class ScanConfig:
+    """How the virtual scanner casts: ``column_stride`` (see :class:`optipose.scan.scanner.Scanner`; the
+    clouds are the same for any stride but on features thinner than stride × the column pitch)."""
+
+    column_stride: int = 8
+
+
+@dataclass(frozen=True)
 class StatisticConfig:
     """How per-axis errors become numbers: median and 75th percentile per axis, and a weighted score."""
 
@@ -78,6 +87,7 @@ class Objective:
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     statistic: StatisticConfig = field(default_factory=StatisticConfig)
     conditions: ConditionsConfig = field(default_factory=ConditionsConfig)
+    scan: ScanConfig = field(default_factory=ScanConfig)
     source_text: str = field(default="", repr=False, compare=False)  # the file as written, saved with results
 
     def to_dict(self) -> dict:
@@ -119,7 +129,8 @@ def objective_from_dict(table: dict, source_text: str = "") -> Objective:
         protocol=section(ProtocolConfig, table.get("protocol", {})),
         registration=section(RegistrationConfig, table.get("registration", {})),
         statistic=section(StatisticConfig, table.get("statistic", {})),
-        conditions=section(ConditionsConfig, table.get("conditions", {})), source_text=source_text,
+        conditions=section(ConditionsConfig, table.get("conditions", {})),
+        scan=section(ScanConfig, table.get("scan", {})), source_text=source_text,
     )  # fmt: skip
 
 
@@ -134,7 +145,7 @@ def reduced_objective(objective: Objective) -> Objective:
 
 def objective_from_table(table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective") -> Objective:
     """Validate a parsed objective table; every problem is a :class:`ConfigError` naming the key."""
-    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "conditions"}, where)
+    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "conditions", "scan"}, where)
     return Objective(
         name=str(table.get("name", default_name)),
         description=str(table.get("description", "")),
@@ -142,6 +153,7 @@ def objective_from_table(table: dict, where: str = "objective", source_text: str
         registration=_registration(table.get("registration", {}), f"{where} [registration]"),
         statistic=_statistic(table.get("statistic", {}), f"{where} [statistic]"),
         conditions=conditions_from_table(table.get("conditions", {}), f"{where} [conditions]"),
+        scan=_scan(table.get("scan", {}), f"{where} [scan]"),
         source_text=source_text,
     )
 
@@ -185,7 +197,7 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
     keys = {
         "method", "backend", "reference", "reference_spacing_mm", "voxel_size_mm", "outlier_removal",
         "outlier_neighbors", "outlier_std_ratio", "max_correspondence_distance_mm", "max_iterations",
-        "tolerance_rotation_deg", "tolerance_translation_mm",
+        "tolerance_rotation_deg", "tolerance_translation_mm", "subset_start",
     }  # fmt: skip
     _no_unknown(t, keys, where)
     d = RegistrationConfig()
@@ -202,6 +214,7 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
         max_iterations=int(_num(t, "max_iterations", 100, where)),
         tolerance_rotation=_num(t, "tolerance_rotation_deg", 1e-5, where) * _DEG,
         tolerance_translation=_num(t, "tolerance_translation_mm", 1e-5, where) * _MM,
+        subset_start=_choice(t, "subset_start", ("combined", "identity"), d.subset_start, where),
     )
     positive = ("reference_spacing", "max_correspondence_distance", "max_iterations", "outlier_neighbors", "outlier_std_ratio")
     bad = [k for k in positive if not getattr(cfg, k) > 0]
@@ -209,6 +222,14 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
     if bad:
         raise ConfigError(f"{where}: {', '.join(bad)} must be positive")
     return cfg
+
+
+def _scan(t: dict, where: str) -> ScanConfig:
+    _no_unknown(t, {"column_stride"}, where)
+    stride = _num(t, "column_stride", ScanConfig.column_stride, where)
+    if stride < 1 or stride != int(stride):
+        raise ConfigError(f"{where}: column_stride must be a whole number >= 1, got {t.get('column_stride')!r}")
+    return ScanConfig(column_stride=int(stride))
 
 
 def _statistic(t: dict, where: str) -> StatisticConfig:

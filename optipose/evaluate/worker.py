@@ -47,6 +47,7 @@ class WorkerSetup:
     centre : (3,) m, the rotation centre. threads : ray-casting threads per scan (None: all cores).
     occluders : the part's keep-outs, (lo, hi) boxes in m that hide what they cover.
     condition : the noise scale and bracket errors the layouts are scanned under (default: nominal).
+    column_stride : the scanners' anchor columns (:class:`optipose.scan.scanner.Scanner`).
     """
 
     token: str
@@ -62,6 +63,7 @@ class WorkerSetup:
     threads: int | None
     occluders: tuple = ()
     condition: Condition = field(default_factory=Condition)
+    column_stride: int = 8
 
 
 def sensor_groups(models: list, default) -> list[tuple[object, list[int]]]:
@@ -113,7 +115,8 @@ class _Worker:
             if scale != 1.0:
                 sensor = load_sensor(sensor)
                 sensor = replace(sensor, noise_sigma=sensor.noise_sigma * scale)
-            self.scanners[key] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders))
+            self.scanners[key] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders),
+                                          column_stride=s.column_stride)  # fmt: skip
         return self.scanners[key]
 
     def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None, exact=False,
@@ -248,11 +251,12 @@ def _clouds(cfg: RegistrationConfig, scans) -> list[np.ndarray]:
     return clouds
 
 
-def _register(worker, clouds, subset, reference, initial=None):
-    """One subset's floating cloud registered onto its reference (``initial``: each sensor's matches at identity)."""
+def _register(worker, clouds, subset, reference, initial=None, start=None):
+    """One subset's floating cloud registered onto its reference (``initial``: each sensor's matches at
+    identity; ``start``: a pose to start from and the matches there, see :func:`_start`)."""
     source = np.vstack([clouds[j] for j in subset])
-    start = Matches.concat([initial[j] for j in subset]) if initial and all(initial[j] for j in subset) else None
-    return register(source, reference, worker.setup.registration, start), source
+    matches = Matches.concat([initial[j] for j in subset]) if initial and all(initial[j] for j in subset) else None
+    return register(source, reference, worker.setup.registration, matches, start), source
 
 
 def _register_subsets(worker, setup, scans, subsets, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
@@ -264,15 +268,36 @@ def _register_subsets(worker, setup, scans, subsets, references, zeros, names, i
     # every subset against the part's reference: each sensor's matches at identity are searched once
     shared = references[0] is references[-1] and backend_for(cfg).takes_initial
     initial = [Matches(*worker.reference.nearest(c)) if len(c) else None for c in clouds] if shared else None
+    own: dict = {}  # sensor -> its single registration and centroid, where several sensors start from
     T_O_P = part_motion(rpy, setup.centre, offset)
     rows = []
     for s_index, (subset, reference, zero) in enumerate(zip(subsets, references, zeros)):
-        reg, source = _register(worker, clouds, subset, reference, initial)
+        start = _start(own, subset) if shared and len(subset) > 1 and cfg.subset_start == "combined" else None
+        reg, source = _register(worker, clouds, subset, reference, initial, start)
+        if shared and len(subset) == 1 and reg.ok and reg.matched is not None:
+            own[subset[0]] = (reg, reg.T_target_source[:3, :3] @ clouds[subset[0]].mean(axis=0) + reg.T_target_source[:3, 3])
         row = {"scan": i, "label": label, "subset_index": s_index, "subset": subset_name(subset, names),
                "n_points": len(source), "ok": reg.ok, "converged": reg.converged, "failure": reg.failure,
                "iterations": reg.iterations, "fitness": reg.fitness, "rmse": reg.rmse}  # fmt: skip
         rows.append(row | _errors(reg, source, rpy, T_O_P, setup.observability_tolerance, zero))
     return rows
+
+
+def _start(own: dict, subset) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where a subset of several sensors starts its ICP: its sensors' own registrations combined
+    (:func:`optipose.registration.backends.combined_start`), with their last matches as hints; ``None``
+    (identity) unless every sensor of the subset has registered on its own.
+
+    From identity a subset takes ~5 steps (a 2° turn is solved to the tolerance's 10⁻⁷ rad in three
+    Gauss-Newton steps and a fourth that confirms); from here one or two. Its ICP still runs to its own
+    fixed point, so its estimate is its own to the tolerance: no sensor borrows another's information,
+    and a direction none of its sensors sees stays at identity's."""
+    if not all(j in own for j in subset):
+        return None
+    from optipose.registration.backends import combined_start
+
+    T = combined_start([(own[j][0].T_target_source, own[j][0].information, own[j][1]) for j in subset])
+    return T, np.concatenate([own[j][0].matched for j in subset])
 
 
 def _errors(reg, source: np.ndarray, rpy: np.ndarray, T_O_P: np.ndarray, tolerance: float, zero: np.ndarray) -> dict:

@@ -81,14 +81,50 @@ def backend_for(cfg: RegistrationConfig) -> RegistrationBackend:
     return backend if cfg.method in backend.methods else get_backend("open3d")
 
 
-def register(source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration:
+def register(source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None,
+             start: tuple[np.ndarray, np.ndarray] | None = None) -> Registration:  # fmt: skip
     """Register a scan ``source`` (n, 3) m onto ``reference`` from identity (ICP, see :func:`backend_for`).
 
     initial : the reference matches of ``source`` at identity, if already known (they are the same for
         every subset that contains a sensor, so the evaluator searches them once per sensor).
+    start : (T (4, 4), ids (n,)) for back-ends that take ``initial``: start from pose T instead of identity,
+        with each point's match there as a hint (the evaluator starts a subset of several sensors where
+        its own sensors' registrations, combined, put it; see :func:`combined_start`).
     Returns a :class:`Registration`; fewer than :data:`MIN_POINTS` points fail without a back-end call.
     """
     backend = backend_for(cfg)
     if len(source) < MIN_POINTS:
         return Registration.failed(len(source), f"only {len(source)} points")
+    if start is not None:
+        return backend.register(source, reference, cfg, initial, start=start)
     return backend.register(source, reference, cfg, initial)
+
+
+def combined_start(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Where the registrations of several clouds put them together, to second order: (4, 4).
+
+    parts : per cloud (T (4, 4) its own registration, H (6, 6) its information about c, c (3,) its
+    centroid there). Each registration's quadratic model (H about its pose) is moved to a common origin
+    and the models are added, as the clouds' normal equations add; the minimum of the sum is the pose.
+    ICP from there has next to nothing left to do (its fixed point is the same); a direction no cloud
+    sees stays where the first registration left it, which is identity's there (a registration from
+    identity never moves along a direction its cloud cannot see).
+    """
+    from scipy.spatial.transform import Rotation
+
+    T_ref = parts[0][0]
+    o = np.mean([c for _, _, c in parts], axis=0)
+    H_sum, g = np.zeros((6, 6)), np.zeros(6)
+    for T, H, c in parts:
+        D = T @ np.linalg.inv(T_ref)
+        x = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, :3] @ o + D[:3, 3] - o])
+        M = np.eye(6)
+        M[3:, :3] = -np.cross(np.eye(3), c - o)  # rows about c -> about o: (c - o) x n added to the rotation part
+        H_o = M.T @ H @ M
+        H_sum += H_o
+        g += H_o @ x
+    x, *_ = np.linalg.lstsq(H_sum, g, rcond=1e-12)
+    R = Rotation.from_rotvec(x[:3]).as_matrix()
+    D = np.eye(4)
+    D[:3, :3], D[:3, 3] = R, o + x[3:] - R @ o
+    return D @ T_ref

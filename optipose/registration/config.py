@@ -27,3 +27,4 @@ class RegistrationConfig:
     max_iterations: int = 100
     tolerance_rotation: float = 1e-5 * _DEG
     tolerance_translation: float = 1e-5 * _MM
+    subset_start: str = "combined"  # a subset of several sensors starts where its sensors' own registrations put it, or at "identity"

@@ -38,13 +38,15 @@ class FastBackend:
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
-    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration:
-        """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity."""
+    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None,
+                 start: tuple[np.ndarray, np.ndarray] | None = None) -> Registration:  # fmt: skip
+        """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity.
+        ``start``: (T (4, 4), ids (n,)) a pose to start from instead, and each point's match there as a hint."""
         from optipose.registration import kernels
 
         source = np.ascontiguousarray(source, dtype=np.float64)
-        T = np.eye(4)
-        ids = None
+        T, ids = (np.eye(4), None) if start is None else (np.array(start[0], dtype=float), np.array(start[1]))
+        initial = initial if start is None else None
         max_d2 = cfg.max_correspondence_distance**2
         converged, it, history = False, 0, None
         cycle = Cycle(cfg)
@@ -82,6 +84,7 @@ class FastBackend:
             n_points=len(source),
             information=AtA,
             failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
+            matched=ids,
         )
 
 
@@ -94,9 +97,12 @@ class PlainBackend:
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
-    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration:
-        """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity."""
-        T = np.eye(4)
+    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None,
+                 start: tuple[np.ndarray, np.ndarray] | None = None) -> Registration:  # fmt: skip
+        """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity.
+        ``start``: (T (4, 4), ids (n,)) a pose to start from instead (its ids are not needed here)."""
+        T = np.eye(4) if start is None else np.array(start[0], dtype=float)
+        initial = initial if start is None else None
         ids = None
         max_d2 = cfg.max_correspondence_distance**2
         step = _kabsch if cfg.method == "point_to_point" else _point_to_plane
@@ -139,6 +145,7 @@ class PlainBackend:
             n_points=len(source),
             information=information_matrix(p[inlier], n[inlier]),
             failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
+            matched=ids,
         )
 
 

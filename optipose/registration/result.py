@@ -45,6 +45,8 @@ class Registration:
     n_points : points in the source.
     information : (6, 6) symmetric positive semi-definite, see the module doc.
     failure : why the registration is not usable ("" when it is).
+    matched : (n,) int64, the reference id each source point was matched to at the last step (back-ends
+        that track matches; ``None`` otherwise). Other subsets of the same clouds start from them.
     """
 
     T_target_source: np.ndarray = field(repr=False)
@@ -55,6 +57,7 @@ class Registration:
     n_points: int
     information: np.ndarray = field(repr=False)
     failure: str = ""
+    matched: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def ok(self) -> bool:
