@@ -16,6 +16,9 @@ if ! command -v uv >/dev/null 2>&1; then
     python3 -m pip install -q --disable-pip-version-check uv
 fi
 
-# The lock file pins every package; --frozen refuses to drift from it.
-uv sync --frozen --extra dev --extra bench -q
+# The lock file pins every package; --frozen refuses to drift from it. Byte-code is compiled here, once:
+# where PYTHONDONTWRITEBYTECODE is set (this machine sets it) every process, each evaluator worker
+# included, would otherwise compile every module it imports from source (README, "Start-up").
+uv sync --frozen --extra dev --extra bench -q --compile-bytecode
+.venv/bin/python -m compileall -q optipose >/dev/null
 echo "setup: ready (.venv/bin/optipose)"
