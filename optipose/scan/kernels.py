@@ -93,6 +93,46 @@ def fill_columns(anchor_tri, cols, n_col):
     return tri, need[:n]
 
 
+@njit(cache=True, nogil=True)
+def split_at_anchors(idx, test, n_col, stride):
+    """The hits ``test`` (positions in a block's hits, whose rays are ``idx``) on anchor columns, and the rest."""
+    first = np.empty(test.shape[0], np.int64)
+    rest = np.empty(test.shape[0], np.int64)
+    a = 0
+    b = 0
+    for t in test:
+        col = idx[t] % n_col
+        if col % stride == 0 or col == n_col - 1:
+            first[a] = t
+            a += 1
+        else:
+            rest[b] = t
+            b += 1
+    return first[:a], rest[:b]
+
+
+@njit(cache=True, nogil=True)
+def unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride):
+    """Of the hits ``rest`` (between anchors), those whose two anchors are not both measured, seen by
+    the receiver (``keep``) and on the hit's own triangle: their shadow rays must still be traced."""
+    seen = np.zeros(ray_tri.shape[0], np.bool_)
+    for h in range(idx.shape[0]):
+        if keep[h]:
+            seen[idx[h]] = True
+    out = np.empty(rest.shape[0], np.int64)
+    n = 0
+    for t in rest:
+        ray = idx[t]
+        col = ray % n_col
+        left = ray - col % stride
+        right = min(left + stride, ray - col + n_col - 1)
+        f = tri[t]
+        if not (seen[left] and seen[right] and ray_tri[left] == f and ray_tri[right] == f):
+            out[n] = t
+            n += 1
+    return out[:n]
+
+
 # Standard normal quantiles at the centres of 2^16 equal-probability cells: a draw is the inverse CDF of a
 # uniform, interpolated between neighbouring quantiles (tails end at ±4.3σ, where a 2 µm σ is 9 µm).
 _N_CELLS = 1 << 16

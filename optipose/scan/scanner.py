@@ -23,7 +23,7 @@ import numpy as np
 
 from optipose.model.material import Material, load_material
 from optipose.model.motion import ScanMotion
-from optipose.scan.kernels import NORMAL_QUANTILES, fill_columns, measure_hits, write_points
+from optipose.scan.kernels import NORMAL_QUANTILES, fill_columns, measure_hits, split_at_anchors, unsure_between_anchors, write_points
 from optipose.scan.profiles import EMPTY, ray_lines
 from optipose.scan.raycast import default_threads, face_planes, make_caster
 from optipose.model.sensor import SensorModel, load_sensor
@@ -251,20 +251,10 @@ class Scanner:
         two such anchors the hits lie on one segment of one triangle, and a shadow edge would have to
         cross it and come back within the anchors' spacing."""
         n_col, stride = self.sensor.points_per_profile, self.column_stride
-        col = idx[test] % n_col
-        at_anchor = (col % stride == 0) | (col == n_col - 1)
-        first, rest = test[at_anchor], test[~at_anchor]
+        first, rest = split_at_anchors(idx, test, n_col, stride)
         sub = idx[first]
         keep[first] = self._receiver_sees(view, T[first], sub % n_col, shift_b[sub // n_col], tri[first])
-        if not len(rest):
-            return rest
-        seen = np.zeros(len(ray_tri), dtype=bool)  # per ray of the block: a measured hit the receiver sees
-        seen[idx[keep]] = True
-        ray = idx[rest]
-        left = ray - (ray % n_col) % stride
-        right = np.minimum(left + stride, ray - ray % n_col + n_col - 1)
-        sure = seen[left] & seen[right] & (ray_tri[left] == tri[rest]) & (ray_tri[right] == tri[rest])
-        return rest[~sure]
+        return unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride) if len(rest) else rest
 
     def _first_triangles(self, view: "_SensorView", origins: np.ndarray, m: int) -> np.ndarray:
         """The first triangle (-1: none) of each of a block's ``m`` profiles × columns rays (see ``column_stride``)."""
