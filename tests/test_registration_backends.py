@@ -142,6 +142,32 @@ def test_compiled_icp_agrees_with_the_plain_numpy_reference(surface, cloud, meth
     np.testing.assert_allclose(fast.information, plain.information, rtol=1e-10, atol=1e-12)
 
 
+def test_a_sampled_reference_finds_the_kd_trees_nearest_points(block):
+    """The grid search of a CAD sample answers the KD-tree's nearest points, near the sample and far from
+    it, with the previous step's matches as hints or without."""
+    reference = SampledReference(*sample_surface(block.vertices, block.faces, 0.25e-3, seed=1))
+    rng = np.random.default_rng(3)
+    base = reference.points[rng.choice(len(reference.points), 4000)]
+    for scale in (1e-6, 5e-5, 3e-4, 3e-3, 3e-2):
+        p = base + rng.normal(scale=scale, size=base.shape)
+        truth = reference.closest(p)[2]
+        hint = reference.closest(p + rng.normal(scale=2e-5, size=p.shape))[2]
+        np.testing.assert_array_equal(reference.nearest(p)[2], truth)
+        np.testing.assert_array_equal(reference.nearest(p, hint)[2], truth)
+
+
+def test_the_fitness_stop_runs_open3ds_point_to_point_icp(block, turned):
+    """stop = "fitness" in the compiled back-end takes Open3D's steps and stops where Open3D stops (inlier
+    fraction and RMSE unchanged, or the iteration cap): the same pose as Open3D's ICP against the same sample."""
+    reference = SampledReference(*sample_surface(block.vertices, block.faces, 0.5e-3, seed=1))
+    for cap in (8, 60):
+        cfg = replace(_config("fast", "point_to_point", reference="cad-sample", reference_spacing=0.5e-3),
+                      stop="fitness", max_iterations=cap)  # fmt: skip
+        fast, o3d = register(turned, reference, cfg), register(turned, reference, replace(cfg, backend="open3d"))
+        assert fast.ok and o3d.ok and (fast.iterations == cap) == (cap == 8)
+        np.testing.assert_allclose(fast.T_target_source, o3d.T_target_source, rtol=0, atol=1e-9)
+
+
 # -- the registry ----------------------------------------------------------------------------------------
 def test_generalized_icp_goes_to_open3d_whatever_the_backend():
     cfg = load_objective("paper").registration

@@ -6,9 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RegistrationConfig"]
+__all__ = ["RegistrationConfig", "FITNESS_CHANGE", "RMSE_CHANGE"]
 
 _MM, _DEG = 1e-3, np.pi / 180
+FITNESS_CHANGE, RMSE_CHANGE = 1e-9, 1e-12  # the "fitness" stop, and the criteria given to Open3D's ICP (m for the RMSE)
 
 
 @dataclass(frozen=True)
@@ -27,4 +28,8 @@ class RegistrationConfig:
     max_iterations: int = 100
     tolerance_rotation: float = 1e-5 * _DEG
     tolerance_translation: float = 1e-5 * _MM
+    # when an ICP is done: "step" (a step below the tolerances; a cycle settles on its mean) or "fitness"
+    # (Open3D's: the inlier fraction and RMSE stop changing, by FITNESS_CHANGE and RMSE_CHANGE; the
+    # iteration cap ends the ICP without failing it)
+    stop: str = "step"
     subset_start: str = "combined"  # a subset of several sensors starts where its sensors' own registrations put it, or at "identity"

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from optipose.registration.config import FITNESS_CHANGE, RMSE_CHANGE
 from optipose.registration.preprocess import information_matrix
 from optipose.transforms import mean_pose
 from optipose.registration.result import MIN_POINTS, Matches, Registration
@@ -48,7 +49,7 @@ class FastBackend:
         T, ids = (np.eye(4), None) if start is None else (np.array(start[0], dtype=float), np.array(start[1]))
         initial = initial if start is None else None
         max_d2 = cfg.max_correspondence_distance**2
-        converged, it, history = False, 0, None
+        converged, it, history, before = False, 0, None, None
         cycle = Cycle(cfg)
         for it in range(1, cfg.max_iterations + 1):
             p = kernels.transform(source, T)
@@ -60,6 +61,12 @@ class FastBackend:
             n_in = int(inlier.sum())
             if n_in < MIN_POINTS:
                 return Registration.failed(len(source), f"{n_in} points within the correspondence distance", T, it)
+            if cfg.stop == "fitness":  # Open3D's test, on the matches at T against those before the last step
+                now = (n_in / len(source), float(np.sqrt(sum_d2 / n_in)))
+                if before is not None and abs(now[0] - before[0]) < FITNESS_CHANGE and abs(now[1] - before[1]) < RMSE_CHANGE:
+                    converged = True
+                    break
+                before = now
             if cfg.method == "point_to_point":
                 delta = _kabsch(p[inlier], q[inlier])
             else:
@@ -67,6 +74,9 @@ class FastBackend:
             if delta is None:
                 return Registration.failed(len(source), "degenerate step", T, it)
             T = delta @ T
+            if cfg.stop == "fitness":
+                converged = it == cfg.max_iterations  # as Open3D: the cap ends the ICP, it does not fail it
+                continue
             if _small_step(delta, cfg):
                 converged = True
                 break

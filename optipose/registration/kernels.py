@@ -282,3 +282,77 @@ def normal_equations(p, q, n, max_d2):
         for s in range(r):
             AtA[r, s] = AtA[s, r]
     return inlier, c, AtA, Atb, sum_d2
+
+
+@njit(cache=True, nogil=True)
+def point_grid(points, origin, cell, shape):
+    """The points (n, 3) listed per cell of a grid (origin (3,), cube side ``cell``, ``shape`` (3,) cells,
+    covering every point): CSR ``start`` (cells + 1,) and ``order`` (n,), point indices ascending in each cell."""
+    n = points.shape[0]
+    n_cells = shape[0] * shape[1] * shape[2]
+    key = np.empty(n, np.int64)
+    start = np.zeros(n_cells + 1, np.int64)
+    for i in range(n):
+        c = 0
+        for j in range(3):
+            c = c * shape[j] + min(max(np.int64(np.floor((points[i, j] - origin[j]) / cell)), 0), shape[j] - 1)
+        key[i] = c
+        start[c + 1] += 1
+    for c in range(n_cells):
+        start[c + 1] += start[c]
+    slot = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[slot[key[i]]] = i
+        slot[key[i]] += 1
+    return start, order
+
+
+@njit(cache=True, nogil=True)
+def grid_nearest(p, hint, points, origin, cell, shape, start, order, rank):
+    """The nearest of the grid's points to each of p (n, 3), searched in the 27 cells around p's cell of
+    :func:`point_grid` (``points`` in the grid's order: ``points[k]`` is point ``order[k]``, point i is
+    ``points[rank[i]]``): exact when the nearest found is closer than ``cell`` (any point outside those
+    cells is at least a cell away). ``hint`` (n,): each point's nearest at the previous ICP step (-1:
+    none); the distance to it bounds the search, so a cell farther than that is not opened. Returns ids
+    (n,) int64 and ``open`` (n,) bool: points with no grid point that close (or outside the grid), left
+    to a global search."""
+    n = p.shape[0]
+    ids = np.full(n, -1, np.int64)
+    open_ = np.zeros(n, np.bool_)
+    limit = cell * cell
+    s0, s1, s2 = shape[0], shape[1], shape[2]
+    for i in range(n):
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        fx, fy, fz = (px - origin[0]) / cell, (py - origin[1]) / cell, (pz - origin[2]) / cell
+        c0, c1, c2 = np.int64(np.floor(fx)), np.int64(np.floor(fy)), np.int64(np.floor(fz))
+        if c0 < 0 or c0 >= s0 or c1 < 0 or c1 >= s1 or c2 < 0 or c2 >= s2:
+            open_[i] = True
+            continue
+        best, g = limit, -1
+        if hint[i] >= 0:
+            k = rank[hint[i]]
+            d2 = (px - points[k, 0]) ** 2 + (py - points[k, 1]) ** 2 + (pz - points[k, 2]) ** 2
+            if d2 < best:
+                best, g = d2, k
+        for a in range(max(c0 - 1, 0), min(c0 + 2, s0)):
+            gx = (max(a - fx, 0.0, fx - a - 1.0) * cell) ** 2  # p's distance to the cell's slab along x, squared
+            if gx >= best:
+                continue
+            for b in range(max(c1 - 1, 0), min(c1 + 2, s1)):
+                gy = gx + (max(b - fy, 0.0, fy - b - 1.0) * cell) ** 2
+                if gy >= best:
+                    continue
+                row = (a * s1 + b) * s2
+                for d in range(max(c2 - 1, 0), min(c2 + 2, s2)):
+                    if gy + (max(d - fz, 0.0, fz - d - 1.0) * cell) ** 2 >= best:
+                        continue
+                    for k in range(start[row + d], start[row + d + 1]):
+                        d2 = (px - points[k, 0]) ** 2 + (py - points[k, 1]) ** 2 + (pz - points[k, 2]) ** 2
+                        if d2 < best or (d2 == best and g >= 0 and order[k] < order[g]):
+                            best, g = d2, k
+        if g < 0:
+            open_[i] = True
+        else:
+            ids[i] = order[g]
+    return ids, open_

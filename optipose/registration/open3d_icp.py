@@ -41,7 +41,9 @@ class Open3DBackend:
         reg = o3d.pipelines.registration
         target = _open3d_target(reference, cfg)
         src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source))
-        criteria = reg.ICPConvergenceCriteria(relative_fitness=1e-9, relative_rmse=1e-12, max_iteration=cfg.max_iterations)
+        from optipose.registration.config import FITNESS_CHANGE, RMSE_CHANGE
+
+        criteria = reg.ICPConvergenceCriteria(relative_fitness=FITNESS_CHANGE, relative_rmse=RMSE_CHANGE, max_iteration=cfg.max_iterations)
         dist = cfg.max_correspondence_distance
         if cfg.method == "generalized":
             result = reg.registration_generalized_icp(src, target, dist, np.eye(4), reg.TransformationEstimationForGeneralizedICP(), criteria)

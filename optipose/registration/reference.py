@@ -136,7 +136,11 @@ class SurfaceReference:
 
 
 class SampledReference:
-    """A reference point cloud (n, 3) m with unit normals (n, 3) and a KD-tree built once."""
+    """A reference point cloud (n, 3) m with unit normals (n, 3) and a KD-tree built once.
+
+    :meth:`nearest` (what ICP calls every step) first searches a grid of cells of about 2.5 × the points'
+    spacing around each point, which is exact for a point that close to the cloud; the KD-tree answers
+    the rest (points far from the cloud, early in an ICP)."""
 
     def __init__(self, points: np.ndarray, normals: np.ndarray, kind: str = "cad-sample"):
         from scipy.spatial import cKDTree
@@ -145,6 +149,23 @@ class SampledReference:
         self.normals = np.ascontiguousarray(normals, dtype=np.float64)
         self.kind = kind
         self._tree = cKDTree(self.points)
+        self._point_grid = None
+
+    def _grid(self) -> tuple:
+        """The points per cell of a grid over them (:func:`optipose.registration.kernels.point_grid`), built on first use."""
+        if self._point_grid is None:
+            from optipose.registration import kernels
+
+            lo, hi = self.points.min(axis=0), self.points.max(axis=0)
+            spacing = float(np.sqrt(_cloud_area(self.points, self._tree) / max(len(self.points), 1)))
+            cell = max(2.5 * spacing, float(np.prod(hi - lo + 1e-9) / _MAX_CELLS) ** (1 / 3), 1e-6)
+            origin = lo - cell
+            shape = np.floor((hi + cell - origin) / cell).astype(np.int64) + 1
+            start, order = kernels.point_grid(self.points, origin, cell, shape)
+            rank = np.empty_like(order)
+            rank[order] = np.arange(len(order))
+            self._point_grid = (np.ascontiguousarray(self.points[order]), origin, cell, shape, start, order, rank)
+        return self._point_grid
 
     def __repr__(self) -> str:
         return f"SampledReference({self.kind}, {len(self.points)} points)"
@@ -154,8 +175,17 @@ class SampledReference:
         return self.points[ids], self.normals[ids], ids.astype(np.int64)
 
     def nearest(self, points: np.ndarray, ids: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The closest sample points: a search every time (``ids`` is ignored)."""
-        return self.closest(points)
+        """The closest sample points, the same as :meth:`closest`'s: the grid answers the points near the
+        cloud (``ids``, each point's match at the previous ICP step, bounds its search), the KD-tree the others."""
+        from optipose.registration import kernels
+
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        hint = np.full(len(points), -1, dtype=np.int64) if ids is None else np.ascontiguousarray(ids, dtype=np.int64)
+        found, open_ = kernels.grid_nearest(points, hint, *self._grid())
+        open_ = np.flatnonzero(open_)
+        if len(open_):
+            found[open_] = self._tree.query(points[open_])[1]
+        return self.points[found], self.normals[found], found
 
     def follow(self, points: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A sample point is only the closest one where the search says so: always search again."""
@@ -163,6 +193,13 @@ class SampledReference:
 
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         return self.points, self.normals
+
+
+def _cloud_area(points: np.ndarray, tree) -> float:
+    """About the area a surface sample covers (m²): its points times the squared median distance to a neighbour."""
+    pick = points[:: max(1, len(points) // 2000)]
+    d = tree.query(pick, k=2)[0][:, 1]
+    return float(len(points) * np.median(d) ** 2)
 
 
 def sample_surface(vertices: np.ndarray, faces: np.ndarray, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
