@@ -363,3 +363,15 @@ def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_lay
     evaluated.clear()
     confirmer.pick(1, pool, 2, [], near=cands[0])  # already a leader: not run twice
     assert evaluated == ["c0", "c1"]
+
+
+def test_a_tight_time_budget_still_places_every_sensor_count():
+    """Evaluations enough for minutes and 8 s on the clock: each k gets its share of the clock instead of
+    k = 1 using all of it, so k = 1, 2 and 3 all have a feasible layout, and the search keeps to its clock."""
+    cfg = SearchConfig(global_evals=5000, local_evals=2000, joint_evals=2000, max_time=8.0, random_starts=2,
+                       sensors=(1, 2, 3), screen_samples=0)  # fmt: skip
+    out = run_search(load_part("part_b"), load_objective("paper"), cfg, seed=1)
+    assert sorted(out.found) == [1, 2, 3]
+    assert all(f.score < PENALTY and len(f.poses) == k for k, f in out.found.items())
+    stages = {r.stage.split(":")[0] + f":{r.k}" for r in out.history}
+    assert {"greedy:1", "greedy:2", "greedy:3"} <= stages

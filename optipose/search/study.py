@@ -18,13 +18,18 @@ import numpy as np
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import EvalState, Evaluation
 
-__all__ = ["SurrogateStudy", "Stop", "Callback"]
+__all__ = ["SurrogateStudy", "Stop", "Share", "Callback"]
 
 Callback = Callable[[Evaluation], None]
 
 
 class Stop(Exception):
     """Raised inside the objective to end the whole search (time is up, or Ctrl-C)."""
+
+
+class Share(Stop):
+    """Raised inside the objective when a stage's share of the time budget is used up (see
+    :meth:`SurrogateStudy.share`): it ends that stage, and the search goes on with the next."""
 
 
 class SurrogateStudy:
@@ -40,6 +45,7 @@ class SurrogateStudy:
         self.interrupted = False
         self._best: dict[int, tuple[float, np.ndarray]] = {}
         self._deadline = np.inf
+        self._share = None  # the clock's own deadline while a share of it runs
         self._stage = ""
 
     @property
@@ -60,12 +66,29 @@ class SurrogateStudy:
         """From now on the search may take ``seconds``; the evaluation after that raises :class:`Stop`."""
         self._deadline = time.monotonic() + seconds
 
+    def seconds_left(self) -> float:
+        """What is left of the clock (inf before it is started)."""
+        return self._deadline - time.monotonic()
+
+    @contextlib.contextmanager
+    def share(self, seconds: float):
+        """Within the block the search may take ``seconds`` more (and no more than the clock's rest); the
+        evaluation after that raises :class:`Share`, which ends the block's stage but not the search."""
+        outer = self._deadline
+        self._deadline, self._share = min(outer, time.monotonic() + seconds), outer
+        try:
+            yield self
+        finally:
+            self._deadline, self._share = outer, None
+
     def best(self, k: int) -> tuple[float, np.ndarray] | None:
         """The best feasible value and layout of k sensors seen so far."""
         return self._best.get(k)
 
     def __call__(self, u: np.ndarray, grad=None) -> float:
         if time.monotonic() > self._deadline:
+            if self._share is not None and time.monotonic() <= self._share:
+                raise Share("this sensor count's share of the time budget used up")
             raise Stop("time budget used up")
         try:
             result = self.problem.score(np.asarray(u, dtype=float))

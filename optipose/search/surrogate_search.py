@@ -19,7 +19,7 @@ from optipose.search.greedy import greedy_stage
 from optipose.search.joint import joint_stage
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import Found, SearchOutcome
-from optipose.search.study import Stop, SurrogateStudy
+from optipose.search.study import Share, Stop, SurrogateStudy
 
 __all__ = ["run_search", "best_hand_subsets"]
 
@@ -58,20 +58,47 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
 
 
 def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict) -> None:
-    """Fill ``greedy`` and ``joint`` for k = 1 … n (as far as the clock allows)."""
+    """Fill ``greedy`` and ``joint`` for k = 1 … n (as far as the clock allows).
+
+    Each k gets its share of what is left of the clock, by the work its stages ask for (evaluations times
+    the k sensors each one scans), and what it does not use passes on; a k whose share runs out keeps its
+    best layout so far, so a tight budget still gives every k an answer instead of spending it all on k = 1.
+    """
     placed = np.zeros(0)
+    work = {k: k * _evaluations(config, k) for k in range(1, n + 1)}
     for k in range(1, n + 1):
-        if config.strategy in ("greedy", "both") or k == 1:
-            placed = greedy_stage(study, config, placed, hand_u, rng, seed * 1000 + k)
-            if study.best(k) is None:  # no feasible layout of k sensors: more sensors will not help
-                log.warning("no feasible layout of %d sensor(s) found; stopping", k)
-                break
-            score = study.problem.score(placed)
-            greedy[k] = Found(k, "greedy", placed.copy(), study.problem.space.to_poses(placed), score.objective, score.stats or {})
-        if k > 1 and config.strategy in ("joint", "both"):
-            joint[k] = joint_stage(study, config, k, greedy.get(k), hand.get(k), rng, seed * 1000 + 100 + k)
-            if config.strategy == "joint":
-                placed = joint[k].u
+        with study.share(study.seconds_left() * work[k] / sum(work[j] for j in range(k, n + 1))):
+            try:
+                if config.strategy in ("greedy", "both") or k == 1:
+                    placed = greedy_stage(study, config, placed, hand_u, rng, seed * 1000 + k)
+                    if study.best(k) is None:  # no feasible layout of k sensors: more sensors will not help
+                        log.warning("no feasible layout of %d sensor(s) found; stopping", k)
+                        break
+                    greedy[k] = _found(study, k, "greedy", placed)
+                if k > 1 and config.strategy in ("joint", "both"):
+                    joint[k] = joint_stage(study, config, k, greedy.get(k), hand.get(k), rng, seed * 1000 + 100 + k)
+                    if config.strategy == "joint":
+                        placed = joint[k].u
+            except Share as why:
+                best = study.best(k)
+                log.info("k=%d: %s; it keeps its best layout so far", k, why)
+                if best is None:
+                    log.warning("no feasible layout of %d sensor(s) found in its share of the time; stopping", k)
+                    break
+                if k not in greedy and k not in joint:
+                    placed = best[1].copy()
+                    greedy[k] = _found(study, k, "greedy", placed)
+
+
+def _evaluations(config: SearchConfig, k: int) -> int:
+    """The surrogate evaluations the stages of k sensors ask for (greedy and, for k > 1, joint)."""
+    greedy = config.global_evals + config.local_evals + config.random_starts + config.screen_starts * config.screen_evals
+    return (greedy if config.strategy in ("greedy", "both") or k == 1 else 0) + (config.joint_evals if k > 1 and config.strategy != "greedy" else 0)
+
+
+def _found(study, k: int, stage: str, u: np.ndarray) -> Found:
+    score = study.problem.score(u)
+    return Found(k, stage, u.copy(), study.problem.space.to_poses(u), score.objective, score.stats or {})
 
 
 def best_hand_subsets(problem: SurrogateProblem, hand_u: list[np.ndarray], ks) -> dict[int, Found]:
