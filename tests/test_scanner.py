@@ -267,3 +267,31 @@ def test_a_step_shadow_is_the_same_with_anchor_columns():
     every, anchors = (Scanner(mesh, SENSOR, "white-diffuse", column_stride=s).scan(T_DOWN, motion, noise=False) for s in (1, 8))
     assert len(every) < 320 * 3200  # a shadow was cast
     np.testing.assert_array_equal(every.points, anchors.points)
+
+
+def test_profiles_whose_fan_misses_the_parts_box_cast_no_ray_and_change_nothing():
+    """Part B carried 300 mm past a sensor: most profiles' fans lie wholly outside the part's box and cast
+    nothing, and the cloud is the one of a scanner that casts every profile."""
+    from dataclasses import replace
+
+    from optipose.model.part import load_part
+    from optipose.scan.scanner import part_scanner
+
+    part = load_part("part_b")
+    part = replace(part, motion=ScanMotion(0.3, part.motion.step))
+    pose = part.layouts["hand"].poses[1]
+    scanners = {"box": part_scanner(part), "everything": part_scanner(part)}
+    scanners["everything"]._bounds = (np.full(3, -np.inf), np.full(3, np.inf))
+    cast = {}
+    for name, scanner in scanners.items():
+        first = scanner.caster.first_triangle
+        cast[name] = 0
+
+        def counted(origins, *args, _first=first, _name=name):
+            cast[_name] += len(origins)
+            return _first(origins, *args)
+
+        scanner.caster.first_triangle = counted
+    a, b = (s.scan(pose, part.motion, rpy=np.deg2rad([0.7, -0.4, 1.1]), centre=part.rotation_centre, rng=4) for s in scanners.values())
+    np.testing.assert_array_equal(a.points, b.points)
+    assert len(a) > 10_000 and cast["box"] < 0.4 * cast["everything"]

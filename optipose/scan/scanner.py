@@ -103,6 +103,7 @@ class Scanner:
                 boxes.append(box)
             mesh = trimesh.util.concatenate([trimesh.Trimesh(mesh.vertices, mesh.faces, process=False), *boxes])
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+        self._bounds = (self.vertices.min(axis=0) - 1e-6, self.vertices.max(axis=0) + 1e-6)  # the scene's box, keep-outs included
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
         self.sensor = load_sensor(sensor)
         self.material = load_material(material)
@@ -230,7 +231,7 @@ class Scanner:
         s, n_col, m = self.sensor, self.sensor.points_per_profile, k1 - k0
         shift_b = shifts[k0:k1]
         origins = (view.o_P32[None] - (shift_b[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
-        ray_tri = self._first_triangles(view, origins, m)
+        ray_tri = self._first_triangles(view, origins, shift_b)
         idx, T, inten, tri, test = measure_hits(
             ray_tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
             self._on_hull, s.apex_z, s.z_near, s.z_far, self._intensity_grid, s.detection_threshold, s.saturation,
@@ -256,14 +257,20 @@ class Scanner:
         keep[first] = self._receiver_sees(view, T[first], sub % n_col, shift_b[sub // n_col], tri[first])
         return unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride) if len(rest) else rest
 
-    def _first_triangles(self, view: "_SensorView", origins: np.ndarray, m: int) -> np.ndarray:
-        """The first triangle (-1: none) of each of a block's ``m`` profiles × columns rays (see ``column_stride``)."""
-        n_col, caster, t_max = self.sensor.points_per_profile, self.caster, self._t_max_tiled
+    def _first_triangles(self, view: "_SensorView", origins: np.ndarray, shift_b: np.ndarray) -> np.ndarray:
+        """The first triangle (-1: none) of each ray of a block's profiles × columns (see ``column_stride``).
+        A profile whose fan (a trapezoid) lies outside the scene's box cannot hit anything and casts no ray."""
+        n_col, caster, t_max, m = self.sensor.points_per_profile, self.caster, self._t_max_tiled, len(shift_b)
+        moved = shift_b[:, None] * view.step_P
+        live = np.flatnonzero(np.all(view.fan_hi - moved >= self._bounds[0], axis=1) & np.all(view.fan_lo - moved <= self._bounds[1], axis=1))
+        cols = self._anchors if self._anchors is not None else np.arange(n_col)
+        anchor_tri = np.full((m, len(cols)), -1, dtype=np.int32)
+        if len(live):
+            rays = (live[:, None] * n_col + cols[None]).ravel()
+            anchor_tri[live] = np.asarray(caster.first_triangle(origins[rays], view.d_tiled[rays], t_max[rays])).reshape(len(live), len(cols))
         if self._anchors is None:
-            return caster.first_triangle(origins, view.d_tiled[: m * n_col], t_max[: m * n_col])
-        rays = (np.arange(m)[:, None] * n_col + self._anchors[None]).ravel()
-        anchor_tri = caster.first_triangle(origins[rays], view.d_tiled[rays], t_max[rays])
-        tri, need = fill_columns(np.asarray(anchor_tri).reshape(m, len(self._anchors)), self._anchors, n_col)
+            return anchor_tri.ravel()
+        tri, need = fill_columns(anchor_tri, self._anchors, n_col)
         if len(need):
             tri[need] = caster.first_triangle(origins[need], view.d_tiled[need], t_max[need])
         return tri
@@ -338,6 +345,8 @@ class _SensorView:
     d_tiled: np.ndarray  # (block rays, 3) float32: d_P32 for every profile of a block
     receiver_P: np.ndarray  # (3,)
     step_P: np.ndarray  # (3,)
+    fan_lo: np.ndarray  # (3,) the box of the fan's trapezoid (window to far limit) at shift 0
+    fan_hi: np.ndarray
     nu: np.ndarray  # (f,)
     nw: np.ndarray
     q: np.ndarray
@@ -355,6 +364,8 @@ class _SensorView:
         d_P = scanner._ray_d_S @ R_PS.T
         n, off = scanner._normals, scanner._offsets
         step_P = R_PO[:, 0].copy()
+        t_far = scanner._t_max_tiled[: len(d_P)][[0, -1]]
+        corners = np.vstack([o_P[[0, -1]], o_P[[0, -1]] + t_far[:, None] * d_P[[0, -1]]])
         return cls(
             T_O_S=T_O_S,
             apex_P=apex_P,
@@ -364,6 +375,8 @@ class _SensorView:
             d_tiled=np.tile(d_P.astype(np.float32), (_BLOCK_PROFILES, 1)),
             receiver_P=receiver_P,
             step_P=step_P,
+            fan_lo=corners.min(axis=0) - 1e-6,
+            fan_hi=corners.max(axis=0) + 1e-6,
             nu=n @ R_PS[:, 2],
             nw=n @ R_PS[:, 0],
             q=off - n @ apex_P,
