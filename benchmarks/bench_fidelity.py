@@ -294,7 +294,7 @@ def plot(s, path: Path, part: str) -> None:
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_title(f"{part}: the fidelity ladder (floor {floor['dscore_med_mdeg']:g} mdeg)")
     axes[1].set_title(f"{part}: rank agreement across layouts (floor {floor['one_minus_rho']:g})")
-    axes[1].legend(fontsize=8, loc="upper right")
+    axes[1].legend(fontsize=8, loc="lower left")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
