@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-__all__ = ["Plan", "plan", "usable_cores", "thread_env", "cap_threads", "THREAD_VARIABLES"]
+__all__ = ["Plan", "plan", "usable_cores", "thread_env", "cap_threads", "current_caps", "THREAD_VARIABLES"]
 
 THREAD_VARIABLES = (
     "OMP_NUM_THREADS",  # OpenMP: Open3D, MKL's and OpenBLAS's OpenMP builds
@@ -62,6 +62,11 @@ def plan(workers: int, cores: int | None = None, trial_jobs: int | None = None) 
 def thread_env(threads: int) -> dict[str, str]:
     """Environment variables capping every thread pool a worker process may start at ``threads``."""
     return {name: str(max(1, int(threads))) for name in THREAD_VARIABLES}
+
+
+def current_caps() -> dict[str, str | None]:
+    """This process's thread caps (what a worker started with; tests ask its workers)."""
+    return {name: os.environ.get(name) for name in THREAD_VARIABLES}
 
 
 def cap_threads(threads: int) -> None:
