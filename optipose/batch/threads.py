@@ -7,8 +7,8 @@ trials on C cores run ``workers × C`` threads of each kind. :func:`plan` splits
 each trial gets ``cores // workers`` (at least 1) for its threads and its evaluator's jobs.
 
 The caps reach a worker in two ways: as environment variables given to its process when it starts
-(:func:`thread_env`; BLAS and OpenMP read them only when they load), and in the trial itself
-(:func:`cap_threads`: the ray threads and numba, which read theirs at use).
+(:func:`optipose.evaluate.executors.thread_env`; BLAS and OpenMP read them only when they load), and in
+the trial itself (:func:`cap_threads`: the ray threads and numba, which read theirs at use).
 """
 
 from __future__ import annotations
@@ -16,17 +16,9 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-__all__ = ["Plan", "plan", "usable_cores", "thread_env", "cap_threads", "current_caps", "THREAD_VARIABLES"]
+from optipose.evaluate.executors import THREAD_VARIABLES, thread_env
 
-THREAD_VARIABLES = (
-    "OMP_NUM_THREADS",  # OpenMP: Open3D, MKL's and OpenBLAS's OpenMP builds
-    "MKL_NUM_THREADS",
-    "OPENBLAS_NUM_THREADS",
-    "VECLIB_MAXIMUM_THREADS",
-    "NUMEXPR_NUM_THREADS",
-    "NUMBA_NUM_THREADS",
-    "OPTIPOSE_RAY_THREADS",  # the scanner's Embree ray-casting threads (optipose.scan.raycast)
-)
+__all__ = ["Plan", "plan", "usable_cores", "thread_env", "cap_threads", "current_caps", "THREAD_VARIABLES"]
 
 
 @dataclass(frozen=True)
@@ -57,11 +49,6 @@ def plan(workers: int, cores: int | None = None, trial_jobs: int | None = None) 
     if trial_jobs is not None:
         share = max(1, int(trial_jobs))
     return Plan(workers, share, share)
-
-
-def thread_env(threads: int) -> dict[str, str]:
-    """Environment variables capping every thread pool a worker process may start at ``threads``."""
-    return {name: str(max(1, int(threads))) for name in THREAD_VARIABLES}
 
 
 def current_caps() -> dict[str, str | None]:
