@@ -124,11 +124,12 @@ class DaskPool:
             except (OSError, TimeoutError) as exc:
                 raise ConfigError(f"cannot reach the Dask scheduler at {scheduler} ({_first_line(exc)})") from None
             try:
-                self._client.wait_for_workers(1, timeout=timeout)
+                self._client.wait_for_workers(1, timeout=6 * timeout)
             except (OSError, TimeoutError):
                 self._client.close()
                 raise ConfigError(f"the Dask scheduler at {scheduler} has no workers (start some with `dask worker {scheduler}`)") from None
-            # every worker thread runs one trial; remote workers are started with --nthreads 1 (README)
+            # every worker thread runs one trial (remote workers are started with --nthreads 1, README); as
+            # many trials are kept in flight as there are worker threads now
             self.workers = sum(w["nthreads"] for w in self._client.scheduler_info()["workers"].values())
             self.plan = plan(self.workers, cores=self.workers, trial_jobs=trial_jobs)
         else:
