@@ -264,3 +264,33 @@ def test_the_shipped_studies_load():
         (p, k, "default", "search") for p in ("part_a", "part_b", "part_c") for k in (1, 2, 3)
     }
     assert len(load_study(REPO / "studies" / "tiny.toml").trials) == 4
+
+
+# -- the other tasks: each row is what its folder says ----------------------------------------------------
+def test_search_and_robustness_trials_report_their_folders(tmp_path):
+    from optipose.evaluate.robust import evaluate_robust
+    from optipose.evaluate.objective import load_objective
+    from optipose.io import load_result
+    from optipose.model.part import load_part
+
+    band = tmp_path / "band.toml"  # the 6-scan protocol under two noise levels
+    band.write_text(TINY.read_text().replace('name = "tiny"', 'name = "band"') + "\n[conditions]\nnoise_scale = [1.0, 3.0]\n")
+    spec = study_from_table({"trials": [{"part": "part_c", "task": "search", "sensors": 1, "budget": "quick", "seed": 3},
+                                        {"part": "part_c", "task": "robustness", "objective": "band.toml", "sensors": 2}]},
+                            base=tmp_path)  # fmt: skip
+    index = run_study(spec, tmp_path / "t", SerialPool()).frame().set_index("task")
+    assert (index.state == "complete").all(), index.error
+
+    search = index.loc["search"]
+    verdict = {v.k: v for v in load_result(tmp_path / "t" / search.folder).verdicts()}[1]
+    assert search.score_deg == pytest.approx(np.rad2deg(verdict.found.score), rel=1e-12)
+    assert search.hand_score_deg == pytest.approx(np.rad2deg(verdict.reference.score), rel=1e-12)
+    assert search.ratio == pytest.approx(verdict.ratio) and search.no_worse == verdict.no_worse
+    assert search.sensors_used == "F1"
+
+    robust = index.loc["robustness"]
+    again = evaluate_robust(load_part("part_c"), load_part("part_c").layouts["hand"], load_objective(band), seed=0)
+    choice = again.table[1]  # the hand layout's robust choice of 2 sensors, the worst over both noise levels
+    assert robust.sensors_used == choice.name
+    assert robust.score_deg == pytest.approx(np.rad2deg(choice.score), rel=1e-9)
+    assert robust.yaw_p75_deg == pytest.approx(np.rad2deg(choice.axes[2].p75), rel=1e-9)

@@ -108,7 +108,7 @@ def _old_records(folder: Path) -> dict[str, TrialRecord]:
     params = ("part", "task", "objective", "sensors", "budget", "seed")
     out = {}
     for row in read_index(folder).to_dict("records"):
-        trial = TrialSpec(*(row[p] for p in params))
+        trial = TrialSpec(*(int(row[p]) if p in ("sensors", "seed") else str(row[p]) for p in params))
         fields = {k: ("" if pd.isna(row[k]) else row[k]) for k in ("error", "started", "finished", "worker", "folder")}
         results = {k: row[k] for k in RESULT_COLUMNS + ["hand_score_deg", "ratio", "no_worse"] if k in row and not _missing(row[k])}
         out[row["key"]] = TrialRecord(trial, TrialState(row["state"]), seconds=float(row["seconds"]), results=results, **fields)
