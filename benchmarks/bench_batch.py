@@ -7,8 +7,13 @@ The study: ``--trials`` evaluations of the part's hand-placed layout on a 9-scan
 sequences at -1, 0, +1 deg), one seed each, so every trial is the same amount of work. Every trial runs
 with one process and one thread (``trial_jobs=1``), so the figures measure the back-ends, not a trial's own
 parallelism. Each configuration starts its workers and warms them with one trial per worker (imports,
-compiled kernels) before the timed study; the warm-up is printed, not counted. Figures, not asserts: on a
-shared machine compare the ratios, and look at the load printed before and after.
+compiled kernels) before the timed study; the warm-up is printed, not counted.
+
+Besides trials per hour it prints each trial's mean wall and CPU time in its worker and how busy the workers were
+(trials x that time / (workers x wall time)). Busy near 100 % says the back-end keeps its workers fed; a
+trial that takes longer with 2 workers than with 1 says the workers did not get a core each (other load
+on the machine), which caps the speed-up whatever the back-end. Figures, not asserts: on a shared
+machine look at the load printed before, during and after.
 """
 
 from __future__ import annotations
@@ -36,8 +41,9 @@ def study(folder: Path, part: str, seeds: range, name: str):
     return study_from_table(table, where=name, base=folder)
 
 
-def measure(backend: str, workers: int, folder: Path, part: str, trials: int) -> tuple[float, float]:
-    """(warm-up seconds, timed seconds) of ``trials`` trials on ``workers`` workers of ``backend``."""
+def measure(backend: str, workers: int, folder: Path, part: str, trials: int) -> tuple[float, float, float, float]:
+    """(warm-up seconds, timed seconds, mean wall and CPU seconds of a trial in its worker) of ``trials``
+    trials on ``workers`` workers of ``backend``."""
     from optipose.batch.pools import DaskPool, LokyPool
     from optipose.batch.records import TrialState
     from optipose.batch.study import run_study
@@ -52,7 +58,8 @@ def measure(backend: str, workers: int, folder: Path, part: str, trials: int) ->
     finally:
         pool.close()
     assert index.count(TrialState.COMPLETE) == trials, "a trial failed; see the index"
-    return t1 - t0, t2 - t1
+    frame = index.frame()
+    return t1 - t0, t2 - t1, float(frame["seconds"].mean()), float(frame["cpu_seconds"].mean())
 
 
 def main() -> None:
@@ -68,13 +75,16 @@ def main() -> None:
         folder = Path(tmp)
         (folder / "bench.toml").write_text(PROTOCOL)
         for backend in args.backends.split(","):
-            rates = {}
+            rates, per_trial = {}, {}
             for workers in (1, 2):
-                warm, seconds = measure(backend, workers, folder, args.part, args.trials)
+                warm, seconds, per_trial[workers], cpu = measure(backend, workers, folder, args.part, args.trials)
                 rates[workers] = args.trials / seconds * 3600
-                print(f"  {backend:6s} {workers} worker(s) {seconds:7.1f} s  {rates[workers]:7.0f} trials/h  (start + warm-up {warm:.1f} s; "
+                busy = args.trials * per_trial[workers] / (workers * seconds)
+                print(f"  {backend:6s} {workers} worker(s) {seconds:7.1f} s  {rates[workers]:7.0f} trials/h  "
+                      f"trial {per_trial[workers]:5.2f} s in its worker ({cpu:5.2f} s CPU), workers busy {busy:.0%}  (start + warm-up {warm:.1f} s; "
                       f"load {os.getloadavg()[0]:.2f})")  # fmt: skip
-            print(f"  {backend:6s} 2 workers / 1 worker: {rates[2] / rates[1]:.2f}x")
+            print(f"  {backend:6s} 2 workers / 1 worker: {rates[2] / rates[1]:.2f}x trials per hour; a trial took "
+                  f"{per_trial[2] / per_trial[1]:.2f}x as long with 2 workers (1.0 on 2 free cores)")  # fmt: skip
     print(f"load after: {os.getloadavg()[0]:.2f}")
 
 

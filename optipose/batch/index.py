@@ -97,7 +97,8 @@ def _from_folder(folder: Path, trial: TrialSpec) -> TrialRecord | None:
         log.warning("trial %s: its folder cannot be read back (%s); running it again", trial.key, exc)
         return None
     return TrialRecord(trial, TrialState.COMPLETE, started=saved["started"], finished=saved["finished"],
-                       seconds=float(saved["seconds"]), worker=saved["worker"], folder=f"trials/{trial.key}",
+                       seconds=float(saved["seconds"]), cpu_seconds=float(saved.get("cpu_seconds", "nan")),
+                       worker=saved["worker"], folder=f"trials/{trial.key}",
                        results=results)  # fmt: skip
 
 
@@ -111,7 +112,8 @@ def _old_records(folder: Path) -> dict[str, TrialRecord]:
         trial = TrialSpec(*(int(row[p]) if p in ("sensors", "seed") else str(row[p]) for p in params))
         fields = {k: ("" if pd.isna(row[k]) else row[k]) for k in ("error", "started", "finished", "worker", "folder")}
         results = {k: row[k] for k in RESULT_COLUMNS + ["hand_score_deg", "ratio", "no_worse"] if k in row and not _missing(row[k])}
-        out[row["key"]] = TrialRecord(trial, TrialState(row["state"]), seconds=float(row["seconds"]), results=results, **fields)
+        seconds = {k: float(row.get(k, float("nan"))) for k in ("seconds", "cpu_seconds")}
+        out[row["key"]] = TrialRecord(trial, TrialState(row["state"]), results=results, **seconds, **fields)
     return out
 
 

@@ -26,6 +26,7 @@ class TrialRecord:
     """One trial: its parameters, state, error (failed only), timings and per-axis results.
 
     started, finished : UTC times, ISO 8601 (empty while unknown); seconds : wall time in the worker;
+    cpu_seconds : CPU time of the worker process over the trial (all its threads; not its child processes);
     worker : ``host:pid`` that ran it; folder : its result folder relative to the study folder (complete
     only); results : the per-axis columns of :func:`optipose.batch.results.trial_results`.
     """
@@ -36,6 +37,7 @@ class TrialRecord:
     started: str = ""
     finished: str = ""
     seconds: float = float("nan")
+    cpu_seconds: float = float("nan")
     worker: str = ""
     folder: str = ""
     results: dict = field(default_factory=dict, compare=False)
@@ -53,5 +55,5 @@ class TrialRecord:
     def row(self) -> dict:
         """The index's row: key, parameters, state and timings, then the results' columns."""
         return {"key": self.key, **self.trial.params(), "state": self.state.value, "error": self.error,
-                "started": self.started, "finished": self.finished, "seconds": self.seconds,
+                "started": self.started, "finished": self.finished, "seconds": self.seconds, "cpu_seconds": self.cpu_seconds,
                 "worker": self.worker, "folder": self.folder, **self.results}  # fmt: skip

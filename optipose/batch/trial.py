@@ -47,7 +47,7 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
     trials = Path(study_dir) / "trials"
     final = trials / trial.key
     tmp = trials / f"{TMP_PREFIX}{trial.key}-{uuid.uuid4().hex[:8]}"
-    started, t0 = now(), time.perf_counter()
+    started, t0, c0 = now(), time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     record = TrialRecord(trial, TrialState.RUNNING, started=started, worker=worker)
     try:
@@ -55,7 +55,7 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
         TASK_RUNNERS[trial.task](trial, tmp, plan.trial_jobs)
         seconds = time.perf_counter() - t0
         done = TrialRecord(trial, TrialState.COMPLETE, started=started, finished=now(), seconds=seconds,
-                           worker=worker, folder=f"trials/{trial.key}")  # fmt: skip
+                           cpu_seconds=time.process_time() - c0, worker=worker, folder=f"trials/{trial.key}")  # fmt: skip
         _write_trial_file(tmp, done, plan)
         if final.exists():  # a folder that lost its trial.toml: never a complete trial
             shutil.rmtree(final)
@@ -64,7 +64,7 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
     except Exception as exc:  # a failing trial is recorded and the study goes on
         shutil.rmtree(tmp, ignore_errors=True)
         log.debug("trial %s failed:\n%s", trial.key, traceback.format_exc())
-        return replace(record.failed(error_line(exc), now()), seconds=time.perf_counter() - t0)
+        return replace(record.failed(error_line(exc), now()), seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0)
     except BaseException:  # Ctrl-C in a serial study: nothing half-written stays behind
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -80,7 +80,7 @@ def _write_trial_file(folder: Path, record: TrialRecord, plan: Plan) -> None:
     import tomli_w
 
     table = {"trial": record.trial.params(), "key": record.key, "started": record.started, "finished": record.finished,
-             "seconds": record.seconds, "worker": record.worker, "plan": plan.__dict__}  # fmt: skip
+             "seconds": record.seconds, "cpu_seconds": record.cpu_seconds, "worker": record.worker, "plan": plan.__dict__}  # fmt: skip
     (folder / TRIAL_FILE).write_text(tomli_w.dumps(table))
 
 
