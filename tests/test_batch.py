@@ -9,11 +9,13 @@ trial once a worker is warm), plus a part whose mesh is garbage: its trials must
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
 import tomllib
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -163,6 +165,48 @@ def test_the_summary_groups_trials_per_part_and_setting(serial_index):
     scores = serial_index[(serial_index.part == "part_c") & (serial_index.sensors == 2)].score_deg
     assert summary.loc[("part_c", 2), "score_median_deg"] == pytest.approx(scores.median())
     assert summary.loc[("part_c", 2), "score_worst_deg"] == pytest.approx(scores.max())
+
+
+def test_the_study_command_prints_the_table_and_refuses_other_folders(serial, tmp_path):
+    folder, index = serial
+    shown = subprocess.run([sys.executable, "-m", "optipose", "study", folder], capture_output=True, text=True, timeout=120,
+                           env={**os.environ, "COLUMNS": "120"})  # fmt: skip
+    assert shown.returncode == 0, shown.stderr
+    rows = [line.split() for line in shown.stdout.splitlines() if line.strip().startswith(("part_c", "broken"))]
+    assert [(r[0], r[3], r[4]) for r in rows] == [("part_c", "1", "2/2"), ("part_c", "2", "2/2"), ("broken", "1", "0/2"), ("broken", "2", "0/2")]
+    score = index[(index.part == "part_c") & (index.sensors == 1)].score_deg.median()
+    assert rows[0][5] == f"{1e3 * score:.2f}"  # mdeg, the median over the seeds
+    other = subprocess.run([sys.executable, "-m", "optipose", "study", tmp_path], capture_output=True, text=True, timeout=120)
+    assert other.returncode == 2 and other.stderr.startswith("optipose: error:") and "not an optipose study" in other.stderr
+
+
+class _DyingPool(SerialPool):
+    """Runs trials here, but reports the worker of ``deaths[key]`` trials dead that many times (and, as a
+    dead worker would, leaves no folder)."""
+
+    def __init__(self, folder: Path, deaths: dict):
+        super().__init__()
+        self.folder, self.deaths, self.runs = folder, dict(deaths), {}
+
+    def result(self, future):
+        record = super().result(future)
+        self.runs[record.key] = self.runs.get(record.key, 0) + 1
+        if self.deaths.get(record.key, 0) > 0:
+            self.deaths[record.key] -= 1
+            shutil.rmtree(self.folder / record.folder)
+            raise BrokenProcessPool("A process in the process pool was terminated abruptly")
+        return record
+
+
+def test_a_dead_worker_costs_its_trial_one_retry_then_it_fails(tmp_path):
+    spec = study_from_table({"grid": {"parts": ["part_c"], "tasks": ["evaluate"], "objectives": [str(TINY)], "sensors": [1], "seeds": [0, 1, 2]}})
+    once, twice, fine = (t.key for t in spec.trials)
+    pool = _DyingPool(tmp_path / "t", {once: 1, twice: 2})
+    index = run_study(spec, tmp_path / "t", pool).frame().set_index("key")
+    assert pool.runs == {once: 2, twice: 2, fine: 1}
+    assert (index.loc[once, "state"], index.loc[fine, "state"]) == ("complete", "complete")
+    assert index.loc[twice, "state"] == "failed" and index.loc[twice, "error"].startswith("worker died: BrokenProcessPool")
+    assert sorted(p.name for p in (tmp_path / "t" / "trials").iterdir()) == sorted([once, fine])
 
 
 # -- killed, interrupted and resumed ----------------------------------------------------------------------
