@@ -14,7 +14,7 @@ import trimesh
 
 from optipose.errors import ConfigError
 from optipose.evaluate.evaluator import Evaluator
-from optipose.evaluate.executors import EXECUTORS, JoblibExecutor, SerialExecutor, make_executor, register_executor
+from optipose.evaluate.executors import EXECUTORS, DaskExecutor, JoblibExecutor, SerialExecutor, make_executor, register_executor
 from optipose.evaluate.objective import objective_from_table
 from optipose.evaluate.worker import sensor_groups
 from optipose.seeds import group_seed
@@ -84,11 +84,11 @@ def test_make_executor_picks_by_jobs_and_name(monkeypatch):
     assert isinstance(pool, JoblibExecutor) and pool.n_workers == 3
     mine = SerialExecutor()
     assert make_executor(mine) is mine
-    with pytest.raises(ConfigError, match="unknown executor 'dask'"):
-        make_executor(2, "dask")
-    monkeypatch.setitem(EXECUTORS, "dask", None)  # restored after the test
-    register_executor("dask", lambda n: _Recording())
-    assert isinstance(make_executor(2, "dask"), _Recording)
+    with pytest.raises(ConfigError, match="unknown executor 'spark'"):
+        make_executor(2, "spark")
+    monkeypatch.setitem(EXECUTORS, "spark", None)  # restored after the test
+    register_executor("spark", lambda n: _Recording())
+    assert isinstance(make_executor(2, "spark"), _Recording)
 
 
 def test_serial_and_two_loky_workers_give_identical_tables(plate, objective, serial):
@@ -99,6 +99,18 @@ def test_serial_and_two_loky_workers_give_identical_tables(plate, objective, ser
     pd.testing.assert_frame_equal(parallel.per_scan, serial.per_scan, check_exact=True)
     pd.testing.assert_frame_equal(parallel.points, serial.points, check_exact=True)
     pd.testing.assert_frame_equal(again.per_scan, serial.per_scan, check_exact=True)
+
+
+def test_two_dask_workers_give_identical_tables(plate, objective, serial):
+    executor = make_executor(2, "dask")  # a local cluster of two worker processes on 127.0.0.1
+    try:
+        assert isinstance(executor, DaskExecutor) and executor.n_workers == 2
+        with Evaluator(plate, objective, seed=2, executor=executor) as ev:
+            parallel = ev(_layout(None, None))
+    finally:
+        executor.close()
+    pd.testing.assert_frame_equal(parallel.per_scan, serial.per_scan, check_exact=True)
+    pd.testing.assert_frame_equal(parallel.points, serial.points, check_exact=True)
 
 
 def test_a_given_executor_is_used_and_left_open(plate, objective, serial):

@@ -10,10 +10,14 @@ An :class:`Executor` maps a function over items and returns the results in the i
 scanner and reference there), so a pool's workers should live as long as the executor.
 
 Back-ends by name in :data:`EXECUTORS` (a factory taking the number of workers): ``joblib`` (joblib's
-loky process pool, created on first use and reused). A Dask back-end slots in the same way: a class whose
-``map`` is ``client.gather(client.map(fn, items, pure=False))`` and whose ``n_workers`` is the cluster's
-worker count, made available with ``register_executor("dask", lambda n: DaskExecutor(client, n))``;
-then ``make_executor(4, "dask")``. Results do not depend on the executor (tests/test_executors.py).
+loky process pool, created on first use and reused) and ``dask`` (:class:`DaskExecutor`: a local Dask
+cluster of n single-threaded worker processes, or the scheduler named by Dask's ``scheduler-address``
+setting, e.g. ``DASK_SCHEDULER_ADDRESS=tcp://host:8786``, so one evaluation can run on a cluster). Another
+back-end slots in with ``register_executor(name, factory)``. Results do not depend on the executor
+(tests/test_executors.py).
+
+Worker processes an executor starts get :func:`thread_env`: every thread pool a worker may open (BLAS,
+OpenMP, numba, the scanner's ray threads) capped, so n workers on n cores do not run n² threads.
 """
 
 from __future__ import annotations
@@ -24,9 +28,26 @@ from typing import Protocol, runtime_checkable
 
 from optipose.errors import ConfigError
 
-__all__ = ["Executor", "SerialExecutor", "JoblibExecutor", "EXECUTORS", "register_executor", "make_executor"]
+__all__ = ["Executor", "SerialExecutor", "JoblibExecutor", "DaskExecutor", "EXECUTORS", "register_executor", "make_executor",
+           "THREAD_VARIABLES", "thread_env"]  # fmt: skip
 
 log = logging.getLogger(__name__)
+
+THREAD_VARIABLES = (
+    "OMP_NUM_THREADS",  # OpenMP: Open3D, MKL's and OpenBLAS's OpenMP builds
+    "MKL_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+    "OPTIPOSE_RAY_THREADS",  # the scanner's Embree ray-casting threads (optipose.scan.raycast)
+)
+
+
+def thread_env(threads: int = 1) -> dict[str, str]:
+    """Environment variables capping every thread pool a worker process may start at ``threads``
+    (BLAS and OpenMP read them only when they load, so they are given to a process when it starts)."""
+    return {name: str(max(1, int(threads))) for name in THREAD_VARIABLES}
 
 
 @runtime_checkable
@@ -79,7 +100,47 @@ class JoblibExecutor:
         return f"JoblibExecutor(n_jobs={self.n_workers})"
 
 
-EXECUTORS: dict[str, Callable[[int], Executor]] = {"joblib": JoblibExecutor}
+class DaskExecutor:
+    """Dask distributed: ``client.map`` over the cluster's workers, results gathered in order.
+
+    client : a ``distributed.Client`` of the caller's (left open by :meth:`close`); else ``address`` (a
+    scheduler, ``tcp://host:8786``), else Dask's ``scheduler-address`` setting, else a local cluster of
+    ``n_workers`` single-threaded worker processes with capped thread pools (closed by :meth:`close`).
+    ``n_workers`` is then the cluster's worker threads, which the evaluator splits its work by."""
+
+    def __init__(self, n_workers: int = 2, address: str | None = None, client=None):
+        import dask
+        from distributed import Client, LocalCluster
+
+        self._own, self._cluster = client is None, None
+        address = address or dask.config.get("scheduler-address", None)
+        if client is not None:
+            self._client = client
+        elif address:
+            try:
+                self._client = Client(address, timeout=10, set_as_default=False)
+            except (OSError, TimeoutError) as exc:
+                raise ConfigError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+        else:
+            self._cluster = LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True, host="127.0.0.1",
+                                         dashboard_address=None, env=thread_env(1))  # fmt: skip
+            self._client = Client(self._cluster, set_as_default=False)
+        self.n_workers = max(1, sum(w["nthreads"] for w in self._client.scheduler_info()["workers"].values()))
+
+    def map(self, fn: Callable, items: Iterable) -> list:
+        return self._client.gather(self._client.map(fn, list(items), pure=False))
+
+    def close(self) -> None:
+        if self._own:
+            self._client.close()
+            if self._cluster is not None:
+                self._cluster.close()
+
+    def __repr__(self) -> str:
+        return f"DaskExecutor(n_workers={self.n_workers}, scheduler={self._client.scheduler.address})"
+
+
+EXECUTORS: dict[str, Callable[[int], Executor]] = {"joblib": JoblibExecutor, "dask": DaskExecutor}
 
 
 def register_executor(name: str, factory: Callable[[int], Executor]) -> None:

@@ -1,0 +1,140 @@
+"""``optipose batch STUDY.toml`` and ``optipose study STUDY_DIR``: run a study of many trials, and show one.
+
+:func:`batch` and :func:`study` are the Typer commands (registered by :mod:`optipose.cli.app`),
+:func:`batch_command` and :func:`study_command` the plain functions behind them; imports of the library
+stay lazy so ``optipose --help`` is instant. Everything that can be wrong with the input (the study
+file, its parts and objectives, the back-end, the scheduler) is checked before the study folder is made.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from optipose.cli.options import EXIT_INTERRUPTED, friendly_errors
+from optipose.errors import ConfigError
+
+__all__ = ["batch", "batch_command", "study", "study_command"]
+
+StudyFile = Annotated[Path, typer.Argument(help="The study file (TOML: a [grid] and/or [[trials]]; see studies/).")]
+StudyDir = Annotated[Path, typer.Argument(help="A study folder written by `optipose batch`.")]
+
+
+@friendly_errors
+def batch(
+    study_file: StudyFile,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Study folder (default: results/<study name>/).")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the study in its folder: complete trials are kept, the rest run.")] = False,
+    jobs: Annotated[int, typer.Option("--jobs", min=1, help="Trials at once: worker processes (joblib), or local Dask workers.")] = 1,
+    backend: Annotated[str, typer.Option("--backend", help="joblib (a process pool on this machine) or dask.")] = "joblib",
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="A Dask scheduler, tcp://HOST:8786 (default: a local cluster of --jobs workers).")] = None,
+    trial_jobs: Annotated[Optional[int], typer.Option("--trial-jobs", min=1, help="Each trial's own processes and threads (default: the cores split between the workers).")] = None,
+    summary: Annotated[bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")] = False,
+) -> None:
+    """Run every trial of a study (parts × tasks × objectives × sensor counts × budgets × seeds), each into
+    its own result folder, with an index of all of them (index.parquet, index.csv)."""
+    if summary:
+        from optipose.batch.spec import load_study
+
+        study_command(out or Path("results") / load_study(study_file).name)
+        return
+    batch_command(study_file, out, resume, jobs, backend, scheduler, trial_jobs)
+
+
+@friendly_errors
+def study(folder: StudyDir) -> None:
+    """Print a study's table: per part and setting, its trials over seeds (complete, failed, scores, axes)."""
+    study_command(folder)
+
+
+def batch_command(study_file: Path, out: Path | None = None, resume: bool = False, jobs: int = 1, backend: str = "joblib",
+                  scheduler: str | None = None, trial_jobs: int | None = None) -> Path:  # fmt: skip
+    """Run the study with a progress bar; print its table; returns the study folder."""
+    from rich.console import Console
+
+    from optipose.batch.pools import make_pool
+    from optipose.batch.spec import load_study
+    from optipose.batch.study import prepare_folder, run_study
+
+    spec = load_study(study_file)
+    folder = Path(out) if out else Path("results") / spec.name
+    prepare_folder(folder, resume)
+    pool = make_pool(jobs, backend, scheduler, trial_jobs)
+    console = Console(stderr=True)
+    try:
+        index = _run_with_progress(console, spec, folder, pool, resume, {"backend": backend, "scheduler": scheduler or ""})
+    except KeyboardInterrupt:
+        console.print(f"[yellow]interrupted[/]: finished trials are in {folder}; continue with "
+                      f"`optipose batch {study_file} --out {folder} --resume`")  # fmt: skip
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    finally:
+        pool.close()
+    study_command(folder)
+    from optipose.batch.records import TrialState
+
+    n_failed = index.count(TrialState.FAILED)
+    if n_failed:
+        console.print(f"[yellow]{n_failed} trial(s) failed[/] (their errors are in {folder}/index.csv); "
+                      f"`--resume` runs them again")  # fmt: skip
+    console.print(f"results: {folder}")
+    return folder
+
+
+def _run_with_progress(console, spec, folder: Path, pool, resume: bool, config: dict):
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from optipose.batch.records import TrialState
+    from optipose.batch.study import run_study
+
+    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("[red]{task.fields[failed]} failed"),
+               TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn()]  # fmt: skip
+    with Progress(*columns, console=console) as progress:
+        bar = progress.add_task(f"{spec.name} ({pool.workers} worker(s))", total=len(spec.trials), failed=0)
+        failed = 0
+
+        def on_record(record):
+            nonlocal failed
+            failed += record.state == TrialState.FAILED
+            progress.update(bar, advance=1, failed=failed, description=f"{spec.name}: {record.key} {record.state.value}")
+
+        index = run_study(spec, folder, pool, resume, on_record, config)
+        return index
+
+
+def study_command(folder: Path) -> None:
+    """Print the table per part and setting of a study folder."""
+    from rich.console import Console
+
+    from optipose.batch.summary import load_study, summary_frame
+
+    if not Path(folder).is_dir():
+        raise ConfigError(f"study folder not found: {folder}")
+    Console().print(_summary_table(summary_frame(load_study(folder)), Path(folder).name))
+
+
+def _summary_table(frame, name: str):
+    """Per part and setting: trials (complete/failed), seeds, score median/worst and per-axis medians
+    in millidegrees, and for searches hand/found and how many were no worse on every axis."""
+    import math
+
+    from rich import box
+    from rich.table import Table
+
+    def mdeg(value) -> str:
+        return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{1e3 * value:.2f}"
+
+    searches = "ratio_median" in frame
+    table = Table(title=f"study {name}: mdeg, median over seeds", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
+    for col in ("part", "task", "k", "ok/n", "score", "worst", "roll", "pitch", "yaw", *(("hand/f", "no worse") if searches else ())):
+        table.add_column(col, justify="left" if col in ("part", "task") else "right", no_wrap=True)
+    for r in frame.to_dict("records"):
+        task = r["task"] + (f" {r['budget']}" if r["budget"] else "") + ("" if r["objective"] in ("paper", "robust") else f" {r['objective']}")
+        cells = [r["part"], task, str(r["sensors"]), f"{r['complete']}/{r['trials']}" + (f" [red]{r['failed']}F[/]" if r["failed"] else ""),
+                 mdeg(r["score_median_deg"]), mdeg(r["score_worst_deg"]), *(mdeg(r[f"{a}_median_deg"]) for a in ("roll", "pitch", "yaw"))]  # fmt: skip
+        if searches:
+            ratio = r.get("ratio_median")
+            cells += ["-" if ratio is None or math.isnan(ratio) else f"{ratio:.2f}", str(r.get("no_worse") or "-")]
+        table.add_row(*cells)
+    return table
