@@ -1,7 +1,7 @@
 """The ``optipose`` Typer app: ``--verbose``, every command's registration and :func:`main`.
 
 Each command lives in its own module (:mod:`~optipose.cli.scan`, :mod:`~optipose.cli.parts`,
-:mod:`~optipose.cli.evaluate`, :mod:`~optipose.cli.search`) and shares its options through
+:mod:`~optipose.cli.evaluate`, :mod:`~optipose.cli.search`, :mod:`~optipose.cli.robustness`, :mod:`~optipose.cli.report`) and shares its options through
 :mod:`optipose.cli.options`; those modules never import this one. At import time they need only typer,
 so ``optipose --help`` is instant; the library is imported when a command runs. Every command turns an
 :class:`~optipose.errors.OptiposeError` into one line on stderr and a non-zero exit, never a traceback.
@@ -15,7 +15,7 @@ from typing import Annotated
 
 import typer
 
-from optipose.cli import evaluate, parts, robustness, scan, search
+from optipose.cli import evaluate, parts, report, robustness, scan, search
 
 app = typer.Typer(
     name="optipose",
@@ -45,6 +45,7 @@ app.command()(parts.counts)
 app.command()(evaluate.evaluate)
 app.command()(search.search)
 app.command()(robustness.robustness)
+app.command()(report.report)
 
 
 def main() -> None:
