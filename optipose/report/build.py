@@ -156,7 +156,7 @@ def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     best = result.table[-1]
     blocks: list[Block] = [Heading("Summary"), Paragraph(
         f"with all {best.k} sensors the best per-axis choice scores {mdeg(best.score):.3f} mdeg (sum of per-axis median and p75); "
-        + "; ".join(f"k={c.k}: {c.name} {mdeg(c.score):.3f} mdeg" for c in result.table), "verdict good")]  # fmt: skip
+        + "; ".join(f"k={c.k}: {c.name} {mdeg(c.score):.3f} mdeg" for c in result.table), "verdict info")]  # fmt: skip
     blocks.append(Heading("Per axis (the paper's Table 1)"))
     blocks.append(table1_alone(result.table, name, "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses"))
     blocks += _views(_part(_config(folder)), {name: result.layout}, views)

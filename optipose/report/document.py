@@ -66,7 +66,7 @@ main{max-width:1180px;margin:0 auto;padding:24px 32px 64px;background:#fff;min-h
 h1{font-size:26px;margin:0 0 4px}h2{font-size:20px;margin:36px 0 10px;border-bottom:2px solid #e3e6ea;padding-bottom:4px}
 h3{font-size:16px;margin:22px 0 8px}p{margin:6px 0}
 .verdict{font-size:16px;padding:8px 12px;border-radius:6px;margin:6px 0;border-left:6px solid}
-.good{background:#e8f6ec;border-color:#2e9d4f}.bad{background:#fdecea;border-color:#c8362b}.mixed{background:#fff6e0;border-color:#d99a00}
+.good{background:#e8f6ec;border-color:#2e9d4f}.info{background:#eef3fb;border-color:#3b6fb6}.bad{background:#fdecea;border-color:#c8362b}.mixed{background:#fff6e0;border-color:#d99a00}
 .note{color:#59636e;font-size:13px}
 table{border-collapse:collapse;margin:8px 0 14px;font-size:13.5px;font-variant-numeric:tabular-nums}
 caption{caption-side:top;text-align:left;font-size:13px;color:#59636e;padding-bottom:4px}
