@@ -126,13 +126,15 @@ def _conditions(objective):
 def _verdicts(results: dict) -> list[str]:
     """Per given layout, the verdict on the robust statistic against the hand layout's choice of as many sensors."""
     from optipose.evaluate.compare import Verdict
+    from optipose.model.baseline import baseline_label
 
     hand, lines = results["hand"], []
+    label = baseline_label(hand.layout)  # "conventional" for a part without a hand-placed layout
     for name, result in results.items():
         if name == "hand":
             continue
         k = min(len(result.layout), len(hand.table))
-        line = Verdict(k, result.table[k - 1], hand.table[k - 1]).line()
+        line = Verdict(k, result.table[k - 1], hand.table[k - 1]).line(label)
         lines.append(f"{name} (worst over the band): {line}")
     return lines
 

@@ -77,7 +77,7 @@ def _views(part, layouts: dict, enabled: bool) -> list[Block]:
             log.warning("report: could not draw %s: %s", name, exc)
             blocks.append(Paragraph(f"{name}: no picture ({exc})", "note"))
             continue
-        blocks.append(Figure(png, f"view_{name}.png", f"{name} ({len(layout)} sensors): isometric, front, and close-ups from the "
+        blocks.append(Figure(png, f"view_{name}.png", f"{name} ({len(layout)} sensor{'s' if len(layout) > 1 else ''}): isometric, front, and close-ups from the "
                              "front and the top; heads (boxes), laser fans (dashed), measuring ranges (filled), keep-outs "
                              "(dotted) and the points of a nominal scan, one colour per sensor"))  # fmt: skip
     return blocks
