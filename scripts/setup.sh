@@ -1,14 +1,23 @@
 #!/usr/bin/env bash
-# One-shot set-up on a fresh Debian machine (root): system library for Open3D, uv, and the locked .venv.
+# One-shot set-up on a fresh Debian machine (root): system library for Open3D, Debian's chromium (the report
+# test opens report.html in it headless; playwright drives it, no browser download), uv, and the locked .venv.
 # Idempotent: a second run only checks. Usage: bash scripts/setup.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
+APT_UPDATED=""
+apt_install() {  # apt_install PACKAGE WHY
+    echo "setup: installing $1 ($2)"
+    if [ -z "$APT_UPDATED" ]; then $SUDO apt-get update -qq; APT_UPDATED=1; fi
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "$1" >/dev/null
+}
+
 if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
-    echo "setup: installing libusb-1.0-0 (needed by Open3D)"
-    if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
-    $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libusb-1.0-0 >/dev/null
+    apt_install libusb-1.0-0 "needed by Open3D"
+fi
+if [ ! -x /usr/bin/chromium ]; then
+    apt_install chromium "the headless browser of tests/test_report.py"
 fi
 
 if ! command -v uv >/dev/null 2>&1; then

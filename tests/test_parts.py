@@ -157,7 +157,7 @@ def test_bare_stl_gets_the_defaults(tmp_path):
     assert part.motion.length == pytest.approx(0.060, abs=1e-6)  # the extent along x
     assert part.motion.step == pytest.approx(0.0005)
     np.testing.assert_allclose(part.rotation_centre, [0.030, 0.0, 0.0088], atol=1e-6)
-    assert part.keepouts == [] and part.layouts == {}
+    assert part.keepouts == [] and list(part.layouts) == ["conventional"]  # the baseline of a bare mesh
     assert part.source == stl
 
 

@@ -1,8 +1,8 @@
 """The ``optipose`` Typer app: ``--verbose``, every command's registration and :func:`main`.
 
 Each command lives in its own module (:mod:`~optipose.cli.scan`, :mod:`~optipose.cli.parts`,
-:mod:`~optipose.cli.evaluate`, :mod:`~optipose.cli.search`,
-:mod:`~optipose.cli.robustness`, :mod:`~optipose.cli.batch`) and shares its options through
+:mod:`~optipose.cli.evaluate`, :mod:`~optipose.cli.search`, :mod:`~optipose.cli.robustness`,
+:mod:`~optipose.cli.batch`, :mod:`~optipose.cli.report`) and shares its options through
 :mod:`optipose.cli.options`; those modules never import this one. At import time they need only typer,
 so ``optipose --help`` is instant; the library is imported when a command runs. Every command turns an
 :class:`~optipose.errors.OptiposeError` into one line on stderr and a non-zero exit, never a traceback.
@@ -16,7 +16,7 @@ from typing import Annotated
 
 import typer
 
-from optipose.cli import batch, evaluate, parts, robustness, scan, search
+from optipose.cli import batch, evaluate, parts, report, robustness, scan, search
 
 app = typer.Typer(
     name="optipose",
@@ -48,6 +48,7 @@ app.command()(search.search)
 app.command()(robustness.robustness)
 app.command()(batch.batch)
 app.command()(batch.study)
+app.command()(report.report)
 
 
 def main() -> None:

@@ -11,6 +11,7 @@ from pathlib import Path
 import typer
 
 from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, friendly_errors, warn_if_band
+from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
 
 __all__ = ["evaluate", "evaluate_command", "table1", "register"]
@@ -25,10 +26,11 @@ def evaluate(
     objective: Objective = "paper",
     jobs: Jobs = 1,
     seed: Seed = 0,
+    no_report: NoReport = False,
 ) -> None:
     """Scan a layout at every orientation of an objective's protocol, register every sensor subset with
     ICP, and print the best subset per axis for 1, 2, 3 … sensors (the paper's Table 1)."""
-    evaluate_command(part, units, layout, out, objective, jobs, seed)
+    evaluate_command(part, units, layout, out, objective, jobs, seed, report=not no_report)
 
 
 def register(app: typer.Typer) -> None:
@@ -38,13 +40,14 @@ def register(app: typer.Typer) -> None:
 
 
 def evaluate_command(part: str, units: str = "auto", layout: Path | None = None, out: Path | None = None,
-                     objective: str = "paper", jobs: int = 1, seed: int = 0) -> Path:  # fmt: skip
+                     objective: str = "paper", jobs: int = 1, seed: int = 0, report: bool = True) -> Path:  # fmt: skip
     """Run the evaluation, print Table 1, save the result folder; returns the folder."""
     from rich.console import Console
 
     from optipose.evaluate.evaluator import Evaluator
     from optipose.model.layout import load_layout
     from optipose.evaluate.objective import load_objective
+    from optipose.model.baseline import baseline
     from optipose.model.part import load_part
     from optipose.io import load_result
     from optipose.io.evaluation import write_evaluation
@@ -53,8 +56,8 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     the_part = load_part(part, units=units)
     if layout is not None:
         the_layout = load_layout(layout)
-    elif "hand" in the_part.layouts:
-        the_layout = the_part.layouts["hand"]
+    elif baseline(the_part) is not None:  # the hand-placed layout, else the conventional placement
+        the_layout = baseline(the_part)
     else:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give one with --layout")
     the_objective = load_objective(objective)
@@ -69,6 +72,10 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     n = len(result.per_scan)
     if result.n_failed:
         console.print(f"[yellow]{result.n_failed} of {n} registrations failed or did not converge; kept out of the statistics (see per_scan.csv)[/]")
+    if report:
+        from optipose.cli.report import write_report_after
+
+        write_report_after(folder, console)
     console.print(f"results: {folder}")
     return folder
 

@@ -20,6 +20,7 @@ from typing import Annotated, Optional
 import typer
 
 from optipose.cli.options import Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
 
 __all__ = ["robustness", "robustness_command"]
@@ -45,14 +46,16 @@ def robustness(
     jobs: Jobs = 1,
     seed: Seed = 0,
     brackets: Brackets = None,
+    no_report: NoReport = False,
 ) -> None:
     """Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
     levels, bracket tolerances) and say, per layout, whether it stays no worse than the hand one."""
-    robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets)
+    robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report)
 
 
 def robustness_command(part: str, layouts: list[Path], objective: str = "robust", units: str = "auto",
-                       out: Path | None = None, jobs: int = 1, seed: int = 0, brackets: bool | None = None) -> Path:  # fmt: skip
+                       out: Path | None = None, jobs: int = 1, seed: int = 0, brackets: bool | None = None,
+                       report: bool = True) -> Path:  # fmt: skip
     """Run the evaluations, print the table and the verdicts, save the result folder; returns the folder."""
     from rich.console import Console
 
@@ -61,10 +64,12 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     from optipose.io.folders import make_result_dir
     from optipose.io.robustness import write_robustness
     from optipose.model.layout import load_layout
+    from optipose.model.baseline import baseline
     from optipose.model.part import load_part
 
     the_part = load_part(part, units=units)
-    if "hand" not in the_part.layouts:
+    reference = baseline(the_part)  # the hand-placed layout, else the conventional placement
+    if reference is None:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout to compare with")
     the_objective = load_objective(objective)
     if brackets is None:
@@ -75,8 +80,8 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     given = [load_layout(p) for p in layouts]
     console = Console(stderr=True)
     results = {}
-    for lay in [the_part.layouts["hand"], *given]:
-        name = lay.name if lay.name not in results else f"{lay.name}-{len(results)}"  # two files of one name
+    for i, lay in enumerate([reference, *given]):
+        name = "hand" if i == 0 else (lay.name if lay.name not in results else f"{lay.name}-{len(results)}")  # two files of one name
         with console.status(f"{the_part.name}: {name} under {len(_conditions(the_objective))} conditions"):
             results[name] = evaluate_robust(the_part, lay, the_objective, seed=seed, jobs=jobs, quiet=True)
     folder = make_result_dir(the_part.name, "robustness", out)
@@ -86,6 +91,10 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
         Console().print(line)
     if brackets:
         _brackets(the_part, the_objective, seed, jobs, results, folder, console)
+    if report:
+        from optipose.cli.report import write_report_after
+
+        write_report_after(folder, console)
     console.print(f"results: {folder}")
     return folder
 
@@ -117,13 +126,15 @@ def _conditions(objective):
 def _verdicts(results: dict) -> list[str]:
     """Per given layout, the verdict on the robust statistic against the hand layout's choice of as many sensors."""
     from optipose.evaluate.compare import Verdict
+    from optipose.model.baseline import baseline_label
 
     hand, lines = results["hand"], []
+    label = baseline_label(hand.layout)  # "conventional" for a part without a hand-placed layout
     for name, result in results.items():
         if name == "hand":
             continue
         k = min(len(result.layout), len(hand.table))
-        line = Verdict(k, result.table[k - 1], hand.table[k - 1]).line()
+        line = Verdict(k, result.table[k - 1], hand.table[k - 1]).line(label)
         lines.append(f"{name} (worst over the band): {line}")
     return lines
 

@@ -14,9 +14,10 @@ from typing import Annotated, Optional
 import typer
 
 from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
 
-__all__ = ["search", "search_command"]
+__all__ = ["search", "search_command", "verdict_headline"]
 
 
 @friendly_errors
@@ -31,16 +32,17 @@ def search(
     out: ResultFolder = None,
     resume: Annotated[Optional[Path], typer.Option(help="Continue the search in this result folder (same settings; PART is then not needed).")] = None,
     config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with a search table overriding the budget (algorithms, evaluations, constraints).")] = None,
+    no_report: NoReport = False,
 ) -> None:
     """Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
     the full ICP protocol (quick: the reduced one) with a held-out noise seed, and print found vs.
     hand-placed per axis (the paper's Table 1 shape)."""
-    search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config)
+    search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report)
 
 
 def search_command(part: str | None = None, units: str = "auto", sensors: str = "1,2,3", budget: str = "default",
                    objective: str = "paper", seed: int = 0, jobs: int | None = None, out: Path | None = None,
-                   resume: Path | None = None, config: Path | None = None) -> Path:  # fmt: skip
+                   resume: Path | None = None, config: Path | None = None, report: bool = True) -> Path:  # fmt: skip
     """Run the search, print found vs. hand-placed, keep everything in the result folder; returns the folder.
 
     With ``resume`` the part, budget, seed, objective and search settings come from that folder's config.toml.
@@ -77,6 +79,10 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(EXIT_INTERRUPTED)
+    if report:
+        from optipose.cli.report import write_report_after
+
+        write_report_after(folder, console)
     console.print(f"results: {folder}")
     return folder
 
@@ -181,67 +187,122 @@ def _draw_layouts(folder: Path, part, layouts) -> None:
 
 
 def _print_report(console, report, part) -> None:
-    """Found vs. hand-placed on the validation protocol with a verdict per k (the records ``comparison.csv``
-    was written from, which :func:`optipose.io.load_result` reads back), the surrogate's strategies, and
-    the found layouts' poses."""
+    """The verdict first, one line per k (:func:`verdict_headline`), then the details: found vs. the
+    baseline per axis on the validation protocol (the records ``comparison.csv`` was written from, which
+    :func:`optipose.io.load_result` reads back), the subsets each axis uses, the band, the full verdict
+    lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal."""
+    from optipose.evaluate.compare import mdeg
+    from optipose.model.baseline import baseline, baseline_label
+
+    label = baseline_label(baseline(part))
     if report.validated:
-        console.print(_validation_table(report.validation, part))
-        if any(v.ratios() for v in report.validation.verdicts()):
-            console.print(_band_table(report.validation, part))
-        for line in report.validation.verdict_lines():
-            console.print(line)
-    console.print(_strategies_table(report.outcome))
+        verdicts = report.validation.verdicts()
+        for v in verdicts:
+            console.print(verdict_headline(v, label), highlight=False)
+        lines = report.validation.verdict_lines(label)
+        found, hand = report.validation.found, report.validation.hand
+        if 1 in found and max(hand, default=0) > 1:  # the headline: fewer sensors to buy
+            top = hand[max(hand)]
+            beats = "beats" if found[1].score < top.score else "does not beat"
+            console.print(f"one found sensor {beats} {label} {top.name} in sum ({mdeg(found[1].score):.3f} vs "
+                          f"{mdeg(top.score):.3f} mdeg)", highlight=False)  # fmt: skip
+        console.print(_validation_table(report.validation, part, label))
+        console.print(_subsets_table(report.validation, label))
+        if any(v.ratios() for v in verdicts):
+            console.print(_band_table(report.validation, part, label))
+        for line in lines[: len(verdicts)]:
+            console.print(line, highlight=False)
+    console.print(_strategies_table(report.outcome, label))
     for k, layout in sorted(report.layouts.items()):
-        console.print(f"[bold]found k={k}[/] (T_O_S, metres):")
+        console.print(f"[bold]found k={k}[/] (T_O_S, metres; X Y Z mm, roll pitch yaw deg):")
         for name, T in zip(layout.names, layout.poses):
             console.print(f"  {name}:\n" + "\n".join("    [" + "  ".join(f"{v: .5f}" for v in row) + "]" for row in T))
+            console.print(f"    {_xyz_rpy(T)}", highlight=False)
 
 
-def _validation_table(validation, part):
-    """One row per k and layout (found, hand): median/p75 and subset per axis, and the score, in mdeg."""
+def verdict_headline(verdict, label: str = "hand") -> str:
+    """The verdict for one k in one short line (under 80 characters for names up to 6): buy or keep."""
+    ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
+    if verdict.no_worse:
+        return f"k={verdict.k}: BUY found {found}: {ratio:.2f}x better in sum than {label} {ref}, no axis worse"
+    if ratio < 1:
+        return f"k={verdict.k}: KEEP {label} {ref}: found {found} is {1 / ratio:.2f}x worse in sum"
+    axes = ", ".join(dict.fromkeys(g.axis for g in verdict.worse))
+    return f"k={verdict.k}: found {found} {ratio:.2f}x better in sum than {label} {ref}, worse on {axes}"
+
+
+def _xyz_rpy(T) -> str:
+    import numpy as np
+
+    from optipose.transforms import matrix_to_rpy
+
+    xyz, rpy = np.asarray(T)[:3, 3] * 1e3, np.rad2deg(matrix_to_rpy(np.asarray(T)[:3, :3]))
+    return "XYZ " + " ".join(f"{v:.3f}" for v in xyz) + " mm, RPY " + " ".join(f"{v:.3f}" for v in rpy) + " deg"
+
+
+def _compact(value: float) -> str:
+    """Millidegrees in at most 6 characters: 3 significant digits."""
+    return f"{value:.3g}" if value < 1e4 else f"{value:.0f}"
+
+
+def _short(label: str) -> str:
+    """A layout's label in a table column: ``conventional`` as ``conv.``."""
+    return "conv." if label == "conventional" else label
+
+
+def _narrow_table(title: str, columns: list[tuple[str, str]]):
+    """A rich table that keeps every row on one line of an 80-column terminal."""
+    from rich import box
     from rich.table import Table
 
-    from optipose.evaluate.compare import mdeg
-
-    protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans: --budget default for the full one)"
-    band = ", the worst over the band of conditions" if any(c.under for c in validation.found.values()) else ""
-    table = Table(title=f"{part.name}: found vs. hand-placed, {protocol}, held-out noise seed{band} "
-                        "(millidegrees, median/75th pct and the subset used)")  # fmt: skip
-    for col in ("k", "layout", "sensors", "roll", "pitch", "yaw", "score"):
-        table.add_column(col, justify="left" if col in ("layout", "sensors") else "right")
-    for k in sorted({*validation.found, *validation.hand}):
-        for label, choices in (("found", validation.found), ("hand", validation.hand)):
-            if k not in choices:
-                continue
-            choice = choices[k]
-            cells = [f"{mdeg(a.median):.3f}/{mdeg(a.p75):.3f} {a.name or 'unobservable'}" for a in choice.axes]
-            table.add_row(str(k), label, choice.name, *cells, f"{mdeg(choice.score):.3f}")
+    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
+    for name, justify in columns:
+        table.add_column(name, justify=justify, no_wrap=True)
     return table
 
 
-def _band_table(validation, part):
-    """Per k and noise level of the band: hand / found in sum, and whether found is no worse on every axis."""
-    from rich.table import Table
+def _validation_table(validation, part, label: str = "hand"):
+    """One row per k and layout (found, baseline): median/p75 per axis and the score, in mdeg."""
+    from optipose.evaluate.compare import mdeg
 
+    protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans)"
+    band = ", worst over the band" if any(c.under for c in validation.found.values()) else ""
+    table = _narrow_table(f"{part.name}: found vs. {label}, {protocol}, held-out seed{band}; mdeg median/p75",
+                          [("k", "right"), ("layout", "left"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"),
+                           ("yaw", "right"), ("score", "right")])  # fmt: skip
+    for k in sorted({*validation.found, *validation.hand}):
+        for name, choices in (("found", validation.found), (label, validation.hand)):
+            if k in choices:
+                choice = choices[k]
+                cells = [f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else "unobs." for a in choice.axes]
+                table.add_row(str(k), _short(name), choice.name, *cells, _compact(mdeg(choice.score)))
+    return table
+
+
+def _subsets_table(validation, label: str = "hand"):
+    """The sensor subset each axis uses, per k and layout."""
+    table = _narrow_table("the subset each axis uses", [("k", "right"), ("layout", "left"), ("roll", "left"), ("pitch", "left"), ("yaw", "left")])
+    for k in sorted({*validation.found, *validation.hand}):
+        for name, choices in (("found", validation.found), (label, validation.hand)):
+            if k in choices:
+                table.add_row(str(k), _short(name), *(a.name or "unobservable" for a in choices[k].axes))
+    return table
+
+
+def _band_table(validation, part, label: str = "hand"):
+    """Per k and noise level of the band: baseline / found in sum, and whether found is no worse on every axis."""
     verdicts = [v for v in validation.verdicts() if v.levels()]
-    table = Table(title=f"{part.name}: hand / found score per condition of the band (held-out seed); "
-                        "* = found worse on some axis there")  # fmt: skip
-    table.add_column("condition", justify="left")
-    for v in verdicts:
-        table.add_column(f"k={v.k}", justify="right")
+    table = _narrow_table(f"{part.name}: {label} / found per condition (* found worse on some axis)",
+                          [("condition", "left")] + [(f"k={v.k}", "right") for v in verdicts])  # fmt: skip
     for row in zip(*(v.levels() for v in verdicts)):
         table.add_row(row[0][0], *(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row))
     return table
 
 
-def _strategies_table(outcome):
-    """The surrogate's predicted score per k for greedy, joint and hand, and which strategy won."""
-    from rich.table import Table
-
-    strategies = Table(title="surrogate: predicted score (millidegrees) of greedy vs. joint vs. hand; "
-                             "the winner is chosen on it plus the penalty for axes not clearly better than the hand's")  # fmt: skip
-    for col in ("k", "greedy", "joint", "hand", "winner"):
-        strategies.add_column(col, justify="right")
+def _strategies_table(outcome, label: str = "hand"):
+    """The surrogate's predicted score per k for greedy, joint and the baseline, and which strategy won."""
+    strategies = _narrow_table(f"surrogate: predicted score (mdeg), greedy vs. joint vs. {label}",
+                               [("k", "right"), ("greedy", "right"), ("joint", "right"), (_short(label), "right"), ("winner", "right")])  # fmt: skip
     for k in sorted(outcome.found):
         g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
         fmt = lambda f: f"{1e3 * f.stats['score']:.3f}" if f is not None and f.stats else "-"  # noqa: E731

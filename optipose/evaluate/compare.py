@@ -109,8 +109,9 @@ class Verdict:
         """No axis statistic worse than the reference's: replacing the reference loses nothing."""
         return dominates(self.found, self.reference)
 
-    def line(self) -> str:
-        """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace."""
+    def line(self, reference: str = "hand") -> str:
+        """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace;
+        ``reference`` names the baseline (``hand``, ``conventional``)."""
         ratio, name, ref = self.ratio, self.found.name, self.reference.name
         gaps = sorted(self.worse, key=lambda g: g.reference / g.found)  # the widest first
         worse = [f"{g.axis} {g.statistic} {mdeg(g.found):.3f} vs {mdeg(g.reference):.3f}"
@@ -118,7 +119,7 @@ class Verdict:
         if len(gaps) > 3:
             worse.append(f"{len(gaps) - 3} more")
         robust = " at the worst over the band" if self.ratios() else ""
-        than = f"x {'better' if ratio >= 1 else 'worse'} in sum{robust} than hand {ref}"
+        than = f"x {'better' if ratio >= 1 else 'worse'} in sum{robust} than {reference} {ref}"
         head = f"k={self.k}: found {name} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
         if worse and ratio < 1:
             return f"{head} and worse on {'; '.join(worse)} mdeg: keep {ref}"
@@ -127,10 +128,10 @@ class Verdict:
         return f"{head}, no worse on any axis"
 
 
-def one_versus_many(one: Choice, many: Choice) -> str:
+def one_versus_many(one: Choice, many: Choice, reference: str = "hand-placed") -> str:
     """Whether one found sensor beats the reference's largest choice in sum: fewer sensors to buy."""
     beats = one.score < many.score
-    return (f"one found sensor {'beats' if beats else 'does not beat'} the hand-placed {many.name} in sum "
+    return (f"one found sensor {'beats' if beats else 'does not beat'} the {reference} {many.name} in sum "
             f"({mdeg(one.score):.3f} vs {mdeg(many.score):.3f} mdeg)")  # fmt: skip
 
 

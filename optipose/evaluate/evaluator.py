@@ -86,11 +86,13 @@ class EvaluationResult:
 def evaluate(part, layout: Layout | None = None, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1) -> EvaluationResult:
     """Evaluate ``layout`` (default: the part's hand-placed one) on ``part`` (a :class:`optipose.model.part.Part`)."""
     if layout is None:
-        if "hand" not in part.layouts:
+        from optipose.model.baseline import baseline
+
+        layout = baseline(part)
+        if layout is None:
             from optipose.errors import ConfigError
 
             raise ConfigError(f"part '{part.name}' has no hand-placed layout; give one with --layout")
-        layout = part.layouts["hand"]
     with Evaluator(part, objective, seed=seed, jobs=jobs) as evaluator:
         return evaluator(layout)
 

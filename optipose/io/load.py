@@ -2,7 +2,10 @@
 
 ``optipose evaluate`` folders give an :class:`~optipose.evaluate.evaluator.EvaluationResult`, ``optipose
 search`` folders a :class:`~optipose.search.records.SearchResult` whose ``verdicts()`` say, per k, whether
-the found layout beats the hand-placed one. The CLI tables, ``scripts/search_table.py`` and reports read
+the found layout beats the hand-placed one, ``optipose robustness`` folders a
+:class:`~optipose.io.robustness.RobustnessResult`. A search's trace comes back as records too:
+:func:`load_history` (``Evaluation`` per surrogate call) and :func:`load_selection` (``IcpEvaluation`` per
+ICP look at a candidate). The CLI tables, ``scripts/search_table.py`` and reports read
 results through here, never by parsing CSV columns of their own.
 """
 
@@ -20,7 +23,7 @@ from optipose.evaluate.assignment import AxisChoice, Choice
 from optipose.evaluate.objective import AXES
 from optipose.io.folders import read_config
 
-__all__ = ["load_result", "load_search", "choices_from_comparison"]
+__all__ = ["load_result", "load_search", "load_history", "load_selection", "load_surrogate_scores", "choices_from_comparison"]
 
 
 def load_result(folder: str | Path):
@@ -34,6 +37,10 @@ def load_result(folder: str | Path):
         return read_evaluation(folder, config)
     if command == "search":
         return load_search(folder, config)
+    if command == "robustness":
+        from optipose.io.robustness import read_robustness
+
+        return read_robustness(folder, config)
     raise ConfigError(f"{folder}: a '{command}' result, which optipose cannot read back")
 
 
@@ -93,3 +100,61 @@ def _indices(name: str, names: list[str]) -> tuple[int, ...]:
     if "".join(tokens) != name:
         raise ConfigError(f"subset '{name}' does not name sensors of the layout ({', '.join(names)})")
     return tuple(sorted(names.index(t) for t in tokens))
+
+
+def load_history(folder: str | Path) -> list:
+    """The search's surrogate evaluations (``history.csv``) as :class:`~optipose.search.records.Evaluation`
+    records, in order; [] when there is none."""
+    import ast
+
+    from optipose.search.records import EvalState, Evaluation
+
+    path = Path(folder) / "history.csv"
+    if not path.is_file():
+        return []
+    rows = pd.read_csv(path, keep_default_na=False, na_values={"value": ["nan"], "best": ["nan", ""]})
+    return [
+        Evaluation(int(r.eval), str(r.stage), int(r.k), tuple(ast.literal_eval(r.u)), EvalState(r.state), float(r.value),
+                   float(r.best), str(r.constraint))
+        for r in rows.itertuples(index=False)
+    ]  # fmt: skip
+
+
+def load_selection(folder: str | Path, names: list[str] | None = None) -> list:
+    """The ICP evaluations of the selection, polish and confirmation (``selection.csv``) as
+    :class:`~optipose.search.records.IcpEvaluation` records (degrees back to radians); [] when there is none.
+
+    names : the sensor names subsets are spelled with (default F1 … F9 and S1 … S9)."""
+    from optipose.search.records import IcpEvaluation
+
+    path = Path(folder) / "selection.csv"
+    if not path.is_file():
+        return []
+    rows = pd.read_csv(path, keep_default_na=False, na_values={"surrogate_deg": ["nan", ""]})
+    names = names or [f"F{i}" for i in range(1, 10)] + [f"S{i}" for i in range(1, 10)]
+    out = []
+    for r in rows.to_dict("records"):
+        axes = tuple(
+            AxisChoice(axis, _indices(_subset(r[f"{axis}_subset"]), names), _subset(r[f"{axis}_subset"]),
+                       float(np.deg2rad(r[f"{axis}_median_deg"])), float(np.deg2rad(r[f"{axis}_p75_deg"])))
+            for axis in AXES
+        )  # fmt: skip
+        choice = Choice(int(r["k"]), (), "", axes, float(np.deg2rad(r["score_deg"])))
+        dominates = str(r["dominates_hand"]).strip().lower() == "true"
+        out.append(IcpEvaluation(int(r["k"]), str(r["origin"]), float(r["surrogate_deg"]), str(r["protocol"]), choice, dominates))
+    return out
+
+
+def _subset(value) -> str:
+    text = str(value)
+    return "" if text in ("", "nan", "unobservable") else text
+
+
+def load_surrogate_scores(folder: str | Path) -> dict[tuple[str, int], float]:
+    """(layout label, k) → the surrogate's predicted score (deg) from ``surrogate_scores.csv`` (found,
+    greedy, joint, hand); {} when there is none."""
+    path = Path(folder) / "surrogate_scores.csv"
+    if not path.is_file():
+        return {}
+    rows = pd.read_csv(path)
+    return {(str(r.layout), int(r.k)): float(r.score_deg) for r in rows.itertuples(index=False)}

@@ -30,7 +30,9 @@ with it along the scan; :mod:`optipose.model.collision` sweeps them together wit
 :func:`load_part` takes a shipped part's name, a part file, or a mesh file. A mesh may have a part file
 beside it (``<stem>.toml``, else ``part.toml`` in its folder); with none, the defaults are: material
 ``milled-aluminium-ra1.6``, sensor ``keyence-lj-x8080``, scanning length = the mesh's extent along x,
-0.5 mm steps, rotation centre = the bounding-box centre, no keep-outs and no layouts.
+0.5 mm steps, rotation centre = the bounding-box centre, no keep-outs, and as its only layout the
+conventional placement (``layouts["conventional"]``, :mod:`optipose.model.baseline`), which any part
+without a ``hand`` layout gets so that a search always has a baseline.
 """
 
 from __future__ import annotations
@@ -80,7 +82,8 @@ class Part:
     motion : the scan's travel along +x_O.
     rotation_centre : (3,) m, the centre of the orientation offsets (SPEC §3).
     keepouts : boxes fixed to the part that sensor heads must avoid.
-    layouts : named sensor layouts, e.g. ``layouts["hand"]`` (the paper-style baseline).
+    layouts : named sensor layouts, e.g. ``layouts["hand"]`` (the paper-style baseline) or, without one,
+        ``layouts["conventional"]`` (:func:`optipose.model.baseline.baseline` picks).
     source : the part file, or the mesh file when there was none.
     """
 
@@ -122,15 +125,30 @@ def load_part(spec: str | Path, units: str = "auto") -> Part:
     text = str(spec)
     path = Path(spec)
     if text in list_parts():
-        return _from_part_file(PARTS_DIR / text / "part.toml", units)
+        return _with_baseline(_from_part_file(PARTS_DIR / text / "part.toml", units))
     if path.suffix.lower() == ".toml":
         if not path.is_file():
             raise ConfigError(f"part file not found: {path}")
-        return _from_part_file(path, units)
+        return _with_baseline(_from_part_file(path, units))
     if path.suffix.lower() in _MESH_SUFFIXES:
-        return _from_mesh(path, units)
+        return _with_baseline(_from_mesh(path, units))
     shipped = ", ".join(list_parts()) or "none found"
     raise ConfigError(f"unknown part '{text}' (shipped parts: {shipped}; or a part .toml or a mesh file)")
+
+
+def _with_baseline(part: Part) -> Part:
+    """A part without a hand-placed layout gets the conventional placement (:mod:`optipose.model.baseline`)
+    as ``layouts["conventional"]``, so every search and report has something to compare against."""
+    from optipose.model.baseline import CONVENTIONAL, conventional_layout
+
+    if "hand" not in part.layouts and CONVENTIONAL not in part.layouts:
+        try:
+            part.layouts[CONVENTIONAL] = conventional_layout(part)
+        except ConfigError as exc:  # a part the conventional heads cannot clear: no baseline, said once
+            import logging
+
+            logging.getLogger(__name__).warning("%s", exc)
+    return part
 
 
 def _from_mesh(path: Path, units: str) -> Part:

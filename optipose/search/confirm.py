@@ -17,6 +17,7 @@ from optipose.search.candidates import distinct
 from optipose.search.driver import apart
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import Found, IcpEvaluation
+from optipose.model.baseline import baseline
 
 __all__ = ["Confirmer"]
 
@@ -35,7 +36,7 @@ class Confirmer:
         if self._hand is None:
             if on_stage:
                 on_stage("confirming on the full protocol: the hand-placed layout")
-            self._hand = self.evaluator(self.part.layouts["hand"])
+            self._hand = self.evaluator(baseline(self.part))
         return self._hand
 
     def evaluate(self, layout: Found):

@@ -31,6 +31,7 @@ from optipose.search.space import SPACE_VERSION
 from optipose.search.study import SurrogateStudy
 from optipose.search.surrogate_search import run_search
 from optipose.seeds import validation_seed
+from optipose.model.baseline import baseline
 
 __all__ = ["SearchReport", "ResultSink", "run", "found_layout", "search_objective", "NoFeasibleLayout"]
 
@@ -91,7 +92,7 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
             f"{config.min_points} points without its head hitting the part or a keep-out (can the sensors see "
             f"this part at all? check --units, the material and the part's size against the {config.clearance * 1e3:.0f} mm clearance)"
         )
-    hand = part.layouts.get("hand")
+    hand = baseline(part)
     report = SearchReport(outcome, _layouts(outcome.found))
     sink.layouts(report.layouts, hand)  # the surrogate's best, on disk before anything slower
     if config.select_candidates > 0 and not outcome.interrupted:

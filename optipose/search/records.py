@@ -147,13 +147,14 @@ class Validation:
         """Found vs. hand for every k that has both."""
         return [Verdict(k, self.found[k], self.hand[k]) for k in sorted(self.found) if k in self.hand]
 
-    def verdict_lines(self) -> list[str]:
-        """One line per k (:meth:`Verdict.line`), then whether one found sensor beats the hand's largest choice."""
-        lines = [v.line() for v in self.verdicts()]
+    def verdict_lines(self, reference: str = "hand") -> list[str]:
+        """One line per k (:meth:`Verdict.line`), then whether one found sensor beats the hand's largest
+        choice; ``reference`` names the baseline (``hand``, ``conventional``)."""
+        lines = [v.line(reference) for v in self.verdicts()]
         ks = sorted(self.found)
         top = max(ks, default=0)
         if 1 in self.found and top in self.hand and top > 1:
-            lines.append(one_versus_many(self.found[1], self.hand[top]))
+            lines.append(one_versus_many(self.found[1], self.hand[top], "hand-placed" if reference == "hand" else reference))
         return lines
 
 
@@ -179,4 +180,7 @@ class SearchResult:
         return self.validation.verdicts() if self.validation is not None else []
 
     def verdict_lines(self) -> list[str]:
-        return self.validation.verdict_lines() if self.validation is not None else []
+        """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""
+        from optipose.model.baseline import baseline_label
+
+        return self.validation.verdict_lines(baseline_label(self.hand)) if self.validation is not None else []

@@ -41,6 +41,7 @@ from optipose.search.polish import hand_start, polish
 from optipose.search.records import Found, IcpEvaluation, SearchOutcome
 from optipose.search.study import SurrogateStudy
 from optipose.seeds import selection_seed
+from optipose.model.baseline import baseline
 
 __all__ = ["select_finalists", "clear_win", "closest", "nearest"]
 
@@ -60,7 +61,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
     finalists, records = {}, []
     confirmer = Confirmer(part, objective, selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
     with make_evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
-        hand = evaluator(part.layouts["hand"]) if "hand" in part.layouts else None
+        hand = evaluator(baseline(part)) if baseline(part) is not None else None
         ks = sorted(outcome.found)
         for n, k in enumerate(ks):
             reference = _reference(k, hand, confirmer, records, on_stage)
@@ -118,7 +119,7 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
     config, k = study.problem.config, best.k
     starts = [best] + nearest(pool, reference, best)
     if k == 1:  # a reference means the part has a hand layout
-        starts += hand_start(study.problem, part.layouts["hand"], reference)
+        starts += hand_start(study.problem, baseline(part), reference)
     # under a band each evaluation runs every condition: the polish gets as many conditions' worth of work
     evals = (config.polish_evals if k == 1 else config.polish_evals // 2) // len(conditions(evaluator.objective.conditions))
     starts = starts[: evals // (6 * k + 2)]  # COBYLA needs 6k + 1 evaluations before its first step

@@ -20,6 +20,7 @@ from optipose.search.joint import joint_stage
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import Found, SearchOutcome
 from optipose.search.study import Share, Stop, SurrogateStudy
+from optipose.model.baseline import baseline
 
 __all__ = ["run_search", "best_hand_subsets"]
 
@@ -35,7 +36,7 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
     t0 = time.monotonic()
     study = study or SurrogateStudy(SurrogateProblem(part, objective, config))
     rng = np.random.default_rng(seed)
-    hand_poses = part.layouts["hand"].poses if "hand" in part.layouts else []
+    hand_poses = baseline(part).poses if baseline(part) is not None else []
     hand_u = [study.problem.space.from_pose(T) for T in hand_poses]
     ks = sorted(set(config.sensors))
     hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])

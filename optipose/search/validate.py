@@ -13,6 +13,7 @@ from optipose.evaluate.objective import reduced_objective
 from optipose.model.layout import Layout
 from optipose.search.records import Validation
 from optipose.seeds import validation_seed
+from optipose.model.baseline import baseline
 
 __all__ = ["validate", "nested_groups", "indices_in"]
 
@@ -36,8 +37,8 @@ def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int =
             done(f"found_k{max(members)}", result)
             for k in members:
                 found[k] = choice_of(result, tuple(indices_in(layouts[k], big)))
-        if "hand" in part.layouts:
-            result = evaluator(part.layouts["hand"])
+        if baseline(part) is not None:
+            result = evaluator(baseline(part))
             done("hand", result)
             hand = {choice.k: choice for choice in result.table if choice.k in layouts}
     return Validation(protocol, vseed, found, hand)

@@ -1,0 +1,60 @@
+"""``optipose report RESULT_DIR``: a self-contained ``report.html`` and a ``report.md`` for a result folder.
+
+:func:`report` is the Typer command, :func:`report_command` the plain function; :func:`write_report_after`
+is what ``search``, ``evaluate`` and ``robustness`` call at their end (unless ``--no-report``): a report
+that fails is a warning there, never a lost result.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from optipose.cli.options import friendly_errors
+from optipose.errors import ConfigError
+
+__all__ = ["report", "report_command", "write_report_after", "NoReport"]
+
+NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report.html and report.md into the result folder.")]
+
+
+@friendly_errors
+def report(
+    result_dir: Annotated[Path, typer.Argument(help="A result folder of optipose search, evaluate or robustness.")],
+    views: Annotated[bool, typer.Option("--views/--no-views", help="Draw the 3D views (they scan each layout once).")] = True,
+) -> None:
+    """Write report.html (self-contained: opens offline) and report.md into a result folder: the verdict
+    first, Table 1, error box plots, point counts, 3D views, robustness, the search, the poses to paste."""
+    report_command(result_dir, views)
+
+
+def report_command(result_dir: Path, views: bool = True) -> Path:
+    """Write the report; returns the path of report.html."""
+    from rich.console import Console
+
+    from optipose.report.build import write_report
+
+    if not Path(result_dir).is_dir():
+        raise ConfigError(f"{result_dir}: no such result folder")
+    console = Console(stderr=True)
+    with console.status(f"writing the report of {result_dir}"):
+        html, md = write_report(result_dir, views=views)
+    console.print(f"report: {html} (and {md.name})")
+    return html
+
+
+def write_report_after(folder: Path, console) -> None:
+    """The report at the end of a command; a failure is one warning line, the result folder stays."""
+    import logging
+
+    from optipose.report.build import write_report
+
+    try:
+        with console.status("writing report.html"):
+            html, _ = write_report(folder)
+        console.print(f"report: {html}")
+    except Exception as exc:  # a report must never cost the results
+        logging.getLogger(__name__).debug("report failed", exc_info=True)
+        console.print(f"[yellow]warning[/]: no report ({type(exc).__name__}: {exc}); try `optipose report {folder}`")

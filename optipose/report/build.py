@@ -1,0 +1,209 @@
+"""``report.html`` and ``report.md`` for a result folder: :func:`write_report` reads the result with
+:func:`optipose.io.load_result` and puts the sections of this package in order, the verdict first.
+
+The HTML is one self-contained file (figures as data URIs, no script or style from elsewhere); the
+Markdown references the same figures as PNG files in ``report_figures/``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from pathlib import Path
+
+from optipose.report.document import Block, Figure, Heading, Paragraph, render_html, render_markdown, write_figures
+
+__all__ = ["write_report", "build_blocks", "REPORT_HTML", "REPORT_MD", "FIGURE_DIR"]
+
+log = logging.getLogger(__name__)
+REPORT_HTML, REPORT_MD, FIGURE_DIR = "report.html", "report.md", "report_figures"
+
+
+def write_report(folder: str | Path, views: bool = True) -> tuple[Path, Path]:
+    """Write ``report.html`` and ``report.md`` into a result folder; returns both paths.
+
+    views : draw the 3D views (they scan each layout once at its nominal pose: a few seconds per layout).
+    """
+    folder = Path(folder)
+    title, blocks = build_blocks(folder, views)
+    html_path, md_path = folder / REPORT_HTML, folder / REPORT_MD
+    html_path.write_text(render_html(title, blocks), encoding="utf-8")
+    write_figures(blocks, folder / FIGURE_DIR)
+    md_path.write_text(render_markdown(title, blocks, FIGURE_DIR), encoding="utf-8")
+    return html_path, md_path
+
+
+def build_blocks(folder: Path, views: bool = True) -> tuple[str, list[Block]]:
+    """The report's title and blocks for the result in ``folder``."""
+    from optipose.evaluate.evaluator import EvaluationResult
+    from optipose.io import load_result
+    from optipose.io.robustness import RobustnessResult
+
+    result = load_result(folder)
+    if isinstance(result, EvaluationResult):
+        return _evaluation(folder, result, views)
+    if isinstance(result, RobustnessResult):
+        return _robustness(folder, result, views)
+    return _search(folder, result, views)
+
+
+def _part(config: dict):
+    """The part the result was made for, or None (with a log line) when it cannot be loaded any more."""
+    from optipose.errors import OptiposeError
+    from optipose.model.part import load_part
+
+    source = config.get("part", {}).get("source") or config.get("part", {}).get("name")
+    try:
+        return load_part(source)
+    except (OptiposeError, OSError) as exc:
+        log.warning("report: no 3D views, the part '%s' does not load: %s", source, exc)
+        return None
+
+
+def _views(part, layouts: dict, enabled: bool) -> list[Block]:
+    """The 3D views (part, heads, fans, keep-outs, a nominal scan's points) of each named layout."""
+    from optipose.report.figures import layout_views
+
+    blocks: list[Block] = [Heading("Where the sensors go")]
+    if not enabled:
+        return blocks + [Paragraph("3D views left out (--no-views)", "note")]
+    if part is None:
+        return blocks + [Paragraph("no 3D views: the part's file could not be loaded from where the result says it was", "note")]
+    shown = replace(part, layouts={**part.layouts, **layouts})
+    for name, layout in layouts.items():
+        try:
+            png = layout_views(shown, name)
+        except Exception as exc:  # a picture must never cost the report
+            log.warning("report: could not draw %s: %s", name, exc)
+            blocks.append(Paragraph(f"{name}: no picture ({exc})", "note"))
+            continue
+        blocks.append(Figure(png, f"view_{name}.png", f"{name} ({len(layout)} sensor{'s' if len(layout) > 1 else ''}): isometric, front, and close-ups from the "
+                             "front and the top; heads (boxes), laser fans (dashed), measuring ranges (filled), keep-outs "
+                             "(dotted) and the points of a nominal scan, one colour per sensor"))  # fmt: skip
+    return blocks
+
+
+def _evaluations(sub: Path) -> tuple[object, str]:
+    """The evaluation saved in a validation folder (under a band: its first condition's), and a note."""
+    from optipose.io import load_result
+
+    if (sub / "config.toml").is_file():
+        return load_result(sub), ""
+    conditions = sorted(p for p in sub.iterdir() if (p / "config.toml").is_file())
+    if not conditions:
+        return None, ""
+    return load_result(conditions[0]), f"condition {conditions[0].name} of the band ({len(conditions)} conditions in {sub})"
+
+
+def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
+    from optipose.io.load import load_history, load_selection, load_surrogate_scores
+    from optipose.model.baseline import baseline_label
+    from optipose.report.layouts import layout_section
+    from optipose.report.provenance import provenance_blocks
+    from optipose.report.robustness import band_blocks
+    from optipose.report.scans import scan_blocks
+    from optipose.report.search import search_blocks, surrogate_pairs
+    from optipose.report.verdict import table1_side_by_side, verdict_blocks
+
+    label = baseline_label(result.hand)
+    validation = result.validation
+    title = f"{result.part}: where to mount the sensors (search, budget {result.budget}, seed {result.seed})"
+    blocks: list[Block] = []
+    if validation is None:
+        blocks.append(Paragraph("the search stopped before its validation: no verdict; the layouts below are its best so far", "verdict mixed"))
+    else:
+        protocol = "the full protocol" if validation.protocol == "full" else "the REDUCED protocol (14 scans; --budget default for the full one)"
+        blocks += verdict_blocks(result.verdicts(), validation.found, validation.hand, label)
+        blocks.append(Paragraph(f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "
+                                f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
+                                "A verdict says 'better in sum' from the summed per-axis medians and 75th percentiles, and 'no worse on any axis' "
+                                "only when every one of them is at most the baseline's.", "note"))  # fmt: skip
+        blocks.append(Heading("Per axis (the paper's Table 1)"))
+        blocks.append(table1_side_by_side(validation.found, validation.hand, label,
+                                          "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses"))  # fmt: skip
+        for v in result.verdicts():
+            blocks += band_blocks(f"found k={v.k}", v, label)
+    layouts = {f"found_k{k}": lay for k, lay in sorted(result.layouts.items())}
+    if result.hand is not None:
+        layouts[label] = replace(result.hand, name=label)
+    blocks += _views(_part(result.config), layouts, views)
+    blocks.append(Heading("Poses for the robot program"))
+    for name, layout in layouts.items():
+        blocks += layout_section(name, layout)
+    if (folder / "validation").is_dir():
+        blocks.append(Heading("Errors and points on the validation"))
+        for sub in sorted((folder / "validation").iterdir()):
+            evaluation, note = _evaluations(sub) if sub.is_dir() else (None, "")
+            if evaluation is not None:
+                name = label if sub.name == "hand" else sub.name.replace("_k", " k=")
+                blocks += scan_blocks(evaluation, name, sub.name, note)
+    pairs = surrogate_pairs(load_selection(folder), load_surrogate_scores(folder), result, label)
+    blocks += search_blocks(load_history(folder), pairs, label)
+    blocks += provenance_blocks(result.config)
+    return title, blocks
+
+
+def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
+    from optipose.evaluate.compare import mdeg
+    from optipose.report.layouts import layout_section
+    from optipose.report.provenance import provenance_blocks
+    from optipose.report.scans import scan_blocks
+    from optipose.report.verdict import table1_alone
+
+    n_scans = result.per_scan["scan"].nunique()
+    name = result.layout.name
+    title = f"{result.part}: layout '{name}' evaluated ({result.objective.name}, {n_scans} scans, seed {result.seed})"
+    best = result.table[-1]
+    blocks: list[Block] = [Heading("Summary"), Paragraph(
+        f"with all {best.k} sensors the best per-axis choice scores {mdeg(best.score):.3f} mdeg (sum of per-axis median and p75); "
+        + "; ".join(f"k={c.k}: {c.name} {mdeg(c.score):.3f} mdeg" for c in result.table), "verdict info")]  # fmt: skip
+    blocks.append(Heading("Per axis (the paper's Table 1)"))
+    blocks.append(table1_alone(result.table, name, "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses"))
+    blocks += _views(_part(_config(folder)), {name: result.layout}, views)
+    blocks.append(Heading("Poses for the robot program"))
+    blocks += layout_section(name, result.layout)
+    blocks.append(Heading("Errors and points"))
+    blocks += scan_blocks(result, name, "evaluation")
+    blocks += provenance_blocks(_config(folder))
+    return title, blocks
+
+
+def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
+    from optipose.model.baseline import baseline_label
+    from optipose.report.layouts import layout_section
+    from optipose.report.provenance import provenance_blocks
+    from optipose.report.robustness import band_blocks, bracket_blocks
+    from optipose.report.verdict import table1_side_by_side, verdict_css
+
+    label = baseline_label(result.layouts.get("hand"))
+    title = f"{result.part}: layouts under every condition of the band (robustness, seed {result.seed})"
+    blocks: list[Block] = [Heading("Verdict")]
+    verdicts = result.verdicts()
+    for name, v in verdicts.items():
+        blocks.append(Paragraph(f"{name} (worst over the band): {v.line(label)}", verdict_css(v)))
+    if not verdicts:
+        blocks.append(Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed"))
+    blocks.append(Heading("Per axis (the paper's Table 1), the robust statistic over the band"))
+    for name, v in verdicts.items():
+        blocks.append(table1_side_by_side({v.k: v.found}, {v.k: v.reference}, label, f"Table 1, {name} vs. {label}: median / 75th percentile "
+                                          "(mdeg) of the worst condition, and the subset each axis uses"))  # fmt: skip
+    if not verdicts:
+        hand = {k: c for (n, k), c in result.choices.items() if n == "hand"}
+        blocks.append(table1_side_by_side({}, hand, label, "Table 1: median / 75th percentile (mdeg), robust over the band"))
+    blocks.append(Heading("At every condition of the band"))
+    for name, v in verdicts.items():
+        blocks += band_blocks(name, v, label)
+    blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
+    layouts = {(label if n == "hand" else n): replace(lay, name=label if n == "hand" else n) for n, lay in result.layouts.items()}
+    blocks += _views(_part(result.config), layouts, views)
+    blocks.append(Heading("Poses for the robot program"))
+    for name, layout in layouts.items():
+        blocks += layout_section(name, layout)
+    blocks += provenance_blocks(result.config)
+    return title, blocks
+
+
+def _config(folder: Path) -> dict:
+    from optipose.io.folders import read_config
+
+    return read_config(folder)

@@ -1,0 +1,255 @@
+"""Reports (``optipose report``) on real result folders, opened in headless Chromium; the conventional
+placement of a bare STL; the search's terminal output in 80 columns."""
+
+from __future__ import annotations
+
+import html
+import itertools
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from optipose.io import load_result
+from optipose.model.baseline import conventional_layout
+from optipose.model.collision import DEFAULT_MARGIN, clearance, heads_clearance
+from optipose.model.part import PARTS_DIR, load_part
+
+CHROMIUM = Path("/usr/bin/chromium")
+FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync"]  # fmt: skip
+SMALL = """[search]
+global_evals = 25
+local_evals = 8
+joint_evals = 10
+random_starts = 2
+select_candidates = 0
+screen_samples = 0
+"""
+SHORT = """name = "short"
+[protocol]
+sequences = ["R", "P", "Y"]
+start_deg = -2.0
+stop_deg = 2.0
+step_deg = 4.0
+"""
+BAND = SHORT.replace('"short"', '"short-band"') + """[conditions]
+noise_scale = [1.0, 5.0]
+mounting_translation_mm = 0.2
+mounting_rotation_deg = 0.1
+mounting_draws = 1
+"""
+
+
+def run(*args, columns: int = 80):
+    env = {**os.environ, "COLUMNS": str(columns)}
+    return subprocess.run([sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=900, env=env)
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    """A search on a bare STL (its baseline: the conventional placement), a robustness run of its found
+    pair against part B's hand layout under a band, and an evaluation: each writes its report."""
+    d = tmp_path_factory.mktemp("report")
+    for name, text in (("small.toml", SMALL), ("short.toml", SHORT), ("band.toml", BAND)):
+        (d / name).write_text(text)
+    shutil.copy(PARTS_DIR / "part_b" / "part_b.stl", d / "block.stl")
+    search = run("search", d / "block.stl", "--sensors", "1,2", "--budget", "quick", "--search-config", d / "small.toml",
+                 "--objective", d / "short.toml", "--seed", 1, "--out", d / "search")  # fmt: skip
+    assert search.returncode == 0, search.stderr
+    robust = run("robustness", "part_b", "--layout", d / "search" / "layouts" / "found_k2.toml", "--objective", d / "band.toml",
+                 "--no-brackets", "--out", d / "robustness")  # fmt: skip (the brackets' 13 evaluations: see the unit test)
+    assert robust.returncode == 0, robust.stderr
+    evaluation = run("evaluate", "part_b", "--objective", d / "short.toml", "--out", d / "evaluate")
+    assert evaluation.returncode == 0, evaluation.stderr
+    return {"search": d / "search", "robustness": d / "robustness", "evaluate": d / "evaluate", "stdout": search.stdout}
+
+
+# --- the terminal ------------------------------------------------------------------------------------
+def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
+    lines = results["stdout"].splitlines()
+    assert max(len(line) for line in lines) <= 80
+    verdicts = load_result(results["search"]).verdicts()
+    from optipose.cli.search import verdict_headline
+
+    assert lines[: len(verdicts)] == [verdict_headline(v, "conventional") for v in verdicts]
+    assert [line[:4] for line in lines[:2]] == ["k=1:", "k=2:"]
+    table_row = next(i for i, line in enumerate(lines) if line.lstrip().startswith("1  found"))
+    assert table_row > len(verdicts)  # the details come after
+
+
+# --- the baseline of a bare STL ------------------------------------------------------------------------
+def test_a_bare_stl_search_is_compared_with_the_conventional_placement(results):
+    result = load_result(results["search"])
+    assert result.hand is not None and result.hand.description.startswith("conventional placement")
+    assert sorted(result.validation.hand) == [1, 2] and len(result.verdicts()) == 2
+    assert all("than conventional" in line for line in result.verdict_lines()[:2])
+
+
+@pytest.mark.parametrize("spec", ["part_b", "bare part_a.stl"])
+def test_conventional_placement_clears_the_part_and_sees_it(spec, tmp_path):
+    if spec.startswith("bare"):
+        shutil.copy(PARTS_DIR / "part_a" / "part_a.stl", tmp_path / "a.stl")
+        part = load_part(tmp_path / "a.stl", units="m")
+        layout = part.layouts["conventional"]
+    else:
+        part = load_part(spec)
+        layout = conventional_layout(part)  # a shipped part keeps its hand layout; the placement still exists
+    from optipose.scan.scanner import part_scanner
+
+    scanner = part_scanner(part)
+    x_O = np.array([1.0, 0.0, 0.0])
+    for pose in layout.sensors:
+        T = pose.T_O_S
+        assert clearance(part, None, T).distance >= DEFAULT_MARGIN
+        assert abs(T[:3, 0] @ x_O) < 1e-9 and abs(abs(T[:3, 1] @ x_O) - 1) < 1e-9  # the line across the motion
+        assert len(scanner.scan(T, part.motion)) >= 2000  # it sees the part (the search's min_points)
+    tilt = [np.rad2deg(np.arccos(-pose.T_O_S[2, 2])) for pose in layout.sensors]
+    np.testing.assert_allclose(tilt, [45.0, 0.0, 45.0], atol=1e-6)  # S1, S3 at 45 deg, S2 straight down
+    assert layout.sensors[0].T_O_S[1, 2] > 0 > layout.sensors[2].T_O_S[1, 2]  # S1 from -y, S3 from +y
+    for a, b in itertools.combinations(layout.poses, 2):
+        assert heads_clearance(part.sensor, a, part.sensor, b) >= 0
+
+
+# --- what the report says ------------------------------------------------------------------------------
+def test_the_report_says_the_verdicts_of_the_result(results):
+    result = load_result(results["search"])
+    text = (results["search"] / "report.html").read_text()
+    md = (results["search"] / "report.md").read_text()
+    for line in result.verdict_lines():
+        assert html.escape(line) in text and line in md
+    assert text.index("Verdict") < text.index("Table 1") < text.index("Where the sensors go")
+
+
+def _rz_ry_rx(rpy_deg):
+    r, p, y = np.deg2rad(rpy_deg)
+    Rx = np.array([[1, 0, 0], [0, np.cos(r), -np.sin(r)], [0, np.sin(r), np.cos(r)]])
+    Ry = np.array([[np.cos(p), 0, np.sin(p)], [0, 1, 0], [-np.sin(p), 0, np.cos(p)]])
+    Rz = np.array([[np.cos(y), -np.sin(y), 0], [np.sin(y), np.cos(y), 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def test_the_xyz_rpy_shown_rebuilds_each_sensors_T_O_S(results):
+    """SPEC §1: R = Rz(yaw)·Ry(pitch)·Rx(roll), built here by hand from the numbers the report prints."""
+    result = load_result(results["search"])
+    md = (results["search"] / "report.md").read_text()
+    shown = re.findall(r"# (\w+): X Y Z \(mm\), roll pitch yaw \(deg, extrinsic xyz\)\n([-0-9., ]+)", md)
+    layouts = [*(lay for _, lay in sorted(result.layouts.items())), result.hand]
+    expected = [(s.name, s.T_O_S) for lay in layouts for s in lay.sensors]
+    assert [name for name, _ in shown] == [name for name, _ in expected]
+    for (_, numbers), (_, T) in zip(shown, expected):
+        values = np.array([float(v) for v in numbers.split(",")])
+        np.testing.assert_allclose(values[:3], T[:3, 3] * 1e3, atol=1e-3)
+        np.testing.assert_allclose(_rz_ry_rx(values[3:]), T[:3, :3], atol=2e-6)
+
+
+def test_the_bracket_tables_show_each_layout_with_all_its_sensors_in_mdeg_and_um():
+    import pandas as pd
+
+    from optipose.report.robustness import bracket_blocks
+
+    common = {"tolerance_mm": 0.2, "tolerance_deg": 0.1, "draws": 2, "n_scans": 14, "reduced_protocol": True}
+    axes = pd.DataFrame([
+        {"layout": "hand", "k": 1, "axis": "roll", "subset": "S1", "unit": "deg", "perfect_median_deg": 0.001, "perfect_p75_deg": 0.002,
+         "mounted_median_deg": 0.003, "mounted_p75_deg": 0.004, "worst_abs_bias": 0.05, **common},
+        {"layout": "hand", "k": 2, "axis": "roll", "subset": "S1S2", "unit": "deg", "perfect_median_deg": 0.0005, "perfect_p75_deg": 0.0007,
+         "mounted_median_deg": 0.0011, "mounted_p75_deg": 0.0013, "worst_abs_bias": 0.02, **common},
+        {"layout": "hand", "k": 2, "axis": "x", "subset": "S1S2", "unit": "m", "perfect_median_deg": np.nan, "perfect_p75_deg": np.nan,
+         "mounted_median_deg": np.nan, "mounted_p75_deg": np.nan, "worst_abs_bias": 25e-6, **common},
+    ])  # fmt: skip
+    sensors = pd.DataFrame([{"layout": "hand", "k": 2, "sensor": "S2", "sensor_index": 1, "rank": 1, "change_roll_deg": 0.0004,
+                             "change_pitch_deg": -0.0001, "change_yaw_deg": 0.0, "score_change_deg": 0.0003}])  # fmt: skip
+    blocks = bracket_blocks(axes, sensors, "hand")
+    spread, ranking = [b for b in blocks if hasattr(b, "rows")]
+    assert spread.rows == (("hand", "2", "roll", "S1S2", "0.500", "0.700", "1.100", "1.300", "20.000", "mdeg"),
+                           ("hand", "2", "x", "S1S2", "", "", "", "", "25.0", "µm"))  # fmt: skip
+    assert ranking.rows == (("hand", "2", "S2", "+0.400", "-0.100", "+0.000", "+0.300", "1"),)
+    assert "±0.2 mm and ±0.1°" in blocks[1].text
+
+
+def test_a_study_table_links_each_trials_report(results, tmp_path):
+    from optipose.report.study import study_report
+
+    rows = [{"part": "block", "k": 2, "score_mdeg": 1.25, "state": "complete"}, {"part": "part_b", "k": 3, "score_mdeg": 0.5, "state": "failed"}]
+    page, md = study_report(rows, [results["search"], None], tmp_path / "study")
+    text = page.read_text()
+    assert text.count("<tr>") == 3 and 'class="sortable"' in text
+    link = os.path.relpath(results["search"] / "report.html", tmp_path / "study")
+    assert f'href="{link}"' in text and f"]({link})" in md.read_text()
+
+
+# --- the report in a browser ----------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def browser():
+    if not CHROMIUM.exists():
+        pytest.fail("no /usr/bin/chromium: run scripts/setup.sh")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p, tempfile.TemporaryDirectory() as profile:
+        context = p.chromium.launch_persistent_context(profile, executable_path=str(CHROMIUM), args=FLAGS, headless=True,
+                                                       viewport={"width": 1280, "height": 900})  # fmt: skip
+        yield context
+        context.close()
+
+
+def _open(browser, path: Path):
+    page = browser.new_page()
+    errors, requests = [], []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("request", lambda r: requests.append(r.url))
+    page.goto(path.as_uri())
+    page.wait_for_load_state("load")
+    return page, errors, requests
+
+
+@pytest.mark.parametrize("kind, tables", [
+    ("search", ["Table 1", "found vs. conventional per k", "R (the middle of the measuring range)", "points per scan", "search settings"]),
+    ("robustness", ["Table 1", "score per condition", "R (the middle of the measuring range)"]),
+    ("evaluate", ["Table 1", "points per scan"]),
+])  # fmt: skip
+def test_the_report_opens_offline_in_chromium_and_shows_everything(results, browser, kind, tables, tmp_path):
+    path = results[kind] / "report.html"
+    source = path.read_text()
+    assert not re.search(r"""(src|href)=["']?(https?:)?//""", source)  # nothing to fetch
+    page, errors, requests = _open(browser, path)
+    assert errors == []
+    assert requests == [path.as_uri()]  # the page itself, nothing else
+    n_tables = page.evaluate("() => document.querySelectorAll('table').length")
+    assert n_tables == source.count("<table") and n_tables >= len(tables)
+    captions = page.evaluate("() => Array.from(document.querySelectorAll('table caption')).map(c => c.innerText)")
+    for fragment in tables:
+        assert any(fragment in c for c in captions), (fragment, captions)
+    images = page.evaluate("() => Array.from(document.images).map(i => [i.complete, i.naturalWidth])")
+    assert len(images) == source.count("<img") >= 3 and all(ok and width > 0 for ok, width in images)
+    copies = page.evaluate("() => document.querySelectorAll('.code button').length")
+    assert copies >= 2  # each sensor's pose, and the command
+    shot = tmp_path / f"{kind}.png"
+    page.screenshot(path=str(shot), full_page=True)
+    page.close()
+    from PIL import Image
+
+    pixels = np.asarray(Image.open(shot).convert("L"), dtype=float)
+    assert pixels.shape[0] > 2000 and pixels.std() > 10  # a long page with something on it, not blank
+
+
+def test_a_study_table_sorts_in_the_browser(results, browser, tmp_path):
+    from optipose.report.study import study_report
+
+    rows = [{"trial": n, "score_mdeg": s} for n, s in (("a", 3.0), ("b", 1.0), ("c", 2.0))]
+    page_path, _ = study_report(rows, [results["search"], None, None], tmp_path)
+    page, errors, _ = _open(browser, page_path)
+    column = lambda: page.evaluate("() => Array.from(document.querySelectorAll('tbody tr')).map(r => r.cells[0].innerText)")  # noqa: E731
+    assert column() == ["a", "b", "c"]
+    page.click("th:nth-child(2)")
+    assert column() == ["b", "c", "a"]
+    page.click("th:nth-child(2)")
+    assert column() == ["a", "c", "b"]
+    assert errors == []
+    page.close()
