@@ -111,7 +111,20 @@ def study_command(folder: Path) -> None:
 
     if not Path(folder).is_dir():
         raise ConfigError(f"study folder not found: {folder}")
-    Console().print(_summary_table(summary_frame(load_study(folder)), Path(folder).name))
+    index = load_study(folder)
+    Console().print(_summary_table(summary_frame(index), Path(folder).name))
+    html, _ = write_study_report(folder, index)
+    Console(stderr=True).print(f"study report: {html}")
+
+
+def write_study_report(folder: Path, index) -> tuple[Path, Path]:
+    """``study.html`` and ``study.md`` in the study folder: one sortable row per trial, linking each trial's
+    ``report.html`` where it has one (``optipose report <trial folder>`` writes it)."""
+    from optipose.report.study import study_report
+
+    rows = index.drop(columns=[c for c in ("folder",) if c in index]).to_dict("records")
+    folders = [Path(folder) / f if isinstance(f, str) and f else None for f in index.get("folder", [None] * len(index))]
+    return study_report(rows, folders, folder, title=f"study {Path(folder).name}")
 
 
 def _summary_table(frame, name: str):
