@@ -25,10 +25,11 @@ import numpy as np
 
 from optipose.evaluate.assignment import all_subsets, subset_name
 from optipose.evaluate.conditions import Condition, mounting_error
-from optipose.evaluate.objective import AXES, RegistrationConfig
+from optipose.evaluate.objective import AXES, RegistrationConfig, ScanConfig
 from optipose.evaluate.statistics import unobservable_axes
 from optipose.model.layout import Layout
 from optipose.registration import Matches, backend_for, register, remove_outliers, voxel_down
+from optipose.registration.backends import combined_start
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 
@@ -63,7 +64,7 @@ class WorkerSetup:
     threads: int | None
     occluders: tuple = ()
     condition: Condition = field(default_factory=Condition)
-    column_stride: int = 8
+    column_stride: int = ScanConfig.column_stride
 
 
 def sensor_groups(models: list, default) -> list[tuple[object, list[int]]]:
@@ -294,8 +295,6 @@ def _start(own: dict, subset) -> tuple[np.ndarray, np.ndarray] | None:
     and a direction none of its sensors sees stays at identity's."""
     if not all(j in own for j in subset):
         return None
-    from optipose.registration.backends import combined_start
-
     T = combined_start([(own[j][0].T_target_source, own[j][0].information, own[j][1]) for j in subset])
     return T, np.concatenate([own[j][0].matched for j in subset])
 
