@@ -9,6 +9,7 @@ killed between the folder's rename and the index's write), so a resumed study ne
 
 from __future__ import annotations
 
+import io
 import logging
 import os
 import shutil
@@ -82,7 +83,9 @@ def read_index(folder: str | Path) -> pd.DataFrame:
     path = Path(folder) / INDEX_FILE
     if not path.is_file():
         raise ConfigError(f"{folder}: no {INDEX_FILE} there (not an optipose study folder)")
-    return pd.read_parquet(path)
+    # One open, one read: pyarrow's dataset reader takes the file's size from a stat and reads the footer
+    # through a second open, so a study replacing the file in between gave it the new file at the old size.
+    return pd.read_parquet(io.BytesIO(path.read_bytes()))
 
 
 def _from_folder(folder: Path, trial: TrialSpec) -> TrialRecord | None:
