@@ -197,7 +197,7 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
     keys = {
         "method", "backend", "reference", "reference_spacing_mm", "voxel_size_mm", "outlier_removal",
         "outlier_neighbors", "outlier_std_ratio", "max_correspondence_distance_mm", "max_iterations",
-        "tolerance_rotation_deg", "tolerance_translation_mm", "subset_start", "stop",
+        "tolerance_rotation_deg", "tolerance_translation_mm", "subset_start", "stop", "voxel_grid",
     }  # fmt: skip
     _no_unknown(t, keys, where)
     d = RegistrationConfig()
@@ -207,6 +207,7 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
         reference=_choice(t, "reference", REFERENCES, d.reference, where),
         reference_spacing=_num(t, "reference_spacing_mm", 0.2, where) * _MM,
         voxel_size=_num(t, "voxel_size_mm", 0.5, where) * _MM,
+        voxel_grid=_choice(t, "voxel_grid", ("part", "random"), d.voxel_grid, where),
         outlier_removal=bool(t.get("outlier_removal", False)),
         outlier_neighbors=int(_num(t, "outlier_neighbors", 20, where)),
         outlier_std_ratio=_num(t, "outlier_std_ratio", 2.0, where),

@@ -28,7 +28,7 @@ from optipose.evaluate.conditions import Condition, mounting_error
 from optipose.evaluate.objective import AXES, RegistrationConfig, ScanConfig
 from optipose.evaluate.statistics import unobservable_axes
 from optipose.model.layout import Layout
-from optipose.registration import Matches, backend_for, register, remove_outliers, voxel_down
+from optipose.registration import Matches, backend_for, grid_origin, register, remove_outliers, voxel_down
 from optipose.registration.backends import combined_start
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
@@ -174,8 +174,9 @@ class _Worker:
     def _master(self, models, poses, subsets, references, exact: bool) -> list[np.ndarray]:
         """Per subset, ``T_target_source`` of a noise-free master scan at the nominal orientation, by the
         mounted cell of this condition's draw or (``exact``) by a cell with exact brackets."""
-        scans = self.scan(models, poses, zeroing_seed(self.setup.seed, self.condition.draw), exact=exact, noise=False)
-        clouds, out = _clouds(self.setup.registration, scans), []
+        seed = zeroing_seed(self.setup.seed, self.condition.draw)
+        scans = self.scan(models, poses, seed, exact=exact, noise=False)
+        clouds, out = _clouds(self.setup.registration, scans, seed), []
         for subset, reference in zip(subsets, references):
             reg, _ = _register(self, clouds, subset, reference)
             if not reg.ok:  # its estimate still stands in for the bias; say so
@@ -235,17 +236,20 @@ def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[l
         t0 = time.perf_counter()
         scans = worker.scan(models, poses, seed, rpy=rpy, offset=offset)
         t1 = time.perf_counter()
-        rows += _register_subsets(worker, setup, scans, subsets, references, zeros, names, i, rpy, offset, label, point_rows)
+        rows += _register_subsets(worker, setup, scans, seed, subsets, references, zeros, names, i, rpy, offset, label, point_rows)
         timing["scan"] += t1 - t0
         timing["register"] += time.perf_counter() - t1
     return rows, point_rows, timing
 
 
-def _clouds(cfg: RegistrationConfig, scans) -> list[np.ndarray]:
-    """Each sensor's scan down-sampled (and cleaned of outliers when the objective asks): (m, 3) m each."""
+def _clouds(cfg: RegistrationConfig, scans, seed: int) -> list[np.ndarray]:
+    """Each sensor's scan down-sampled (and cleaned of outliers when the objective asks): (m, 3) m each.
+    ``seed`` is the orientation's noise seed; under ``voxel_grid = "random"`` it places the grid, one
+    grid for all the sensors of a scan (the cell merges their clouds in one frame)."""
+    origin = grid_origin(seed, cfg.voxel_size) if cfg.voxel_grid == "random" else None
     clouds = []
     for scan in scans:
-        cloud = voxel_down(scan.points, cfg.voxel_size)
+        cloud = voxel_down(scan.points, cfg.voxel_size, origin)
         if cfg.outlier_removal:
             cloud = remove_outliers(cloud, cfg.outlier_neighbors, cfg.outlier_std_ratio)
         clouds.append(cloud)
@@ -260,9 +264,9 @@ def _register(worker, clouds, subset, reference, initial=None, start=None):
     return register(source, reference, worker.setup.registration, matches, start), source
 
 
-def _register_subsets(worker, setup, scans, subsets, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
+def _register_subsets(worker, setup, scans, seed, subsets, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
     cfg = setup.registration
-    clouds = _clouds(cfg, scans)
+    clouds = _clouds(cfg, scans, seed)
     for j, (scan, cloud) in enumerate(zip(scans, clouds)):
         point_rows.append({"scan": i, "label": label, "sensor_index": j, "sensor": names[j],
                            "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip

@@ -111,6 +111,9 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
         # the mounting term's per-turn matrices (n_phases + 1 with the nominal orientation; NaN: none)
         A_turns=np.array([_or_nan(v, "A_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(len(infos), n_phases + 1, 6, 6),
         N_turns=np.array([_or_nan(v, "N_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(len(infos), n_phases + 1, 6, 6),
+        # the noise bias term at each sensor's band top (NaN: none; noise_band 1)
+        G_noise=np.array([_or_nan(v, "G_noise", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
+        noise_band=np.array([getattr(v, "noise_band", 1.0) for v in infos], dtype=float),
         space=space_version,
     )
 
@@ -135,15 +138,16 @@ def load_cache(folder: Path, space_version: int) -> dict:
     if not path.is_file():
         return {}
     data = np.load(path)
-    if "G" not in data or "N_turns" not in data:  # from before the voxel bias or the mounting term: scores differ, start over
+    if "G" not in data or "N_turns" not in data or "G_noise" not in data:  # from before the voxel bias, the mounting or the noise bias term: start over
         return {}
     if (int(data["space"]) if "space" in data else 1) != space_version:  # its u keys name other poses: start over
         return {}
     constraint = data["constraint"] if "constraint" in data else np.full(len(data["u"]), "infeasible")
     out = {}
     rows = zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"], data["A"], data["G"],
-               data["A_turns"], data["N_turns"], constraint)  # fmt: skip
-    for u, ok, H, (n_points, n_voxels), violation, A, G, A_turns, N_turns, why in rows:
+               data["A_turns"], data["N_turns"], data["G_noise"], data["noise_band"], constraint)  # fmt: skip
+    for u, ok, H, (n_points, n_voxels), violation, A, G, A_turns, N_turns, G_noise, band, why in rows:
         turns = (None, None) if np.isnan(N_turns).any() else (A_turns, N_turns)
-        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G, *turns) if ok else Violation(str(why), float(violation))
+        noise = (None, 1.0) if np.isnan(G_noise).any() else (G_noise, float(band))
+        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G, *turns, *noise) if ok else Violation(str(why), float(violation))
     return out

@@ -21,6 +21,9 @@ class RegistrationConfig:
     reference: str = "cad-surface"
     reference_spacing: float = 0.2 * _MM
     voxel_size: float = 0.5 * _MM
+    # where the down-sampling grid lies: "part" (a corner at O's origin) or "random" (each scan's grid
+    # shifted by a seeded offset within one voxel, :func:`optipose.registration.preprocess.grid_origin`)
+    voxel_grid: str = "part"
     outlier_removal: bool = False
     outlier_neighbors: int = 20
     outlier_std_ratio: float = 2.0

@@ -11,8 +11,9 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def voxel_centroids(points, size):
-    """Centroids (m, 3) of the points (n, 3) in each cube of side ``size``, in the voxels' sorted key order.
+def voxel_centroids(points, size, origin):
+    """Centroids (m, 3) of the points (n, 3) in each cube of side ``size`` of the grid whose corner is at
+    ``origin`` (3,), in the voxels' sorted key order.
 
     Same sums in the same order as ``np.unique`` + ``np.bincount`` (each voxel adds its points in input
     order), so the result is bit-identical. A scan runs along its profiles, so consecutive points mostly
@@ -26,7 +27,7 @@ def voxel_centroids(points, size):
         hi[j] = np.iinfo(np.int64).min
     for i in range(n):
         for j in range(3):
-            c = np.int64(np.floor(points[i, j] / size))
+            c = np.int64(np.floor((points[i, j] - origin[j]) / size))
             lo[j] = min(lo[j], c)
             hi[j] = max(hi[j], c)
     d1 = hi[1] - lo[1] + 1
@@ -34,9 +35,9 @@ def voxel_centroids(points, size):
     key = np.empty(n, np.int64)
     runs = 0
     for i in range(n):
-        c0 = np.int64(np.floor(points[i, 0] / size)) - lo[0]
-        c1 = np.int64(np.floor(points[i, 1] / size)) - lo[1]
-        c2 = np.int64(np.floor(points[i, 2] / size)) - lo[2]
+        c0 = np.int64(np.floor((points[i, 0] - origin[0]) / size)) - lo[0]
+        c1 = np.int64(np.floor((points[i, 1] - origin[1]) / size)) - lo[1]
+        c2 = np.int64(np.floor((points[i, 2] - origin[2]) / size)) - lo[2]
         key[i] = (c0 * d1 + c1) * d2 + c2
         if i == 0 or key[i] != key[i - 1]:
             runs += 1

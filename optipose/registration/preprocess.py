@@ -5,23 +5,38 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["voxel_down", "remove_outliers", "information_matrix"]
+__all__ = ["voxel_down", "grid_origin", "remove_outliers", "information_matrix"]
 
 
-def voxel_down(points: np.ndarray, size: float) -> np.ndarray:
-    """Centroid of the points in each cube of side ``size`` (m) of a grid anchored at O's origin.
+def voxel_down(points: np.ndarray, size: float, origin=None) -> np.ndarray:
+    """Centroid of the points in each cube of side ``size`` (m) of a grid with a corner at ``origin``
+    (3,) m in O (default O's origin).
 
     points : (n, 3) float, m. Returns (m, 3) float64, m ≤ n; ``points`` unchanged when ``size`` ≤ 0.
 
     The grid is fixed in O (Open3D's moves with the cloud's bounding box), so a voxel's content does not
-    depend on what else was scanned. Output order is the voxels' sorted keys: deterministic.
+    depend on what else was scanned. Output order is the voxels' sorted keys: deterministic. A part drawn in
+    round millimetres has faces on the planes of a grid at O's origin; :func:`grid_origin` gives a scan a
+    grid of its own (``[registration] voxel_grid = "random"``).
     """
     from optipose.registration.kernels import voxel_centroids
 
     points = np.asarray(points, dtype=np.float64)
     if size <= 0 or len(points) == 0:
         return points
-    return voxel_centroids(np.ascontiguousarray(points), float(size))
+    origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
+    return voxel_centroids(np.ascontiguousarray(points), float(size), origin)
+
+
+def grid_origin(seed, size: float) -> np.ndarray:
+    """A scan's own voxel grid: its corner at a seeded uniform offset within one voxel (3,) m.
+
+    Where the grid's planes fall on a part's faces is chance in a real cell (the part is placed to a tenth
+    of a millimetre, the voxel is half a millimetre); a grid at O's origin puts every face drawn in round
+    millimetres on a plane between two voxels, where the sensor noise splits it, and turns that coincidence
+    into a constant bias of every scan whose turn leaves the face parallel to the grid.
+    """
+    return np.random.default_rng([int(seed), 0x70C5]).random(3) * size
 
 
 def remove_outliers(points: np.ndarray, neighbors: int = 20, std_ratio: float = 2.0) -> np.ndarray:

@@ -57,7 +57,8 @@ class SurrogateProblem:
         self.part, self.objective, self.config = part, objective, config
         stat = objective.statistic
         self.weights = (tuple(stat.weights), stat.median_weight, stat.p75_weight)
-        self.surrogate = surrogate or Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective))
+        self.surrogate = surrogate or Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective),
+                                                noise_band=max(objective.conditions.noise_scales))  # fmt: skip
         self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
         self.collision = collision_model(part)
         self._cache: dict = {} if cache is None else cache

@@ -87,6 +87,10 @@ class SensorInfo:
     # the bracket mounting term (:mod:`optipose.search.mounting`), in O at each turn, index 0 the nominal orientation
     A_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀJ of the voxel centroids
     N_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀr per unit bracket error (r rad, t m; sensor frame)
+    # the noise's own bias (the noise bias term, see the module doc): per turn, what the sensor noise at the
+    # surrogate's ``noise_band`` adds to G through the voxels' membership (turns, 6); None: no such term
+    G_noise: np.ndarray | None = None
+    noise_band: float = 1.0
 
 
 class Surrogate:
@@ -102,6 +106,7 @@ class Surrogate:
     def __init__(
         self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0,
         threads: int | None = None, extra_variance: float = 0.0, turns: np.ndarray | None = None,
+        noise_band: float = 1.0,
     ):  # fmt: skip
         from optipose.model.sensor import load_sensor
 
@@ -121,6 +126,7 @@ class Surrogate:
         turns = DEFAULT_TURNS if turns is None else np.asarray(turns, dtype=float).reshape(-1, 3)
         shifts = np.random.default_rng(20221536).random((len(turns), 3)) * voxel
         self.motions = [part_motion(rpy, self.centre, shift) for rpy, shift in zip(turns, shifts)]
+        self.noise_band = float(noise_band)  # the highest noise scale the objective's band asks for
         self._reference = None
 
     def info(self, T_O_S: np.ndarray) -> SensorInfo:
@@ -137,7 +143,9 @@ class Surrogate:
         # the number of points a full-fidelity scan puts there; its tangential spread does not matter
         var = self.full_sensor.noise_sigma**2 / inten / (counts * self.scale) + self.extra_variance
         J = np.hstack([np.cross(p, n), n]) / np.sqrt(var)[:, None]
-        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), *self._bias(scan.points, T_O_S))
+        A, G, A_turns, N_turns = self._bias(scan.points, T_O_S)
+        noisy = self._noise_bias(scan, T_O_S, G) if G is not None and self.noise_band > 1.0 else None
+        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G, A_turns, N_turns, noisy, self.noise_band)
 
     def _bias(self, points: np.ndarray, T_O_S: np.ndarray) -> tuple:
         """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and
@@ -152,7 +160,7 @@ class Surrogate:
         A, G = np.zeros((6, 6)), np.zeros((len(self.motions), 6))
         A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
-            turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel)
+            turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
             v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
             q, n, _ = self._reference.nearest(v)
             A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
@@ -163,6 +171,38 @@ class Surrogate:
             G[m - 1] = J.T @ r
             A += J.T @ J / len(self.motions)
         return A, G, A_turns, N_turns
+
+    def _noise_bias(self, scan, T_O_S: np.ndarray, G: np.ndarray) -> np.ndarray:
+        """Per turn, what the sensor noise at ``noise_band`` adds to ΣJᵀr through the voxels (turns, 6).
+
+        Each raw point moves along its ray by ε (σ/√intensity times the band's top scale), once by +ε and
+        once by −ε with the same draws; the mean of the two runs' ΣJᵀr less the noise-free one keeps what is
+        even in the noise (the voxels' membership, a bias ∝ σ²) and cancels what is odd (the noise itself,
+        which the information matrix already accounts for)."""
+        from optipose.registration.kernels import voxel_centroids
+
+        s = self.full_sensor
+        apex_z = s.apex_z
+        shifts = self.motion.offsets()
+        if np.isfinite(apex_z):  # rays from the fan's apex, which the part passes along +x_O
+            apex = T_O_S[:3, :3] @ np.array([0.0, 0.0, apex_z]) + T_O_S[:3, 3]
+            u = scan.points - apex + shifts[scan.profile][:, None] * np.array([1.0, 0.0, 0.0])
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
+        else:
+            u = np.broadcast_to(T_O_S[:3, 2], scan.points.shape)
+        inten = np.clip(scan.intensity.astype(float), s.detection_threshold, 1.0)
+        rng = np.random.default_rng(20221536)  # fixed, so a pose always scores the same
+        eps = rng.standard_normal(len(scan)) * (s.noise_sigma * self.noise_band / np.sqrt(inten))
+        out = np.zeros_like(G)
+        for sign in (1.0, -1.0):
+            points = scan.points + sign * eps[:, None] * u
+            for m, T in enumerate(self.motions):
+                turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
+                v = (turned - T[:3, 3]) @ T[:3, :3]
+                q, n, _ = self._reference.nearest(v)
+                r = np.einsum("ij,ij->i", v - q, n)
+                out[m] += 0.5 * (np.hstack([np.cross(v - self.centre, n), n]).T @ r)
+        return out - G
 
 
 def _voxels(points: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -223,13 +263,18 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     for s, c in enumerate(subsets):
         H = sum(infos[i].H for i in c)
         have_bias = all(infos[i].G is not None for i in c)
-        delta = bias_rotation(sum(infos[i].A for i in c), sum(infos[i].G for i in c)) if have_bias else None
+        A = sum(infos[i].A for i in c) if have_bias else None
+        delta = bias_rotation(A, sum(infos[i].G for i in c)) if have_bias else None
+        noisy = have_bias and all(infos[i].G_noise is not None for i in c)
         mount = None
         if mounting is not None and delta is not None and all(infos[i].A_turns is not None for i in c):
             mount = mounting_variance([infos[i].A_turns for i in c], [infos[i].N_turns for i in c], *mounting)
         for n, scale in enumerate(noise_scales):
             sigma = rotation_sigma(H if scale == 1.0 else H / scale**2)
-            m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), delta)
+            d = delta
+            if noisy:  # the noise's own bias grows as σ²: measured at each sensor's band top, scaled to this level
+                d = bias_rotation(A, sum(infos[i].G + (scale / infos[i].noise_band) ** 2 * infos[i].G_noise for i in c))
+            m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d)
             median[s], p75[s] = (m, q) if n == 0 else (np.maximum(median[s], m), np.maximum(p75[s], q))
     median, p75 = np.rad2deg(median), np.rad2deg(p75)
     best = [min(range(len(subsets)), key=lambda s: (median[s, a], p75[s, a])) for a in range(3)]
