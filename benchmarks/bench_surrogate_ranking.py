@@ -11,11 +11,14 @@ matrix of one reduced nominal scan and the same plus the voxel-bias model (the s
 ``--noise-scale``. With a band (``--objective robust``) ICP runs under every condition of the band
 (``optipose.evaluate.robust.RobustEvaluator``; ``--draws`` overrides its bracket draws) and the surrogate
 (voxel bias, the band's noise levels) is compared with and without the bracket mounting term, on the robust
-score and at each noise level alone. ``--icp-cache FILE`` keeps the ICP figures (.npz) so a rerun only
+score and at each noise level alone, and with and without the noise bias term (what the noise does to
+equal-weight voxel centroids, a bias growing as σ²; ``--no-mounting`` drops the band's bracket tolerance to
+see that term alone). ``--icp-cache FILE`` keeps the ICP figures (.npz) so a rerun only
 re-scores the surrogate.
 
     .venv/bin/python benchmarks/bench_surrogate_ranking.py [--part part_b] [--layouts 16] [--seed 0] [--noise-scale 5]
     .venv/bin/python benchmarks/bench_surrogate_ranking.py --objective robust --sensors 2 --layouts 12 --draws 1
+    .venv/bin/python benchmarks/bench_surrogate_ranking.py --objective robust --no-mounting --layouts 12
 """
 
 from __future__ import annotations
@@ -50,12 +53,15 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--noise-scale", type=float, default=1.0, help="nominal objective: the sensor noise sigma times this")
     ap.add_argument("--draws", type=int, default=None, help="band objective: bracket draws per noise level")
+    ap.add_argument("--no-mounting", action="store_true", help="band objective: brackets exact (the noise band alone)")
     ap.add_argument("--icp-cache", type=Path, default=None, help="keep the ICP figures here (.npz) and reuse them")
     args = ap.parse_args()
 
     part, objective = load_part(args.part), load_objective(args.objective)
     if args.draws is not None:
         objective = replace(objective, conditions=replace(objective.conditions, mounting_draws=args.draws))
+    if args.no_mounting:
+        objective = replace(objective, conditions=replace(objective.conditions, mounting_translation=0.0, mounting_rotation=0.0))
     band = not objective.conditions.trivial
     problem = SurrogateProblem(part, objective, SearchConfig())
     layouts = _layouts(problem, part, args.sensors, args.layouts, args.seed)
@@ -67,7 +73,7 @@ def main() -> None:
     infos = [[problem.surrogate.info(T) for T in problem.space.to_poses(u)] for u in layouts]
     t_info = time.perf_counter() - t0
     icp, t_icp = _icp(part, objective, problem, layouts, args, band)
-    scores = _band_models(problem, infos) if band else _nominal_models(part, objective, problem, layouts, infos, args.noise_scale)
+    scores = _band_models(part, objective, problem, layouts, infos) if band else _nominal_models(part, objective, problem, layouts, infos, args.noise_scale)
     for label, (icp_score, icp_axes) in icp.items():
         print(f"-- against ICP, {label}")
         for name, stats in scores[label].items():
@@ -128,14 +134,19 @@ def _nominal_models(part, objective, problem, layouts, infos, scale: float) -> d
     return {f"noise x{scale:g}": {"noise only": noise_only, "noise + voxel bias": bias}}
 
 
-def _band_models(problem, infos) -> dict:
-    """Per ICP label, the surrogate with and without the mounting term at the same noise levels."""
+def _band_models(part, objective, problem, layouts, infos) -> dict:
+    """Per ICP label, the surrogate without either band term, with the noise bias term, and with it and the
+    mounting term (when the band has a tolerance), at the same noise levels."""
     scales, mounting = problem.band["noise_scales"], problem.band["mounting"]
+    bare = Surrogate(part, voxel=objective.registration.voxel_size, turns=problem.surrogate.turns)  # no noise bias term
+    bare_infos = [[bare.info(T) for T in problem.space.to_poses(u)] for u in layouts]
+    models = [("voxel bias alone", bare_infos, None), ("with the noise bias term", infos, None)]
+    models += [("with the noise bias and the mounting term", infos, mounting)] if mounting else []
     out = {}
     for label, levels in [("the robust score (worst over the band)", scales), *[(f"noise x{s:g} (worst over its draws)", (s,)) for s in scales]]:
         out[label] = {
-            name: [predicted_stats(i, *problem.weights, noise_scales=tuple(levels), mounting=m) for i in infos]
-            for name, m in (("without the mounting term", None), ("with the mounting term", mounting))
+            name: [predicted_stats(i, *problem.weights, noise_scales=tuple(levels), mounting=m) for i in model_infos]
+            for name, model_infos, m in models
         }
     t0 = time.perf_counter()
     for i in infos:

@@ -125,6 +125,7 @@ class Surrogate:
         # the turns' grid shifts are fixed (not the search's seed), so a pose always scores the same
         turns = DEFAULT_TURNS if turns is None else np.asarray(turns, dtype=float).reshape(-1, 3)
         shifts = np.random.default_rng(20221536).random((len(turns), 3)) * voxel
+        self.turns = turns
         self.motions = [part_motion(rpy, self.centre, shift) for rpy, shift in zip(turns, shifts)]
         self.noise_band = float(noise_band)  # the highest noise scale the objective's band asks for
         self._reference = None

@@ -1,0 +1,129 @@
+"""The noise's own bias through the voxels: each scan's grid of its own (``voxel_grid = "random"``), and the
+surrogate's term for what noise does to equal-weight voxel centroids (a bias that grows as σ²)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from optipose.errors import ConfigError
+from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.objective import load_objective, objective_from_table, reduced_objective
+from optipose.model.part import load_part
+from optipose.registration import grid_origin, voxel_down
+from optipose.search.surrogate import Surrogate, SensorInfo, predicted_stats, protocol_turns
+from optipose.transforms import make_T, rpy_to_matrix
+
+# a single sensor found by the nominal quick search on part B (seed 0): a grazing view of few voxels whose
+# error at 5x the preset's noise ICP measured at 35.7 mdeg in sum against hand S3's 9.7 (README, "the noise's
+# own bias"); at the preset's noise it is the better of the two
+F1 = np.array([[-0.383022221559, 0.663413948169, 0.642787609687, 0.014444444072],
+               [0.866025403784, 0.5, -0.0, 0.004080000091],
+               [-0.321393804843, 0.556670399226, -0.766044443119, -0.002792000008],
+               [0.0, 0.0, 0.0, 1.0]])  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def part_b():
+    return load_part("part_b")
+
+
+def test_a_grid_of_its_own_is_the_grid_at_o_moved_by_its_origin():
+    p = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [0.9, 0.4, 0.4]]) * 1e-3
+    np.testing.assert_allclose(voxel_down(p, 1e-3), [[1.3e-3 / 3, 0.8e-3 / 3, 0.8e-3 / 3]])  # one cell at O's origin
+    # a corner at 0.25 mm: the first point falls in the cell below it, the other two share the one above
+    got = voxel_down(p, 1e-3, np.full(3, 0.25e-3))
+    np.testing.assert_allclose(got, [[0.1e-3] * 3, [0.6e-3, 0.35e-3, 0.35e-3]])
+    np.testing.assert_array_equal(voxel_down(p, 1e-3, np.zeros(3)), voxel_down(p, 1e-3))
+    rng = np.random.default_rng(2)
+    points, origin = rng.normal(scale=5e-3, size=(5000, 3)), rng.random(3) * 0.5e-3
+    np.testing.assert_allclose(voxel_down(points, 0.5e-3, origin), voxel_down(points - origin, 0.5e-3) + origin, atol=1e-15)
+
+
+def test_a_scans_grid_origin_is_seeded_and_within_one_voxel():
+    a = np.array([grid_origin(s, 0.5e-3) for s in range(200)])
+    assert np.array_equal(a, np.array([grid_origin(s, 0.5e-3) for s in range(200)]))
+    assert (a >= 0).all() and (a < 0.5e-3).all() and len(np.unique(a[:, 0])) == 200
+    assert abs(a.mean() - 0.25e-3) < 0.03e-3  # uniform over the voxel
+
+
+def test_voxel_grid_is_a_checked_key_of_the_objective():
+    assert load_objective("paper").registration.voxel_grid == "part"  # the paper's figures stand as they were
+    assert load_objective("robust").registration.voxel_grid == "random"
+    with pytest.raises(ConfigError, match="voxel_grid"):
+        objective_from_table({"registration": {"voxel_grid": "diagonal"}}, "bad.toml")
+
+
+def test_a_random_grid_is_reproducible_and_moves_the_errors_only_by_the_grid(part_b):
+    base = load_objective("paper")
+    base = replace(base, protocol=replace(reduced_objective(base).protocol, sequences=("R", "Y")))
+    randomised = replace(base, registration=replace(base.registration, voxel_grid="random"))
+    layout = replace(part_b.layouts["hand"], sensors=part_b.layouts["hand"].sensors[1:2])  # S2 alone: B's top face
+    runs = []
+    for objective in (base, randomised, randomised):
+        with Evaluator(part_b, objective, seed=3) as evaluator:
+            runs.append(evaluator(layout).per_scan)
+    fixed, rand, again = runs
+    assert rand.equals(again)  # the grids come from the scans' seeds
+    err = ["err_roll", "err_pitch", "err_yaw"]
+    assert not np.allclose(fixed[err].to_numpy(), rand[err].to_numpy())
+    # another grid changes which points share a voxel, not what the scan saw: errors of the same size
+    assert np.rad2deg(np.abs(fixed[err] - rand[err]).to_numpy()).max() < 0.02
+    assert (fixed.n_points == rand.n_points).all()
+
+
+@pytest.fixture(scope="module")
+def infos(part_b):
+    turns = protocol_turns(load_objective("robust"))
+    nominal = Surrogate(part_b, turns=turns)
+    banded = Surrogate(part_b, turns=turns, noise_band=5.0)
+    S3 = part_b.layouts["hand"].poses[2]
+    return {(name, band): s.info(T) for name, T in (("F1", F1), ("S3", S3)) for band, s in ((1.0, nominal), (5.0, banded))}
+
+
+def _score(info, scale):
+    return predicted_stats([info], noise_scales=(scale,))["score"]
+
+
+def test_without_a_band_there_is_no_noise_bias_term(infos):
+    assert infos["F1", 1.0].G_noise is None and infos["F1", 5.0].G_noise is not None
+    for name in ("F1", "S3"):  # the same scan, the same voxel bias: only the term differs
+        assert np.array_equal(infos[name, 1.0].G, infos[name, 5.0].G) and np.array_equal(infos[name, 1.0].H, infos[name, 5.0].H)
+
+
+def test_the_noise_bias_term_turns_the_ranking_at_five_times_the_noise_as_icp_does(infos):
+    # at the preset's noise the grazing sensor is predicted the better one, with or without the term...
+    assert _score(infos["F1", 5.0], 1.0) < _score(infos["S3", 5.0], 1.0)
+    # ...and there the term, scaled by (1/5)², moves the score by a few per cent at most
+    assert _score(infos["F1", 5.0], 1.0) == pytest.approx(_score(infos["F1", 1.0], 1.0), rel=0.1)
+    # at 5x the noise alone would keep F1 ahead; with the voxels' bias it falls behind S3, as ICP measured
+    assert _score(infos["F1", 1.0], 5.0) < _score(infos["S3", 1.0], 5.0)
+    assert _score(infos["F1", 5.0], 5.0) > _score(infos["S3", 5.0], 5.0)
+    # the term hurts the grazing view of few voxels far more than S3's view of B's long faces
+    assert _score(infos["F1", 5.0], 5.0) / _score(infos["F1", 1.0], 5.0) > 1.6
+    assert _score(infos["S3", 5.0], 5.0) / _score(infos["S3", 1.0], 5.0) < 1.3
+
+
+def test_the_search_cache_keeps_the_noise_bias_term(tmp_path, infos):
+    from optipose.io.search import load_cache, save_cache
+    from optipose.search.space import SPACE_VERSION
+
+    cache = {(0.1,) * 6: infos["F1", 5.0], (0.2,) * 6: infos["S3", 1.0], (0.3,) * 6: SensorInfo(np.eye(6), 10, 5)}
+    save_cache(tmp_path, cache, SPACE_VERSION)
+    loaded = load_cache(tmp_path, SPACE_VERSION)
+    assert np.array_equal(loaded[(0.1,) * 6].G_noise, infos["F1", 5.0].G_noise) and loaded[(0.1,) * 6].noise_band == 5.0
+    assert loaded[(0.2,) * 6].G_noise is None and loaded[(0.3,) * 6].G_noise is None
+    assert _score(loaded[(0.1,) * 6], 5.0) == _score(infos["F1", 5.0], 5.0)
+    data = dict(np.load(tmp_path / "cache.npz"))  # a cache from before the term: its poses would score without it
+    np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k != "G_noise"})
+    assert load_cache(tmp_path, SPACE_VERSION) == {}
+
+
+def test_the_search_gives_the_surrogate_the_bands_top(part_b):
+    from optipose.search.config import SearchConfig
+    from optipose.search.problem import SurrogateProblem
+
+    assert SurrogateProblem(part_b, load_objective("robust"), SearchConfig()).surrogate.noise_band == 5.0
+    assert SurrogateProblem(part_b, load_objective("paper"), SearchConfig()).surrogate.noise_band == 1.0
