@@ -35,7 +35,7 @@ from optipose.evaluate.compare import excess, rank
 from optipose.evaluate.conditions import conditions
 from optipose.evaluate.robust import make_evaluator
 from optipose.evaluate.objective import reduced_objective
-from optipose.search.candidates import candidates
+from optipose.search.candidates import anchored, candidates
 from optipose.search.confirm import Confirmer
 from optipose.search.polish import hand_start, polish
 from optipose.search.records import Found, IcpEvaluation, SearchOutcome
@@ -66,7 +66,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
         for n, k in enumerate(ks):
             reference = _reference(k, hand, confirmer, records, on_stage)
             deadline = time.monotonic() + max(0.0, end - time.monotonic()) / (len(ks) - n)  # a fair share of what is left
-            pool = _screen_candidates(study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage)
+            pool = _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage)
             if not pool:
                 continue
             key, best, choice = min(pool, key=lambda t: t[0])
@@ -97,10 +97,15 @@ def _reference(k: int, hand, confirmer: Confirmer | None, records: list[IcpEvalu
     return reference
 
 
-def _screen_candidates(study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage) -> Pool:
-    """Every candidate of k on the reduced protocol, until the time is up (one at least)."""
+def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage) -> Pool:
+    """Every candidate of k on the reduced protocol, until the time is up (one at least): first the hand
+    layout's used sensors with found ones in the other places (:func:`optipose.search.candidates.anchored`)."""
     pool: Pool = []
-    for cand in candidates(study.problem, study.history, outcome, k, per_k, finalists):
+    first = []
+    if reference is not None:
+        used = tuple(sorted({i for a in reference.axes for i in a.subset}))
+        first = anchored(study.problem, baseline(part).poses, used, outcome, k)
+    for cand in first + candidates(study.problem, study.history, outcome, k, per_k, finalists):
         if time.monotonic() > deadline and pool:
             log.info("selection for k=%d stopped by the time budget", k)
             break
