@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The reference results of parts A, B and C (issue #16): the search for one, two and three sensors under the
+# robust objective (the band of noise levels and bracket tolerances), each validated against the hand-placed
+# layout under every condition with a held-out seed, its report, and the table of all three.
+#
+#   bash scripts/reference.sh            # about 35 min on 2 cores; writes results/reference/
+#
+# What is kept in git: each part's report (report.html is self-contained), its small tables and layouts;
+# not the search caches, the per-scan tables or the figures' source folders (see .gitignore).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+[ -x .venv/bin/optipose ] || bash scripts/setup.sh
+out=results/reference
+mkdir -p "$out"
+for part in part_a part_b part_c; do
+    rm -rf "$out/$part"
+    .venv/bin/optipose search "$part" --budget default --objective robust --seed 0 --jobs 2 --out "$out/$part"
+done
+.venv/bin/python scripts/search_table.py "$out/part_a" "$out/part_b" "$out/part_c" > "$out/table.md"
+echo "reference: $out (table: $out/table.md)"
