@@ -2,7 +2,7 @@
 
 Draws feasible layouts of ``--sensors`` sensors at random for a part (seeded), adds the part's hand-placed
 sensors (each alone, or each k of them), scores each with the surrogate and with the objective's own ICP on
-the reduced protocol (14 scans, as the search's selection stage), and prints Spearman's rank correlation
+the reduced protocol (14 scans, as the search's selection stage; ``--protocol full``: all 77), and prints Spearman's rank correlation
 with ICP for the score and per axis (each axis on its best subset), the median factor between predicted
 and ICP per-axis scores, the agreement on the best layout, and the time per evaluation of each fidelity.
 
@@ -53,6 +53,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--noise-scale", type=float, default=1.0, help="nominal objective: the sensor noise sigma times this")
     ap.add_argument("--draws", type=int, default=None, help="band objective: bracket draws per noise level")
+    ap.add_argument("--protocol", choices=("reduced", "full"), default="reduced", help="ICP on the selection's 14 scans or the full protocol")
     ap.add_argument("--no-mounting", action="store_true", help="band objective: brackets exact (the noise band alone)")
     ap.add_argument("--icp-cache", type=Path, default=None, help="keep the ICP figures here (.npz) and reuse them")
     args = ap.parse_args()
@@ -79,7 +80,7 @@ def main() -> None:
         for name, stats in scores[label].items():
             _report(name, np.array([s["score"] for s in stats]), np.array([s["axis_score"] for s in stats]), icp_score, icp_axes)
     n = len(layouts)
-    print(f"time per layout: surrogate scans {1e3 * t_info / n:.0f} ms, ICP reduced protocol {t_icp / n:.2f} s")
+    print(f"time per layout: surrogate scans {1e3 * t_info / n:.0f} ms, ICP {args.protocol} protocol {t_icp / n:.2f} s")
 
 
 def _layouts(problem, part, k: int, n: int, seed: int) -> list[np.ndarray]:
@@ -99,7 +100,8 @@ def _icp(part, objective, problem, layouts, args, band: bool) -> tuple[dict, flo
     if path is not None and path.is_file():
         data = np.load(path, allow_pickle=False)
         return {str(label): (data[f"score{i}"], data[f"axes{i}"]) for i, label in enumerate(data["labels"])}, float(data["seconds"])
-    reduced, k, t0 = reduced_objective(objective), args.sensors, time.perf_counter()
+    reduced = objective if args.protocol == "full" else reduced_objective(objective)
+    k, t0 = args.sensors, time.perf_counter()
     rows: dict = {}
     if band:
         with RobustEvaluator(part, reduced, seed=args.seed + 1, quiet=True) as evaluator:

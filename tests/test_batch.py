@@ -180,6 +180,11 @@ def test_the_study_command_prints_the_table_and_refuses_other_folders(serial, tm
     assert page.count("<tr") == len(index) + 1 and all(str(key) in page for key in index.key)
     other = subprocess.run([sys.executable, "-m", "optipose", "study", tmp_path], capture_output=True, text=True, timeout=120)
     assert other.returncode == 2 and other.stderr.startswith("optipose: error:") and "not an optipose study" in other.stderr
+    # `optipose report` on a study folder writes the same study report
+    (Path(folder) / "study.html").unlink()
+    made = subprocess.run([sys.executable, "-m", "optipose", "report", folder], capture_output=True, text=True, timeout=120)
+    assert made.returncode == 0, made.stderr
+    assert (Path(folder) / "study.html").read_text() == page and (Path(folder) / "study.md").is_file()
 
 
 class _DyingPool(SerialPool):
@@ -340,3 +345,11 @@ def test_search_and_robustness_trials_report_their_folders(tmp_path):
     assert robust.sensors_used == choice.name
     assert robust.score_deg == pytest.approx(np.rad2deg(choice.score), rel=1e-9)
     assert robust.yaw_p75_deg == pytest.approx(np.rad2deg(choice.axes[2].p75), rel=1e-9)
+
+
+def test_no_report_leaves_the_study_without_its_report(tmp_path):
+    study_file = _study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0,))
+    done = subprocess.run([sys.executable, "-m", "optipose", "batch", study_file, "--out", tmp_path / "out", "--no-report"],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "out" / "index.parquet").is_file() and not (tmp_path / "out" / "study.html").exists()

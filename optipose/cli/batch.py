@@ -32,15 +32,16 @@ def batch(
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="A Dask scheduler, tcp://HOST:8786 (default: a local cluster of --jobs workers).")] = None,
     trial_jobs: Annotated[Optional[int], typer.Option("--trial-jobs", min=1, help="Each trial's own processes and threads (default: the cores split between the workers).")] = None,
     summary: Annotated[bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")] = False,
+    no_report: Annotated[bool, typer.Option("--no-report", help="Do not write the study report (study.html, study.md).")] = False,
 ) -> None:
     """Run every trial of a study (parts × tasks × objectives × sensor counts × budgets × seeds), each into
     its own result folder, with an index of all of them (index.parquet, index.csv)."""
     if summary:
         from optipose.batch.spec import load_study
 
-        study_command(out or Path("results") / load_study(study_file).name)
+        study_command(out or Path("results") / load_study(study_file).name, report=not no_report)
         return
-    batch_command(study_file, out, resume, jobs, backend, scheduler, trial_jobs)
+    batch_command(study_file, out, resume, jobs, backend, scheduler, trial_jobs, report=not no_report)
 
 
 @friendly_errors
@@ -50,7 +51,7 @@ def study(folder: StudyDir) -> None:
 
 
 def batch_command(study_file: Path, out: Path | None = None, resume: bool = False, jobs: int = 1, backend: str = "joblib",
-                  scheduler: str | None = None, trial_jobs: int | None = None) -> Path:  # fmt: skip
+                  scheduler: str | None = None, trial_jobs: int | None = None, report: bool = True) -> Path:  # fmt: skip
     """Run the study with a progress bar; print its table; returns the study folder."""
     from rich.console import Console
 
@@ -71,7 +72,7 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
         raise typer.Exit(EXIT_INTERRUPTED) from None
     finally:
         pool.close()
-    study_command(folder)
+    study_command(folder, report)
     from optipose.batch.records import TrialState
 
     n_failed = index.count(TrialState.FAILED)
@@ -103,8 +104,8 @@ def _run_with_progress(console, spec, folder: Path, pool, resume: bool, config: 
         return index
 
 
-def study_command(folder: Path) -> None:
-    """Print the table per part and setting of a study folder."""
+def study_command(folder: Path, report: bool = True) -> None:
+    """Print the table per part and setting of a study folder, and (``report``) write its study report."""
     from rich.console import Console
 
     from optipose.batch.summary import load_study, summary_frame
@@ -113,8 +114,9 @@ def study_command(folder: Path) -> None:
         raise ConfigError(f"study folder not found: {folder}")
     index = load_study(folder)
     Console().print(_summary_table(summary_frame(index), Path(folder).name))
-    html, _ = write_study_report(folder, index)
-    Console(stderr=True).print(f"study report: {html}")
+    if report:
+        html, _ = write_study_report(folder, index)
+        Console(stderr=True).print(f"study report: {html}")
 
 
 def write_study_report(folder: Path, index) -> tuple[Path, Path]:

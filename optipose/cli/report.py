@@ -22,7 +22,7 @@ NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report
 
 @friendly_errors
 def report(
-    result_dir: Annotated[Path, typer.Argument(help="A result folder of optipose search, evaluate or robustness.")],
+    result_dir: Annotated[Path, typer.Argument(help="A result folder of optipose search, evaluate or robustness, or a study folder of optipose batch.")],
     views: Annotated[bool, typer.Option("--views/--no-views", help="Draw the 3D views (they scan each layout once).")] = True,
 ) -> None:
     """Write report.html (self-contained: opens offline) and report.md into a result folder: the verdict
@@ -39,6 +39,13 @@ def report_command(result_dir: Path, views: bool = True) -> Path:
     if not Path(result_dir).is_dir():
         raise ConfigError(f"{result_dir}: no such result folder")
     console = Console(stderr=True)
+    if (Path(result_dir) / "index.parquet").is_file():  # a batch study: its table of trials, linking their reports
+        from optipose.batch.summary import load_study
+        from optipose.cli.batch import write_study_report
+
+        html, md = write_study_report(Path(result_dir), load_study(result_dir))
+        console.print(f"study report: {html} (and {md.name})")
+        return html
     with console.status(f"writing the report of {result_dir}"):
         html, md = write_report(result_dir, views=views)
     console.print(f"report: {html} (and {md.name})")
