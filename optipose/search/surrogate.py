@@ -35,6 +35,14 @@ What the surrogate models, and why:
   Turning a scan is not re-scanning the turned part (which points are seen and how densely change a
   little), but it moves the edges through the grid as the protocol does; how close it comes to ICP is
   measured by ``benchmarks/bench_surrogate_ranking.py`` (figures in the README).
+* **the noise's own bias.** A voxel's point is the equal-weight centroid of the raw points that fall in it,
+  and the noise along each ray decides which do: where a face cuts a voxel obliquely the points pushed in
+  and out do not balance, a bias that grows as σ² and that the information matrix cannot see (a grazing
+  view of few voxels suffers most; ``benchmarks/bench_noise_voxels.py``). Under a band the surrogate
+  (``noise_band``, the band's top scale) voxelises each turn twice more with every raw point moved by +ε
+  and by −ε along its ray (one draw, the same for both): the mean less the noise-free ΣJᵀr keeps what is
+  even in the noise and cancels what is odd, and each level s adds (s / top)² of it. One draw is itself
+  noisy, and ICP's re-matching is not in it; README, "The surrogate's noise bias term", has its ranking.
 * **the brackets.** Under an objective whose band has a mounting tolerance, a sensor's true pose is off
   its drawing and the cell is zeroed on a master part; the change with orientation of the compromise
   between sensors whose clouds disagree is linearised in the bracket errors at the same turns and added as
