@@ -145,7 +145,8 @@ def condition_bars(rows: list[tuple[str, float, float]], baseline: str, title: s
     base = np.array([r[2] for r in rows]) * 1e3 * 180 / np.pi
     ax.bar(x - 0.2, base, 0.4, color="0.65", label=baseline)
     ax.bar(x + 0.2, found, 0.4, color="C0", label="found")
-    ax.set_xticks(x, [r[0] for r in rows], fontsize=9, rotation=20 if len(rows) > 4 else 0)
+    labels = [r[0].replace(", ", ",\n") for r in rows]  # "noise x1, mounting draw 0" on two lines: no overlap
+    ax.set_xticks(x, labels, fontsize=9, rotation=20 if len(rows) > 4 else 0)
     ax.set_ylabel("score (mdeg)")
     ax.set_title(title, fontsize=11)
     ax.grid(axis="y", alpha=0.3)
