@@ -62,3 +62,24 @@ def test_scan_hits_match_a_float64_intersection(shift_m, bound_m):
     # micrometres off there: that, not the distance along the ray, is what float32 costs
     assert error.max() < bound_m and np.mean(face != face64) < 1e-3
     assert np.median(error) < 1e-12 * max(1.0, shift_m)
+
+
+@pytest.mark.parametrize("shift_m", [0.0, 10.0])
+def test_closest_points_on_the_cad_surface_stay_exact_far_from_O(shift_m):
+    # the closest point of a box to a point outside it is the point clamped to the box: points around its
+    # edges and corners, where the reference falls back on Open3D's float32 search
+    from optipose.registration.reference import SurfaceReference
+
+    shift = np.full(3, shift_m)
+    box = trimesh.creation.box((0.06, 0.04, 0.02))
+    box.apply_translation(shift)
+    rng = np.random.default_rng(1)
+    corners = box.vertices[rng.integers(0, 8, 2000)]
+    points = corners + rng.uniform(-1e-3, 1e-3, (2000, 3))
+    reference = SurfaceReference(box.vertices, box.faces)
+    outside = ~box.contains(points)
+    q, _, _ = reference.nearest(points[outside])
+    exact = np.clip(points[outside], *box.bounds)
+    assert outside.sum() > 1000
+    # float32 at the part's size (~4 nm on 35 mm), not at its distance from O (~1 µm at 10 m)
+    assert np.abs(q - exact).max() < 1e-8
