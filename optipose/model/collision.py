@@ -60,9 +60,12 @@ class ConvexSet:
     @classmethod
     def hull_of(cls, points: np.ndarray) -> "ConvexSet":
         """The convex hull of points (n, 3) m."""
-        from scipy.spatial import ConvexHull
+        from scipy.spatial import ConvexHull, QhullError
 
-        hull = ConvexHull(points)
+        try:
+            hull = ConvexHull(points)
+        except QhullError:  # a flat part (a sheet of zero thickness) swept in its own plane: joggled, still flat to ~1e-10
+            hull = ConvexHull(points, qhull_options="QJ")
         vertices = points[hull.vertices]
         normals = _unique_directions(hull.equations[:, :3])
         tri = hull.simplices
@@ -100,7 +103,10 @@ class CollisionModel:
         self.sensor = load_sensor(sensor if sensor is not None else part.sensor)
         offsets = part.motion.offsets()
         travel = np.array([[offsets.min(), 0.0, 0.0], [offsets.max(), 0.0, 0.0]])
-        hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
+        try:
+            hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
+        except Exception:  # trimesh's hull of a flat mesh fails (qhull, or its winding fix): the vertices span the same hull
+            hull = np.asarray(part.mesh.vertices, dtype=float)
         swept = np.concatenate([hull + travel[0], hull + travel[1]])
         self.obstacles: list[tuple[str, ConvexSet]] = [("part", ConvexSet.hull_of(swept))]
         for keepout in part.keepouts:
