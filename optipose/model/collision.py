@@ -32,7 +32,7 @@ from optipose.model.sensor import SensorModel, load_sensor
 
 __all__ = [
     "DEFAULT_MARGIN", "Clearance", "ConvexSet", "CollisionModel",
-    "collision_model", "clearance", "collides", "heads_clearance",
+    "collision_model", "clearance", "collides", "heads_clearance", "check_sensors_outside",
 ]  # fmt: skip
 
 DEFAULT_MARGIN = 2e-3  # m
@@ -152,6 +152,26 @@ def clearance(part, sensor: SensorModel | str | None, T_O_S: np.ndarray) -> Clea
 def collides(part, sensor: SensorModel | str | None, T_O_S: np.ndarray, margin: float = DEFAULT_MARGIN) -> bool:
     """True when the sensor head at ``T_O_S`` comes within ``margin`` (m) of the swept part or a keep-out."""
     return collision_model(part, sensor).collides(T_O_S, margin)
+
+
+def check_sensors_outside(part, layout) -> None:
+    """Raise :class:`ConfigError` for a sensor of ``layout`` whose window (where its laser rays start) or
+    head-box centre lies inside the part's material; such a sensor sees nothing. A mesh that is not
+    watertight has no inside, and is not checked."""
+    from optipose.errors import ConfigError
+
+    if not part.mesh.is_watertight:
+        return
+    for s in layout.sensors:
+        model = load_sensor(s.sensor or part.sensor)
+        corners = model.head_box_corners()
+        where = np.array([[0.0, 0.0, model.window_z], 0.5 * (corners.min(axis=0) + corners.max(axis=0))])
+        where = where @ s.T_O_S[:3, :3].T + s.T_O_S[:3, 3]
+        inside = part.mesh.contains(where)
+        if inside.any():
+            what = "window" if inside[0] else "head"
+            at = np.round(where[int(np.argmax(inside))] * 1e3, 1).tolist()
+            raise ConfigError(f"sensor {s.name}: its {what} is inside the part (at {at} mm in O); move it out along -z_S")
 
 
 def heads_clearance(
