@@ -111,3 +111,33 @@ def test_wrong_basins_at_ten_degrees_stay_in_the_statistics_and_show_in_the_rmse
     for (subset, axis), row in stats.set_index(["subset", "axis"]).iterrows():
         ok = per_scan.loc[(per_scan["subset"] == subset) & per_scan["ok"], f"err_{axis}"].abs()
         assert row["max"] == ok.max() and row.n_ok + row.n_failed == 8  # the worst is in, none dropped
+
+
+def test_max_rmse_fails_the_wrong_basins_and_the_wrong_reference(part_b, s1_cloud):
+    objective = _at(10.0)
+    objective = replace(objective, registration=replace(objective.registration, max_rmse=0.03e-3))
+    part_c = load_part("part_c")
+    with Evaluator(part_c, objective, seed=2, quiet=True) as evaluator:
+        per_scan = evaluator(part_c.layouts["hand"]).per_scan
+    seen = ~per_scan[["unobservable_roll", "unobservable_pitch", "unobservable_yaw"]].any(axis=1)
+    error = np.rad2deg(per_scan[AXES].abs().max(axis=1))
+    by_rmse = per_scan["failure"].str.startswith("rmse ")
+    assert by_rmse.sum() >= 10 and not per_scan.loc[by_rmse, "ok"].any()
+    assert not (per_scan["ok"] & seen & (error > 0.05)).any()  # no wrong basin left among the successes
+    assert (per_scan.loc[seen & (error < 0.02), "ok"]).all()  # and no good registration lost
+    cloud, cfg = s1_cloud
+    cfg = replace(cfg, max_rmse=0.05e-3)
+    assert register(cloud, SurfaceReference(part_b.mesh.vertices, part_b.mesh.faces), cfg).ok
+    mesh = load_part("part_a").mesh
+    wrong = register(cloud, SurfaceReference(mesh.vertices, mesh.faces), cfg)
+    assert not wrong.ok and wrong.converged and wrong.failure.startswith("rmse 1.4")
+
+
+def test_max_rmse_in_an_objective_file():
+    from optipose.errors import ConfigError
+    from optipose.evaluate.objective import objective_from_table
+
+    assert objective_from_table({"registration": {"max_rmse_mm": 0.1}}).registration.max_rmse == pytest.approx(1e-4)
+    assert load_objective("paper").registration.max_rmse == 0.0  # off unless set
+    with pytest.raises(ConfigError, match="max_rmse"):
+        objective_from_table({"registration": {"max_rmse_mm": -1}})
