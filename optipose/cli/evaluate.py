@@ -45,6 +45,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     from rich.console import Console
 
     from optipose.evaluate.evaluator import Evaluator
+    from optipose.model.collision import check_sensors_outside
     from optipose.model.layout import load_layout
     from optipose.evaluate.objective import load_objective
     from optipose.model.baseline import baseline
@@ -56,6 +57,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     the_part = load_part(part, units=units)
     if layout is not None:
         the_layout = load_layout(layout)
+        check_sensors_outside(the_part, the_layout)
     elif baseline(the_part) is not None:  # the hand-placed layout, else the conventional placement
         the_layout = baseline(the_part)
     else:

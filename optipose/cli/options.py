@@ -74,7 +74,7 @@ Part = Annotated[
     Optional[str],
     typer.Argument(help="A shipped part name (see `optipose parts`), a part TOML or a mesh file (STL, OBJ, PLY)."),
 ]
-Units = Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 2 means mm), m, mm or in.")]
+Units = Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 20 means mm, 2-20 is refused as mm-or-inches), m, mm or in.")]
 LayoutFile = Annotated[
     Optional[Path],
     typer.Option("--layout", help="Layout TOML, a name and T_O_S per sensor; default: the part's hand-placed one."),

@@ -63,6 +63,7 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     from optipose.evaluate.robust import evaluate_robust
     from optipose.io.folders import make_result_dir
     from optipose.io.robustness import write_robustness
+    from optipose.model.collision import check_sensors_outside
     from optipose.model.layout import load_layout
     from optipose.model.baseline import baseline
     from optipose.model.part import load_part
@@ -78,6 +79,8 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
         raise ConfigError(f"--brackets: objective '{the_objective.name}' has no mounting tolerance (mounting_translation_mm, "
                           "mounting_rotation_deg in [conditions])")  # fmt: skip
     given = [load_layout(p) for p in layouts]
+    for lay in given:
+        check_sensors_outside(the_part, lay)
     console = Console(stderr=True)
     results = {}
     for i, lay in enumerate([reference, *given]):

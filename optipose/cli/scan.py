@@ -55,6 +55,7 @@ def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path |
     import numpy as np
     from rich.console import Console
 
+    from optipose.model.collision import check_sensors_outside
     from optipose.model.part import load_part
     from optipose.scan.scanner import part_scanner
 
@@ -62,6 +63,7 @@ def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path |
         raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
     the_part = load_part(part, units=units)
     the_layout = poses_from_cli(sensor_pose, layout, the_part)
+    check_sensors_outside(the_part, the_layout)
     scanner = part_scanner(the_part, sensor, material)
     rpy = np.deg2rad(rpy_deg)
     scans = scanner.scan_many(the_layout.poses, the_part.motion, rpy, the_part.rotation_centre, rng=seed, noise=noise)

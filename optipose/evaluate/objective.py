@@ -197,7 +197,7 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
     keys = {
         "method", "backend", "reference", "reference_spacing_mm", "voxel_size_mm", "outlier_removal",
         "outlier_neighbors", "outlier_std_ratio", "max_correspondence_distance_mm", "max_iterations",
-        "tolerance_rotation_deg", "tolerance_translation_mm", "subset_start", "stop", "voxel_grid",
+        "tolerance_rotation_deg", "tolerance_translation_mm", "subset_start", "stop", "voxel_grid", "max_rmse_mm",
     }  # fmt: skip
     _no_unknown(t, keys, where)
     d = RegistrationConfig()
@@ -217,10 +217,11 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
         tolerance_translation=_num(t, "tolerance_translation_mm", 1e-5, where) * _MM,
         subset_start=_choice(t, "subset_start", ("combined", "identity"), d.subset_start, where),
         stop=_choice(t, "stop", ("step", "fitness"), d.stop, where),
+        max_rmse=_num(t, "max_rmse_mm", 0.0, where) * _MM,
     )
     positive = ("reference_spacing", "max_correspondence_distance", "max_iterations", "outlier_neighbors", "outlier_std_ratio")
     bad = [k for k in positive if not getattr(cfg, k) > 0]
-    bad += [k for k in ("voxel_size", "tolerance_rotation", "tolerance_translation") if getattr(cfg, k) < 0]
+    bad += [k for k in ("voxel_size", "tolerance_rotation", "tolerance_translation", "max_rmse") if getattr(cfg, k) < 0]
     if bad:
         raise ConfigError(f"{where}: {', '.join(bad)} must be positive")
     return cfg

@@ -32,7 +32,7 @@ from optipose.model.sensor import SensorModel, load_sensor
 
 __all__ = [
     "DEFAULT_MARGIN", "Clearance", "ConvexSet", "CollisionModel",
-    "collision_model", "clearance", "collides", "heads_clearance",
+    "collision_model", "clearance", "collides", "heads_clearance", "check_sensors_outside",
 ]  # fmt: skip
 
 DEFAULT_MARGIN = 2e-3  # m
@@ -60,9 +60,12 @@ class ConvexSet:
     @classmethod
     def hull_of(cls, points: np.ndarray) -> "ConvexSet":
         """The convex hull of points (n, 3) m."""
-        from scipy.spatial import ConvexHull
+        from scipy.spatial import ConvexHull, QhullError
 
-        hull = ConvexHull(points)
+        try:
+            hull = ConvexHull(points)
+        except QhullError:  # a flat part (a sheet of zero thickness) swept in its own plane: joggled, still flat to ~1e-10
+            hull = ConvexHull(points, qhull_options="QJ")
         vertices = points[hull.vertices]
         normals = _unique_directions(hull.equations[:, :3])
         tri = hull.simplices
@@ -100,7 +103,10 @@ class CollisionModel:
         self.sensor = load_sensor(sensor if sensor is not None else part.sensor)
         offsets = part.motion.offsets()
         travel = np.array([[offsets.min(), 0.0, 0.0], [offsets.max(), 0.0, 0.0]])
-        hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
+        try:
+            hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
+        except Exception:  # trimesh's hull of a flat mesh fails (qhull, or its winding fix): the vertices span the same hull
+            hull = np.asarray(part.mesh.vertices, dtype=float)
         swept = np.concatenate([hull + travel[0], hull + travel[1]])
         self.obstacles: list[tuple[str, ConvexSet]] = [("part", ConvexSet.hull_of(swept))]
         for keepout in part.keepouts:
@@ -146,6 +152,26 @@ def clearance(part, sensor: SensorModel | str | None, T_O_S: np.ndarray) -> Clea
 def collides(part, sensor: SensorModel | str | None, T_O_S: np.ndarray, margin: float = DEFAULT_MARGIN) -> bool:
     """True when the sensor head at ``T_O_S`` comes within ``margin`` (m) of the swept part or a keep-out."""
     return collision_model(part, sensor).collides(T_O_S, margin)
+
+
+def check_sensors_outside(part, layout) -> None:
+    """Raise :class:`ConfigError` for a sensor of ``layout`` whose window (where its laser rays start) or
+    head-box centre lies inside the part's material; such a sensor sees nothing. A mesh that is not
+    watertight has no inside, and is not checked."""
+    from optipose.errors import ConfigError
+
+    if not part.mesh.is_watertight:
+        return
+    for s in layout.sensors:
+        model = load_sensor(s.sensor or part.sensor)
+        corners = model.head_box_corners()
+        where = np.array([[0.0, 0.0, model.window_z], 0.5 * (corners.min(axis=0) + corners.max(axis=0))])
+        where = where @ s.T_O_S[:3, :3].T + s.T_O_S[:3, 3]
+        inside = part.mesh.contains(where)
+        if inside.any():
+            what = "window" if inside[0] else "head"
+            at = np.round(where[int(np.argmax(inside))] * 1e3, 1).tolist()
+            raise ConfigError(f"sensor {s.name}: its {what} is inside the part (at {at} mm in O); move it out along -z_S")
 
 
 def heads_clearance(

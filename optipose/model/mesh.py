@@ -15,13 +15,17 @@ log = logging.getLogger(__name__)
 
 UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "in": 0.0254}
 _AUTO_MM_DIAGONAL = 2.0  # a part with a bounding-box diagonal over 2 "units" is taken to be in mm
+# ... but 2-20 "units" is a 2-20 mm part or a 2-20 inch one (51-508 mm, the likelier for a 35 mm laser line):
+# auto refuses to guess there
+_AUTO_AMBIGUOUS_DIAGONAL = 20.0
 
 
 def load_mesh(path: str | Path, units: str = "auto"):
     """Load a triangle mesh and return it in metres as a ``trimesh.Trimesh``.
 
     units : ``auto`` | ``m`` | ``mm`` | ``in``. ``auto`` takes a mesh whose bounding-box diagonal is over
-    2 as millimetres and logs that choice.
+    2 as millimetres and logs that choice, except for a diagonal of 2 to 20, which might as well be
+    inches: that needs the units given.
     """
     import trimesh
 
@@ -43,6 +47,11 @@ def load_mesh(path: str | Path, units: str = "auto"):
     check_mesh(mesh, path.name)
     if units == "auto":
         diagonal = float(np.linalg.norm(mesh.extents))
+        if _AUTO_MM_DIAGONAL < diagonal <= _AUTO_AMBIGUOUS_DIAGONAL:
+            raise MeshError(
+                f"{path.name}: bounding-box diagonal {diagonal:.3g} could be mm or inches "
+                f"({diagonal:.3g} or {diagonal * 25.4:.3g} mm across); give --units mm or --units in"
+            )
         units = "mm" if diagonal > _AUTO_MM_DIAGONAL else "m"
         if units == "mm":
             log.info("%s: bounding-box diagonal %.4g > 2, taking units as millimetres", path.name, diagonal)
@@ -68,3 +77,5 @@ def check_mesh(mesh, name: str = "mesh", watertight: bool = True) -> None:
         raise MeshError(f"{name}: mesh has zero surface area")
     if watertight and not mesh.is_watertight:
         log.warning("%s: mesh is not watertight; shadows and inside/outside tests may be wrong", name)
+    if watertight and mesh.body_count > 1:  # legal (a part and its fixture move as one), but often an assembly exported by mistake
+        log.warning("%s: mesh has %d separate bodies; they are scanned and registered as one rigid part", name, mesh.body_count)

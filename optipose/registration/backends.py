@@ -18,6 +18,7 @@ Every back-end passes the contract tests in ``tests/test_registration_backends.p
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -90,14 +91,20 @@ def register(source: np.ndarray, reference, cfg: RegistrationConfig, initial: Ma
     start : (T (4, 4), ids (n,)) for back-ends that take ``initial``: start from pose T instead of identity,
         with each point's match there as a hint (the evaluator starts a subset of several sensors where
         its own sensors' registrations, combined, put it; see :func:`combined_start`).
-    Returns a :class:`Registration`; fewer than :data:`MIN_POINTS` points fail without a back-end call.
+    Returns a :class:`Registration`; fewer than :data:`MIN_POINTS` points fail without a back-end call, and
+    one that ends with an RMSE over ``cfg.max_rmse`` (when set) fails with that reason.
     """
     backend = backend_for(cfg)
     if len(source) < MIN_POINTS:
         return Registration.failed(len(source), f"only {len(source)} points")
     if start is not None:
-        return backend.register(source, reference, cfg, initial, start=start)
-    return backend.register(source, reference, cfg, initial)
+        reg = backend.register(source, reference, cfg, initial, start=start)
+    else:
+        reg = backend.register(source, reference, cfg, initial)
+    if cfg.max_rmse > 0 and reg.ok and reg.rmse > cfg.max_rmse:
+        # converged, but in a wrong basin or onto a wrong reference: the ICP cannot tell, the residual can
+        reg = replace(reg, failure=f"rmse {reg.rmse * 1e3:.3f} mm over max_rmse_mm = {cfg.max_rmse * 1e3:g}")
+    return reg
 
 
 def combined_start(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> np.ndarray:

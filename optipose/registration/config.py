@@ -35,4 +35,7 @@ class RegistrationConfig:
     # (Open3D's: the inlier fraction and RMSE stop changing, by FITNESS_CHANGE and RMSE_CHANGE; the
     # iteration cap ends the ICP without failing it)
     stop: str = "step"
+    # a registration that converges with an RMSE over this (m) fails ("rmse ... over max_rmse_mm"): a wrong
+    # basin or a wrong reference, which the ICP's own tests pass; 0 = no such test
+    max_rmse: float = 0.0
     subset_start: str = "combined"  # a subset of several sensors starts where its sensors' own registrations put it, or at "identity"

@@ -48,8 +48,11 @@ class SurfaceReference:
         # face plane and edge planes packed: one gather and one product per point in follow()
         self._planes = np.ascontiguousarray(np.concatenate([self.normals[:, None], self.edge_n], axis=1))  # (f, 4, 3)
         self._plane_c = np.ascontiguousarray(np.concatenate([self.offsets[:, None], self.edge_c], axis=1))  # (f, 4)
+        # the BVH is float32: built about the part's own centre, so a part far from O (a cell's frame
+        # metres away) keeps float32's resolution at the part's size rather than at its distance
+        self._origin = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
         mesh = o3d.t.geometry.TriangleMesh()
-        mesh.vertex.positions = o3d.core.Tensor(self.vertices.astype(np.float32))
+        mesh.vertex.positions = o3d.core.Tensor((self.vertices - self._origin).astype(np.float32))
         mesh.triangle.indices = o3d.core.Tensor(self.faces.astype(np.int32))
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(mesh)
@@ -80,9 +83,9 @@ class SurfaceReference:
         """Closest surface points (n, 3), their face normals (n, 3) and face ids (n,) int64."""
         import open3d as o3d
 
-        ans = self._scene.compute_closest_points(o3d.core.Tensor(np.asarray(points, dtype=np.float32)))
+        ans = self._scene.compute_closest_points(o3d.core.Tensor((np.asarray(points) - self._origin).astype(np.float32)))
         ids = ans["primitive_ids"].numpy().astype(np.int64)
-        q = ans["points"].numpy().astype(np.float64)
+        q = ans["points"].numpy().astype(np.float64) + self._origin
         # the BVH answers in float32 (~4 nm here); on the face's interior the float64 projection is exact
         q_exact, _, inside = self.follow(points, ids)
         q[inside] = q_exact[inside]
