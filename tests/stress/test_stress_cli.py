@@ -3,27 +3,13 @@ traceback (what tests/test_cli_errors.py does not already cover)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 import trimesh
 
-DOWN_AT_TOP = "0,1,0,0.03, 1,0,0,0, 0,0,-1,0.0175, 0,0,0,1"  # part B's S2, straight down at its top
+from cli_checks import PAPER_S2, assert_one_line_error, run
+
 SHORT = '[protocol]\nsequences = ["R"]\nstep_deg = 4.0\n'  # two scans: an evaluation in seconds
-
-
-def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "optipose", *args], capture_output=True, text=True, cwd=cwd, timeout=120)
-
-
-def assert_one_line_error(result, fragment):
-    assert result.returncode == 2, result.stderr
-    lines = [line for line in result.stderr.splitlines() if not line.startswith("WARNING")]
-    assert len(lines) == 1, result.stderr
-    assert lines[0].startswith("optipose: error:") and fragment in lines[0], lines[0]
-    assert "Traceback" not in result.stderr
 
 
 @pytest.fixture(scope="module")
@@ -61,18 +47,18 @@ def files(tmp_path_factory):
 @pytest.mark.parametrize(
     "args, fragment",
     [
-        (["scan", "{d}/truncated.stl", "-p", DOWN_AT_TOP], "no triangles"),
-        (["scan", "{d}/binary_garbage.stl", "-p", DOWN_AT_TOP], "no triangles"),
-        (["scan", "{d}/inf.stl", "-p", DOWN_AT_TOP], "NaN or infinite"),
-        (["scan", "{d}/degenerate.stl", "-p", DOWN_AT_TOP], "zero surface area"),
-        (["scan", "{d}/inches.stl", "-p", DOWN_AT_TOP], "mm or inches"),
+        (["scan", "{d}/truncated.stl", "-p", PAPER_S2], "no triangles"),
+        (["scan", "{d}/binary_garbage.stl", "-p", PAPER_S2], "no triangles"),
+        (["scan", "{d}/inf.stl", "-p", PAPER_S2], "NaN or infinite"),
+        (["scan", "{d}/degenerate.stl", "-p", PAPER_S2], "zero surface area"),
+        (["scan", "{d}/inches.stl", "-p", PAPER_S2], "mm or inches"),
         (["evaluate", "part_b", "--objective", "{d}/unknown_key.toml", "--no-report"], "unknown key(s) step_degrees"),
         (["evaluate", "part_b", "--objective", "{d}/wrong_type.toml", "--no-report"], "max_iterations must be a number"),
         (["evaluate", "part_b", "--objective", "{d}/wrong_type_list.toml", "--no-report"], "voxel_size_mm must be a number"),
         (["scan", "part_b", "--layout", "{d}/inside.toml"], "sensor S1: its window is inside the part"),
         (["evaluate", "part_b", "--layout", "{d}/inside.toml", "--no-report"], "inside the part"),
         (["robustness", "part_b", "--layout", "{d}/inside.toml", "--no-report"], "inside the part"),
-        (["scan", "part_b", "-p", DOWN_AT_TOP, "--out", "{d}/a_file/cloud.npy"], "a_file"),
+        (["scan", "part_b", "-p", PAPER_S2, "--out", "{d}/a_file/cloud.npy"], "a_file"),
         (["evaluate", "part_b", "--objective", "{d}/short.toml", "--no-report", "--out", "{d}/a_file/result"], "a_file"),
     ],
 )  # fmt: skip
@@ -88,14 +74,14 @@ def test_an_output_folder_that_cannot_be_written(files):
 
 
 def test_a_part_in_inches_is_read_with_its_units(files, tmp_path):
-    result = run("scan", str(files / "inches.stl"), "--units", "in", "-p", DOWN_AT_TOP, "--out", str(tmp_path / "c.npy"))
+    result = run("scan", str(files / "inches.stl"), "--units", "in", "-p", PAPER_S2, "--out", str(tmp_path / "c.npy"))
     assert result.returncode == 0, result.stderr
     assert np.median(np.load(tmp_path / "c.npy")[:, 2]) == pytest.approx(0.0176, abs=1e-5)  # the top, in metres
 
 
 def test_a_mesh_of_two_bodies_is_scanned_with_a_warning(files, tmp_path):
     # legal (a part and its fixture move as one) but often an assembly exported by mistake: said, not refused
-    result = run("scan", str(files / "two_bodies.stl"), "-p", DOWN_AT_TOP, "--out", str(tmp_path / "c.npy"))
+    result = run("scan", str(files / "two_bodies.stl"), "-p", PAPER_S2, "--out", str(tmp_path / "c.npy"))
     assert result.returncode == 0, result.stderr
     assert "2 separate bodies" in result.stderr and "Traceback" not in result.stderr
     assert len(np.load(tmp_path / "c.npy")) > 100_000

@@ -1,0 +1,20 @@
+"""What the command-line tests share: running ``optipose`` as a user would, and the one-line error check."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+PAPER_S2 = "0,1,0,0.03, 1,0,0,0, 0,0,-1,0.0175, 0,0,0,1"  # part B's S2, straight down at its top
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "optipose", *args], capture_output=True, text=True, cwd=cwd, timeout=120)
+
+
+def assert_one_line_error(result, fragment):
+    assert result.returncode == 2, result.stderr
+    lines = [line for line in result.stderr.splitlines() if not line.startswith("WARNING")]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("optipose: error:") and fragment in lines[0], lines[0]
+    assert "Traceback" not in result.stderr
