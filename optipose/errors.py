@@ -18,3 +18,15 @@ class ConfigError(OptiposeError):
 
 class PoseError(OptiposeError):
     """A pose matrix is not a proper rigid transform."""
+
+
+def read_toml(path, what: str = "") -> tuple[dict, str]:
+    """A TOML file's table and its text; a syntax error is a :class:`ConfigError` naming the file as
+    ``"<what> <path>: …"`` (``"<path>: …"`` without ``what``). Whether the file exists is the caller's to say."""
+    import tomllib
+
+    text = path.read_text()
+    try:
+        return tomllib.loads(text), text
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{what} {path}: {exc}" if what else f"{path}: {exc}") from None

@@ -28,11 +28,10 @@ from __future__ import annotations
 import glob
 import itertools
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from optipose.errors import ConfigError
+from optipose.errors import ConfigError, read_toml
 
 __all__ = ["TASKS", "TrialSpec", "StudySpec", "load_study", "study_from_table"]
 
@@ -90,11 +89,7 @@ def load_study(path: str | Path) -> StudySpec:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"study file not found: {path}")
-    text = path.read_text()
-    try:
-        table = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"study file {path}: {exc}") from None
+    table, text = read_toml(path, "study file")
     return study_from_table(table, where=str(path), base=path.resolve().parent, text=text, default_name=path.stem)
 
 

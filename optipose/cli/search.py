@@ -15,7 +15,7 @@ import typer
 
 from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
 from optipose.cli.report import NoReport
-from optipose.errors import ConfigError
+from optipose.errors import ConfigError, read_toml
 
 __all__ = ["search", "search_command", "verdict_headline"]
 
@@ -121,10 +121,7 @@ def _overrides(path: Path | None) -> dict:
         return {}
     if not path.is_file():
         raise ConfigError(f"search config not found: {path}")
-    try:
-        table = tomllib.loads(path.read_text()).get("search", {})
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"search config {path}: {exc}") from None
+    table = read_toml(path, "search config")[0].get("search", {})
     known = set(SearchConfig.__dataclass_fields__)
     unknown = set(table) - known
     if unknown:

@@ -8,13 +8,12 @@ for every key with its meaning.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from optipose.errors import ConfigError
+from optipose.errors import ConfigError, read_toml
 from optipose.registration.backends import BACKENDS as REGISTRATION_BACKENDS
 from optipose.evaluate.conditions import ConditionsConfig, conditions_from_table
 from optipose.registration.config import RegistrationConfig
@@ -107,11 +106,7 @@ def load_objective(spec: str | Path) -> Objective:
             raise ConfigError(f"unknown objective '{spec}' (shipped: {', '.join(shipped)}; or give a .toml path)")
     if not path.is_file():
         raise ConfigError(f"objective file not found: {path}")
-    text = path.read_text()
-    try:
-        table = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"objective file {path}: {exc}") from None
+    table, text = read_toml(path, "objective file")
     return objective_from_table(table, where=str(path), source_text=text, default_name=path.stem)
 
 

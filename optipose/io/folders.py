@@ -69,17 +69,12 @@ def write_config(folder: Path, table: dict) -> Path:
 
 def read_config(folder: Path) -> dict:
     """The parsed ``config.toml`` of a result folder; ConfigError when there is none or it is broken."""
-    import tomllib
-
-    from optipose.errors import ConfigError
+    from optipose.errors import ConfigError, read_toml
 
     path = Path(folder) / "config.toml"
     if not path.is_file():
         raise ConfigError(f"{folder}: no config.toml there (not an optipose result folder)")
-    try:
-        return tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
+    return read_toml(path)[0]
 
 
 def _plain(value):

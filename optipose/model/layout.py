@@ -13,13 +13,12 @@ Part files embed layouts the same way under ``[layouts.NAME]``.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from optipose.errors import ConfigError, OptiposeError
+from optipose.errors import ConfigError, OptiposeError, read_toml
 from optipose.transforms import validate_pose
 
 __all__ = ["SensorPose", "Layout", "load_layout", "layout_from_table", "write_layout"]
@@ -93,10 +92,7 @@ def load_layout(path: str | Path) -> Layout:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"layout file not found: {path}")
-    try:
-        table = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"layout file {path}: {exc}") from None
+    table, _ = read_toml(path, "layout file")
     return layout_from_table(table, name=path.stem, where=str(path))
 
 

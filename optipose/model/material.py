@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from optipose.errors import ConfigError
+from optipose.errors import ConfigError, read_toml
 
 __all__ = ["Material", "load_material", "material_presets"]
 
@@ -119,10 +119,7 @@ def load_material(spec: str | Path | Material) -> Material:
     if path.suffix.lower() == ".csv":
         return _from_csv(path)
     if path.suffix.lower() == ".toml" and path.is_file():
-        try:
-            tables = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"material file {path}: {exc}") from None
+        tables, _ = read_toml(path, "material file")
         if len(tables) != 1:
             raise ConfigError(f"material file {path}: expected exactly one [material-name] table")
         (name, table), = tables.items()

@@ -37,14 +37,13 @@ without a ``hand`` layout gets so that a search always has a baseline.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
-from optipose.errors import ConfigError, MeshError
+from optipose.errors import ConfigError, MeshError, read_toml
 from optipose.model.layout import Layout, layout_from_table
 from optipose.model.material import load_material
 from optipose.model.mesh import load_mesh
@@ -188,9 +187,7 @@ def _from_part_file(path: Path, units: str, mesh_path: Path | None = None) -> Pa
 
 def _read_toml(path: Path) -> dict:
     try:
-        return tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"part file {path}: {exc}") from None
+        return read_toml(path, "part file")[0]
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"part file {path}: cannot read ({exc})") from None
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from optipose.errors import ConfigError
+from optipose.errors import ConfigError, read_toml
 
 __all__ = ["SensorModel", "load_sensor", "sensor_presets"]
 
@@ -188,10 +188,7 @@ def load_sensor(spec: str | Path | SensorModel) -> SensorModel:
         return _from_table(str(spec), presets[str(spec)])
     path = Path(spec)
     if path.suffix == ".toml" and path.is_file():
-        try:
-            tables = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"sensor file {path}: {exc}") from None
+        tables, _ = read_toml(path, "sensor file")
         if len(tables) != 1:
             raise ConfigError(f"sensor file {path}: expected exactly one [sensor-name] table")
         (name, table), = tables.items()
