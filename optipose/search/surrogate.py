@@ -161,7 +161,6 @@ class Surrogate:
         per turn and at the nominal orientation, the mounting term's normal matrices and maps."""
         if not len(self.motions):
             return None, None, None, None
-        from optipose.registration.kernels import voxel_centroids
         from optipose.registration.reference import SurfaceReference
 
         if self._reference is None:
@@ -169,17 +168,24 @@ class Surrogate:
         A, G = np.zeros((6, 6)), np.zeros((len(self.motions), 6))
         A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
-            turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
-            v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
-            q, n, _ = self._reference.nearest(v)
+            v, n, r, J = self._turned(points, T)
             A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
             if m == 0:
                 continue
-            r = np.einsum("ij,ij->i", v - q, n)
-            J = np.hstack([np.cross(v - self.centre, n), n])
             G[m - 1] = J.T @ r
             A += J.T @ J / len(self.motions)
         return A, G, A_turns, N_turns
+
+    def _turned(self, points: np.ndarray, T: np.ndarray) -> tuple:
+        """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
+        centroids v (in the part's frame), their surface normals n, signed distances r to the CAD surface
+        and point-to-plane rows J = [(v − c) × n, n] about the rotation centre c."""
+        from optipose.registration.kernels import voxel_centroids
+
+        turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
+        v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
+        q, n, _ = self._reference.nearest(v)
+        return v, n, np.einsum("ij,ij->i", v - q, n), np.hstack([np.cross(v - self.centre, n), n])
 
     def _noise_bias(self, scan, T_O_S: np.ndarray, G: np.ndarray) -> np.ndarray:
         """Per turn, what the sensor noise at ``noise_band`` adds to ΣJᵀr through the voxels (turns, 6).
@@ -188,8 +194,6 @@ class Surrogate:
         once by −ε with the same draws; the mean of the two runs' ΣJᵀr less the noise-free one keeps what is
         even in the noise (the voxels' membership, a bias ∝ σ²) and cancels what is odd (the noise itself,
         which the information matrix already accounts for)."""
-        from optipose.registration.kernels import voxel_centroids
-
         s = self.full_sensor
         apex_z = s.apex_z
         shifts = self.motion.offsets()
@@ -206,11 +210,8 @@ class Surrogate:
         for sign in (1.0, -1.0):
             points = scan.points + sign * eps[:, None] * u
             for m, T in enumerate(self.motions):
-                turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
-                v = (turned - T[:3, 3]) @ T[:3, :3]
-                q, n, _ = self._reference.nearest(v)
-                r = np.einsum("ij,ij->i", v - q, n)
-                out[m] += 0.5 * (np.hstack([np.cross(v - self.centre, n), n]).T @ r)
+                _, _, r, J = self._turned(points, T)
+                out[m] += 0.5 * (J.T @ r)
         return out - G
 
 
