@@ -238,16 +238,18 @@ def test_an_occluder_hides_what_it_covers_and_returns_no_points():
 
 
 @pytest.mark.parametrize("part_name", ["part_a", "part_b", "part_c"])
-def test_casting_only_anchor_columns_gives_the_same_points_as_casting_every_column(part_name):
+@pytest.mark.parametrize("stride", [16, 40])
+def test_casting_only_anchor_columns_gives_the_same_points_as_casting_every_column(part_name, stride):
     """Columns between two anchors that hit one triangle are filled, not cast, and their shadow rays are
     skipped when both anchors see the receiver: the shipped parts' scans (edges, holes, shadows, the
-    flange) come out bit-identical to casting every column, at a turned orientation too."""
+    flange) come out bit-identical to casting every column, at a turned orientation too. Between anchors
+    on two triangles of one plane (most of them: a CAD face is many triangles) the rays are filled too."""
     from optipose.model.part import load_part
     from optipose.scan.scanner import part_scanner
 
     part = load_part(part_name)
     poses = part.layouts["hand"].poses
-    every, anchors = part_scanner(part, column_stride=1), part_scanner(part, column_stride=8)
+    every, anchors = part_scanner(part, column_stride=1), part_scanner(part, column_stride=stride)
     for rpy_deg in ([0.0, 0.0, 0.0], [1.7, -1.3, 0.9]):
         rpy = np.deg2rad(rpy_deg)
         a = every.scan_many(poses, part.motion, rpy=rpy, centre=part.rotation_centre, rng=3)
@@ -264,7 +266,7 @@ def test_a_step_shadow_is_the_same_with_anchor_columns():
     mesh = trimesh.util.concatenate([box([-20, -30, -5], [20, 30, 0]), box([2, -30, 0], [20, 30, 10])])
     mesh.apply_transform(trimesh.transformations.rotation_matrix(np.deg2rad(30.0), [0, 0, 1]))
     motion = ScanMotion(16 * MM, 0.05 * MM)
-    every, anchors = (Scanner(mesh, SENSOR, "white-diffuse", column_stride=s).scan(T_DOWN, motion, noise=False) for s in (1, 8))
+    every, anchors = (Scanner(mesh, SENSOR, "white-diffuse", column_stride=s).scan(T_DOWN, motion, noise=False) for s in (1, 16))
     assert len(every) < 320 * 3200  # a shadow was cast
     np.testing.assert_array_equal(every.points, anchors.points)
 
@@ -294,4 +296,4 @@ def test_profiles_whose_fan_misses_the_parts_box_cast_no_ray_and_change_nothing(
         scanner.caster.first_triangle = counted
     a, b = (s.scan(pose, part.motion, rpy=np.deg2rad([0.7, -0.4, 1.1]), centre=part.rotation_centre, rng=4) for s in scanners.values())
     np.testing.assert_array_equal(a.points, b.points)
-    assert len(a) > 10_000 and cast["box"] < 0.4 * cast["everything"]
+    assert len(a) > 10_000 and cast["box"] < 0.5 * cast["everything"]  # 4 of 5 profiles miss; anchors are most of the rest

@@ -65,7 +65,7 @@ class ScanConfig:
     """How the virtual scanner casts: ``column_stride`` (see :class:`optipose.scan.scanner.Scanner`; the
     clouds are the same for any stride but on features thinner than stride × the column pitch)."""
 
-    column_stride: int = 8
+    column_stride: int = 16
 
 
 @dataclass(frozen=True)

@@ -63,15 +63,21 @@ def measure_hits(
 
 
 @njit(cache=True, nogil=True)
-def fill_columns(anchor_tri, cols, n_col):
+def fill_columns(anchor_tri, cols, n_col, plane, shift_b, ray_cos, ray_sin, nu, nw, q, b, apex, d, step, edge_n, edge_c):
     """The first triangles of a block's rays (m·n_col,) from those of its anchor columns (m, a) only.
 
     cols : (a,) the anchor columns, increasing, the first and last column among them. Between two
     neighbouring anchors of a profile that hit the same triangle (or both miss), every ray hits that
     triangle too: the rays lie in the laser plane between the two, so their hits lie on the segment
     between the anchors' hits, inside the (convex) triangle; only a feature thinner than the anchors'
-    spacing could stand in between. Returns the filled triangles and ``need`` (n,), the rays between
-    anchors that disagree, which must be cast.
+    spacing could stand in between. When the two anchors hit two triangles of one plane (``plane``
+    (f,): faces in one plane share a number, :func:`optipose.scan.raycast.shared_planes`), the rays
+    between meet that plane on the same segment, and a ray whose point there lies inside either
+    triangle hits it, for the same reason; the rest (a gap or a third triangle between) are cast.
+    For the point: a ray of column c at shift s meets face f's plane ``T = (q_f + s·b_f)/(cos_c·nu_f +
+    sin_c·nw_f)`` from the apex, at ``apex + T·d_c − s·step`` (part frame); it lies inside f when it is
+    on the inner side of f's three edge planes (``edge_n`` (f, 3, 3), ``edge_c`` (f, 3)).
+    Returns the filled triangles and ``need`` (n,), the rays that must be cast.
     """
     m, a = anchor_tri.shape
     tri = np.empty(m * n_col, anchor_tri.dtype)
@@ -79,18 +85,43 @@ def fill_columns(anchor_tri, cols, n_col):
     n = 0
     for k in range(m):
         base = k * n_col
+        s = shift_b[k]
         for j in range(a):
             tri[base + cols[j]] = anchor_tri[k, j]
         for j in range(a - 1):
             t0 = anchor_tri[k, j]
-            same = t0 == anchor_tri[k, j + 1]
+            t1 = anchor_tri[k, j + 1]
+            same = t0 == t1
+            coplanar = (not same) and t0 >= 0 and t1 >= 0 and plane[t0] == plane[t1]
             for c in range(cols[j] + 1, cols[j + 1]):
                 if same:
                     tri[base + c] = t0
-                else:
-                    need[n] = base + c
-                    n += 1
+                    continue
+                if coplanar:
+                    den = ray_cos[c] * nu[t0] + ray_sin[c] * nw[t0]
+                    if den != 0.0:
+                        T = (q[t0] + s * b[t0]) / den
+                        p0 = apex[0] + T * d[c, 0] - s * step[0]
+                        p1 = apex[1] + T * d[c, 1] - s * step[1]
+                        p2 = apex[2] + T * d[c, 2] - s * step[2]
+                        if _inside(edge_n, edge_c, t0, p0, p1, p2):
+                            tri[base + c] = t0
+                            continue
+                        if _inside(edge_n, edge_c, t1, p0, p1, p2):
+                            tri[base + c] = t1
+                            continue
+                need[n] = base + c
+                n += 1
     return tri, need[:n]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _inside(edge_n, edge_c, f, p0, p1, p2):
+    """Whether the point (on face f's plane) lies inside face f (its edges included)."""
+    for e in range(3):
+        if edge_n[f, e, 0] * p0 + edge_n[f, e, 1] * p1 + edge_n[f, e, 2] * p2 < edge_c[f, e]:
+            return False
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -112,9 +143,10 @@ def split_at_anchors(idx, test, n_col, stride):
 
 
 @njit(cache=True, nogil=True)
-def unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride):
+def unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride, plane):
     """Of the hits ``rest`` (between anchors), those whose two anchors are not both measured, seen by
-    the receiver (``keep``) and on the hit's own triangle: their shadow rays must still be traced."""
+    the receiver (``keep``) and on the hit's own plane (``plane`` (f,), see :func:`fill_columns`): their
+    shadow rays must still be traced."""
     seen = np.zeros(ray_tri.shape[0], np.bool_)
     for h in range(idx.shape[0]):
         if keep[h]:
@@ -127,7 +159,7 @@ def unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride):
         left = ray - col % stride
         right = min(left + stride, ray - col + n_col - 1)
         f = tri[t]
-        if not (seen[left] and seen[right] and ray_tri[left] == f and ray_tri[right] == f):
+        if not (seen[left] and seen[right] and plane[ray_tri[left]] == plane[f] and plane[ray_tri[right]] == plane[f]):
             out[n] = t
             n += 1
     return out[:n]

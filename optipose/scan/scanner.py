@@ -25,7 +25,7 @@ from optipose.model.material import Material, load_material
 from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import NORMAL_QUANTILES, fill_columns, measure_hits, split_at_anchors, unsure_between_anchors, write_points
 from optipose.scan.profiles import EMPTY, ray_lines
-from optipose.scan.raycast import default_threads, face_planes, make_caster
+from optipose.scan.raycast import default_threads, face_planes, make_caster, shared_planes
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
@@ -33,7 +33,7 @@ __all__ = ["Scan", "Scanner", "part_scanner", "nominal_scans", "rebuilt_with"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count
-COLUMN_STRIDE = 8  # cast every this many columns, and the columns between only where their anchors disagree
+COLUMN_STRIDE = 16  # cast every this many columns, and the columns between only where their anchors disagree
 
 
 @dataclass
@@ -77,8 +77,8 @@ class Scanner:
         (a part's keep-outs: the flange it is held by). They cast shadows and hide what is behind them but
         are never measured.
     column_stride : cast every ``column_stride``-th column of a profile (the anchors); the columns between
-        two anchors that hit the same triangle hit it too and are not cast (:func:`fill_columns`), the
-        others are. 1 casts every column. The points are the same either way, but for a feature thinner
+        two anchors that hit the same triangle (or two triangles of one plane, where the ray's point on it
+        lies inside one of them) hit it too and are not cast (:func:`fill_columns`), the others are. 1 casts every column. The points are the same either way, but for a feature thinner
         than the anchors' spacing (stride × the column pitch).
     """
 
@@ -110,7 +110,7 @@ class Scanner:
         self.caster = make_caster(self.vertices, self.faces, backend, threads=1)
         self.threads = threads or default_threads()
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
-        self._normals, self._offsets = face_planes(self.vertices, self.faces)
+        self._plane, self._normals, self._offsets, self._edge_n, self._edge_c = shared_planes(self.vertices, self.faces, *face_planes(self.vertices, self.faces))
         self._on_hull = _supporting_faces(mesh, self._normals, self._offsets)
         self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
         self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()
@@ -255,7 +255,7 @@ class Scanner:
         first, rest = split_at_anchors(idx, test, n_col, stride)
         sub = idx[first]
         keep[first] = self._receiver_sees(view, T[first], sub % n_col, shift_b[sub // n_col], tri[first])
-        return unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride) if len(rest) else rest
+        return unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride, self._plane) if len(rest) else rest
 
     def _first_triangles(self, view: "_SensorView", origins: np.ndarray, shift_b: np.ndarray) -> np.ndarray:
         """The first triangle (-1: none) of each ray of a block's profiles × columns (see ``column_stride``).
@@ -270,7 +270,8 @@ class Scanner:
             anchor_tri[live] = np.asarray(caster.first_triangle(origins[rays], view.d_tiled[rays], t_max[rays])).reshape(len(live), len(cols))
         if self._anchors is None:
             return anchor_tri.ravel()
-        tri, need = fill_columns(anchor_tri, self._anchors, n_col)
+        tri, need = fill_columns(anchor_tri, self._anchors, n_col, self._plane, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw,
+                                 view.q, view.b, view.apex_P, view.d_P, view.step_P, self._edge_n, self._edge_c)  # fmt: skip
         if len(need):
             tri[need] = caster.first_triangle(origins[need], view.d_tiled[need], t_max[need])
         return tri
