@@ -210,3 +210,30 @@ def test_problem_band_carries_the_tolerance_only_when_mounted(part_b):
     assert problem.band["mounting"] == (robust.conditions.mounting_translation, robust.conditions.mounting_rotation)
     plain = change(robust, conditions=change(robust.conditions, mounting_translation=0.0, mounting_rotation=0.0))
     assert SurrogateProblem(part, plain, SearchConfig(), surrogate=problem.surrogate).band["mounting"] is None
+
+
+def test_prefetching_poses_on_threads_fills_the_cache_as_scoring_them_one_by_one(part_b):
+    """The screen scores its poses on every core first (``SurrogateProblem.prefetch``): each pose's
+    information (or its violation) is the one a plain call computes, bit for bit, whatever the threads."""
+    from scipy.stats import qmc
+
+    from optipose.search.config import config_from_budget
+    from optipose.search.problem import SurrogateProblem
+
+    part, objective, config = part_b[0], load_objective("paper"), config_from_budget("default", (1,))
+    points = qmc.Sobol(6, scramble=True, seed=3).random(24)
+    threaded, plain = SurrogateProblem(part, objective, config), SurrogateProblem(part, objective, config)
+    threaded.prefetch(points, threads=3)
+    assert len(threaded.cache) == 24
+    feasible = 0
+    for u in points:
+        a, b = threaded.sensor(u), plain.sensor(u)
+        assert type(a) is type(b)
+        if isinstance(a, SensorInfo):
+            feasible += 1
+            np.testing.assert_array_equal(a.H, b.H)
+            np.testing.assert_array_equal(a.G, b.G)
+            assert a.A_turns is None  # the paper objective has exact brackets: no bracket term computed
+        else:
+            assert (a.constraint, a.amount) == (b.constraint, b.amount)
+    assert feasible >= 5

@@ -19,6 +19,7 @@ result folder), so the search itself never touches the file system.
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -36,7 +37,8 @@ from optipose.model.baseline import baseline
 __all__ = ["SearchReport", "ResultSink", "run", "found_layout", "search_objective", "NoFeasibleLayout"]
 
 log = logging.getLogger(__name__)
-_FLUSH_EVERY = 100  # evaluations between writes of the history and the cache
+_FLUSH_EVERY = 100  # evaluations between writes of the history and the cache...
+_FLUSH_GAP = 10.0  # ... and seconds: what a kill can lose, and a resume recomputes
 
 
 class NoFeasibleLayout(OptiposeError):
@@ -134,12 +136,16 @@ def _study(part, objective, config, sink: ResultSink, resume: bool, on_eval) -> 
     study = SurrogateStudy(SurrogateProblem(part, objective, config, cache=cache))
     if on_eval:
         study.callbacks.append(on_eval)
-    flushed = [0]
+    flushed = {"n": 0, "at": time.monotonic(), "took": 0.0}
 
     def flush(_evaluation) -> None:
-        if len(study.history) - flushed[0] >= _FLUSH_EVERY:
+        # every _FLUSH_EVERY evaluations, but no sooner than _FLUSH_GAP s and 10x the last write's own time
+        # after it: a write is the whole history and cache, so counting evaluations alone made the writes
+        # grow with the search (61 of 264 s of a default search on part B)
+        now = time.monotonic()
+        if len(study.history) - flushed["n"] >= _FLUSH_EVERY and now - flushed["at"] >= max(_FLUSH_GAP, 10 * flushed["took"]):
             _flush(sink, study)
-            flushed[0] = len(study.history)
+            flushed.update(n=len(study.history), at=time.monotonic(), took=time.monotonic() - now)
 
     study.callbacks.append(flush)
     return study

@@ -29,6 +29,8 @@ def screen(sub: SubProblem, config: SearchConfig, k: int, seed: int) -> list[np.
     study = sub.study
     with study.stage_named(f"screen:k={k}"):
         points = qmc.Sobol(6, scramble=True, seed=seed).random(int(config.screen_samples))
+        if hasattr(study.problem, "prefetch"):  # the new sensor's poses, on every core; the loop then looks them up
+            study.problem.prefetch(points)
         values = np.array([sub(u) for u in points])
     picked: list[np.ndarray] = []
     for i in np.argsort(values, kind="stable"):

@@ -109,12 +109,14 @@ class Surrogate:
     turns : (m, 3) roll, pitch, yaw (rad) of the part at which the voxel bias is sampled, e.g.
         :func:`protocol_turns` of the objective; default: eight turns of ±2° (empty: no bias model).
     columns : laser columns per profile in the reduced scan; ``step_factor`` : profile step multiplier.
+    mounting : whether to compute the bracket term's matrices (``A_turns``, ``N_turns``: one more turn per
+        pose and a map per turn); an objective whose brackets are exact never reads them.
     """
 
     def __init__(
         self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0,
         threads: int | None = None, extra_variance: float = 0.0, turns: np.ndarray | None = None,
-        noise_band: float = 1.0,
+        noise_band: float = 1.0, mounting: bool = True,
     ):  # fmt: skip
         from optipose.model.sensor import load_sensor
 
@@ -136,7 +138,15 @@ class Surrogate:
         self.turns = turns
         self.motions = [part_motion(rpy, self.centre, shift) for rpy, shift in zip(turns, shifts)]
         self.noise_band = float(noise_band)  # the highest noise scale the objective's band asks for
+        self.mounting = bool(mounting)
         self._reference = None
+
+    def ready(self) -> None:
+        """Build what :meth:`info` builds on first use (the CAD reference), e.g. before calling it from threads."""
+        if self._reference is None and len(self.motions):
+            from optipose.registration.reference import SurfaceReference
+
+            self._reference = SurfaceReference(self.part.mesh.vertices, self.part.mesh.faces)
 
     def info(self, T_O_S: np.ndarray) -> SensorInfo:
         """Information matrix of one sensor pose from a noise-free nominal scan."""
@@ -161,20 +171,20 @@ class Surrogate:
         per turn and at the nominal orientation, the mounting term's normal matrices and maps."""
         if not len(self.motions):
             return None, None, None, None
-        from optipose.registration.reference import SurfaceReference
-
-        if self._reference is None:
-            self._reference = SurfaceReference(self.part.mesh.vertices, self.part.mesh.faces)
+        self.ready()
         A, G = np.zeros((6, 6)), np.zeros((len(self.motions), 6))
         A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
+            if m == 0 and not self.mounting:
+                continue
             v, n, r, J = self._turned(points, T)
-            A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
+            if self.mounting:
+                A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
             if m == 0:
                 continue
             G[m - 1] = J.T @ r
             A += J.T @ J / len(self.motions)
-        return A, G, A_turns, N_turns
+        return (A, G, A_turns, N_turns) if self.mounting else (A, G, None, None)
 
     def _turned(self, points: np.ndarray, T: np.ndarray) -> tuple:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
