@@ -237,3 +237,23 @@ def test_prefetching_poses_on_threads_fills_the_cache_as_scoring_them_one_by_one
         else:
             assert (a.constraint, a.amount) == (b.constraint, b.amount)
     assert feasible >= 5
+
+
+def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
+    """Under the robust objective a pose costs ~0.1 s, and the screen's 4,096 do not fit in a sensor count's
+    share of the clock: the screen computes its poses ahead in chunks and records each chunk, so when the
+    clock ends it, what was computed is in the history (a first version computed them all ahead and
+    recorded none: "no feasible layout in 0 evaluations")."""
+    from optipose.search.config import config_from_budget
+    from optipose.search.driver import SubProblem
+    from optipose.search.problem import SurrogateProblem
+    from optipose.search.screen import screen
+    from optipose.search.study import Stop, SurrogateStudy
+
+    config = config_from_budget("default", (1,), band=True)
+    study = SurrogateStudy(SurrogateProblem(part_b[0], load_objective("robust"), config))
+    study.start_clock(4.0)
+    with pytest.raises(Stop):
+        screen(SubProblem(study, np.zeros(0)), config, 1, seed=0)
+    assert 16 <= len(study.history) < config.screen_samples
+    assert any(e.state.name == "FEASIBLE" for e in study.history)

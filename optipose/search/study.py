@@ -81,6 +81,17 @@ class SurrogateStudy:
         finally:
             self._deadline, self._share = outer, None
 
+    def prefetch(self, us: np.ndarray) -> None:
+        """Have the problem compute these layouts' sensors ahead, on every core, within the clock (the
+        problem's ``prefetch``; nothing when it has none). Evaluating them afterwards records them as usual."""
+        if not hasattr(self.problem, "prefetch"):
+            return
+        try:
+            self.problem.prefetch(us, until=self._deadline)
+        except KeyboardInterrupt:
+            self.interrupted = True
+            raise Stop("interrupted") from None
+
     def best(self, k: int) -> tuple[float, np.ndarray] | None:
         """The best feasible value and layout of k sensors seen so far."""
         return self._best.get(k)
