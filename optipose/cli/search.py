@@ -242,6 +242,11 @@ def _compact(value: float) -> str:
     return f"{value:.3g}" if value < 1e4 else f"{value:.0f}"
 
 
+def _short_reason(axis) -> str:
+    """Why an axis has no number, in a 6-character cell."""
+    return "failed" if axis.label == "registrations failed" else "unobs."
+
+
 def _short(label: str) -> str:
     """A layout's label in a table column: ``conventional`` as ``conv.``."""
     return "conv." if label == "conventional" else label
@@ -271,7 +276,7 @@ def _validation_table(validation, part, label: str = "hand"):
         for name, choices in (("found", validation.found), (label, validation.hand)):
             if k in choices:
                 choice = choices[k]
-                cells = [f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else "unobs." for a in choice.axes]
+                cells = [f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else _short_reason(a) for a in choice.axes]
                 table.add_row(str(k), _short(name), choice.name, *cells, _compact(mdeg(choice.score)))
     return table
 
@@ -282,7 +287,7 @@ def _subsets_table(validation, label: str = "hand"):
     for k in sorted({*validation.found, *validation.hand}):
         for name, choices in (("found", validation.found), (label, validation.hand)):
             if k in choices:
-                table.add_row(str(k), _short(name), *(a.name or "unobservable" for a in choices[k].axes))
+                table.add_row(str(k), _short(name), *(a.label for a in choices[k].axes))
     return table
 
 

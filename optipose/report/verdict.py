@@ -59,7 +59,7 @@ def verdict_table(verdicts: list[Verdict], label: str) -> Table:
 
 def _cell(axis) -> str:
     if not axis.observable:
-        return "unobservable"
+        return axis.label
     return f"{mdeg(axis.median):.3f} / {mdeg(axis.p75):.3f} ({axis.name})"
 
 
