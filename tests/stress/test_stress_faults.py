@@ -1,6 +1,7 @@
-"""Faults: a killed evaluation or search and a full disk. Every file a result folder holds is whole
-(written to a temporary file and renamed, :mod:`optipose.files`); a write that fails leaves what was
-written before as it was."""
+"""Faults: a killed evaluation, a full disk and a result folder that cannot be resumed. Every file a
+result folder holds is whole (written to a temporary file and renamed, :mod:`optipose.files`); a write
+that fails leaves what was written before as it was; ``--resume`` of anything but a search folder this
+version wrote is one line, exit 2."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import time
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -146,6 +148,85 @@ def test_a_failed_write_keeps_the_file_it_would_have_replaced(tmp_path, monkeypa
         tmp.write_text("half")
         raise ValueError("stop")
     assert (tmp_path / "history.csv").read_bytes() == before["history.csv"]
+
+
+# -- --resume ------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def search_config(tmp_path_factory) -> dict:
+    """A search folder's config.toml as this version writes it (part B, the paper objective)."""
+    from optipose.evaluate.objective import load_objective
+    from optipose.io.search import SearchFolder
+    from optipose.model.part import load_part
+    from optipose.search.config import config_from_budget
+
+    folder = tmp_path_factory.mktemp("search_config")
+    SearchFolder(folder).start(load_part("part_b"), load_objective("paper"), config_from_budget("quick", (1,)), "quick", 0, 1)
+    return tomllib.loads((folder / "config.toml").read_text())
+
+
+def _search_folder(root: Path, name: str, table: dict | None = None, text: str | bytes | None = None) -> Path:
+    import tomli_w
+
+    folder = root / name
+    folder.mkdir()
+    if table is not None:
+        text = tomli_w.dumps(table)
+    if text is not None:
+        (folder / "config.toml").write_bytes(text if isinstance(text, bytes) else text.encode())
+    return folder
+
+
+def test_a_search_folder_of_this_version_is_resumable(search_config, tmp_path):
+    from optipose.cli.search import _resumed_settings
+    from optipose.io.folders import RESULT_FORMAT
+
+    assert search_config["format"] == RESULT_FORMAT and search_config["command"] == "search"
+    part, config, budget, seed, objective = _resumed_settings(_search_folder(tmp_path, "ok", search_config))
+    assert part.endswith("part_b/part.toml") and (config.sensors, budget, seed, objective.name) == ((1,), "quick", 0, "paper")
+
+
+def _older(table: dict, **changes) -> dict:
+    """The table as an older optipose wrote it: no format, and ``changes`` (None: the key removed)."""
+    out = {k: v for k, v in table.items() if k != "format"}
+    for key, value in changes.items():
+        if value is None:
+            out.pop(key)
+        else:
+            out[key] = value
+    return out
+
+
+@pytest.mark.parametrize(
+    "case, fragment",
+    [
+        ("a_file", "not a folder"),
+        ("empty", "no config.toml there (not a search result folder)"),
+        ("garbage", "its config.toml is damaged"),
+        ("broken_toml", "its config.toml is damaged"),
+        ("evaluation", "holds a 'evaluate' result, not a search"),
+        ("newer", "written by another optipose (optipose 0.1.0, result format 99)"),
+        ("older_unknown_key", "cannot be resumed by this version: unknown search setting(s) retired_knob"),
+        ("older_no_objective", "cannot be resumed by this version: no 'objective_file' in it"),
+        ("older_bad_objective", "cannot be resumed by this version: objective [registration]: max_iterations must be a number"),
+    ],
+)
+def test_resume_of_a_folder_it_cannot_take_is_one_line(search_config, tmp_path, case, fragment):
+    cases = {
+        "empty": {},
+        "garbage": {"text": np.random.default_rng(1).bytes(300)},
+        "broken_toml": {"text": 'command = "search"\n[search\n'},
+        "evaluation": {"table": {**search_config, "command": "evaluate"}},
+        "newer": {"table": {**search_config, "format": 99}},
+        "older_unknown_key": {"table": _older(search_config, search={**search_config["search"], "retired_knob": 3})},
+        "older_no_objective": {"table": _older(search_config, objective_file=None)},
+        "older_bad_objective": {"table": _older(search_config, objective_file='[registration]\nmax_iterations = "many"\n')},
+    }  # fmt: skip
+    if case == "a_file":
+        target = tmp_path / "a_file"
+        target.write_text("not a folder\n")
+    else:
+        target = _search_folder(tmp_path, case, **cases[case])
+    assert_one_line_error(run("search", "--resume", str(target)), fragment)
 
 
 # -- a killed search --------------------------------------------------------------------------------------
