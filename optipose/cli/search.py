@@ -228,6 +228,8 @@ def _print_report(console, report, part) -> None:
         verdicts = report.validation.verdicts()
         for v in verdicts:
             console.print(verdict_headline(v, label), highlight=False)
+        for line in report.validation.unmeasured_lines(label):
+            console.print(line, style="bold red", highlight=False)
         lines = report.validation.verdict_lines(label)
         found, hand = report.validation.found, report.validation.hand
         if 1 in found and max(hand, default=0) > 1:  # the headline: fewer sensors to buy

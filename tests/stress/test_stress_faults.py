@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cli_checks import assert_one_line_error, run
+from cli_checks import SMALL_SEARCH, assert_one_line_error, run
 from optipose.files import atomic_path, is_temporary
 
 SHORT = '[protocol]\nsequences = ["R"]\nstep_deg = 4.0\n'  # two scans: an evaluation in seconds
@@ -230,17 +230,6 @@ def test_resume_of_a_folder_it_cannot_take_is_one_line(search_config, tmp_path, 
 
 
 # -- a killed search --------------------------------------------------------------------------------------
-SMALL_SEARCH = """[search]
-global_evals = 150
-local_evals = 10
-random_starts = 2
-select_candidates = 0
-screen_samples = 0
-polish_evals = 0
-confirm_candidates = 0
-"""
-
-
 def _search(files: Path, out: Path, *more: str) -> list[str]:
     return ["-m", "optipose", "search", "part_b", "--sensors", "1", "--search-config", str(files / "small_search.toml"),
             "--objective", str(files / "short.toml"), "--seed", "4", "--out", str(out), "--no-report", *more]  # fmt: skip
