@@ -102,10 +102,13 @@ def _resumed_settings(resume: Path):
 def _written_by(saved: dict) -> str:
     """Which optipose wrote a result folder, as its config.toml says."""
     versions = saved.get("versions")
-    return f"optipose {versions.get('optipose', '?') if isinstance(versions, dict) else '?'}, result format {saved.get('format', 'none')}"
+    version = versions.get("optipose", "?") if isinstance(versions, dict) else "?"
+    return f"optipose {version}, result format {saved.get('format', 'none')}"
 
 
 def _settings(saved: dict):
+    """The settings of a parsed config.toml; KeyError, TypeError, ValueError or ConfigError where this
+    version cannot take them."""
     from optipose.evaluate.objective import objective_from_table
     from optipose.search.config import SearchConfig
 
@@ -155,7 +158,7 @@ def _overrides(path: Path | None) -> dict:
 
 
 def _resumed(resume: Path) -> dict:
-    """The config.toml of a search result folder (refusing any other folder, and one of a newer format)."""
+    """The config.toml of a search result folder (refusing any other folder, and one of another format)."""
     from optipose.io.folders import RESULT_FORMAT, read_config
 
     if not resume.is_dir():
