@@ -25,8 +25,9 @@ def read_toml(path, what: str = "") -> tuple[dict, str]:
     ``"<what> <path>: …"`` (``"<path>: …"`` without ``what``). Whether the file exists is the caller's to say."""
     import tomllib
 
-    text = path.read_text()
     try:
+        text = path.read_text()
         return tomllib.loads(text), text
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{what} {path}: {exc}" if what else f"{path}: {exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        reason = "not a text file" if isinstance(exc, UnicodeDecodeError) else exc
+        raise ConfigError(f"{what} {path}: {reason}" if what else f"{path}: {reason}") from None

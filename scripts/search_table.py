@@ -18,7 +18,7 @@ def mdeg(rad: float) -> float:
 
 
 def cells(choice) -> str:
-    return " | ".join(f"{mdeg(a.median):.3f} / {mdeg(a.p75):.3f} ({a.name or 'unobservable'})" for a in choice.axes)
+    return " | ".join(f"{mdeg(a.median):.3f} / {mdeg(a.p75):.3f} ({a.label})" for a in choice.axes)
 
 
 def main(folders: list[str]) -> None:

@@ -6,6 +6,16 @@ import subprocess
 import sys
 
 PAPER_S2 = "0,1,0,0.03, 1,0,0,0, 0,0,-1,0.0175, 0,0,0,1"  # part B's S2, straight down at its top
+# a --search-config of ~160 surrogate evaluations of one sensor and no ICP stage but the validation
+SMALL_SEARCH = """[search]
+global_evals = 150
+local_evals = 10
+random_starts = 2
+select_candidates = 0
+screen_samples = 0
+polish_evals = 0
+confirm_candidates = 0
+"""
 
 
 def run(*args, cwd=None):

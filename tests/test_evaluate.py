@@ -230,8 +230,9 @@ def test_failed_registrations_are_counted_not_averaged(block):
     obj = _objective(("R",), 1.0, 1.0, max_iterations=1)
     with Evaluator(block, obj, seed=0) as ev:
         result = ev(block.layouts["hand"])
-    assert result.n_failed == 7 and (result.stats["n_failed"] == 1).all() and result.stats["median"].isna().all()
-    assert all(not a.observable for c in result.table for a in c.axes)
+    assert result.n_failed == 7 and (result.stats["n_failed"] == 1).all() and result.stats["max"].isna().all()
+    assert (result.stats["median"] == np.deg2rad(10.0)).all()  # a failure enters the order statistics as 10°
+    assert all(not a.observable and a.reason == "registrations failed" for c in result.table for a in c.axes)
 
 
 # -- assignment -----------------------------------------------------------------------------------------

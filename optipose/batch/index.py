@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import io
 import logging
-import os
 import shutil
 import tomllib
 from pathlib import Path
@@ -23,6 +22,7 @@ from optipose.batch.results import RESULT_COLUMNS, trial_results
 from optipose.batch.spec import TrialSpec
 from optipose.batch.trial import TMP_PREFIX, TRIAL_FILE
 from optipose.errors import ConfigError
+from optipose.files import atomic_path
 
 __all__ = ["StudyIndex", "read_index", "INDEX_FILE", "INDEX_CSV"]
 
@@ -132,6 +132,5 @@ def _missing(value) -> bool:
 
 
 def _replace(path: Path, write) -> None:
-    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
-    write(tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        write(tmp)

@@ -48,7 +48,7 @@ def _choice_columns(choice) -> dict:
     out = {"sensors_used": choice.name, "score_deg": float(np.rad2deg(choice.score))}
     for a in choice.axes:
         out |= {f"{a.axis}_median_deg": float(np.rad2deg(a.median)), f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)),
-                f"{a.axis}_subset": a.name or "unobservable"}  # fmt: skip
+                f"{a.axis}_subset": a.label}  # fmt: skip
     return out
 
 

@@ -27,6 +27,7 @@ from optipose.batch.results import trial_results
 from optipose.batch.spec import StudySpec
 from optipose.batch.trial import error_line, now, run_trial
 from optipose.errors import ConfigError
+from optipose.files import write_text
 
 __all__ = ["run_study", "prepare_folder", "MAX_RETRIES"]
 
@@ -115,7 +116,7 @@ def _write_header(folder: Path, spec: StudySpec, pool, config: dict) -> None:
     from optipose.io.folders import versions, write_config
 
     if spec.text:
-        (folder / "study.toml").write_text(spec.text)
+        write_text(folder / "study.toml", spec.text)
     write_config(folder, {
         "command": "batch", "study": {"name": spec.name, "source": spec.source, "description": spec.description,
                                       "trials": len(spec.trials)},

@@ -28,6 +28,7 @@ from optipose.batch.records import TrialRecord, TrialState
 from optipose.batch.spec import TrialSpec
 from optipose.batch.threads import Plan, cap_threads
 from optipose.errors import ConfigError
+from optipose.files import write_text
 
 __all__ = ["run_trial", "TRIAL_FILE", "TMP_PREFIX", "now", "TASK_RUNNERS"]
 
@@ -81,7 +82,7 @@ def _write_trial_file(folder: Path, record: TrialRecord, plan: Plan) -> None:
 
     table = {"trial": record.trial.params(), "key": record.key, "started": record.started, "finished": record.finished,
              "seconds": record.seconds, "cpu_seconds": record.cpu_seconds, "worker": record.worker, "plan": plan.__dict__}  # fmt: skip
-    (folder / TRIAL_FILE).write_text(tomli_w.dumps(table))
+    write_text(folder / TRIAL_FILE, tomli_w.dumps(table))
 
 
 def _hand(part):

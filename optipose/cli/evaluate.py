@@ -73,7 +73,8 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     Console().print(table1(load_result(folder)))  # what the folder holds, as a report will read it
     n = len(result.per_scan)
     if result.n_failed:
-        console.print(f"[yellow]{result.n_failed} of {n} registrations failed or did not converge; kept out of the statistics (see per_scan.csv)[/]")
+        console.print(f"[yellow]{result.n_failed} of {n} registrations failed or did not converge: each a 10° error in the "
+                      "medians and 75th percentiles, out of the means and maxima (see per_scan.csv)[/]")  # fmt: skip
     if report:
         from optipose.cli.report import write_report_after
 
@@ -96,7 +97,7 @@ def table1(result):
         table.add_column(f"{axis} [deg]", justify="right")
     for choice in result.table:
         cells = [
-            f"{np.rad2deg(a.median):.5f} / {np.rad2deg(a.p75):.5f} {a.name}" if a.observable else "[red]unobservable[/]"
+            f"{np.rad2deg(a.median):.5f} / {np.rad2deg(a.p75):.5f} {a.name}" if a.observable else f"[red]{a.label}[/]"
             for a in choice.axes
         ]
         table.add_row(str(choice.k), choice.name, *cells)

@@ -67,15 +67,15 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     folder = resume or make_result_dir(the_part.name, "search", out)
 
     try:
-        report = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
+        searched = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
     except KeyboardInterrupt:
         console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
                       f"continue with `optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(EXIT_INTERRUPTED) from None
-    if report.validated:
-        _draw_layouts(folder, the_part, report.layouts)
-    _print_report(Console(), report, the_part)
-    if report.outcome.interrupted:
+    if searched.validated:
+        _draw_layouts(folder, the_part, searched.layouts)
+    _print_report(Console(), searched, the_part)
+    if searched.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(EXIT_INTERRUPTED)
@@ -88,18 +88,44 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
 
 
 def _resumed_settings(resume: Path):
-    """(part, search config, budget, seed, objective) as saved in a search result folder's config.toml."""
+    """(part, search config, budget, seed, objective) as saved in a search result folder's config.toml; a
+    folder whose settings this version cannot take (an older optipose's) is one ConfigError."""
+    saved = _resumed(resume)
+    try:
+        return _settings(saved)
+    except (KeyError, TypeError, ValueError, AttributeError, ConfigError) as exc:
+        why = f"no '{exc.args[0]}' in it" if isinstance(exc, KeyError) else (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise ConfigError(f"--resume {resume}: its config.toml ({_written_by(saved)}) cannot be resumed by this "
+                          f"version: {why}; start a new search") from None  # fmt: skip
+
+
+def _written_by(saved: dict) -> str:
+    """Which optipose wrote a result folder, as its config.toml says."""
+    versions = saved.get("versions")
+    version = versions.get("optipose", "?") if isinstance(versions, dict) else "?"
+    return f"optipose {version}, result format {saved.get('format', 'none')}"
+
+
+def _settings(saved: dict):
+    """The settings of a parsed config.toml; KeyError, TypeError, ValueError or ConfigError where this
+    version cannot take them."""
     from optipose.evaluate.objective import objective_from_table
     from optipose.search.config import SearchConfig
 
-    saved = _resumed(resume)
     part = saved["part"]["source"] or saved["part"]["name"]
     cfg = dict(saved["search"])
+    unknown = set(cfg) - set(SearchConfig.__dataclass_fields__)
+    if unknown:  # a setting this version no longer has
+        raise ConfigError(f"unknown search setting(s) {', '.join(sorted(unknown))}")
     cfg["sensors"] = tuple(cfg["sensors"])
     search_config = SearchConfig(**cfg)
-    budget, seed = saved["budget"], int(saved["seed"])
-    the_objective = objective_from_table(tomllib.loads(saved["objective_file"]), source_text=saved["objective_file"])
-    return part, search_config, budget, seed, the_objective
+    budget, seed = str(saved["budget"]), int(saved["seed"])
+    text = saved["objective_file"]
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"its objective_file does not parse: {exc}") from None
+    return part, search_config, budget, seed, objective_from_table(table, source_text=text)
 
 
 def _parse_sensors(text: str) -> tuple[int, ...]:
@@ -132,14 +158,23 @@ def _overrides(path: Path | None) -> dict:
 
 
 def _resumed(resume: Path) -> dict:
-    """The config.toml of a search result folder (refusing any other folder)."""
-    from optipose.io.folders import read_config
+    """The config.toml of a search result folder (refusing any other folder, and one of another format)."""
+    from optipose.io.folders import RESULT_FORMAT, read_config
 
+    if not resume.is_dir():
+        raise ConfigError(f"--resume {resume}: not a folder (give a search's result folder)")
     if not (resume / "config.toml").is_file():
         raise ConfigError(f"--resume {resume}: no config.toml there (not a search result folder)")
-    table = read_config(resume)
+    try:
+        table = read_config(resume)
+    except ConfigError as exc:
+        raise ConfigError(f"--resume {resume}: its config.toml is damaged ({str(exc).splitlines()[0]})") from None
     if table.get("command") != "search":
         raise ConfigError(f"--resume {resume}: that folder holds a '{table.get('command')}' result, not a search")
+    written = table.get("format")
+    if written is not None and written != RESULT_FORMAT:
+        raise ConfigError(f"--resume {resume}: written by another optipose ({_written_by(table)}); this version "
+                          f"reads result format {RESULT_FORMAT}: start a new search")  # fmt: skip
     return table
 
 
@@ -196,6 +231,8 @@ def _print_report(console, report, part) -> None:
         verdicts = report.validation.verdicts()
         for v in verdicts:
             console.print(verdict_headline(v, label), highlight=False)
+        for line in report.validation.unmeasured_lines(label):
+            console.print(line, style="bold red", highlight=False)
         lines = report.validation.verdict_lines(label)
         found, hand = report.validation.found, report.validation.hand
         if 1 in found and max(hand, default=0) > 1:  # the headline: fewer sensors to buy
@@ -242,6 +279,11 @@ def _compact(value: float) -> str:
     return f"{value:.3g}" if value < 1e4 else f"{value:.0f}"
 
 
+def _short_reason(axis) -> str:
+    """Why an axis has no number, in a 6-character cell."""
+    return "failed" if axis.label == "registrations failed" else "unobs."
+
+
 def _short(label: str) -> str:
     """A layout's label in a table column: ``conventional`` as ``conv.``."""
     return "conv." if label == "conventional" else label
@@ -271,7 +313,7 @@ def _validation_table(validation, part, label: str = "hand"):
         for name, choices in (("found", validation.found), (label, validation.hand)):
             if k in choices:
                 choice = choices[k]
-                cells = [f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else "unobs." for a in choice.axes]
+                cells = [f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else _short_reason(a) for a in choice.axes]
                 table.add_row(str(k), _short(name), choice.name, *cells, _compact(mdeg(choice.score)))
     return table
 
@@ -282,7 +324,7 @@ def _subsets_table(validation, label: str = "hand"):
     for k in sorted({*validation.found, *validation.hand}):
         for name, choices in (("found", validation.found), (label, validation.hand)):
             if k in choices:
-                table.add_row(str(k), _short(name), *(a.name or "unobservable" for a in choices[k].axes))
+                table.add_row(str(k), _short(name), *(a.label for a in choices[k].axes))
     return table
 
 

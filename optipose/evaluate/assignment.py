@@ -3,9 +3,11 @@
 For a layout of n sensors every non-empty subset (2ⁿ − 1) has per-axis statistics. Within a choice C of
 k sensors, each axis takes the subset of C with the lowest median (ties: lowest 75th percentile); a
 subset is not eligible for an axis it cannot observe or when more than ``MAX_FAILED_FRACTION`` of its
-registrations failed. The k-sensor result is the choice C with the lowest score
+registrations failed (the failures below that share are in its median and p75, each as a 10° error:
+:mod:`optipose.evaluate.statistics`). The k-sensor result is the choice C with the lowest score
 ``Σ_axis weight · (median_weight · median + p75_weight · p75)``; an axis no subset of C can measure
-costs ``UNOBSERVABLE_PENALTY`` instead.
+costs ``UNOBSERVABLE_PENALTY`` instead, and says why (:attr:`AxisChoice.reason`): no subset observes it
+(``unobservable``), or some would but their registrations failed too often (``registrations failed``).
 """
 
 from __future__ import annotations
@@ -17,14 +19,17 @@ import numpy as np
 import pandas as pd
 
 from optipose.evaluate.objective import AXES, StatisticConfig
+from optipose.evaluate.statistics import FAILED_ERROR
 
 __all__ = [
     "all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "choose", "restated", "stats_by_key",
-    "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY",
+    "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY", "UNOBSERVABLE", "FAILED",
 ]  # fmt: skip
 
 MAX_FAILED_FRACTION = 0.1
-UNOBSERVABLE_PENALTY = np.deg2rad(10.0)  # rad per axis: worse than any measurable error under ±2° protocols
+UNOBSERVABLE_PENALTY = FAILED_ERROR  # rad per axis (10°): worse than any measurable error under ±2° protocols
+UNOBSERVABLE = "unobservable"  # why an axis has no subset: none of the choice's subsets can observe it
+FAILED = "registrations failed"  # some could, but each failed in over MAX_FAILED_FRACTION of the scans
 
 
 def all_subsets(n: int) -> list[tuple[int, ...]]:
@@ -41,9 +46,10 @@ def subset_name(subset: tuple[int, ...], names: list[str]) -> str:
 class AxisChoice:
     """One axis of a choice: the subset of the layout's sensors used for it and its statistics.
 
-    subset : sensor indices in the layout, () when no subset of the choice can observe the axis.
-    name : the subset for display, e.g. "S1S2" ("" when unobservable).
-    median, p75 : rad (NaN when unobservable).
+    subset : sensor indices in the layout, () when no subset of the choice can measure the axis.
+    name : the subset for display, e.g. "S1S2" ("" when none).
+    median, p75 : rad (NaN when none).
+    reason : when there is no subset, why: ``UNOBSERVABLE`` or ``FAILED``; "" otherwise.
     """
 
     axis: str
@@ -51,10 +57,17 @@ class AxisChoice:
     name: str
     median: float
     p75: float
+    reason: str = ""
 
     @property
     def observable(self) -> bool:
+        """Measured: some subset of the choice observes the axis and registered reliably."""
         return bool(self.subset)
+
+    @property
+    def label(self) -> str:
+        """The subset's name, or why there is none (``unobservable``, ``registrations failed``)."""
+        return self.name if self.subset else (self.reason or UNOBSERVABLE)
 
 
 @dataclass(frozen=True)
@@ -75,7 +88,7 @@ class Choice:
 
     def __repr__(self) -> str:
         cells = ", ".join(
-            f"{a.axis}={np.rad2deg(a.median):.4f}/{np.rad2deg(a.p75):.4f} deg ({a.name})" if a.observable else f"{a.axis}=unobservable"
+            f"{a.axis}={np.rad2deg(a.median):.4f}/{np.rad2deg(a.p75):.4f} deg ({a.name})" if a.observable else f"{a.axis}={a.label}"
             for a in self.axes
         )
         return f"Choice(k={self.k}, {self.name}: {cells})"
@@ -104,10 +117,11 @@ def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: Statis
     subsets = [s for k in range(1, len(sensors) + 1) for s in combinations(sensors, k)]
     axes, score = [], 0.0
     for axis, weight in zip(AXES, cfg.weights):
-        eligible = [(s, by_key[(subset_name(s, names), axis)]) for s in subsets]
-        eligible = [(s, r) for s, r in eligible if _eligible(r, n_scans)]
+        rows = [(s, by_key[(subset_name(s, names), axis)]) for s in subsets]
+        eligible = [(s, r) for s, r in rows if _eligible(r, n_scans)]
         if not eligible:
-            axes.append(AxisChoice(axis, (), "", float("nan"), float("nan")))
+            seen = any(not r.unobservable for _, r in rows)  # observable, but its registrations failed too often
+            axes.append(AxisChoice(axis, (), "", float("nan"), float("nan"), FAILED if seen else UNOBSERVABLE))
             score += weight * UNOBSERVABLE_PENALTY * (cfg.median_weight + cfg.p75_weight)
             continue
         s, best = min(eligible, key=lambda t: (t[1].median, t[1].p75))  # stable: the smaller subset wins a full tie

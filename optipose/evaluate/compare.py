@@ -7,6 +7,11 @@ it misses is the summed excess. Under a band of conditions (choices that carry `
 level: no worse on any axis at *every* level, the excess summed over them; the score compared is the
 robust one. The search ranks and polishes with these, the CLI prints a
 :class:`Verdict` per k, and :func:`optipose.io.load_result` gives a saved search's verdicts back.
+
+An axis a choice does not measure (unobservable, or its registrations failed) compares as the score's
+``UNOBSERVABLE_PENALTY`` (10°) on both statistics: worse than any measured error, equal to another
+unmeasured one; :func:`unmeasured_line` says so in words, so a layout that cannot see an axis is never
+read as a small error.
 """
 
 from __future__ import annotations
@@ -15,17 +20,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from optipose.evaluate.assignment import Choice
+from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 
-__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "one_versus_many", "mdeg"]
+__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "one_versus_many", "unmeasured_line", "mdeg"]
 
 _STATISTICS = ("median", "p75")
+
+
+def _stat(axis: AxisChoice, statistic: str) -> float:
+    """An axis's median or p75 (rad) as compared: ``UNOBSERVABLE_PENALTY`` where the choice does not measure it."""
+    return getattr(axis, statistic) if axis.observable else UNOBSERVABLE_PENALTY
 
 
 def dominates(choice: Choice, reference: Choice) -> bool:
     """Every axis's median and 75th percentile at most the reference's (at every condition of a band)."""
     return all(
-        a.median <= b.median and a.p75 <= b.p75 for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes)
+        _stat(a, s) <= _stat(b, s) for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes) for s in _STATISTICS
     )  # fmt: skip
 
 
@@ -33,8 +43,8 @@ def excess(choice: Choice, reference: Choice, margin: float = 1.0) -> float:
     """How far (rad, summed) the choice's per-axis medians and 75th percentiles exceed margin × the
     reference's (summed over the conditions of a band)."""
     return float(sum(
-        max(0.0, a.median - margin * b.median) + max(0.0, a.p75 - margin * b.p75)
-        for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes)
+        max(0.0, _stat(a, s) - margin * _stat(b, s))
+        for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes) for s in _STATISTICS
     ))  # fmt: skip
 
 
@@ -87,10 +97,10 @@ class Verdict:
         pairs = _pairs(self.found, self.reference)
         labels = [label for label, _ in self.found.under] if len(pairs) > 1 else [""]
         return tuple(
-            AxisGap(f.axis, stat, getattr(f, stat), getattr(r, stat), label)
+            AxisGap(f.axis, stat, _stat(f, stat), _stat(r, stat), label)
             for label, (c, ref) in zip(labels, pairs)
             for f, r in zip(c.axes, ref.axes) for stat in _STATISTICS
-            if getattr(f, stat) > getattr(r, stat)
+            if _stat(f, stat) > _stat(r, stat)
         )  # fmt: skip
 
     def levels(self) -> list[tuple[str, float, bool]]:
@@ -114,7 +124,7 @@ class Verdict:
         ``reference`` names the baseline (``hand``, ``conventional``)."""
         ratio, name, ref = self.ratio, self.found.name, self.reference.name
         gaps = sorted(self.worse, key=lambda g: g.reference / g.found)  # the widest first
-        worse = [f"{g.axis} {g.statistic} {mdeg(g.found):.3f} vs {mdeg(g.reference):.3f}"
+        worse = [f"{g.axis} {g.statistic} {_mdeg_or_none(g.found)} vs {_mdeg_or_none(g.reference)}"
                  + (f" ({g.condition})" if g.condition else "") for g in gaps[:3]]  # fmt: skip
         if len(gaps) > 3:
             worse.append(f"{len(gaps) - 3} more")
@@ -126,6 +136,32 @@ class Verdict:
         if worse:
             return f"{head}, but worse on {'; '.join(worse)} mdeg: keep {ref} if no axis may get worse"
         return f"{head}, no worse on any axis"
+
+
+def _mdeg_or_none(rad: float) -> str:
+    return "unmeasured" if rad == UNOBSERVABLE_PENALTY else f"{mdeg(rad):.3f}"
+
+
+def unmeasured_line(k: int, found: Choice, reference: Choice | None = None, label: str = "hand") -> str:
+    """One line when the found choice of k sensors measures some axis with none of its subsets ("" when it
+    measures all three): the axes no found layout of k sensors observes, and those whose registrations
+    failed too often — their error is unknown, not small — and whether the reference (``label``) does."""
+    out = []
+    for reason in dict.fromkeys(a.reason for a in found.axes if not a.observable):
+        axes = [a.axis for a in found.axes if not a.observable and a.reason == reason]
+        names = " and ".join(axes)
+        theirs = [a for a in (reference.axes if reference is not None else ()) if a.axis in axes]
+        also = ""
+        if theirs:
+            seen = [a.axis for a in theirs if a.observable]
+            also = f"; {label} {reference.name} does not either" if not seen else f"; {label} {reference.name} measures {' and '.join(seen)}"
+        if reason == UNOBSERVABLE:
+            sensors = f"{k} sensor{'s' if k > 1 else ''}"
+            out.append(f"{names} unobservable: no layout of {sensors} the search found observes {'it' if len(axes) == 1 else 'them'}{also}")
+        else:
+            out.append(f"{names} not measured: the registrations of found {found.name} that observe {'it' if len(axes) == 1 else 'them'} "
+                       f"failed in over a tenth of the scans{also}")  # fmt: skip
+    return f"k={k}: " + "; ".join(out) + " (the error is unknown, not small)" if out else ""
 
 
 def one_versus_many(one: Choice, many: Choice, reference: str = "hand-placed") -> str:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from optipose.io.folders import versions, write_config
+from optipose.files import atomic_path
+from optipose.io.folders import versions, write_config, write_csv
 from optipose.io.tables import table1_frame
 
 __all__ = ["write_evaluation", "read_evaluation"]
@@ -12,13 +13,15 @@ __all__ = ["write_evaluation", "read_evaluation"]
 
 def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "") -> Path:
     """Save an :class:`optipose.evaluate.evaluator.EvaluationResult`: per-scan errors (CSV and Parquet),
-    point counts, statistics, Table 1 and the config. Returns the folder."""
+    point counts, statistics, Table 1 and, last, the config (a folder without ``config.toml`` is one whose
+    writing was cut short). Each file is written whole or not at all. Returns the folder."""
     folder = Path(folder)
-    result.per_scan.to_csv(folder / "per_scan.csv", index=False)
-    result.per_scan.to_parquet(folder / "per_scan.parquet", index=False)
-    result.points.to_csv(folder / "points.csv", index=False)
-    result.stats.to_csv(folder / "stats.csv", index=False)
-    table1_frame(result.table).to_csv(folder / "table1.csv", index=False)
+    write_csv(result.per_scan, folder / "per_scan.csv")
+    with atomic_path(folder / "per_scan.parquet") as tmp:
+        result.per_scan.to_parquet(tmp, index=False)
+    write_csv(result.points, folder / "points.csv")
+    write_csv(result.stats, folder / "stats.csv")
+    write_csv(table1_frame(result.table), folder / "table1.csv")
     write_config(folder, {
         "command": "evaluate",
         "part": {"name": result.part, "source": part_source},

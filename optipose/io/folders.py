@@ -1,7 +1,9 @@
 """Result folders: one timestamped folder per run with the config it ran, and a ``latest`` link.
 
 ``results/<part>-<command>-<YYYYmmdd-HHMMSS>/`` holds ``config.toml`` (the objective file as written, the
-resolved SI config, part, layout, seed and package versions) beside the command's tables. Files are SI
+resolved SI config, part, layout, seed, package versions and ``format``, the folder layout's version:
+``RESULT_FORMAT``, raised when a command's files or config keys change so that an older folder can be
+told apart) beside the command's tables. Files are SI
 (radians, metres); column names say so where it matters.
 """
 
@@ -15,10 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["make_result_dir", "write_config", "read_config", "versions", "RESULTS_DIR"]
+__all__ = ["make_result_dir", "write_config", "read_config", "write_csv", "versions", "RESULTS_DIR", "RESULT_FORMAT"]
 
 log = logging.getLogger(__name__)
 RESULTS_DIR = Path("results")
+RESULT_FORMAT = 1  # config.toml's ``format``; folders written before it was recorded have none
 
 
 def make_result_dir(part: str, command: str, out: Path | None = None, root: Path = RESULTS_DIR) -> Path:
@@ -59,12 +62,22 @@ def versions() -> dict[str, str]:
 
 
 def write_config(folder: Path, table: dict) -> Path:
-    """``config.toml`` of a result folder: what produced it (command, part, objective file, seed, versions)."""
+    """``config.toml`` of a result folder: what produced it (command, part, objective file, seed, versions)
+    and the folder's ``format``."""
     import tomli_w
 
-    path = Path(folder) / "config.toml"
-    path.write_text(tomli_w.dumps(_plain(table)))
-    return path
+    from optipose.files import write_text
+
+    return write_text(Path(folder) / "config.toml", tomli_w.dumps(_plain({"format": RESULT_FORMAT, **table})))
+
+
+def write_csv(frame, path: Path) -> Path:
+    """A table as CSV (no index), whole or not at all (:mod:`optipose.files`)."""
+    from optipose.files import atomic_path
+
+    with atomic_path(path) as tmp:
+        frame.to_csv(tmp, index=False)
+    return Path(path)
 
 
 def read_config(folder: Path) -> dict:

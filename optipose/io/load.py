@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from optipose.errors import ConfigError
-from optipose.evaluate.assignment import AxisChoice, Choice
+from optipose.evaluate.assignment import FAILED, UNOBSERVABLE, AxisChoice, Choice
 from optipose.evaluate.objective import AXES
 from optipose.io.folders import read_config
 
@@ -84,8 +84,7 @@ def _choice(group: pd.DataFrame, k, names: list[str]) -> Choice:
     axes = []
     for axis in AXES:
         r = by_axis[axis]
-        name = "" if r.subset == "unobservable" else str(r.subset)
-        axes.append(AxisChoice(axis, _indices(name, names), name, float(np.deg2rad(r.median_deg)), float(np.deg2rad(r.p75_deg))))
+        axes.append(_axis(axis, r.subset, r.median_deg, r.p75_deg, names))
     first = group.iloc[0]
     sensors = str(first["sensors"])
     return Choice(int(k), _indices(sensors, names), sensors, tuple(axes), float(np.deg2rad(first["score_deg"])))
@@ -134,20 +133,20 @@ def load_selection(folder: str | Path, names: list[str] | None = None) -> list:
     names = names or [f"F{i}" for i in range(1, 10)] + [f"S{i}" for i in range(1, 10)]
     out = []
     for r in rows.to_dict("records"):
-        axes = tuple(
-            AxisChoice(axis, _indices(_subset(r[f"{axis}_subset"]), names), _subset(r[f"{axis}_subset"]),
-                       float(np.deg2rad(r[f"{axis}_median_deg"])), float(np.deg2rad(r[f"{axis}_p75_deg"])))
-            for axis in AXES
-        )  # fmt: skip
+        axes = tuple(_axis(axis, r[f"{axis}_subset"], r[f"{axis}_median_deg"], r[f"{axis}_p75_deg"], names) for axis in AXES)
         choice = Choice(int(r["k"]), (), "", axes, float(np.deg2rad(r["score_deg"])))
         dominates = str(r["dominates_hand"]).strip().lower() == "true"
         out.append(IcpEvaluation(int(r["k"]), str(r["origin"]), float(r["surrogate_deg"]), str(r["protocol"]), choice, dominates))
     return out
 
 
-def _subset(value) -> str:
-    text = str(value)
-    return "" if text in ("", "nan", "unobservable") else text
+def _axis(axis: str, subset, median_deg: float, p75_deg: float, names: list[str]) -> AxisChoice:
+    """An axis of a choice from a table's cells: its subset's name or, where there is none, the reason
+    written instead (``unobservable``, ``registrations failed``; an empty cell: unobservable)."""
+    text = str(subset)
+    if text in ("", "nan", UNOBSERVABLE, FAILED):
+        return AxisChoice(axis, (), "", float(np.deg2rad(median_deg)), float(np.deg2rad(p75_deg)), FAILED if text == FAILED else UNOBSERVABLE)
+    return AxisChoice(axis, _indices(text, names), text, float(np.deg2rad(median_deg)), float(np.deg2rad(p75_deg)))
 
 
 def load_surrogate_scores(folder: str | Path) -> dict[tuple[str, int], float]:

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from optipose.io.folders import versions, write_config
+from optipose.io.folders import versions, write_config, write_csv
 from optipose.io.tables import bracket_sensors_frame, brackets_frame, robustness_frame
 from optipose.model.layout import write_layout
 
@@ -48,12 +48,12 @@ def write_robustness(folder: Path, part, objective, seed: int, results: dict, ha
         "objective": objective.to_dict(), "objective_file": objective.source_text, "versions": versions(),
     })  # fmt: skip
     frame = robustness_frame(results, hand, objective.conditions.aggregate)
-    frame.to_csv(folder / "robustness.csv", index=False)
+    write_csv(frame, folder / "robustness.csv")
     per_condition = [
         result.stats.assign(layout=name, condition=condition.label)
         for name, robust in results.items() for condition, result in robust.results
     ]  # fmt: skip
-    pd.concat(per_condition, ignore_index=True).to_csv(folder / "conditions.csv", index=False)
+    write_csv(pd.concat(per_condition, ignore_index=True), folder / "conditions.csv")
     return frame
 
 
@@ -63,8 +63,8 @@ def write_brackets(folder: Path, sensitivities: dict) -> tuple[pd.DataFrame, pd.
     sensitivities : layout name → :class:`~optipose.evaluate.sensitivity.BracketSensitivity`.
     """
     axes, sensors = brackets_frame(sensitivities), bracket_sensors_frame(sensitivities)
-    axes.to_csv(Path(folder) / "brackets.csv", index=False)
-    sensors.to_csv(Path(folder) / "bracket_sensors.csv", index=False)
+    write_csv(axes, Path(folder) / "brackets.csv")
+    write_csv(sensors, Path(folder) / "bracket_sensors.csv")
     return axes, sensors
 
 

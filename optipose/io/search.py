@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from optipose.io.evaluation import write_evaluation
-from optipose.io.folders import versions, write_config
+from optipose.files import atomic_path
+from optipose.io.folders import versions, write_config, write_csv
 from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame, table1_frame
 from optipose.model.layout import Layout, write_layout
 
@@ -36,7 +37,7 @@ class SearchFolder:
 
     def flush(self, history, cache, space_version: int) -> None:
         """History and cache to disk: what was computed is never lost."""
-        history_frame(history).to_csv(self.folder / "history.csv", index=False)
+        write_csv(history_frame(history), self.folder / "history.csv")
         save_cache(self.folder, cache, space_version)
 
     def layouts(self, layouts: dict[int, Layout], hand: Layout | None) -> None:
@@ -49,10 +50,10 @@ class SearchFolder:
             write_layout(hand, layout_dir / "hand.toml")
 
     def selection(self, records) -> None:
-        selection_frame(records).to_csv(self.folder / "selection.csv", index=False)
+        write_csv(selection_frame(records), self.folder / "selection.csv")
 
     def surrogate_scores(self, outcome) -> None:
-        surrogate_frame(outcome).to_csv(self.folder / "surrogate_scores.csv", index=False)
+        write_csv(surrogate_frame(outcome), self.folder / "surrogate_scores.csv")
 
     def evaluation(self, name: str, result) -> None:
         """``validation/<name>/``: one evaluation of the validation, as soon as it ends; under a band, one
@@ -66,12 +67,12 @@ class SearchFolder:
         for condition, each in result.results:
             (sub / condition.slug).mkdir(exist_ok=True)
             write_evaluation(each, sub / condition.slug)
-        result.stats.to_csv(sub / "stats.csv", index=False)
-        table1_frame(result.table).to_csv(sub / "table1.csv", index=False)
+        write_csv(result.stats, sub / "stats.csv")
+        write_csv(table1_frame(result.table), sub / "table1.csv")
 
     def validation(self, validation) -> None:
         """``comparison.csv``: found vs. hand per k and axis."""
-        comparison_frame(validation).to_csv(self.folder / "comparison.csv", index=False)
+        write_csv(comparison_frame(validation), self.folder / "comparison.csv")
 
 
 def _write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int) -> Path:
@@ -98,8 +99,7 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
     infos = [cache[k] for k in keys]
     ok = np.array([isinstance(v, SensorInfo) for v in infos])
     n_phases = max((len(v.G) for v in infos if isinstance(v, SensorInfo) and v.G is not None), default=0)
-    np.savez_compressed(
-        folder / "cache.npz",
+    arrays = dict(
         u=np.array(keys, dtype=float).reshape(-1, 6),
         feasible=ok,
         H=np.array([v.H if isinstance(v, SensorInfo) else np.zeros((6, 6)) for v in infos]).reshape(-1, 6, 6),
@@ -116,6 +116,8 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
         noise_band=np.array([getattr(v, "noise_band", 1.0) for v in infos], dtype=float),
         space=space_version,
     )
+    with atomic_path(folder / "cache.npz") as tmp, open(tmp, "wb") as file:  # a file: savez would add .npz to a name
+        np.savez_compressed(file, **arrays)
 
 
 def _or_zeros(info, name: str, shape: tuple) -> np.ndarray:

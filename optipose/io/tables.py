@@ -46,7 +46,7 @@ def _band_rows(label: str, k: int, choice) -> list[dict]:
 
 def _choice_rows(label: str, k: int, choice) -> list[dict]:
     return [
-        {"k": k, "layout": label, "sensors": choice.name, "axis": a.axis, "subset": a.name or "unobservable",
+        {"k": k, "layout": label, "sensors": choice.name, "axis": a.axis, "subset": a.label,
          "median_deg": float(np.rad2deg(a.median)), "p75_deg": float(np.rad2deg(a.p75)), "score_deg": float(np.rad2deg(choice.score))}
         for a in choice.axes
     ]  # fmt: skip
@@ -59,7 +59,7 @@ def selection_frame(records) -> pd.DataFrame:
         row = {"k": r.k, "origin": r.origin, "surrogate_deg": r.surrogate, "protocol": r.protocol,
                "score_deg": float(np.rad2deg(r.choice.score)), "dominates_hand": r.dominates}  # fmt: skip
         for a in r.choice.axes:
-            row |= {f"{a.axis}_median_deg": float(np.rad2deg(a.median)), f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)), f"{a.axis}_subset": a.name}
+            row |= {f"{a.axis}_median_deg": float(np.rad2deg(a.median)), f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)), f"{a.axis}_subset": a.label}
         row["state"] = r.state.value
         rows.append(row)
     return pd.DataFrame(rows)

@@ -99,6 +99,6 @@ def load_layout(path: str | Path) -> Layout:
 def write_layout(layout: Layout, path: str | Path) -> Path:
     import tomli_w
 
-    path = Path(path)
-    path.write_text(tomli_w.dumps(layout.to_table()))
-    return path
+    from optipose.files import write_text
+
+    return write_text(path, tomli_w.dumps(layout.to_table()))

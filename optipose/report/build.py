@@ -11,6 +11,7 @@ import logging
 from dataclasses import replace
 from pathlib import Path
 
+from optipose.files import write_text
 from optipose.report.document import Block, Figure, Heading, Paragraph, render_html, render_markdown, write_figures
 
 __all__ = ["write_report", "build_blocks", "REPORT_HTML", "REPORT_MD", "FIGURE_DIR"]
@@ -27,9 +28,9 @@ def write_report(folder: str | Path, views: bool = True) -> tuple[Path, Path]:
     folder = Path(folder)
     title, blocks = build_blocks(folder, views)
     html_path, md_path = folder / REPORT_HTML, folder / REPORT_MD
-    html_path.write_text(render_html(title, blocks), encoding="utf-8")
+    write_text(html_path, render_html(title, blocks))
     write_figures(blocks, folder / FIGURE_DIR)
-    md_path.write_text(render_markdown(title, blocks, FIGURE_DIR), encoding="utf-8")
+    write_text(md_path, render_markdown(title, blocks, FIGURE_DIR))
     return html_path, md_path
 
 

@@ -14,6 +14,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from optipose.files import write_bytes
+
 __all__ = ["Block", "Heading", "Paragraph", "Table", "Figure", "Code", "render_html", "render_markdown"]
 
 
@@ -120,7 +122,7 @@ def write_figures(blocks: list[Block], folder: Path) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     for b in blocks:
         if isinstance(b, Figure):
-            (folder / b.name).write_bytes(b.png)
+            write_bytes(folder / b.name, b.png)
 
 
 def _e(text: str) -> str:

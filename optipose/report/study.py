@@ -11,6 +11,7 @@ import math
 import os
 from pathlib import Path
 
+from optipose.files import write_text
 from optipose.report.document import Heading, Paragraph, Table, render_html, render_markdown
 
 __all__ = ["study_report", "study_table"]
@@ -47,8 +48,8 @@ def study_report(rows: list[dict], folders: list[str | Path | None], out: str | 
     summary = ", ".join(f"{states.count(s)} {s}" for s in dict.fromkeys(states) if s) or f"{len(rows)} trials"
     blocks = [Heading("Trials"), Paragraph(summary), study_table(rows, folders, out)]
     html, md = out / "study.html", out / "study.md"
-    html.write_text(render_html(title, blocks), encoding="utf-8")
-    md.write_text(render_markdown(title, blocks, "."), encoding="utf-8")
+    write_text(html, render_html(title, blocks))
+    write_text(md, render_markdown(title, blocks, "."))
     return html, md
 
 

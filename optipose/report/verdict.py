@@ -7,7 +7,7 @@ records only; the lines are the ones the terminal prints (:meth:`Verdict.line`).
 
 from __future__ import annotations
 
-from optipose.evaluate.compare import Verdict, mdeg, one_versus_many
+from optipose.evaluate.compare import Verdict, mdeg, one_versus_many, unmeasured_line
 from optipose.report.document import Block, Heading, Paragraph, Table
 
 __all__ = ["verdict_css", "verdict_blocks", "verdict_table", "table1_rows", "table1_side_by_side", "table1_alone"]
@@ -23,11 +23,14 @@ def verdict_css(verdict: Verdict) -> str:
 
 
 def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label: str) -> list[Block]:
-    """One coloured line per k (the terminal's), then the headline: one found sensor vs. the baseline's largest.
+    """An axis a found layout does not measure, one line per k; one coloured line per k (the terminal's), then
+    the headline: one found sensor vs. the baseline's largest.
 
     found, reference : k → Choice; label : ``hand`` or ``conventional``.
     """
     blocks: list[Block] = [Heading("Verdict")]
+    unmeasured = (unmeasured_line(k, choice, reference.get(k), label) for k, choice in found.items())
+    blocks += [Paragraph(text, "verdict bad") for text in unmeasured if text]  # an axis no found layout measures, first
     if not verdicts:
         blocks.append(Paragraph(f"no verdict: nothing to compare the found layouts with ({label} layout missing)", "verdict mixed"))
         return blocks
@@ -59,7 +62,7 @@ def verdict_table(verdicts: list[Verdict], label: str) -> Table:
 
 def _cell(axis) -> str:
     if not axis.observable:
-        return "unobservable"
+        return axis.label
     return f"{mdeg(axis.median):.3f} / {mdeg(axis.p75):.3f} ({axis.name})"
 
 

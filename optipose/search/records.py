@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from optipose.evaluate.compare import Verdict, one_versus_many
+from optipose.evaluate.compare import Verdict, one_versus_many, unmeasured_line
 
 __all__ = ["EvalState", "LayoutScore", "Evaluation", "Found", "IcpEvaluation", "SearchOutcome", "Validation", "SearchResult", "PENALTY"]
 
@@ -147,10 +147,17 @@ class Validation:
         """Found vs. hand for every k that has both."""
         return [Verdict(k, self.found[k], self.hand[k]) for k in sorted(self.found) if k in self.hand]
 
+    def unmeasured_lines(self, reference: str = "hand") -> list[str]:
+        """Per k whose found choice leaves an axis unmeasured, one line saying so
+        (:func:`~optipose.evaluate.compare.unmeasured_line`): no found layout of k sensors observes it."""
+        lines = (unmeasured_line(k, self.found[k], self.hand.get(k), reference) for k in sorted(self.found))
+        return [line for line in lines if line]
+
     def verdict_lines(self, reference: str = "hand") -> list[str]:
-        """One line per k (:meth:`Verdict.line`), then whether one found sensor beats the hand's largest
-        choice; ``reference`` names the baseline (``hand``, ``conventional``)."""
-        lines = [v.line(reference) for v in self.verdicts()]
+        """One line per k (:meth:`Verdict.line`), then the axes a found layout does not measure
+        (:meth:`unmeasured_lines`), then whether one found sensor beats the hand's largest choice;
+        ``reference`` names the baseline (``hand``, ``conventional``)."""
+        lines = [v.line(reference) for v in self.verdicts()] + self.unmeasured_lines(reference)
         ks = sorted(self.found)
         top = max(ks, default=0)
         if 1 in self.found and top in self.hand and top > 1:

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 
+from cli_checks import SMALL_SEARCH, run
 from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import load_objective, reduced_objective
+from optipose.io import load_result
 from optipose.model.baseline import CONVENTIONAL
 from optipose.model.part import load_part
 
@@ -111,3 +113,45 @@ def test_a_faceted_sphere_pins_its_centre(tmp_path):
     assert per_scan[["err_x", "err_y", "err_z"]].abs().max().max() < 5e-6
     for axis in ROTATIONS:
         assert per_scan[f"unobservable_{axis}"].all() or _max_deg(per_scan, axis) < 0.05
+
+
+# -- the search on a part no sensor can fully observe -------------------------------------------------------
+SHORT = '[protocol]\nsequences = ["R", "P", "Y"]\nstep_deg = 4.0\n'
+
+
+def test_the_search_says_when_no_layout_of_k_sensors_observes_an_axis(tmp_path):
+    # a plane: from any view its yaw (a turn about its normal) is unobservable. Measured: a 160-evaluation
+    # search of one sensor in 17 s; found and conventional both read yaw `unobs.`, scores 20 000 mdeg
+    # (the 10° charge twice), and one line says no layout of one sensor the search found observes yaw
+    FLAT["plane"]().export(tmp_path / "plane.stl")
+    (tmp_path / "small.toml").write_text(SMALL_SEARCH)
+    (tmp_path / "short.toml").write_text(SHORT)
+    out = tmp_path / "searched"
+    result = run("search", str(tmp_path / "plane.stl"), "--units", "m", "--sensors", "1", "--search-config", str(tmp_path / "small.toml"),
+                 "--objective", str(tmp_path / "short.toml"), "--seed", "4", "--out", str(out), "--no-report")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    said = " ".join(result.stdout.split())  # the terminal's 80 columns fold the line
+    assert "k=1: yaw unobservable: no layout of 1 sensor the search found observes it; conventional S2 does not either" in said
+    found = load_result(out).validation.found[1]
+    assert [a.label for a in found.axes] == ["F1", "F1", "unobservable"] and np.isnan(found.axes[2].median)
+    assert any(line.startswith("k=1: yaw unobservable") for line in load_result(out).verdict_lines())  # the report's lines too
+
+
+def test_an_unmeasured_axis_compares_as_the_penalty_not_as_nan():
+    from optipose.evaluate.assignment import FAILED, UNOBSERVABLE, AxisChoice, Choice
+    from optipose.evaluate.compare import Verdict, dominates, excess, unmeasured_line
+
+    def choice(name, yaw_reason=""):
+        yaw = AxisChoice("yaw", (), "", float("nan"), float("nan"), yaw_reason) if yaw_reason else AxisChoice("yaw", (0,), name, 2e-6, 3e-6)
+        axes = (AxisChoice("roll", (0,), name, 1e-6, 2e-6), AxisChoice("pitch", (0,), name, 1e-6, 2e-6), yaw)
+        return Choice(1, (0,), name, axes, 0.0)
+
+    blind, seeing, failing = choice("F1", UNOBSERVABLE), choice("S2"), choice("F1", FAILED)
+    # NaN compared as "not worse" before: a found layout blind to yaw passed as no worse than one that sees it
+    assert not dominates(blind, seeing) and dominates(seeing, blind) and dominates(blind, choice("S2", UNOBSERVABLE))
+    assert excess(blind, seeing) == pytest.approx(2 * np.deg2rad(10.0) - 5e-6)
+    assert [(g.axis, g.statistic) for g in Verdict(1, blind, seeing).worse] == [("yaw", "median"), ("yaw", "p75")]
+    assert unmeasured_line(1, seeing, blind) == ""
+    assert unmeasured_line(1, blind, seeing) == ("k=1: yaw unobservable: no layout of 1 sensor the search found observes it; "
+                                                 "hand S2 measures yaw (the error is unknown, not small)")  # fmt: skip
+    assert unmeasured_line(2, failing, None).startswith("k=2: yaw not measured: the registrations of found F1 that observe it failed")

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from optipose.evaluate.assignment import MAX_FAILED_FRACTION
+from optipose.evaluate.assignment import FAILED, MAX_FAILED_FRACTION
 from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
@@ -57,12 +57,16 @@ def test_registrations_cut_short_are_counted_not_dropped(part_b):
         rows = per_scan[per_scan["subset"] == subset]
         assert row.n_ok + row.n_failed == 8 and row.n_failed == (~rows["ok"]).sum()
         ok = rows.loc[rows["ok"], f"err_{axis}"].abs()
-        assert (np.isnan(row["median"]) and ok.empty) or row["median"] == pytest.approx(ok.median(), rel=1e-12)
-    # Table 1 takes no subset that failed in more than a tenth of the scans
+        ranked = np.concatenate([ok, np.full(row.n_failed, np.deg2rad(10.0))])  # a failure: a 10° error
+        assert row["median"] == pytest.approx(np.median(ranked), rel=1e-12) and row["p75"] == pytest.approx(np.percentile(ranked, 75), rel=1e-12)
+        assert (np.isnan(row["max"]) and ok.empty) or row["max"] == ok.max()  # mean and max: the converged ones
+    # Table 1 takes no subset that failed in more than a tenth of the scans, and says that is why
     too_many = set(stats.loc[stats["n_failed"] > MAX_FAILED_FRACTION * 8, "subset"])
     assert too_many
     for choice in result.table:
         assert not {a.name for a in choice.axes if a.observable} & too_many
+    assert not stats["unobservable"].any()  # every subset observes every axis: the failures are why
+    assert all(a.reason == FAILED and a.label == "registrations failed" for c in result.table for a in c.axes)
 
 
 @pytest.fixture(scope="module")
