@@ -14,7 +14,7 @@ from optipose.search.pipeline import run
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "part, ks",
-    [("part_a", (1, 2, 3)), ("part_b", (2, 3)), ("part_c", (2, 3))],  # about 6, 2.5 and 3 minutes (session 10 CLI runs)
+    [("part_a", (1, 2, 3)), ("part_b", (2, 3)), ("part_c", (2, 3))],  # about 4, 2.5 and 2 minutes (session 10 CLI runs)
 )
 def test_default_search_beats_the_hand_placed_layout(tmp_path, part, ks):
     # README "Results on parts A, B and C": these found layouts are >= 2x better than the hand-placed
