@@ -16,6 +16,10 @@ class ConfigError(OptiposeError):
     """A config, preset, layout or objective file is missing, malformed or inconsistent."""
 
 
+class WorkerError(OptiposeError):
+    """A worker process died (killed, out of memory) and the work it had could not be finished."""
+
+
 class PoseError(OptiposeError):
     """A pose matrix is not a proper rigid transform."""
 

@@ -160,3 +160,42 @@ def test_a_sensor_naming_another_model_is_scanned_with_it(plate, objective, seri
         row = mixed.points[(mixed.points["scan"] == i) & (mixed.points["sensor"] == "S3")].iloc[0]
         assert row["n_points"] == len(scan.points)
         assert row["n_points_down"] == len(voxel_down(scan.points, ev.objective.registration.voxel_size))
+
+
+def _dies_once(item):
+    """Square ``value``; the first call that finds no ``marker`` file creates it and kills its own process."""
+    import os
+    import signal
+    from pathlib import Path
+
+    value, marker, always = item
+    if always or (value == 3 and not Path(marker).exists()):
+        Path(marker).touch()
+        os.kill(os.getpid(), signal.SIGKILL)
+    return value * value
+
+
+def test_a_worker_that_dies_is_replaced_and_its_work_run_again(tmp_path, caplog):
+    """A worker process killed mid-map (SIGKILL: the OOM killer, a user) costs a re-run, not the evaluation:
+    the map's results are those of a map where nothing died, and the death is logged."""
+    marker = tmp_path / "died"
+    executor = JoblibExecutor(2)
+    try:
+        with caplog.at_level("WARNING", logger="optipose.evaluate.executors"):
+            out = executor.map(_dies_once, [(v, str(marker), False) for v in range(8)])
+    finally:
+        executor.close()
+    assert marker.exists()  # a worker did die
+    assert out == [v * v for v in range(8)]
+    assert "a worker process died" in caplog.text
+
+
+def test_a_worker_that_dies_again_is_one_clear_error(tmp_path):
+    from optipose.errors import WorkerError
+
+    executor = JoblibExecutor(2)
+    try:
+        with pytest.raises(WorkerError, match="died twice"):
+            executor.map(_dies_once, [(v, str(tmp_path / "died"), True) for v in range(4)])
+    finally:
+        executor.close()

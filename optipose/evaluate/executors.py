@@ -26,7 +26,7 @@ import logging
 from collections.abc import Callable, Iterable
 from typing import Protocol, runtime_checkable
 
-from optipose.errors import ConfigError
+from optipose.errors import ConfigError, WorkerError
 
 __all__ = ["Executor", "SerialExecutor", "JoblibExecutor", "DaskExecutor", "EXECUTORS", "register_executor", "make_executor",
            "THREAD_VARIABLES", "thread_env"]  # fmt: skip
@@ -86,12 +86,26 @@ class JoblibExecutor:
         self._pool = None
 
     def map(self, fn: Callable, items: Iterable) -> list:
+        """``fn`` over the items on the workers. When a worker process dies (killed, out of memory), loky
+        replaces it and the map runs once more (the work is pure: the same items give the same results);
+        a second death is a :class:`~optipose.errors.WorkerError`."""
         from joblib import Parallel, delayed
+        from joblib.externals.loky.process_executor import BrokenProcessPool
 
-        if self._pool is None:
-            log.debug("starting a loky pool of %d workers", self.n_workers)
-            self._pool = Parallel(n_jobs=self.n_workers, backend="loky")
-        return list(self._pool(delayed(fn)(item) for item in items))
+        items = list(items)
+        for attempt in (1, 2):
+            if self._pool is None:
+                log.debug("starting a loky pool of %d workers", self.n_workers)
+                self._pool = Parallel(n_jobs=self.n_workers, backend="loky")
+            try:
+                return list(self._pool(delayed(fn)(item) for item in items))
+            except BrokenProcessPool as exc:  # TerminatedWorkerError is one
+                self._pool = None
+                reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                if attempt == 2:
+                    raise WorkerError(f"a worker process died twice running the same work ({reason})") from None
+                log.warning("a worker process died (%s); running its %d tasks again", reason, len(items))
+        raise AssertionError("unreachable")
 
     def close(self) -> None:
         self._pool = None  # loky keeps its workers for the next pool of the same size
@@ -128,7 +142,14 @@ class DaskExecutor:
         self.n_workers = max(1, sum(w["nthreads"] for w in self._client.scheduler_info()["workers"].values()))
 
     def map(self, fn: Callable, items: Iterable) -> list:
-        return self._client.gather(self._client.map(fn, list(items), pure=False))
+        """``fn`` over the items on the cluster; the scheduler re-runs the tasks of a worker that dies (Dask's
+        ``distributed.scheduler.allowed-failures``, 3 by default), past that a :class:`~optipose.errors.WorkerError`."""
+        from distributed import KilledWorker
+
+        try:
+            return self._client.gather(self._client.map(fn, list(items), pure=False))
+        except KilledWorker as exc:
+            raise WorkerError(f"Dask workers died running the same task too often ({exc})") from None
 
     def close(self) -> None:
         if self._own:
