@@ -101,7 +101,9 @@ BUDGETS: dict[str, dict] = {
 # confirmation; the selection's statistic already pools every condition's scans (README, "The search
 # under the band").
 BAND_BUDGETS: dict[str, dict] = {
-    "default": dict(max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0),
+    # a sensor pose costs the band's surrogate ~5x a nominal one's (the noise and bracket terms): 4,096 screen
+    # poses would take the whole clock, and k = 1 and 2 got no greedy stage at all
+    "default": dict(max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024),
 }
 
 
