@@ -217,9 +217,17 @@ def test_a_dead_worker_costs_its_trial_one_retry_then_it_fails(tmp_path):
 
 
 # -- killed, interrupted and resumed ----------------------------------------------------------------------
+def _sigint_as_in_a_terminal() -> None:
+    """A shell starts background jobs with SIGINT ignored, and Python keeps an ignored SIGINT ignored: a
+    test suite run as one (``pytest &``, ``nohup``) would hand that to the study and its Ctrl-C would do
+    nothing (the study ran to the end with exit 0). The study gets SIGINT as a terminal gives it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _batch(*args, **kw):
     return subprocess.Popen([sys.executable, "-m", "optipose", "batch", *map(str, args)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True, **kw)  # fmt: skip
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_sigint_as_in_a_terminal, **kw)  # fmt: skip
 
 
 def _wait_for_complete(folder: Path, proc, n: int, timeout: float = 240.0) -> pd.DataFrame:
