@@ -237,8 +237,9 @@ def _search(files: Path, out: Path, *more: str) -> list[str]:
 
 @pytest.mark.slow
 def test_a_search_killed_part_way_resumes_to_the_uninterrupted_result(files):
-    # measured: 13 s uninterrupted; killed at the first flush of its history (100 evaluations of ~160), then
-    # resumed; 23-30 s in all at nice 19 on the shared machine
+    # measured: 13 s uninterrupted; killed at the first flush of its history (100 evaluations of ~160 when
+    # it flushed every 100; since session 10 no sooner than 10 s apart, so here at the end of the surrogate
+    # stage, before the ICP validation), then resumed; 23-30 s in all at nice 19 on the shared machine
     (files / "small_search.toml").write_text(SMALL_SEARCH)
     whole, killed = files / "search_whole", files / "search_killed"
     done = subprocess.run([sys.executable, *_search(files, whole)], capture_output=True, text=True, timeout=600)
@@ -251,7 +252,8 @@ def test_a_search_killed_part_way_resumes_to_the_uninterrupted_result(files):
     finally:
         process.wait(timeout=30)
     assert process.returncode == -signal.SIGKILL and not (killed / "comparison.csv").exists()  # killed part-way
-    assert len(pd.read_csv(killed / "history.csv")) == 100  # the first flush, whole
+    # the first flush, whole (every 100 evaluations and at most every 10 s, or at the end of the surrogate stage)
+    assert 100 <= len(pd.read_csv(killed / "history.csv")) <= len(pd.read_csv(whole / "history.csv"))
     resumed = run("search", "--resume", str(killed), "--no-report")
     assert resumed.returncode == 0, resumed.stderr
     for name in ("history.csv", "comparison.csv", "surrogate_scores.csv", "layouts/found_k1.toml", "layouts/hand.toml"):
