@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from optipose.scan.raycast import edge_planes
+
 __all__ = ["SurfaceReference", "SampledReference", "sample_surface"]
 
 _CELL = 0.5e-3  # m: grid cells of nearest(), larger if the part would need more than _MAX_CELLS
@@ -41,10 +43,7 @@ class SurfaceReference:
         self.normals = normal / np.maximum(area2, 1e-300)[:, None]
         self.offsets = np.einsum("ij,ij->i", self.normals, tri[:, 0])
         # inward edge planes: a point projects inside face f iff edge_n[f, k]·x - edge_c[f, k] >= 0 for k = 0..2
-        edges = np.roll(tri, -1, axis=1) - tri
-        edge_n = np.cross(self.normals[:, None, :], edges)
-        self.edge_n = edge_n / np.maximum(np.linalg.norm(edge_n, axis=2, keepdims=True), 1e-300)
-        self.edge_c = np.einsum("fkj,fkj->fk", self.edge_n, tri)
+        self.edge_n, self.edge_c = edge_planes(tri, self.normals)
         # face plane and edge planes packed: one gather and one product per point in follow()
         self._planes = np.ascontiguousarray(np.concatenate([self.normals[:, None], self.edge_n], axis=1))  # (f, 4, 3)
         self._plane_c = np.ascontiguousarray(np.concatenate([self.offsets[:, None], self.edge_c], axis=1))  # (f, 4)

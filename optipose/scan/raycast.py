@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "shared_planes", "BACKENDS"]
+__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "edge_planes", "shared_planes", "BACKENDS"]
 
 
 class RayCaster(Protocol):
@@ -158,17 +158,26 @@ def face_planes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np
     return normal, np.einsum("ij,ij->i", normal, tris[:, 0])
 
 
-def shared_planes(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9):
+def edge_planes(tris: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each face's inward edge planes ``edge_n`` (f, 3, 3), ``edge_c`` (f, 3) from its corners ``tris``
+    (f, 3, 3) and unit normals (f, 3): a point of the face's plane lies inside the face where
+    ``edge_n·x >= edge_c`` for its three edges (edge k runs from corner k to corner k + 1)."""
+    edge_n = np.cross(normals[:, None, :], np.roll(tris, -1, axis=1) - tris)
+    edge_n /= np.maximum(np.linalg.norm(edge_n, axis=2, keepdims=True), 1e-300)
+    return edge_n, np.einsum("fkj,fkj->fk", edge_n, tris)
+
+
+def shared_planes(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9):
     """Faces that lie in one plane, given one plane: returns ``plane`` (f,) int64 (faces in one plane share a
-    number; a degenerate face has one of its own), the normals (f, 3) and offsets (f,) with every face of a
-    plane given its first face's, and each face's inward edge planes ``edge_n`` (f, 3, 3), ``edge_c`` (f, 3):
-    a point of the face's plane lies inside the face where ``edge_n·x >= edge_c`` for its three edges.
+    number; a degenerate face has one of its own), the normals (f, 3) and offsets (f,) of
+    :func:`face_planes` with every face of a plane given its first face's, and each face's inward edge
+    planes (:func:`edge_planes`).
 
     Faces are one plane when their normals agree to ``tol`` and their offsets to ``tol`` × 0.01 m: the
     faces of a CAD face, split into triangles, whose computed planes differ only by rounding. Giving them
     one plane makes a hit's float64 position the same whichever of them Embree names.
     """
-    normals, offsets = np.asarray(normals, dtype=np.float64), np.asarray(offsets, dtype=np.float64)
+    normals, offsets = face_planes(vertices, faces)
     key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
     _, first, plane = np.unique(key, axis=0, return_index=True, return_inverse=True)
     plane = plane.ravel().astype(np.int64)
@@ -176,9 +185,6 @@ def shared_planes(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, 
     plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(int(degenerate.sum()))
     rep = first[np.minimum(plane, len(first) - 1)]
     rep[degenerate] = np.flatnonzero(degenerate)
-    normals, offsets = normals[rep], offsets[rep]
-    tris = np.asarray(vertices, dtype=np.float64)[faces]
-    edge_n = np.cross(normals[:, None, :], np.roll(tris, -1, axis=1) - tris)
-    edge_n /= np.maximum(np.linalg.norm(edge_n, axis=2, keepdims=True), 1e-300)
-    edge_c = np.einsum("fkj,fkj->fk", edge_n, tris)
-    return plane, np.ascontiguousarray(normals), offsets, np.ascontiguousarray(edge_n), np.ascontiguousarray(edge_c)
+    normals, offsets = np.ascontiguousarray(normals[rep]), offsets[rep]
+    edge_n, edge_c = edge_planes(np.asarray(vertices, dtype=np.float64)[faces], normals)
+    return plane, normals, offsets, np.ascontiguousarray(edge_n), np.ascontiguousarray(edge_c)

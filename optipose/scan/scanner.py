@@ -25,7 +25,7 @@ from optipose.model.material import Material, load_material
 from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import NORMAL_QUANTILES, fill_columns, measure_hits, split_at_anchors, unsure_between_anchors, write_points
 from optipose.scan.profiles import EMPTY, ray_lines
-from optipose.scan.raycast import default_threads, face_planes, make_caster, shared_planes
+from optipose.scan.raycast import default_threads, make_caster, shared_planes
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
@@ -78,8 +78,9 @@ class Scanner:
         are never measured.
     column_stride : cast every ``column_stride``-th column of a profile (the anchors); the columns between
         two anchors that hit the same triangle (or two triangles of one plane, where the ray's point on it
-        lies inside one of them) hit it too and are not cast (:func:`fill_columns`), the others are. 1 casts every column. The points are the same either way, but for a feature thinner
-        than the anchors' spacing (stride × the column pitch).
+        lies inside one of them) hit it too and are not cast (:func:`fill_columns`), the others are. 1 casts
+        every column. The points are the same either way, but for a feature thinner than the anchors'
+        spacing (stride × the column pitch).
     """
 
     def __init__(
@@ -110,7 +111,7 @@ class Scanner:
         self.caster = make_caster(self.vertices, self.faces, backend, threads=1)
         self.threads = threads or default_threads()
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
-        self._plane, self._normals, self._offsets, self._edge_n, self._edge_c = shared_planes(self.vertices, self.faces, *face_planes(self.vertices, self.faces))
+        self._plane, self._normals, self._offsets, self._edge_n, self._edge_c = shared_planes(self.vertices, self.faces)
         self._on_hull = _supporting_faces(mesh, self._normals, self._offsets)
         self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
         self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()

@@ -42,6 +42,11 @@ class Violation(NamedTuple):
     amount: float
 
 
+def _key(u6) -> tuple:
+    """A sensor's cache key: its six numbers rounded to 1e-9."""
+    return tuple(np.round(np.asarray(u6, dtype=float), 9))
+
+
 class SurrogateProblem:
     """Scores layouts on the surrogate with constraints; caches per-sensor results.
 
@@ -80,9 +85,9 @@ class SurrogateProblem:
     # --- one sensor ------------------------------------------------------------------------------
     def sensor(self, u6: np.ndarray) -> SensorInfo | Violation:
         """The sensor's information, or its constraint violation when it is infeasible on its own."""
-        key = tuple(np.round(np.asarray(u6, dtype=float), 9))
+        key = _key(u6)
         if key not in self._cache:
-            self._cache[key] = self._sensor(self.space.to_pose(np.asarray(key)))
+            self._cache[key] = self._sensor_at(key)
         return self._cache[key]
 
     def prefetch(self, us: np.ndarray, threads: int | None = None, until: float = np.inf) -> None:
@@ -96,7 +101,7 @@ class SurrogateProblem:
 
         from optipose.scan.raycast import default_threads
 
-        keys = list(dict.fromkeys(tuple(np.round(np.asarray(u, dtype=float), 9)) for u in us))
+        keys = list(dict.fromkeys(_key(u) for u in us))
         todo = [k for k in keys if k not in self._cache]
         threads = threads or default_threads()
         if threads < 2 or len(todo) < 2:
@@ -108,8 +113,11 @@ class SurrogateProblem:
                 if time.monotonic() > until:
                     return
                 part = todo[start : start + chunk]
-                for key, value in zip(part, pool.map(lambda k: self._sensor(self.space.to_pose(np.asarray(k))), part)):
+                for key, value in zip(part, pool.map(self._sensor_at, part)):
                     self._cache[key] = value
+
+    def _sensor_at(self, key: tuple) -> SensorInfo | Violation:
+        return self._sensor(self.space.to_pose(np.asarray(key)))
 
     def _sensor(self, T: np.ndarray) -> SensorInfo | Violation:
         cfg = self.config

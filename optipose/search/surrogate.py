@@ -173,18 +173,19 @@ class Surrogate:
             return None, None, None, None
         self.ready()
         A, G = np.zeros((6, 6)), np.zeros((len(self.motions), 6))
-        A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
+        A_turns = N_turns = None
+        if self.mounting:
+            A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
             if m == 0 and not self.mounting:
                 continue
             v, n, r, J = self._turned(points, T)
             if self.mounting:
                 A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
-            if m == 0:
-                continue
-            G[m - 1] = J.T @ r
-            A += J.T @ J / len(self.motions)
-        return (A, G, A_turns, N_turns) if self.mounting else (A, G, None, None)
+            if m > 0:
+                G[m - 1] = J.T @ r
+                A += J.T @ J / len(self.motions)
+        return A, G, A_turns, N_turns
 
     def _turned(self, points: np.ndarray, T: np.ndarray) -> tuple:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
