@@ -182,3 +182,39 @@ def test_a_kept_sensor_is_measured_exactly_as_in_the_hand_layout(part_b):
     for subset in ("S1", "S2", "S1S2"):
         np.testing.assert_array_equal(rows_a[rows_a.subset == subset][err].to_numpy(), rows_b[rows_b.subset == subset][err].to_numpy())
     assert not np.array_equal(rows_a[rows_a.subset == "S3"][err].to_numpy(), rows_b[rows_b.subset == "F1"][err].to_numpy())
+
+
+def test_the_refinement_places_the_found_sensor_for_the_kept_ones(part_b):
+    # robust band: the kept S1 and S2 stay exactly, the found sensor moves, and the refined layout scores
+    # no worse on the refinement's value (score + hand-margin penalty) than the best unrefined one
+    from optipose.search.candidates import _anchored_value, anchored
+    from optipose.search.config import SearchConfig
+    from optipose.search.problem import SurrogateProblem
+
+    problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
+    hand = part_b.layouts["hand"].poses
+    outcome = _outcome(problem, [])
+    (plain,) = anchored(problem, hand, (0, 1), outcome, 3, n=1)
+    layouts = anchored(problem, hand, (0, 1), outcome, 3, n=2, evals=25)
+    refined = [f for f in layouts if f.strategy == "hand-anchored, refined"]
+    assert refined, [f.strategy for f in layouts]
+    for i in (0, 1):
+        np.testing.assert_allclose(refined[0].poses[i], hand[i], atol=1e-9)
+    assert not np.allclose(refined[0].poses[2], F1, atol=1e-6)
+    kept = {i: problem.surrogate.info(hand[i]) for i in (0, 1)}
+    assert _anchored_value(problem, refined[0].u, kept, 3) < _anchored_value(problem, plain.u, kept, 3)
+
+
+def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
+    # under a band, an axis lost at the preset's noise is penalised even when the worst over the band
+    # (the top level's) is no worse than the hand layout's; one level: the old per-axis penalty exactly
+    from optipose.search.config import SearchConfig
+    from optipose.search.problem import SurrogateProblem
+
+    problem = SurrogateProblem(part_b, load_objective("paper"), SearchConfig(hand_margin=1.0, hand_weight=1.0))
+    stats = {"axis_score": np.array([1.0, 2.0, 3.0]), "level_axis_score": np.array([[1.0, 2.0, 3.0]])}
+    one = problem.with_targets({1: np.array([[1.0, 1.0, 4.0]])})
+    assert one.shortfall(1, stats) == pytest.approx(1.0)
+    band = {"axis_score": np.array([5.0, 5.0, 5.0]), "level_axis_score": np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]])}
+    targets = problem.with_targets({1: np.array([[1.0, 1.0, 1.0], [6.0, 6.0, 6.0]])})
+    assert targets.shortfall(1, band) == pytest.approx(1.0)  # pitch at the first level, though 5 < 6 at the worst

@@ -6,14 +6,18 @@ the k−1 they contain)."""
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+import time
 
 import numpy as np
 
 from optipose.model.collision import heads_clearance
-from optipose.search.driver import apart
+from optipose.search.driver import apart, optimize
 from optipose.search.problem import SurrogateProblem, Violation
-from optipose.search.records import Evaluation, Found, SearchOutcome
+from optipose.search.records import PENALTY, Evaluation, Found, SearchOutcome
+from optipose.search.surrogate import predicted_stats
+from optipose.search.study import Stop
 
 __all__ = ["candidates", "distinct", "anchored"]
 
@@ -78,7 +82,7 @@ def _extended(problem: SurrogateProblem, base: Found, others: list[Found]) -> Fo
 
 
 def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tuple[int, ...], outcome: SearchOutcome,
-             k: int, n: int = 2) -> list[Found]:  # fmt: skip
+             k: int, n: int = 2, evals: int = 0, until: float = np.inf) -> list[Found]:  # fmt: skip
     """Layouts of k sensors that keep hand-placed sensors the hand layout's k-choice uses (``used``, their
     indices) in their own places and put a found sensor in each other place; the ``n`` best on the surrogate.
 
@@ -90,6 +94,12 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     kept, and at most k − 1 of them (one place at least is the search's): when the choice uses more, each
     way of leaving one out is tried. The found sensors must clear the part and keep-outs on their own and
     the other heads by ``head_gap`` (the kept hand heads are the baseline, whatever their gaps).
+
+    evals : when > 0, each way of keeping sensors then moves its best layout's found sensors by a local
+    NLopt search on the surrogate (``evals`` evaluations, until ``time.monotonic()`` passes ``until``),
+    the kept ones fixed, scored with the hand-margin penalty noise level by noise level: the found sensors
+    are placed *for* the kept ones, not borrowed from layouts placed without them. Layouts are then ranked
+    with that penalty too.
     """
     keepable = [i for i in used if i < k]
     if not hand_poses or k < 2 or not keepable:
@@ -98,25 +108,80 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     pool = [f for f in (*outcome.found.values(), *outcome.greedy.values(), *outcome.joint.values()) if f and f.stats]
     sensors = distinct_sensors([f.sensor(i) for f in pool for i in range(f.k)])
     sensors = [u6 for u6 in sensors if not isinstance(problem.sensor(u6), Violation)]  # feasible alone
-    out = []
+    out, values = [], {}
     for keep in itertools.combinations(keepable, size):
         free = [i for i in range(k) if i not in keep]
+        these = []
         for fill in itertools.permutations(sensors, len(free)):
             u6s = {i: problem.space.from_pose(hand_poses[i]) for i in keep} | dict(zip(free, fill))
             found = _anchored_layout(problem, np.concatenate([u6s[i] for i in range(k)]), free, k)
             if found is not None:
-                out.append(found)
-    return distinct(out, 0.02)[:n]
+                these.append(found)
+        if evals > 0 and these:
+            kept = {i: problem.surrogate.info(hand_poses[i]) for i in keep}  # scanned once, whatever their clearances
+            for found in these:
+                values[id(found)] = _anchored_value(problem, found.u, kept, k)
+            if time.monotonic() < until:
+                refined = _refined(problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until)
+                values[id(refined)] = _anchored_value(problem, refined.u, kept, k)
+                these.append(refined)
+        out += these
+    if evals <= 0:  # as before the refinement existed: ranked by the surrogate's score alone
+        return distinct(out, 0.02)[:n]
+    return distinct(out, 0.02, key=lambda f: values[id(f)])[:n]
 
 
 def _anchored_layout(problem: SurrogateProblem, u: np.ndarray, free: list[int], k: int) -> Found | None:
+    if _gap_violation(problem, u, free, k) > 0:
+        return None
+    score = problem.score(u, constrained=False)  # the kept heads are the baseline's
+    return Found(k, "hand-anchored", u, problem.space.to_poses(u), score.value, score.stats) if score.stats is not None else None
+
+
+def _gap_violation(problem: SurrogateProblem, u: np.ndarray, free: list[int], k: int) -> float:
+    """How far (m) the found heads come within ``head_gap`` of the others (0: far enough)."""
     poses = problem.space.to_poses(u)
     model = problem.collision.sensor
     gaps = [heads_clearance(model, poses[a], model, poses[b]) for a in free for b in range(k) if b != a]
-    if min(gaps, default=np.inf) < problem.config.head_gap:
-        return None
-    score = problem.score(u, constrained=False)  # the kept heads are the baseline's
-    return Found(k, "hand-anchored", u, poses, score.value, score.stats) if score.stats is not None else None
+    return max(0.0, problem.config.head_gap - min(gaps, default=np.inf))
+
+
+def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int) -> float:
+    """What the refinement minimises: the surrogate's score plus the hand-margin penalty, the kept sensors'
+    information ``kept`` (place → :class:`SensorInfo`) given; the found sensors' own violations (each alone,
+    then their head gaps) as the optimisers' ``PENALTY + violation``."""
+    free = [i for i in range(k) if i not in kept]
+    infos = dict(kept) | {i: problem.sensor(u[6 * i : 6 * i + 6]) for i in free}
+    violation = sum(v.amount for v in infos.values() if isinstance(v, Violation))
+    if violation == 0.0 and (gap := _gap_violation(problem, u, free, k)) > 0:
+        violation = 1.0 + 10.0 * min(gap, 0.1)
+    if violation > 0:
+        return PENALTY + violation
+    stats = predicted_stats([infos[i] for i in range(k)], *problem.weights, **problem.band)
+    return stats["score"] + problem.shortfall(k, stats)
+
+
+def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals: int, until: float) -> Found:
+    """``start`` with its found sensors moved by the local algorithm on :func:`_anchored_value`, the kept
+    ones fixed; the best layout it met (``start`` itself when it met none better)."""
+    slots = np.concatenate([np.arange(6 * i, 6 * i + 6) for i in range(k) if i not in kept])
+    best = {"value": _anchored_value(problem, start.u, kept, k), "u": start.u}
+
+    def value(x, grad=None) -> float:
+        if time.monotonic() > until:
+            raise Stop("the selection's time is up")
+        u = start.u.copy()
+        u[slots] = x
+        v = _anchored_value(problem, u, kept, k)
+        if v < best["value"]:
+            best.update(value=v, u=u)
+        return v
+
+    with contextlib.suppress(Stop):
+        optimize(value, problem.config.local_algorithm, start.u[slots], evals, seed=None, step=0.03)
+    u = best["u"]
+    score = problem.score(u, constrained=False)
+    return Found(k, "hand-anchored, refined", u, problem.space.to_poses(u), score.value, score.stats)
 
 
 def distinct_sensors(sensors: list[np.ndarray], min_distance: float = 0.02) -> list[np.ndarray]:

@@ -46,6 +46,9 @@ class SearchConfig:
     screen_evals: int = 30
     select_candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
     select_time: float = 300.0  # s, the selection stage
+    # the hand-anchored candidates' found sensors moved by this many local surrogate evaluations with the
+    # kept hand sensors fixed, before the selection evaluates them (0: taken as found; search/candidates.py)
+    anchor_evals: int = 0
     # a layout is asked to beat the hand-placed one on every axis, not just on the sum: each axis whose
     # predicted score exceeds hand_margin x the hand-placed k-subset's adds hand_weight x the excess
     # (0 turns it off; < 1 leaves room for the surrogate's error)
@@ -103,7 +106,7 @@ BUDGETS: dict[str, dict] = {
 BAND_BUDGETS: dict[str, dict] = {
     # a sensor pose costs the band's surrogate ~5x a nominal one's (the noise and bracket terms): 4,096 screen
     # poses would take the whole clock, and k = 1 and 2 got no greedy stage at all
-    "default": dict(max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024),
+    "default": dict(max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024, anchor_evals=80),
 }
 
 

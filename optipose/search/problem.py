@@ -54,7 +54,8 @@ class SurrogateProblem:
     config : the search's settings (constraints, the hand-margin penalty).
     surrogate : shared with another problem of the same part and objective (default: a new one).
     cache : shared per-sensor cache (u key → :class:`SensorInfo` or :class:`Violation`), e.g. a resumed one.
-    targets : k → per-axis surrogate scores (deg) of the best hand-placed k-subset, for the shortfall.
+    targets : k → per-axis surrogate scores (deg) of the best hand-placed k-subset, for the shortfall: (3,),
+        or (levels, 3) under a band, each noise level's (``level_axis_score``).
     """
 
     def __init__(self, part, objective, config: SearchConfig, surrogate: Surrogate | None = None,
@@ -164,8 +165,12 @@ class SurrogateProblem:
         return violation
 
     def shortfall(self, k: int, stats: dict) -> float:
-        """The per-axis penalty (deg) for axes predicted worse than the margin times the hand layout's."""
+        """The per-axis penalty (deg) for axes predicted worse than the margin times the hand layout's, noise
+        level by noise level under a band (the worst over the band is the top level's on nearly every axis,
+        so it cannot see an axis lost at the preset's noise: the comparison with the hand layout can)."""
         target = self._targets.get(k, self._targets.get(max(self._targets, default=0)))
         if target is None or self.config.hand_margin <= 0:
             return 0.0
-        return float(self.config.hand_weight * weighted_excess(stats["axis_score"], target, self.config.hand_margin, self.weights[0]))
+        margin, weights = self.config.hand_margin, self.weights[0]
+        values, target = np.atleast_2d(stats["level_axis_score"]), np.atleast_2d(target)
+        return float(self.config.hand_weight * sum(weighted_excess(v, t, margin, weights) for v, t in zip(values, target)))

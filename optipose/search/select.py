@@ -104,7 +104,9 @@ def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, ref
     first = []
     if reference is not None:
         used = tuple(sorted({i for a in reference.axes for i in a.subset}))
-        first = anchored(study.problem, baseline(part).poses, used, outcome, k)
+        cfg = study.problem.config
+        first = anchored(study.problem, baseline(part).poses, used, outcome, k, evals=cfg.anchor_evals,
+                         until=time.monotonic() + (deadline - time.monotonic()) / 2)  # fmt: skip
     for cand in first + candidates(study.problem, study.history, outcome, k, per_k, finalists):
         if time.monotonic() > deadline and pool:
             log.info("selection for k=%d stopped by the time budget", k)

@@ -269,7 +269,7 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
                     noise_scales: tuple[float, ...] = (1.0,), mounting: tuple[float, float] | None = None) -> dict:  # fmt: skip
     """The surrogate's Table 1 for a layout: every non-empty subset's predicted per-axis median and 75th
     percentile (degrees), each axis's best subset, its per-axis score and the weighted score of the per-axis
-    best.
+    best; ``level_axis_score`` (levels, 3) is each noise level's per-axis score on its own best subsets.
 
     noise_scales : the sensor noise σ times each of these; each statistic is the worst over them. The
     information matrix scales with 1/σ² and the voxel bias not at all, so a band costs one more 6×6 inverse
@@ -281,6 +281,7 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     k = len(infos)
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
     median, p75 = np.zeros((len(subsets), 3)), np.zeros((len(subsets), 3))
+    levels = np.zeros((len(noise_scales), len(subsets), 2, 3))  # each level's own median and p75 (rad)
     for s, c in enumerate(subsets):
         H = sum(infos[i].H for i in c)
         have_bias = all(infos[i].G is not None for i in c)
@@ -296,15 +297,27 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
             if noisy:  # the noise's own bias grows as σ²: measured at each sensor's band top, scaled to this level
                 d = bias_rotation(A, sum(infos[i].G + (scale / infos[i].noise_band) ** 2 * infos[i].G_noise for i in c))
             m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d)
+            levels[n, s] = m, q
             median[s], p75[s] = (m, q) if n == 0 else (np.maximum(median[s], m), np.maximum(p75[s], q))
     median, p75 = np.rad2deg(median), np.rad2deg(p75)
-    best = [min(range(len(subsets)), key=lambda s: (median[s, a], p75[s, a])) for a in range(3)]
+    best = _best_subsets(median, p75)
     axis = np.array([median_weight * median[s, a] + p75_weight * p75[s, a] for a, s in enumerate(best)])
+    # each level alone, its axes on that level's own best subsets: what the comparison with the hand layout
+    # level by level sees (one level: the same numbers as ``axis_score``)
+    per_level = np.rad2deg(levels)
+    level_axis = np.array([[median_weight * lv[s, 0, a] + p75_weight * lv[s, 1, a] for a, s in enumerate(_best_subsets(lv[:, 0], lv[:, 1]))]
+                           for lv in per_level])  # fmt: skip
     return {
         "subsets": subsets,
         "median_deg": median,
         "p75_deg": p75,
         "best_subset": [subsets[s] for s in best],
         "axis_score": axis,
+        "level_axis_score": level_axis,
         "score": float(np.dot(weights, axis)),
     }
+
+
+def _best_subsets(median: np.ndarray, p75: np.ndarray) -> list[int]:
+    """Per axis, the subset (row) with the lowest median, ties by the lower p75: the paper's assignment."""
+    return [min(range(len(median)), key=lambda s: (median[s, a], p75[s, a])) for a in range(3)]

@@ -40,7 +40,7 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
     hand_u = [study.problem.space.from_pose(T) for T in hand_poses]
     ks = sorted(set(config.sensors))
     hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])
-    study.measure_against({k: f.stats["axis_score"] for k, f in hand.items()})
+    study.measure_against({k: f.stats["level_axis_score"] for k, f in hand.items()})
     study.start_clock(config.max_time)  # after the hand layout is scored: that first scan also compiles the kernels
     greedy, joint = {}, {}
     try:
