@@ -187,7 +187,7 @@ def test_a_kept_sensor_is_measured_exactly_as_in_the_hand_layout(part_b):
 def test_the_refinement_places_the_found_sensor_for_the_kept_ones(part_b):
     # robust band: the kept S1 and S2 stay exactly, the found sensor moves, and the refined layout scores
     # no worse on the refinement's value (score + hand-margin penalty) than the best unrefined one
-    from optipose.search.candidates import _anchored_value, anchored
+    from optipose.search.candidates import _anchored_value, _gap_floors, anchored
     from optipose.search.config import SearchConfig
     from optipose.search.problem import SurrogateProblem
 
@@ -202,7 +202,11 @@ def test_the_refinement_places_the_found_sensor_for_the_kept_ones(part_b):
         np.testing.assert_allclose(refined[0].poses[i], hand[i], atol=1e-9)
     assert not np.allclose(refined[0].poses[2], F1, atol=1e-6)
     kept = {i: problem.surrogate.info(hand[i]) for i in (0, 1)}
-    assert _anchored_value(problem, refined[0].u, kept, 3) < _anchored_value(problem, plain.u, kept, 3)
+    floors = _gap_floors(problem, hand, 3)
+    assert _anchored_value(problem, refined[0].u, kept, 3, floors) < _anchored_value(problem, plain.u, kept, 3, floors)
+    # the hand S3 in its own place is a start, and a head may come as close to a kept one as the hand's do
+    assert floors[0, 1] < 0 and floors[0, 2] == 0.0  # B's S1 and S2 overlap in the head-box model by 2.2 mm
+    assert _anchored_value(problem, np.concatenate([problem.space.from_pose(T) for T in hand]), kept, 3, floors) < 1e3
 
 
 def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):

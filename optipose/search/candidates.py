@@ -98,8 +98,10 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     evals : when > 0, each way of keeping sensors then moves its best layout's found sensors by a local
     NLopt search on the surrogate (``evals`` evaluations, until ``time.monotonic()`` passes ``until``),
     the kept ones fixed, scored with the hand-margin penalty noise level by noise level: the found sensors
-    are placed *for* the kept ones, not borrowed from layouts placed without them. Layouts are then ranked
-    with that penalty too.
+    are placed *for* the kept ones, not borrowed from layouts placed without them. The hand-placed sensor
+    of a free place is then one more start (its own noise draws, as the hand layout's: a small move of it is
+    compared with common random numbers), and a found head may come as close to a kept one as the hand
+    heads of those places do. Layouts are then ranked with that penalty too.
     """
     keepable = [i for i in used if i < k]
     if not hand_poses or k < 2 or not keepable:
@@ -108,22 +110,29 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     pool = [f for f in (*outcome.found.values(), *outcome.greedy.values(), *outcome.joint.values()) if f and f.stats]
     sensors = distinct_sensors([f.sensor(i) for f in pool for i in range(f.k)])
     sensors = [u6 for u6 in sensors if not isinstance(problem.sensor(u6), Violation)]  # feasible alone
+    hand_u = [problem.space.from_pose(T) for T in hand_poses]
+    floors = _gap_floors(problem, hand_poses, k) if evals > 0 else {}
     out, values = [], {}
     for keep in itertools.combinations(keepable, size):
         free = [i for i in range(k) if i not in keep]
         these = []
-        for fill in itertools.permutations(sensors, len(free)):
-            u6s = {i: problem.space.from_pose(hand_poses[i]) for i in keep} | dict(zip(free, fill))
-            found = _anchored_layout(problem, np.concatenate([u6s[i] for i in range(k)]), free, k)
+        # each free place: a found sensor, or (refined only) the hand-placed sensor of that place, a start
+        # the local search can move from; a sensor fills one place at most
+        options = [sensors + ([hand_u[i]] if evals > 0 and i < len(hand_u) else []) for i in free]
+        for fill in itertools.product(*options):
+            if len(fill) > 1 and not all(apart(a, [b], 1e-9) for a, b in itertools.combinations(fill, 2)):
+                continue
+            u6s = {i: hand_u[i] for i in keep} | dict(zip(free, fill))
+            found = _anchored_layout(problem, np.concatenate([u6s[i] for i in range(k)]), free, k, floors)
             if found is not None:
                 these.append(found)
         if evals > 0 and these:
             kept = {i: problem.surrogate.info(hand_poses[i]) for i in keep}  # scanned once, whatever their clearances
             for found in these:
-                values[id(found)] = _anchored_value(problem, found.u, kept, k)
+                values[id(found)] = _anchored_value(problem, found.u, kept, k, floors)
             if time.monotonic() < until:
-                refined = _refined(problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until)
-                values[id(refined)] = _anchored_value(problem, refined.u, kept, k)
+                refined = _refined(problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors)
+                values[id(refined)] = _anchored_value(problem, refined.u, kept, k, floors)
                 these.append(refined)
         out += these
     if evals <= 0:  # as before the refinement existed: ranked by the surrogate's score alone
@@ -131,29 +140,40 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     return distinct(out, 0.02, key=lambda f: values[id(f)])[:n]
 
 
-def _anchored_layout(problem: SurrogateProblem, u: np.ndarray, free: list[int], k: int) -> Found | None:
-    if _gap_violation(problem, u, free, k) > 0:
+def _anchored_layout(problem: SurrogateProblem, u: np.ndarray, free: list[int], k: int, floors: dict) -> Found | None:
+    if _gap_violation(problem, u, free, k, floors) > 0:
         return None
     score = problem.score(u, constrained=False)  # the kept heads are the baseline's
     return Found(k, "hand-anchored", u, problem.space.to_poses(u), score.value, score.stats) if score.stats is not None else None
 
 
-def _gap_violation(problem: SurrogateProblem, u: np.ndarray, free: list[int], k: int) -> float:
-    """How far (m) the found heads come within ``head_gap`` of the others (0: far enough)."""
+def _gap_floors(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: int) -> dict:
+    """The gap (m) two heads of places a, b must keep: ``head_gap``, or the hand-placed heads' own gap at
+    those places when that is smaller (the hand cell exists; our head box is a conservative model of it)."""
+    model, n = problem.collision.sensor, min(k, len(hand_poses))
+    floors = {}
+    for a, b in itertools.permutations(range(n), 2):
+        floors[a, b] = min(problem.config.head_gap, heads_clearance(model, hand_poses[a], model, hand_poses[b]))
+    return floors
+
+
+def _gap_violation(problem: SurrogateProblem, u: np.ndarray, free: list[int], k: int, floors: dict) -> float:
+    """How far (m) the found heads come within their floor (:func:`_gap_floors`) of the others (0: far enough)."""
     poses = problem.space.to_poses(u)
     model = problem.collision.sensor
-    gaps = [heads_clearance(model, poses[a], model, poses[b]) for a in free for b in range(k) if b != a]
-    return max(0.0, problem.config.head_gap - min(gaps, default=np.inf))
+    short = [floors.get((a, b), problem.config.head_gap) - heads_clearance(model, poses[a], model, poses[b])
+             for a in free for b in range(k) if b != a]  # fmt: skip
+    return max(0.0, max(short, default=0.0))
 
 
-def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int) -> float:
+def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int, floors: dict) -> float:
     """What the refinement minimises: the surrogate's score plus the hand-margin penalty, the kept sensors'
     information ``kept`` (place → :class:`SensorInfo`) given; the found sensors' own violations (each alone,
     then their head gaps) as the optimisers' ``PENALTY + violation``."""
     free = [i for i in range(k) if i not in kept]
     infos = dict(kept) | {i: problem.sensor(u[6 * i : 6 * i + 6]) for i in free}
     violation = sum(v.amount for v in infos.values() if isinstance(v, Violation))
-    if violation == 0.0 and (gap := _gap_violation(problem, u, free, k)) > 0:
+    if violation == 0.0 and (gap := _gap_violation(problem, u, free, k, floors)) > 0:
         violation = 1.0 + 10.0 * min(gap, 0.1)
     if violation > 0:
         return PENALTY + violation
@@ -161,18 +181,18 @@ def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int
     return stats["score"] + problem.shortfall(k, stats)
 
 
-def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals: int, until: float) -> Found:
+def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals: int, until: float, floors: dict) -> Found:
     """``start`` with its found sensors moved by the local algorithm on :func:`_anchored_value`, the kept
     ones fixed; the best layout it met (``start`` itself when it met none better)."""
     slots = np.concatenate([np.arange(6 * i, 6 * i + 6) for i in range(k) if i not in kept])
-    best = {"value": _anchored_value(problem, start.u, kept, k), "u": start.u}
+    best = {"value": _anchored_value(problem, start.u, kept, k, floors), "u": start.u}
 
     def value(x, grad=None) -> float:
         if time.monotonic() > until:
             raise Stop("the selection's time is up")
         u = start.u.copy()
         u[slots] = x
-        v = _anchored_value(problem, u, kept, k)
+        v = _anchored_value(problem, u, kept, k, floors)
         if v < best["value"]:
             best.update(value=v, u=u)
         return v
