@@ -222,3 +222,21 @@ def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
     band = {"axis_score": np.array([5.0, 5.0, 5.0]), "level_axis_score": np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]])}
     targets = problem.with_targets({1: np.array([[1.0, 1.0, 1.0], [6.0, 6.0, 6.0]])})
     assert targets.shortfall(1, band) == pytest.approx(1.0)  # pitch at the first level, though 5 < 6 at the worst
+
+
+def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
+    # one sensor keeps nothing: refined, the hand S1 (place 0) is a start, and only the refined layout comes
+    # back (the found sensors themselves are the search's own candidates); unrefined, nothing
+    from optipose.search.candidates import anchored
+    from optipose.search.config import SearchConfig
+    from optipose.search.problem import SurrogateProblem
+    from optipose.search.records import Found, SearchOutcome
+
+    problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
+    hand = part_b.layouts["hand"].poses
+    far = problem.space.from_pose(hand[2]) + 0.02
+    outcome = SearchOutcome({1: Found(1, "greedy", far, problem.space.to_poses(far), 0.0, {"score": 0.0})}, {}, {}, {}, [])
+    assert anchored(problem, hand, (0,), outcome, 1) == []
+    (one,) = anchored(problem, hand, (0,), outcome, 1, n=2, evals=20)
+    assert one.strategy == "hand-anchored, refined" and one.k == 1
+    assert np.abs(one.u - problem.space.from_pose(hand[0])).max() < np.abs(one.u - far).max()

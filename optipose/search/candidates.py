@@ -95,7 +95,7 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     way of leaving one out is tried. The found sensors must clear the part and keep-outs on their own and
     the other heads by ``head_gap`` (the kept hand heads are the baseline, whatever their gaps).
 
-    evals : when > 0, each way of keeping sensors then moves its best layout's found sensors by a local
+    evals : when > 0 (and for one sensor too, which keeps nothing), each way of keeping sensors then moves its best layout's found sensors by a local
     NLopt search on the surrogate (``evals`` evaluations, until ``time.monotonic()`` passes ``until``),
     the kept ones fixed, scored with the hand-margin penalty noise level by noise level: the found sensors
     are placed *for* the kept ones, not borrowed from layouts placed without them. The hand-placed sensor
@@ -104,9 +104,9 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     heads of those places do. Layouts are then ranked with that penalty too.
     """
     keepable = [i for i in used if i < k]
-    if not hand_poses or k < 2 or not keepable:
+    if not hand_poses or (not keepable and k > 1) or (k < 2 and evals <= 0):
         return []
-    size = min(len(keepable), k - 1)
+    size = min(len(keepable), k - 1)  # one sensor, refined: nothing is kept, and the hand one in its place is a start
     pool = [f for f in (*outcome.found.values(), *outcome.greedy.values(), *outcome.joint.values()) if f and f.stats]
     sensors = distinct_sensors([f.sensor(i) for f in pool for i in range(f.k)])
     sensors = [u6 for u6 in sensors if not isinstance(problem.sensor(u6), Violation)]  # feasible alone
@@ -133,7 +133,9 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
             if time.monotonic() < until:
                 refined = _refined(problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors)
                 values[id(refined)] = _anchored_value(problem, refined.u, kept, k, floors)
-                these.append(refined)
+                these = these + [refined] if keep else [refined]  # nothing kept: the others are the search's own candidates
+            elif not keep:
+                these = []
         out += these
     if evals <= 0:  # as before the refinement existed: ranked by the surrogate's score alone
         return distinct(out, 0.02)[:n]
