@@ -95,13 +95,14 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     way of leaving one out is tried. The found sensors must clear the part and keep-outs on their own and
     the other heads by ``head_gap`` (the kept hand heads are the baseline, whatever their gaps).
 
-    evals : when > 0 (and for one sensor too, which keeps nothing), each way of keeping sensors then moves its best layout's found sensors by a local
-    NLopt search on the surrogate (``evals`` evaluations, until ``time.monotonic()`` passes ``until``),
-    the kept ones fixed, scored with the hand-margin penalty noise level by noise level: the found sensors
-    are placed *for* the kept ones, not borrowed from layouts placed without them. The hand-placed sensor
-    of a free place is then one more start (its own noise draws, as the hand layout's: a small move of it is
-    compared with common random numbers), and a found head may come as close to a kept one as the hand
-    heads of those places do. Layouts are then ranked with that penalty too.
+    evals : when > 0, each way of keeping sensors then moves its best layout's found sensors by a local
+    NLopt search on the surrogate (``evals`` evaluations, until ``time.monotonic()`` passes ``until``), the
+    kept ones fixed, scored with the hand-margin penalty noise level by noise level: the found sensors are
+    placed *for* the kept ones, not borrowed from layouts placed without them. The hand-placed sensor of a
+    free place is one more start (with its own noise draws, as in the hand layout: a small move of it is
+    compared with common random numbers); a found head may come as close to a kept one as the hand heads
+    of those places do; layouts are ranked with that penalty too. One sensor keeps nothing and is refined
+    from the best of the found sensors and the hand one in place 0; only the refined layout comes back.
     """
     keepable = [i for i in used if i < k]
     if not hand_poses or (not keepable and k > 1) or (k < 2 and evals <= 0):
