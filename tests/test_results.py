@@ -159,3 +159,22 @@ def test_a_band_validation_reads_back_with_every_condition(tmp_path):
     assert loaded.verdict_lines() == validation.verdict_lines()
     (verdict,) = loaded.verdicts()
     assert [(label, pytest.approx(r)) for label, r in verdict.ratios()] == [(label, r) for label, r in validation.verdicts()[0].ratios()]
+
+
+def test_a_selection_with_an_unobservable_axis_reads_back(tmp_path):
+    # a candidate whose yaw no subset measures writes empty cells; they read back as an unobservable axis
+    # (the reference search of part C wrote one and its report failed on it)
+    from optipose.evaluate.assignment import UNOBSERVABLE
+    from optipose.io.folders import write_csv
+    from optipose.io.load import load_selection
+    from optipose.io.tables import selection_frame
+    from optipose.search.records import IcpEvaluation
+
+    axes = (AxisChoice("roll", (0,), "F1", 0.01, 0.02), AxisChoice("pitch", (0,), "F1", 0.003, 0.004),
+            AxisChoice("yaw", (), "", np.nan, np.nan, UNOBSERVABLE))  # fmt: skip
+    record = IcpEvaluation(1, "subset of k=3", 2.0, "reduced", Choice(1, (0,), "F1", axes, 0.5), False)
+    write_csv(selection_frame([record]), tmp_path / "selection.csv")
+    (back,) = load_selection(tmp_path)
+    assert [a.observable for a in back.choice.axes] == [True, True, False]
+    assert back.choice.axes[2].reason == UNOBSERVABLE and np.isnan(back.choice.axes[2].median)
+    assert back.choice.axes[0].median == pytest.approx(0.01) and back.choice.axes[0].name == "F1"

@@ -144,9 +144,16 @@ def _axis(axis: str, subset, median_deg: float, p75_deg: float, names: list[str]
     """An axis of a choice from a table's cells: its subset's name or, where there is none, the reason
     written instead (``unobservable``, ``registrations failed``; an empty cell: unobservable)."""
     text = str(subset)
+    median, p75 = np.deg2rad(_number(median_deg)), np.deg2rad(_number(p75_deg))
     if text in ("", "nan", UNOBSERVABLE, FAILED):
-        return AxisChoice(axis, (), "", float(np.deg2rad(median_deg)), float(np.deg2rad(p75_deg)), FAILED if text == FAILED else UNOBSERVABLE)
-    return AxisChoice(axis, _indices(text, names), text, float(np.deg2rad(median_deg)), float(np.deg2rad(p75_deg)))
+        return AxisChoice(axis, (), "", median, p75, FAILED if text == FAILED else UNOBSERVABLE)
+    return AxisChoice(axis, _indices(text, names), text, median, p75)
+
+
+def _number(cell) -> float:
+    """A table's numeric cell as a float: an empty one (an axis with no subset, read without NA
+    conversion) is NaN."""
+    return np.nan if str(cell).strip() in ("", "nan") else float(cell)
 
 
 def load_surrogate_scores(folder: str | Path) -> dict[tuple[str, int], float]:
