@@ -234,9 +234,13 @@ def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
 
     problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
     hand = part_b.layouts["hand"].poses
-    far = problem.space.from_pose(hand[2]) + 0.02
+    far = np.clip(problem.space.from_pose(hand[2]) + 0.02, 0.0, 1.0)
     outcome = SearchOutcome({1: Found(1, "greedy", far, problem.space.to_poses(far), 0.0, {"score": 0.0})}, {}, {}, {}, [])
     assert anchored(problem, hand, (0,), outcome, 1) == []
     (one,) = anchored(problem, hand, (0,), outcome, 1, n=2, evals=20)
     assert one.strategy == "hand-anchored, refined" and one.k == 1
     assert np.abs(one.u - problem.space.from_pose(hand[0])).max() < np.abs(one.u - far).max()
+    # the selection's time already spent: no scan, nothing comes back
+    import time
+
+    assert anchored(problem, hand, (0,), outcome, 1, n=2, evals=20, until=time.monotonic() - 1.0) == []

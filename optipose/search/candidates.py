@@ -113,22 +113,32 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     sensors = [u6 for u6 in sensors if not isinstance(problem.sensor(u6), Violation)]  # feasible alone
     hand_u = [problem.space.from_pose(T) for T in hand_poses]
     floors = _gap_floors(problem, hand_poses, k) if evals > 0 else {}
+    scans: dict = {}  # each sensor's scan once (a kept hand sensor whatever its clearances): what scoring a layout needs
+
+    def info(u6):
+        key = tuple(np.round(np.asarray(u6, dtype=float), 9))
+        if key not in scans:
+            scans[key] = problem.surrogate.info(problem.space.to_pose(np.asarray(u6, dtype=float)))
+        return scans[key]
+
     out, values = [], {}
     for keep in itertools.combinations(keepable, size):
         free = [i for i in range(k) if i not in keep]
         these = []
-        # each free place: a found sensor, or (refined only) the hand-placed sensor of that place, a start
-        # the local search can move from; a sensor fills one place at most
-        options = [sensors + ([hand_u[i]] if evals > 0 and i < len(hand_u) else []) for i in free]
-        for fill in itertools.product(*options):
+        # each free place: a found sensor, or (refined only) the hand-placed sensor of that place when it is
+        # feasible alone, a start the local search can move from; a sensor fills one place at most
+        starts = [[hand_u[i]] if evals > 0 and i < len(hand_u) and not isinstance(problem.sensor(hand_u[i]), Violation) else [] for i in free]
+        for fill in itertools.product(*[sensors + extra for extra in starts]):
+            if evals > 0 and time.monotonic() > until:
+                break
             if len(fill) > 1 and not all(apart(a, [b], 1e-9) for a, b in itertools.combinations(fill, 2)):
                 continue
             u6s = {i: hand_u[i] for i in keep} | dict(zip(free, fill))
-            found = _anchored_layout(problem, np.concatenate([u6s[i] for i in range(k)]), free, k, floors)
+            found = _anchored_layout(problem, [u6s[i] for i in range(k)], free, floors, info)
             if found is not None:
                 these.append(found)
         if evals > 0 and these:
-            kept = {i: problem.surrogate.info(hand_poses[i]) for i in keep}  # scanned once, whatever their clearances
+            kept = {i: info(hand_u[i]) for i in keep}
             for found in these:
                 values[id(found)] = _anchored_value(problem, found.u, kept, k, floors)
             if time.monotonic() < until:
@@ -140,14 +150,17 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
         out += these
     if evals <= 0:  # as before the refinement existed: ranked by the surrogate's score alone
         return distinct(out, 0.02)[:n]
-    return distinct(out, 0.02, key=lambda f: values[id(f)])[:n]
+    return distinct([f for f in out if values[id(f)] < PENALTY], 0.02, key=lambda f: values[id(f)])[:n]
 
 
-def _anchored_layout(problem: SurrogateProblem, u: np.ndarray, free: list[int], k: int, floors: dict) -> Found | None:
+def _anchored_layout(problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict, info) -> Found | None:
+    """The layout of these sensors (one (6,) per place) scored on the surrogate as given (the kept heads are
+    the baseline's), ``info(u6)`` each sensor's scan; None when a found head is too close to another."""
+    u, k = np.concatenate(u6s), len(u6s)
     if _gap_violation(problem, u, free, k, floors) > 0:
         return None
-    score = problem.score(u, constrained=False)  # the kept heads are the baseline's
-    return Found(k, "hand-anchored", u, problem.space.to_poses(u), score.value, score.stats) if score.stats is not None else None
+    stats = predicted_stats([info(u6) for u6 in u6s], *problem.weights, **problem.band)
+    return Found(k, "hand-anchored", u, problem.space.to_poses(u), stats["score"], stats)
 
 
 def _gap_floors(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: int) -> dict:
@@ -203,8 +216,10 @@ def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals:
     with contextlib.suppress(Stop):
         optimize(value, problem.config.local_algorithm, start.u[slots], evals, seed=None, step=0.03)
     u = best["u"]
-    score = problem.score(u, constrained=False)
-    return Found(k, "hand-anchored, refined", u, problem.space.to_poses(u), score.value, score.stats)
+    infos = [kept[i] if i in kept else problem.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
+    infos = [problem.surrogate.info(problem.space.to_pose(u[6 * i : 6 * i + 6])) if isinstance(x, Violation) else x for i, x in enumerate(infos)]
+    stats = predicted_stats(infos, *problem.weights, **problem.band)
+    return Found(k, "hand-anchored, refined", u, problem.space.to_poses(u), stats["score"], stats)
 
 
 def distinct_sensors(sensors: list[np.ndarray], min_distance: float = 0.02) -> list[np.ndarray]:

@@ -173,4 +173,6 @@ class SurrogateProblem:
             return 0.0
         margin, weights = self.config.hand_margin, self.weights[0]
         values, target = np.atleast_2d(stats["level_axis_score"]), np.atleast_2d(target)
+        if len(target) != len(values):
+            raise ValueError(f"hand targets for {len(target)} noise level(s), the layout's for {len(values)}: give each level's (level_axis_score)")
         return float(self.config.hand_weight * sum(weighted_excess(v, t, margin, weights) for v, t in zip(values, target)))
