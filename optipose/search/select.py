@@ -98,8 +98,9 @@ def _reference(k: int, hand, confirmer: Confirmer | None, records: list[IcpEvalu
 
 
 def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage) -> Pool:
-    """Every candidate of k on the reduced protocol, until the time is up (one at least): first the hand
-    layout's used sensors with found ones in the other places (:func:`optipose.search.candidates.anchored`)."""
+    """Every candidate of k on the reduced protocol, until the time is up (the best hand-anchored one and the
+    surrogate's best at least): first the hand layout's used sensors with found ones in the other places
+    (:func:`optipose.search.candidates.anchored`)."""
     pool: Pool = []
     first = []
     if reference is not None:
@@ -107,10 +108,16 @@ def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, ref
         cfg = study.problem.config
         first = anchored(study.problem, baseline(part).poses, used, outcome, k, evals=cfg.anchor_evals,
                          until=time.monotonic() + (deadline - time.monotonic()) / 2)  # fmt: skip
-    for cand in first + candidates(study.problem, study.history, outcome, k, per_k, finalists):
-        if time.monotonic() > deadline and pool:
-            log.info("selection for k=%d stopped by the time budget", k)
-            break
+    rest = candidates(study.problem, study.history, outcome, k, per_k, finalists)
+    # whatever the clock says, the best hand-anchored layout and the surrogate's own best are evaluated: a
+    # selection cut after the first of them would make the answer the machine's load, not the search's
+    required = {0, len(first)}
+    for n, cand in enumerate(first + rest):
+        if time.monotonic() > deadline and pool and n not in required:
+            if n > len(first):
+                log.info("selection for k=%d stopped by the time budget", k)
+                break
+            continue
         if on_stage:
             on_stage(f"selecting k={k} on the reduced protocol ({cand.strategy})")
         choice = evaluator(cand.poses).table[k - 1]
