@@ -113,14 +113,6 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     sensors = [u6 for u6 in sensors if not isinstance(problem.sensor(u6), Violation)]  # feasible alone
     hand_u = [problem.space.from_pose(T) for T in hand_poses]
     floors = _gap_floors(problem, hand_poses, k) if evals > 0 else {}
-    scans: dict = {}  # each sensor's scan once (a kept hand sensor whatever its clearances): what scoring a layout needs
-
-    def info(u6):
-        key = tuple(np.round(np.asarray(u6, dtype=float), 9))
-        if key not in scans:
-            scans[key] = problem.surrogate.info(problem.space.to_pose(np.asarray(u6, dtype=float)))
-        return scans[key]
-
     out, values = [], {}
     for keep in itertools.combinations(keepable, size):
         free = [i for i in range(k) if i not in keep]
@@ -134,11 +126,11 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
             if len(fill) > 1 and not all(apart(a, [b], 1e-9) for a, b in itertools.combinations(fill, 2)):
                 continue
             u6s = {i: hand_u[i] for i in keep} | dict(zip(free, fill))
-            found = _anchored_layout(problem, [u6s[i] for i in range(k)], free, floors, info)
+            found = _anchored_layout(problem, [u6s[i] for i in range(k)], free, floors)
             if found is not None:
                 these.append(found)
         if evals > 0 and these:
-            kept = {i: info(hand_u[i]) for i in keep}
+            kept = {i: problem.info(hand_u[i]) for i in keep}  # whatever their clearances
             for found in these:
                 values[id(found)] = _anchored_value(problem, found.u, kept, k, floors)
             if time.monotonic() < until:
@@ -153,14 +145,14 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     return distinct([f for f in out if values[id(f)] < PENALTY], 0.02, key=lambda f: values[id(f)])[:n]
 
 
-def _anchored_layout(problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict, info) -> Found | None:
+def _anchored_layout(problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict) -> Found | None:
     """The layout of these sensors (one (6,) per place) scored on the surrogate as given (the kept heads are
-    the baseline's), ``info(u6)`` each sensor's scan; None when a found head is too close to another."""
+    the baseline's); None when a found head is too close to another."""
     u, k = np.concatenate(u6s), len(u6s)
     if _gap_violation(problem, u, free, k, floors) > 0:
         return None
-    stats = predicted_stats([info(u6) for u6 in u6s], *problem.weights, **problem.band)
-    return Found(k, "hand-anchored", u, problem.space.to_poses(u), stats["score"], stats)
+    score = problem.score(u, constrained=False)
+    return Found(k, "hand-anchored", u, problem.space.to_poses(u), score.value, score.stats)
 
 
 def _gap_floors(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: int) -> dict:
@@ -217,7 +209,7 @@ def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals:
         optimize(value, problem.config.local_algorithm, start.u[slots], evals, seed=None, step=0.03)
     u = best["u"]
     infos = [kept[i] if i in kept else problem.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
-    infos = [problem.surrogate.info(problem.space.to_pose(u[6 * i : 6 * i + 6])) if isinstance(x, Violation) else x for i, x in enumerate(infos)]
+    infos = [problem.info(u[6 * i : 6 * i + 6]) if isinstance(x, Violation) else x for i, x in enumerate(infos)]
     stats = predicted_stats(infos, *problem.weights, **problem.band)
     return Found(k, "hand-anchored, refined", u, problem.space.to_poses(u), stats["score"], stats)
 

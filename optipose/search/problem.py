@@ -69,6 +69,7 @@ class SurrogateProblem:
         self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
         self.collision = collision_model(part)
         self._cache: dict = {} if cache is None else cache
+        self._given: dict = {}  # u key → SensorInfo of a sensor scored as given (:meth:`info`)
         self._targets = dict(targets or {})
         # the objective's band (SPEC §9): every predicted statistic is the worst over it, brackets off by the tolerance
         band = objective.conditions
@@ -117,6 +118,14 @@ class SurrogateProblem:
                 for key, value in zip(part, pool.map(self._sensor_at, part)):
                     self._cache[key] = value
 
+    def info(self, u6: np.ndarray) -> SensorInfo:
+        """The sensor's information whatever its constraints (a given layout's sensor, e.g. a hand-placed
+        one), scanned once at ``u6``'s own pose."""
+        key = _key(u6)
+        if key not in self._given:
+            self._given[key] = self.surrogate.info(self.space.to_pose(np.asarray(u6, dtype=float)))
+        return self._given[key]
+
     def _sensor_at(self, key: tuple) -> SensorInfo | Violation:
         return self._sensor(self.space.to_pose(np.asarray(key)))
 
@@ -139,7 +148,7 @@ class SurrogateProblem:
         the shortfall: it is the baseline.
         """
         if not constrained:
-            stats = predicted_stats([self.surrogate.info(T) for T in self.space.to_poses(u)], *self.weights, **self.band)
+            stats = predicted_stats([self.info(u[6 * i : 6 * i + 6]) for i in range(len(u) // 6)], *self.weights, **self.band)
             return LayoutScore(stats["score"], stats)
         k = len(u) // 6
         parts = [self.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]

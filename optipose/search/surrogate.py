@@ -280,7 +280,6 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     """
     k = len(infos)
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
-    median, p75 = np.zeros((len(subsets), 3)), np.zeros((len(subsets), 3))
     levels = np.zeros((len(noise_scales), len(subsets), 2, 3))  # each level's own median and p75 (rad)
     for s, c in enumerate(subsets):
         H = sum(infos[i].H for i in c)
@@ -298,8 +297,7 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
                 d = bias_rotation(A, sum(infos[i].G + (scale / infos[i].noise_band) ** 2 * infos[i].G_noise for i in c))
             m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d)
             levels[n, s] = m, q
-            median[s], p75[s] = (m, q) if n == 0 else (np.maximum(median[s], m), np.maximum(p75[s], q))
-    median, p75 = np.rad2deg(median), np.rad2deg(p75)
+    median, p75 = np.rad2deg(levels.max(axis=0)).transpose(1, 0, 2)  # the worst over the levels
     best = _best_subsets(median, p75)
     axis = np.array([median_weight * median[s, a] + p75_weight * p75[s, a] for a, s in enumerate(best)])
     # each level alone, its axes on that level's own best subsets: what the comparison with the hand layout
