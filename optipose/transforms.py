@@ -32,9 +32,27 @@ def rpy_to_matrix(rpy: np.ndarray) -> np.ndarray:
     return Rotation.from_euler("xyz", rpy).as_matrix()
 
 
+_NEAR_GIMBAL = 1e-6  # rad from pitch ±90°: where scipy's angles may give the matrix back only to ~1e-8
+
+
 def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
-    """Roll, pitch, yaw (radians) of a rotation matrix (3, 3) or (n, 3, 3); inverse of :func:`rpy_to_matrix`."""
-    return Rotation.from_matrix(R).as_euler("xyz")
+    """Roll, pitch, yaw (radians) of a rotation matrix (3, 3) or (n, 3, 3); inverse of :func:`rpy_to_matrix`.
+
+    scipy treats a pitch within ~1e-7 rad of ±90° as gimbal lock (yaw 0), which gives the matrix back only
+    to ~1e-8; there, yaw is taken from the first column and roll from the 2×2 block given that yaw, so the
+    angles give the matrix back to rounding (elsewhere scipy's angles are returned as they are)."""
+    rpy = Rotation.from_matrix(R).as_euler("xyz")
+    M, out = np.asarray(R, dtype=float).reshape(-1, 3, 3), rpy.reshape(-1, 3)
+    near = np.abs(np.abs(out[:, 1]) - np.pi / 2) < _NEAR_GIMBAL
+    for i in np.flatnonzero(near):
+        m = M[i]
+        if np.hypot(m[0, 0], m[1, 0]) == 0.0:  # exact gimbal lock: only roll - yaw (or + yaw) is defined
+            continue
+        yaw = np.arctan2(m[1, 0], m[0, 0])
+        sy, cy = np.sin(yaw), np.cos(yaw)
+        roll = np.arctan2(sy * m[0, 2] - cy * m[1, 2], cy * m[1, 1] - sy * m[0, 1])
+        out[i] = roll, np.arctan2(-m[2, 0], np.hypot(m[0, 0], m[1, 0])), yaw
+    return out.reshape(rpy.shape)
 
 
 def make_T(R: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:
