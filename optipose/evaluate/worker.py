@@ -136,7 +136,7 @@ class _Worker:
                 continue
             scanner = self._scanner(model)
             out = scanner.scan_many([poses[j] for j in idx], self.setup.motion, rpy=rpy, centre=self.setup.centre,
-                                    offset=offset, rng=group_seed(seed, g), noise=noise)  # fmt: skip
+                                    offset=offset, rng=group_seed(seed, g), noise=noise, raw=False)  # fmt: skip
             for j, scan in zip(idx, out):
                 scans[j] = scan
         if mounted:  # ... and the cell rebuilds its cloud with the drawn pose
@@ -274,6 +274,7 @@ def _register_subsets(worker, setup, scans, seed, subsets, references, zeros, na
     shared = references[0] is references[-1] and backend_for(cfg).takes_initial
     initial = [Matches(*worker.reference.nearest(c)) if len(c) else None for c in clouds] if shared else None
     own: dict = {}  # sensor -> its single registration and centroid, where several sensors start from
+    moments = [_moments(c) for c in clouds]
     T_O_P = part_motion(rpy, setup.centre, offset)
     rows = []
     for s_index, (subset, reference, zero) in enumerate(zip(subsets, references, zeros)):
@@ -284,8 +285,27 @@ def _register_subsets(worker, setup, scans, seed, subsets, references, zeros, na
         row = {"scan": i, "label": label, "subset_index": s_index, "subset": subset_name(subset, names),
                "n_points": len(source), "ok": reg.ok, "converged": reg.converged, "failure": reg.failure,
                "iterations": reg.iterations, "fitness": reg.fitness, "rmse": reg.rmse}  # fmt: skip
-        rows.append(row | _errors(reg, source, rpy, T_O_P, setup.observability_tolerance, zero))
+        scale = _rms_radius([moments[j] for j in subset])
+        rows.append(row | _errors(reg, scale, rpy, T_O_P, setup.observability_tolerance, zero))
     return rows
+
+
+def _moments(cloud: np.ndarray) -> tuple[int, np.ndarray, float]:
+    """A cloud's point count, centroid (3,) and sum of squared distances to it."""
+    if not len(cloud):
+        return 0, np.zeros(3), 0.0
+    mean = cloud.mean(axis=0)
+    return len(cloud), mean, float(((cloud - mean) ** 2).sum())
+
+
+def _rms_radius(moments: list) -> float:
+    """The RMS distance (m) of the union of clouds from its centroid, from each cloud's :func:`_moments`
+    (the parallel-variance sum: each cloud's spread plus its centroid's offset); 1 for no points."""
+    n = sum(m[0] for m in moments)
+    if not n:
+        return 1.0
+    mean = sum(m[0] * m[1] for m in moments) / n
+    return float(np.sqrt(sum(m[2] + m[0] * float(((m[1] - mean) ** 2).sum()) for m in moments) / n))
 
 
 def _start(own: dict, subset) -> tuple[np.ndarray, np.ndarray] | None:
@@ -303,14 +323,14 @@ def _start(own: dict, subset) -> tuple[np.ndarray, np.ndarray] | None:
     return T, np.concatenate([own[j][0].matched for j in subset])
 
 
-def _errors(reg, source: np.ndarray, rpy: np.ndarray, T_O_P: np.ndarray, tolerance: float, zero: np.ndarray) -> dict:
+def _errors(reg, scale: float, rpy: np.ndarray, T_O_P: np.ndarray, tolerance: float, zero: np.ndarray) -> dict:
     """Set and estimated angles, signed errors (rad, m) and observability flags of one registration, the
-    cell's ``zero`` (its estimate of the nominal pose, 4×4) taken off the estimate."""
+    cell's ``zero`` (its estimate of the nominal pose, 4×4) taken off the estimate; ``scale`` (m): the
+    floating cloud's RMS radius, which weighs rotation against translation in the observability test."""
     T_est = invert_T(reg.T_target_source)  # the part's estimated motion T_O_P
     if zero is not None and not np.array_equal(zero, np.eye(4)):
         T_est = invert_T(zero) @ T_est
     est = matrix_to_rpy(T_est[:3, :3])
-    scale = float(np.sqrt(((source - source.mean(axis=0)) ** 2).sum(axis=1).mean())) if len(source) else 1.0
     blind = unobservable_axes(reg.information, scale, tolerance)
     row = {}
     for a, axis in enumerate(AXES):

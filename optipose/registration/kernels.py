@@ -20,16 +20,22 @@ def voxel_centroids(points, size, origin):
     share a voxel: only the first point of each run is looked up, in a hash table sized by the runs.
     """
     n = points.shape[0]
+    if n == 0:
+        return np.empty((0, 3), np.float64)
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
+    low = np.empty(3, np.float64)
+    high = np.empty(3, np.float64)
     for j in range(3):
-        lo[j] = np.iinfo(np.int64).max
-        hi[j] = np.iinfo(np.int64).min
+        low[j] = np.inf
+        high[j] = -np.inf
     for i in range(n):
         for j in range(3):
-            c = np.int64(np.floor((points[i, j] - origin[j]) / size))
-            lo[j] = min(lo[j], c)
-            hi[j] = max(hi[j], c)
+            low[j] = min(low[j], points[i, j])
+            high[j] = max(high[j], points[i, j])
+    for j in range(3):  # floor((x - origin) / size) never decreases with x: the extreme cells are the extremes'
+        lo[j] = np.int64(np.floor((low[j] - origin[j]) / size))
+        hi[j] = np.int64(np.floor((high[j] - origin[j]) / size))
     d1 = hi[1] - lo[1] + 1
     d2 = hi[2] - lo[2] + 1
     key = np.empty(n, np.int64)

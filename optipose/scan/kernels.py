@@ -199,9 +199,10 @@ def write_points(
 
     noise_key : uint64 key of this sensor and scan (0 = exact points, no noise, no quantisation); a
     point's draw is keyed by it and the point's global ray index. table : :data:`NORMAL_QUANTILES`. Writes ``raw`` (the block's rows, flat,
-    mm), and ``points`` (n, 3), ``profile`` (n,), ``column`` (n,) — the block's slices.
+    mm; empty: not written), and ``points`` (n, 3), ``profile`` (n,), ``column`` (n,) — the block's slices.
     """
     noisy = noise_key != 0
+    with_raw = raw.shape[0] > 0
     base = np.uint64(k0 * n_col)
     for h in range(idx.shape[0]):
         i = idx[h]
@@ -215,7 +216,8 @@ def write_points(
             z += draw * (noise_sigma / np.sqrt(inten)) * c  # along the ray, seen in z_S
             if z_resolution > 0.0:
                 z = np.floor(z / z_resolution + 0.5) * z_resolution
-        raw[i] = -1e3 * z
+        if with_raw:
+            raw[i] = -1e3 * z
         xs = x0[col] + z * slope[col]
         points[h, 0] = R[0, 0] * xs + R[0, 2] * z + t[0] - shift_b[k]
         points[h, 1] = R[1, 0] * xs + R[1, 2] * z + t[1]

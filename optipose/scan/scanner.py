@@ -62,7 +62,8 @@ class Scan:
 
     def __repr__(self) -> str:
         n_prof, n_col = self.raw.shape
-        return f"Scan({len(self)} points from {n_prof} profiles x {n_col} columns, rpy_deg={np.rad2deg(self.rpy).round(3).tolist()})"
+        where = f"{n_prof} profiles x {n_col} columns" if n_prof else f"{n_col} columns (raw profiles not kept)"
+        return f"Scan({len(self)} points from {where}, rpy_deg={np.rad2deg(self.rpy).round(3).tolist()})"
 
 
 class Scanner:
@@ -148,6 +149,7 @@ class Scanner:
         offset: np.ndarray | None = None,
         rng: np.random.Generator | int | None = 0,
         noise: bool = True,
+        raw: bool = True,
     ) -> list[Scan]:
         """Scan the part at orientation ``rpy`` (radians, about ``centre`` in m) with every sensor in ``poses``.
 
@@ -155,6 +157,8 @@ class Scanner:
         offset : (3,) m, an extra translation of the part (protocols with translation offsets).
         rng : a seed or a Generator (one draw is taken from it); the same seed gives the same clouds
             whatever the thread count. ``noise=False`` gives exact, unquantised surface points.
+        raw : write the device's raw profiles; ``False`` (what the evaluator asks: it reads the points) leaves
+            ``Scan.raw`` empty, (0, points per profile), and the points exactly as they would be.
         """
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
         seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
@@ -180,7 +184,7 @@ class Scanner:
             n = sum(len(h[0]) for _, h in mine)
             scan = Scan(
                 points=np.empty((n, 3)), profile=np.empty(n, np.int32), column=np.empty(n, np.int32),
-                intensity=np.empty(n, np.float32), raw=np.full((len(shifts), n_col), EMPTY),
+                intensity=np.empty(n, np.float32), raw=np.full((len(shifts) if raw else 0, n_col), EMPTY),
                 T_O_S=T_O_S, rpy=np.asarray(rpy, float), face=np.empty(n, np.int32), T_O_P=T_O_P,
             )  # fmt: skip
             start = 0
@@ -231,8 +235,7 @@ class Scanner:
         """
         s, n_col, m = self.sensor, self.sensor.points_per_profile, k1 - k0
         shift_b = shifts[k0:k1]
-        origins = (view.o_P32[None] - (shift_b[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
-        ray_tri = self._first_triangles(view, origins, shift_b)
+        ray_tri = self._first_triangles(view, shift_b)
         idx, T, inten, tri, test = measure_hits(
             ray_tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
             self._on_hull, s.apex_z, s.z_near, s.z_far, self._intensity_grid, s.detection_threshold, s.saturation,
@@ -258,7 +261,7 @@ class Scanner:
         keep[first] = self._receiver_sees(view, T[first], sub % n_col, shift_b[sub // n_col], tri[first])
         return unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride, self._plane) if len(rest) else rest
 
-    def _first_triangles(self, view: "_SensorView", origins: np.ndarray, shift_b: np.ndarray) -> np.ndarray:
+    def _first_triangles(self, view: "_SensorView", shift_b: np.ndarray) -> np.ndarray:
         """The first triangle (-1: none) of each ray of a block's profiles × columns (see ``column_stride``).
         A profile whose fan (a trapezoid) lies outside the scene's box cannot hit anything and casts no ray."""
         n_col, caster, t_max, m = self.sensor.points_per_profile, self.caster, self._t_max_tiled, len(shift_b)
@@ -268,13 +271,13 @@ class Scanner:
         anchor_tri = np.full((m, len(cols)), -1, dtype=np.int32)
         if len(live):
             rays = (live[:, None] * n_col + cols[None]).ravel()
-            anchor_tri[live] = np.asarray(caster.first_triangle(origins[rays], view.d_tiled[rays], t_max[rays])).reshape(len(live), len(cols))
+            anchor_tri[live] = np.asarray(caster.first_triangle(view.origins(rays, shift_b), view.d_tiled[rays], t_max[rays])).reshape(len(live), len(cols))
         if self._anchors is None:
             return anchor_tri.ravel()
         tri, need = fill_columns(anchor_tri, self._anchors, n_col, self._plane, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw,
                                  view.q, view.b, view.apex_P, view.d_P, view.step_P, self._edge_n, self._edge_c)  # fmt: skip
         if len(need):
-            tri[need] = caster.first_triangle(origins[need], view.d_tiled[need], t_max[need])
+            tri[need] = caster.first_triangle(view.origins(need, shift_b), view.d_tiled[need], t_max[need])
         return tri
 
     def _receiver_sees(self, view, T, col, shift, tri) -> np.ndarray:
@@ -354,6 +357,12 @@ class _SensorView:
     q: np.ndarray
     b: np.ndarray
     a: np.ndarray
+
+    def origins(self, rays: np.ndarray, shift_b: np.ndarray) -> np.ndarray:
+        """(n, 3) float32 origins of a block's rays (index = profile in the block × columns + column) at the
+        block's shifts (m,): only the rays cast are formed, each as the whole block's would be."""
+        n_col = len(self.o_P32)
+        return self.o_P32[rays % n_col] - (shift_b[rays // n_col][:, None] * self.step_P).astype(np.float32)
 
     @classmethod
     def build(cls, scanner: "Scanner", T_O_S: np.ndarray, T_O_P: np.ndarray) -> "_SensorView":
