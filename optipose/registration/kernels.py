@@ -196,11 +196,12 @@ def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, s
     listed for its grid cell (:func:`face_grid`) are searched exactly: they hold every face within
     ``margin`` of the cell, so the answer is certain when the closest point found is within ``margin``
     (faces whose bounding box (lo, hi) is farther than the best so far are skipped; the guessed face
-    starts the search, which prunes more). The point is settled when it lies inside the face found by
-    more than 2|d|, like a followed point; a point closest to an edge is never settled, so an exact tie
-    between faces needs a point equidistant from two faces' interiors. Returns q (n, 3) and ``open``
-    (n,) bool: points not settled, left to the global search (outside the grid or farther than
-    ``margin`` from the surface, or closest to, or near, an edge or a corner).
+    starts the search, which prunes more). A point inside the face found by more than 2|d| gets its
+    projection on the face's plane, like a followed point; a point closest to an edge or a corner gets
+    the closest point of that face, in float64 (where faces tie exactly, at their common edge, the lowest
+    face id takes the point, whatever the guess: the point is the same, the normal the face's). Returns q (n, 3)
+    and ``open`` (n,) bool: points left to the global search (outside the grid or farther than
+    ``margin`` from the surface).
     """
     n = p.shape[0]
     q = np.empty((n, 3), np.float64)
@@ -223,11 +224,12 @@ def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, s
         px, py, pz = p[i, 0], p[i, 1], p[i, 2]
         best = m2
         g_best = -1
+        bx, by, bz = 0.0, 0.0, 0.0
         if f >= 0:
             gx, gy, gz = _closest_on_triangle(px, py, pz, tri[f, 0], tri[f, 1], tri[f, 2])
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
             if d2 <= best:
-                best, g_best = d2, f
+                best, g_best, bx, by, bz = d2, f, gx, gy, gz
         for k in range(start[c], start[c + 1]):
             g = faces[k]
             box = 0.0
@@ -238,12 +240,14 @@ def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, s
                 continue
             gx, gy, gz = _closest_on_triangle(px, py, pz, tri[g, 0], tri[g, 1], tri[g, 2])
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
-            if d2 < best or (g_best < 0 and d2 <= best):
-                best, g_best = d2, g
-        if g_best >= 0 and _project(p, i, g_best, planes, plane_c, q)[0]:
-            ids[i] = g_best
-        else:
+            if d2 < best or (d2 == best and (g_best < 0 or g < g_best)):
+                best, g_best, bx, by, bz = d2, g, gx, gy, gz
+        if g_best < 0:
             open_[i] = True
+            continue
+        ids[i] = g_best
+        if not _project(p, i, g_best, planes, plane_c, q)[0]:  # on or near an edge: the face's closest point
+            q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
     return q, open_
 
 

@@ -3,14 +3,13 @@
 Every reference answers ``closest(points) -> (q, n, ids)``: the closest reference point, its unit normal
 and an id. Two kinds:
 
-- :class:`SurfaceReference` — the CAD triangles themselves (``cad-surface``): closest points on the
-  surface through Open3D's ``RaycastingScene`` (a BVH built once), normals of the faces. This is a dense
-  CAD sample in the limit of zero spacing, so the reference adds no sampling error. Between queries, a
-  point that still projects well inside the face it was matched to keeps that face
-  (:meth:`SurfaceReference.follow`), which makes an ICP iteration near convergence cost a projection
-  rather than a search. :meth:`SurfaceReference.nearest` goes further for ICP: a point that leaves its
-  face for another face's interior is found by an exact search of the faces listed in its cell of a
-  grid (built once), so the BVH search is left to points near edges and corners and far from the part.
+- :class:`SurfaceReference` — the CAD triangles themselves (``cad-surface``): exact (float64) closest
+  points on the surface, normals of the faces. This is a dense CAD sample in the limit of zero spacing,
+  so the reference adds no sampling error. A point within a millimetre of the part is answered by an
+  exact search of the faces listed in its cell of a grid (built once); the rest, far from the part,
+  by Open3D's ``RaycastingScene`` (a float32 BVH built once). Between ICP steps, a point that still
+  projects well inside the face it was matched to keeps that face (:meth:`SurfaceReference.follow`),
+  which makes an iteration near convergence cost a projection rather than a search.
 - :class:`SampledReference` — a point cloud with normals and a KD-tree: a CAD sample at a given spacing
   (``cad-sample``) or the scan at the nominal orientation (``nominal-scan``).
 """
@@ -79,7 +78,12 @@ class SurfaceReference:
         return f"SurfaceReference({len(self.faces)} faces, {self.area * 1e6:.0f} mm^2)"
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Closest surface points (n, 3), their face normals (n, 3) and face ids (n,) int64."""
+        """Closest surface points (n, 3), their face normals (n, 3) and face ids (n,) int64: :meth:`nearest`
+        without a guess."""
+        return self.nearest(points)
+
+    def _far(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Open3D's closest points, for points the grid does not answer (far from the surface)."""
         import open3d as o3d
 
         ans = self._scene.compute_closest_points(o3d.core.Tensor((np.asarray(points) - self._origin).astype(np.float32)))
@@ -112,14 +116,10 @@ class SurfaceReference:
 
         ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
         inside its face by more than twice its distance keeps it (:meth:`follow`). Any other point is searched exactly among
-        the faces listed for its cell of a grid over the part (every face within two cells of the cell);
-        when the closest face found is that close and the point lies inside it by more than twice its
-        distance, the point takes that face and its float64 projection, as :meth:`closest` would. The
-        rest (points far from the surface, or whose closest point is on or near an edge or a corner) get
-        :meth:`closest`'s answer (Open3D's, float32 off the faces' interiors) unchanged. Where
-        the float32 search picks a face only by rounding (a point within nanometres of the edge between
-        two coplanar sliver triangles, where its point can be micrometres off), this answers the nearer
-        point, so distances can be smaller than :meth:`closest`'s; point-to-plane residuals agree.
+        the faces listed for its cell of a grid over the part (every face within two cells of the cell,
+        :func:`optipose.registration.kernels.nearest`): it gets the closest face's float64 projection,
+        or, closest to an edge or a corner, that face's closest point. Points outside the grid or
+        farther than two cells from the surface get Open3D's answer (float32 off the faces' interiors).
         """
         from optipose.registration import kernels
 
@@ -129,7 +129,7 @@ class SurfaceReference:
         q, open_ = kernels.nearest(points, ids, self._planes, self._plane_c, self._tri, *self._grid())
         open_ = np.flatnonzero(open_)
         if len(open_):
-            q[open_], _, ids[open_] = self.closest(points[open_])
+            q[open_], _, ids[open_] = self._far(points[open_])
         return q, self.normals[ids], ids
 
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
