@@ -199,3 +199,37 @@ def test_a_worker_that_dies_again_is_one_clear_error(tmp_path):
             executor.map(_dies_once, [(v, str(tmp_path / "died"), True) for v in range(4)])
     finally:
         executor.close()
+
+
+# -- one call in a process of its own ---------------------------------------------------------------------
+def test_a_background_call_answers_from_another_process_with_its_threads_capped():
+    import os
+
+    from optipose.evaluate.background import Background
+
+    with Background(os.getenv, "NUMBA_NUM_THREADS") as call:
+        assert call.result() == "1"
+    with Background(os.getpid) as call:
+        assert call.result() != os.getpid()
+
+
+def test_a_background_call_that_raises_or_dies_says_so_instead_of_waiting():
+    import os
+    import signal
+    import time
+
+    from optipose.errors import WorkerError
+    from optipose.evaluate.background import Background
+
+    with pytest.raises(WorkerError, match="ValueError"):
+        Background(int, "not a number").result()
+    call = Background(time.sleep, 60)
+    os.kill(call._process.pid, signal.SIGKILL)  # killed, as by the kernel's out-of-memory killer
+    t0 = time.monotonic()
+    with pytest.raises(WorkerError, match="ended without an answer"):
+        call.result()
+    assert time.monotonic() - t0 < 10
+    stopped = Background(time.sleep, 60)
+    stopped.close()
+    with pytest.raises(WorkerError, match="stopped"):
+        stopped.result()

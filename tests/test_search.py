@@ -375,3 +375,68 @@ def test_a_tight_time_budget_still_places_every_sensor_count():
     assert all(f.score < PENALTY and len(f.poses) == k for k, f in out.found.items())
     stages = {r.stage.split(":")[0] + f":{r.k}" for r in out.history}
     assert {"greedy:1", "greedy:2", "greedy:3"} <= stages
+
+
+# -- the hand layout's validation beside the search -------------------------------------------------------
+def _short(objective):
+    """Sequences R and Y at -2°, 0°, +2°... in 1° steps: 5 orientations each, 10 in all."""
+    return replace(objective, protocol=replace(objective.protocol, sequences=("R", "Y"), step=np.deg2rad(1.0)))
+
+
+def test_the_hand_layout_evaluated_beside_the_search_is_the_one_validate_would_compute():
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.search.validate import BaselineRun, validate
+    from optipose.seeds import validation_seed
+
+    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    with BaselineRun(part, objective, seed=3) as run:
+        beside = run.result()
+    with Evaluator(part, objective, seed=validation_seed(3), jobs=1) as evaluator:
+        here = evaluator(part.layouts["hand"])
+    assert beside is not None and len(beside.per_scan) == len(here.per_scan) == 10 * 7
+    cols = ["err_roll", "err_pitch", "err_yaw", "iterations", "rmse"]
+    np.testing.assert_array_equal(beside.per_scan[cols].to_numpy(), here.per_scan[cols].to_numpy())
+    # validate takes it as the hand layout's evaluation, and says so to whoever saves the evaluations
+    seen = {}
+    hand = part.layouts["hand"]
+    found = {1: replace(hand, name="one", sensors=hand.sensors[:1])}
+    with BaselineRun(part, objective, seed=3) as run:
+        validation = validate(part, objective, found, 3, 1, "full", lambda name, r: seen.setdefault(name, r), run)
+    np.testing.assert_array_equal(seen["hand"].per_scan[cols].to_numpy(), here.per_scan[cols].to_numpy())
+    assert validation.hand[1].score == here.table[0].score
+
+
+def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
+    from optipose.search.validate import BaselineRun, validate
+
+    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    run = BaselineRun(part, objective, seed=5)
+    run.close()  # stopped before it could finish: no result, and validate evaluates the hand layout itself
+    assert run.result() is None
+    hand = part.layouts["hand"]
+    found = {1: replace(hand, name="one", sensors=hand.sensors[1:2])}
+    validation = validate(part, objective, found, 5, 1, "full", None, run)
+    assert validation.hand[1].score > 0 and np.isfinite(validation.hand[1].score)
+
+
+
+def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_path):
+    """Every stage in order on two cores (the hand layout's validation in its own process, a selection by
+    ICP, the validation): each k gets a layout, and the hand layout's validation is the one a plain
+    evaluation on the held-out seed gives."""
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.io.search import SearchFolder
+    from optipose.search.pipeline import run
+    from optipose.seeds import validation_seed
+
+    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    config = SearchConfig(sensors=(1, 2), global_evals=20, local_evals=6, joint_evals=8, random_starts=2,
+                          select_candidates=1, select_time=60.0)  # fmt: skip
+    stages = []
+    report = run(part, objective, config, 2, SearchFolder(tmp_path), jobs=2, on_stage=stages.append)
+    assert set(report.layouts) == {1, 2} and report.validated
+    assert any("selecting" in s for s in stages) and any("hand layout" in s for s in stages)
+    with Evaluator(part, objective, seed=validation_seed(2), jobs=1) as evaluator:
+        here = evaluator(part.layouts["hand"])
+    assert report.validation.hand[2].score == here.table[1].score
+    assert (tmp_path / "validation" / "hand" / "per_scan.csv").is_file() and (tmp_path / "selection.csv").is_file()

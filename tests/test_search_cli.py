@@ -88,13 +88,13 @@ def test_resume_replays_from_the_cache_to_the_same_layout(searched):
     assert len(pd.read_csv(out / "history.csv")) == n_before
 
 
-def test_quick_budget_validates_on_the_reduced_protocol_and_says_so():
+def test_every_budget_validates_on_the_full_protocol_and_reduced_is_still_there():
     from optipose.evaluate.objective import load_objective
     from optipose.evaluate.objective import reduced_objective
     from optipose.search.config import config_from_budget
 
-    assert config_from_budget("quick", (1, 2, 3)).validation == "reduced"
-    assert config_from_budget("default", (1, 2, 3)).validation == "full"
+    assert {config_from_budget(b, (1, 2, 3)).validation for b in ("quick", "default", "thorough")} == {"full"}
+    assert config_from_budget("quick", (1, 2, 3), {"validation": "reduced"}).validation == "reduced"
     # the paper's 7 sequences at their two end angles: 14 of the 77 scans
     from optipose.evaluate.protocol import perturbations
 

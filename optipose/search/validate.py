@@ -2,32 +2,104 @@
 reduced one) with a noise seed the search never saw (:func:`optipose.seeds.validation_seed`); these are
 the numbers reported. Under a band of conditions every layout is evaluated at each of them (the bracket
 errors drawn from the held-out seed too), and each choice carries its statistics per noise level (the
-worst over that level's bracket draws: :func:`optipose.evaluate.robust.by_level`)."""
+worst over that level's bracket draws: :func:`optipose.evaluate.robust.by_level`).
+
+The hand layout's evaluation does not depend on what the search finds: :class:`BaselineRun` starts it in
+a process of its own when the search starts, on one core beside the surrogate search, and
+:func:`validate` takes its result instead of evaluating the hand layout again. It is the same result,
+whatever runs it: the scans' noise comes from the seed and the scan's index, not from the worker."""
 
 from __future__ import annotations
+
+import logging
 
 import numpy as np
 
 from optipose.evaluate.robust import choice_of, make_evaluator
+from optipose.errors import WorkerError
 from optipose.evaluate.objective import reduced_objective
 from optipose.model.layout import Layout
 from optipose.search.records import Validation
 from optipose.seeds import validation_seed
 from optipose.model.baseline import baseline
 
-__all__ = ["validate", "nested_groups", "indices_in"]
+__all__ = ["validate", "BaselineRun", "nested_groups", "indices_in"]
+
+log = logging.getLogger(__name__)
+
+
+def validation_objective(objective, protocol: str = "full"):
+    """The objective the validation evaluates with: the objective's own, or (``reduced``) its reduced protocol."""
+    return reduced_objective(objective) if protocol == "reduced" else objective
+
+
+class BaselineRun:
+    """The hand layout's validation evaluation (:func:`optipose.model.baseline.baseline`), running in a
+    process of its own from the moment it is made (:class:`optipose.evaluate.background.Background`, one
+    thread), so it takes one core while the search uses the rest.
+
+    ``result()`` waits for it: ``None`` when the part has no baseline, or the evaluation failed or was
+    stopped (the validation then evaluates the hand layout itself); ``close()`` stops it.
+    """
+
+    def __init__(self, part, objective, seed: int, protocol: str = "full"):
+        from optipose.evaluate.background import Background
+
+        self._call = self._result = None
+        layout = baseline(part)
+        if layout is None:
+            return
+        args = (part, validation_objective(objective, protocol), validation_seed(seed), layout)
+        try:
+            self._call = Background(_evaluate, *args)
+        except Exception as exc:  # noqa: BLE001 - the validation evaluates the hand layout itself instead
+            log.warning("could not start the hand layout's evaluation beside the search (%s)", exc)
+
+    def wait(self) -> None:
+        """Wait until the evaluation has ended (and its process with it)."""
+        if self._call is None:
+            return
+        try:
+            self._result = self._call.result()
+        except WorkerError as exc:  # the validation evaluates the hand layout itself instead
+            log.warning("the hand layout's evaluation beside the search failed (%s); evaluating it again", exc)
+        finally:
+            self.close()
+
+    def result(self):
+        """The finished evaluation (waits for it), or ``None``."""
+        self.wait()
+        return self._result
+
+    def close(self) -> None:
+        if self._call is not None:
+            self._call.close()
+            self._call = None
+
+    def __enter__(self) -> "BaselineRun":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _evaluate(part, objective, seed: int, layout):
+    """One evaluation, in the baseline's process."""
+    with make_evaluator(part, objective, seed=seed, jobs=1, quiet=True) as evaluator:
+        return evaluator(layout)
 
 
 def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full",
-             on_evaluation=None) -> Validation:  # fmt: skip
+             on_evaluation=None, hand_run=None) -> Validation:  # fmt: skip
     """Evaluate ``layouts`` (k → found layout) and the part's hand layout on the held-out seed of ``seed``.
 
     on_evaluation(name, result) : told of each evaluation as it ends (``found_k3``, ``hand``), so it can
     be saved before the next one starts.
+    hand_run : a :class:`BaselineRun` of the same part, objective, seed and protocol, whose result stands for
+    the hand layout's evaluation (the hand layout is evaluated here when it has none).
     """
     vseed = validation_seed(seed)
-    if protocol == "reduced":
-        objective = reduced_objective(objective)
+    objective = validation_objective(objective, protocol)
     done = on_evaluation or (lambda name, result: None)
     found, hand = {}, {}
     with make_evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:
@@ -38,7 +110,7 @@ def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int =
             for k in members:
                 found[k] = choice_of(result, tuple(indices_in(layouts[k], big)))
         if baseline(part) is not None:
-            result = evaluator(baseline(part))
+            result = (hand_run.result() if hand_run is not None else None) or evaluator(baseline(part))
             done("hand", result)
             hand = {choice.k: choice for choice in result.table if choice.k in layouts}
     return Validation(protocol, vseed, found, hand)
