@@ -211,6 +211,8 @@ def test_a_background_call_answers_from_another_process_with_its_threads_capped(
         assert call.result() == "1"
     with Background(os.getpid) as call:
         assert call.result() != os.getpid()
+    with Background(os.nice, 0, nice=5) as call:  # os.nice(0) answers the process's niceness
+        assert call.result() == os.nice(0) + 5
 
 
 def test_a_background_call_that_raises_or_dies_says_so_instead_of_waiting():

@@ -21,15 +21,17 @@ __all__ = ["Background"]
 
 
 class Background:
-    """``fn(*args)`` in a process of its own, started at once; ``threads``: its thread pools' size."""
+    """``fn(*args)`` in a process of its own, started at once; ``threads``: its thread pools' size;
+    ``nice``: how much lower its scheduling priority is than this process's (0: the same), so that where
+    both want a core this one goes first."""
 
-    def __init__(self, fn, *args, threads: int = 1):
+    def __init__(self, fn, *args, threads: int = 1, nice: int = 0):
         from optipose.evaluate.executors import thread_env
 
         context = multiprocessing.get_context("spawn")
         self._receive, send = context.Pipe(duplex=False)
         payload = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
-        self._process = context.Process(target=_serve, args=(send, thread_env(threads), payload), daemon=True,
+        self._process = context.Process(target=_serve, args=(send, thread_env(threads), nice, payload), daemon=True,
                                         name=f"optipose-{getattr(fn, '__name__', 'call')}")  # fmt: skip
         self._process.start()
         send.close()  # this process's copy of the child's end: when the child dies, the pipe ends
@@ -66,10 +68,12 @@ class Background:
         self.close()
 
 
-def _serve(send, env: dict, payload: bytes) -> None:
-    """The child's side: cap the thread pools, then unpickle and run the call, and send back
-    ``(True, value)`` or ``(False, what went wrong)``."""
+def _serve(send, env: dict, nice: int, payload: bytes) -> None:
+    """The child's side: cap the thread pools and lower the priority, then unpickle and run the call, and
+    send back ``(True, value)`` or ``(False, what went wrong)``."""
     os.environ.update(env)
+    if nice:
+        os.nice(nice)
     try:
         fn, args = pickle.loads(payload)
         answer = (True, fn(*args))

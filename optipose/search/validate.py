@@ -26,6 +26,7 @@ from optipose.model.baseline import baseline
 __all__ = ["validate", "BaselineRun", "nested_groups", "indices_in"]
 
 log = logging.getLogger(__name__)
+_NICE = 10  # the hand layout's evaluation takes the cores the search leaves idle, and yields where it wants them
 
 
 def validation_objective(objective, protocol: str = "full"):
@@ -51,7 +52,7 @@ class BaselineRun:
             return
         args = (part, validation_objective(objective, protocol), validation_seed(seed), layout)
         try:
-            self._call = Background(_evaluate, *args)
+            self._call = Background(_evaluate, *args, nice=_NICE)
         except Exception as exc:  # noqa: BLE001 - the validation evaluates the hand layout itself instead
             log.warning("could not start the hand layout's evaluation beside the search (%s)", exc)
 
