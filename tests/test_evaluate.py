@@ -313,3 +313,23 @@ def test_subsets_started_from_their_sensors_registrations_end_where_identity_wou
     diff = np.rad2deg(np.abs(a.loc[~single, errors].to_numpy() - b.loc[~single, errors].to_numpy()))
     assert np.median(diff) < 1e-6 and diff.max() < 1e-4  # degrees; the tolerance is 1e-5 deg per step
     assert b.loc[~single, "iterations"].mean() < a.loc[~single, "iterations"].mean() - 1.5
+
+
+def test_a_zero_area_face_on_an_edge_never_answers_for_its_neighbours():
+    # a box with a sliver triangle along one of its edges (collinear corners: no area, no normal); points
+    # around that edge have their closest point on the edge, and must get a face with a normal
+    box = trimesh.creation.box((0.03, 0.02, 0.01))
+    v = np.asarray(box.vertices)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    a, b = np.array([lo[0], hi[1], hi[2]]), np.array([hi[0], hi[1], hi[2]])
+    vertices = np.vstack([v, a, b, 0.5 * (a + b)])
+    faces = np.vstack([[len(v), len(v) + 2, len(v) + 1], box.faces])  # first: it would win every exact tie
+    surface = SurfaceReference(vertices, faces)
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0.1, 0.9, 500)
+    edge = a + t[:, None] * (b - a)
+    points = edge + np.column_stack([np.zeros(500), rng.uniform(0, 3e-4, 500), rng.uniform(0, 3e-4, 500)])
+    q, n, ids = surface.nearest(points)
+    assert not np.any(ids == 0)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0)
+    np.testing.assert_allclose(q, np.clip(points, lo, hi), atol=1e-12)

@@ -25,7 +25,7 @@ def search(
     part: Part = None,
     units: Units = "auto",
     sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
-    budget: Annotated[str, typer.Option(help="quick (under a minute, validated on the 14-scan reduced protocol), default (under 10 min) or thorough.")] = "default",
+    budget: Annotated[str, typer.Option(help="quick (a first look, ~25 s on part B), default (~3 min) or thorough; every budget validates on the full protocol.")] = "default",
     objective: Objective = "paper",
     seed: Seed = 0,
     jobs: Jobs = None,
@@ -35,7 +35,7 @@ def search(
     no_report: NoReport = False,
 ) -> None:
     """Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
-    the full ICP protocol (quick: the reduced one) with a held-out noise seed, and print found vs.
+    the full ICP protocol with a held-out noise seed, and print found vs.
     hand-placed per axis (the paper's Table 1 shape)."""
     search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report)
 

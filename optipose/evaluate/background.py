@@ -29,12 +29,17 @@ class Background:
         from optipose.evaluate.executors import thread_env
 
         context = multiprocessing.get_context("spawn")
-        self._receive, send = context.Pipe(duplex=False)
         payload = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
+        self._receive, send = context.Pipe(duplex=False)
         self._process = context.Process(target=_serve, args=(send, thread_env(threads), nice, payload), daemon=True,
                                         name=f"optipose-{getattr(fn, '__name__', 'call')}")  # fmt: skip
-        self._process.start()
-        send.close()  # this process's copy of the child's end: when the child dies, the pipe ends
+        try:
+            self._process.start()
+        except BaseException:
+            self._receive.close()
+            raise
+        finally:
+            send.close()  # this process's copy of the child's end: when the child dies, the pipe ends
         self._answer: tuple | None = None
 
     def result(self):
@@ -58,7 +63,10 @@ class Background:
         """Stop the call (if it is still running) and release its process."""
         if self._process.is_alive():
             self._process.terminate()
-        self._process.join(timeout=10)
+            self._process.join(timeout=10)
+            if self._process.is_alive():  # it did not stop on SIGTERM
+                self._process.kill()
+                self._process.join(timeout=10)
         self._receive.close()
 
     def __enter__(self) -> "Background":

@@ -232,6 +232,8 @@ def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, s
                 best, g_best, bx, by, bz = d2, f, gx, gy, gz
         for k in range(start[c], start[c + 1]):
             g = faces[k]
+            if planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0:
+                continue  # a zero-area face (no normal) lies on its neighbours' edges: they answer for it
             box = 0.0
             for j in range(3):
                 gap = max(lo[g, j] - p[i, j], p[i, j] - hi[g, j], 0.0)

@@ -43,7 +43,7 @@ class Scan:
     points : (n, 3) float64, metres, in O with the scan motion undone (a cloud of the rotated part).
     profile, column : (n,) int32, which profile and which of the sensor's columns each point came from.
     intensity : (n,) float32, relative returned intensity.
-    raw : (n_profiles, points_per_profile) float64, device-format heights in mm (EMPTY where nothing).
+    raw : (n_profiles, points_per_profile) float64, device-format heights in mm (EMPTY where nothing); (0, points_per_profile) when not kept.
     face : (n,) int32, the mesh triangle each point lies on (see :meth:`Scanner.normals`).
     """
 
@@ -157,8 +157,7 @@ class Scanner:
         offset : (3,) m, an extra translation of the part (protocols with translation offsets).
         rng : a seed or a Generator (one draw is taken from it); the same seed gives the same clouds
             whatever the thread count. ``noise=False`` gives exact, unquantised surface points.
-        raw : write the device's raw profiles; ``False`` (what the evaluator asks: it reads the points) leaves
-            ``Scan.raw`` empty, (0, points per profile), and the points exactly as they would be.
+        raw : ``False`` (the evaluator's: it reads only the points) leaves ``Scan.raw`` empty, (0, columns).
         """
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
         seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
@@ -359,8 +358,7 @@ class _SensorView:
     a: np.ndarray
 
     def origins(self, rays: np.ndarray, shift_b: np.ndarray) -> np.ndarray:
-        """(n, 3) float32 origins of a block's rays (index = profile in the block × columns + column) at the
-        block's shifts (m,): only the rays cast are formed, each as the whole block's would be."""
+        """(n, 3) float32 origins of a block's rays (profile in the block × columns + column) at its shifts (m,)."""
         n_col = len(self.o_P32)
         return self.o_P32[rays % n_col] - (shift_b[rays // n_col][:, None] * self.step_P).astype(np.float32)
 

@@ -44,16 +44,19 @@ class BaselineRun:
     """
 
     def __init__(self, part, objective, seed: int, protocol: str = "full"):
+        import multiprocessing
+        import pickle
+
         from optipose.evaluate.background import Background
 
         self._call = self._result = None
         layout = baseline(part)
-        if layout is None:
+        if layout is None or multiprocessing.current_process().daemon:  # a daemonic worker (Dask) may not start one
             return
         args = (part, validation_objective(objective, protocol), validation_seed(seed), layout)
         try:
             self._call = Background(_evaluate, *args, nice=_NICE)
-        except Exception as exc:  # noqa: BLE001 - the validation evaluates the hand layout itself instead
+        except (OSError, pickle.PicklingError, AttributeError, TypeError) as exc:  # the validation evaluates it instead
             log.warning("could not start the hand layout's evaluation beside the search (%s)", exc)
 
     def wait(self) -> None:
@@ -62,6 +65,9 @@ class BaselineRun:
             return
         try:
             self._result = self._call.result()
+            failed = getattr(self._result, "n_failed", 0)
+            if failed:  # the evaluation ran quiet in its own process: say here what it would have said
+                log.warning("hand layout: %d registrations failed or did not converge (each counts as a 10 deg error)", failed)
         except WorkerError as exc:  # the validation evaluates the hand layout itself instead
             log.warning("the hand layout's evaluation beside the search failed (%s); evaluating it again", exc)
         finally:
