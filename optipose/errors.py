@@ -35,3 +35,11 @@ def read_toml(path, what: str = "") -> tuple[dict, str]:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         reason = "not a text file" if isinstance(exc, UnicodeDecodeError) else exc
         raise ConfigError(f"{what} {path}: {reason}" if what else f"{path}: {reason}") from None
+
+
+def is_interrupt(exc: BaseException) -> bool:
+    """Ctrl-C: a ``KeyboardInterrupt``, or the ``SystemError`` a compiled (numba) function raises when the
+    interrupt arrives while it runs ("returned a result with an exception set", the interrupt its context)."""
+    while isinstance(exc, SystemError):  # numba may wrap it twice (its dispatcher, and an unpickling under it)
+        exc = exc.__cause__ or exc.__context__
+    return isinstance(exc, KeyboardInterrupt)

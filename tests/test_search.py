@@ -440,3 +440,29 @@ def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_p
         here = evaluator(part.layouts["hand"])
     assert report.validation.hand[2].score == here.table[1].score
     assert (tmp_path / "validation" / "hand" / "per_scan.csv").is_file() and (tmp_path / "selection.csv").is_file()
+
+
+def test_ctrl_c_inside_a_compiled_kernel_stops_the_search_like_any_ctrl_c():
+    # numba raises SystemError ("returned a result with an exception set") when the interrupt arrives while
+    # it runs; the study must treat it as the interrupt it is, and let any other SystemError through
+    from optipose.errors import is_interrupt
+    from optipose.search.study import Stop
+
+    def compiled_call_interrupted():  # as numba chains it: the interrupt, under two SystemErrors
+        try:
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as exc:
+                raise SystemError("<function _numba_unpickle> returned a result with an exception set") from exc
+        except SystemError as exc:
+            raise SystemError("CPUDispatcher(<function nearest>) returned a result with an exception set") from exc
+
+    class Interrupted:
+        def score(self, u):
+            compiled_call_interrupted()
+
+    study = SurrogateStudy(Interrupted())
+    with pytest.raises(Stop, match="interrupted"):
+        study(np.full(6, 0.5))
+    assert study.interrupted
+    assert not is_interrupt(SystemError("something else"))

@@ -15,7 +15,7 @@ import typer
 
 from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
 from optipose.cli.report import NoReport
-from optipose.errors import ConfigError, read_toml
+from optipose.errors import ConfigError, is_interrupt, read_toml
 
 __all__ = ["search", "search_command", "verdict_headline"]
 
@@ -68,7 +68,9 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
 
     try:
         searched = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemError) as exc:
+        if not is_interrupt(exc):
+            raise
         console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
                       f"continue with `optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(EXIT_INTERRUPTED) from None

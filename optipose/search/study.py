@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from optipose.errors import is_interrupt
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import EvalState, Evaluation
 
@@ -88,7 +89,9 @@ class SurrogateStudy:
             return
         try:
             self.problem.prefetch(us, until=self._deadline)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, SystemError) as exc:
+            if not is_interrupt(exc):
+                raise
             self.interrupted = True
             raise Stop("interrupted") from None
 
@@ -103,7 +106,9 @@ class SurrogateStudy:
             raise Stop("time budget used up")
         try:
             result = self.problem.score(np.asarray(u, dtype=float))
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, SystemError) as exc:
+            if not is_interrupt(exc):
+                raise
             self.interrupted = True
             raise Stop("interrupted") from None
         k, value = len(u) // 6, result.objective
