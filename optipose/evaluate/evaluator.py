@@ -33,7 +33,7 @@ from optipose.evaluate.statistics import summarize
 from optipose.evaluate.worker import WorkerSetup, run_chunk
 from optipose.model.layout import Layout, SensorPose
 
-__all__ = ["Evaluator", "EvaluatorWrapper", "EvaluationResult", "evaluate"]
+__all__ = ["Evaluator", "EvaluatorWrapper", "EvaluationResult", "evaluate", "log_failures"]
 
 log = logging.getLogger(__name__)
 
@@ -171,11 +171,16 @@ class Evaluator:
         table = best_choices(stats, layout.names, self.objective.statistic, len(self.perturbations))
         timings = {k: float(sum(out[2][k] for out in outputs)) for k in ("scan", "register")}
         timings["wall"] = time.perf_counter() - t0
-        failed = int((~per_scan["ok"]).sum())
-        if failed:
-            reasons = per_scan.loc[~per_scan["ok"], "failure"].value_counts().to_dict()
-            log.log(self._failure_level, "%d of %d registrations failed or did not converge: %s", failed, len(per_scan), reasons)
+        log_failures(per_scan, self._failure_level)
         return EvaluationResult(self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings)
+
+
+def log_failures(per_scan: pd.DataFrame, level: int = logging.WARNING, what: str = "") -> None:
+    """Log how many of an evaluation's registrations failed or did not converge, and why (nothing if none)."""
+    failed = int((~per_scan["ok"]).sum())
+    if failed:
+        reasons = per_scan.loc[~per_scan["ok"], "failure"].value_counts().to_dict()
+        log.log(level, "%s%d of %d registrations failed or did not converge: %s", what, failed, len(per_scan), reasons)
 
 
 class EvaluatorWrapper:

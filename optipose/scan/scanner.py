@@ -211,11 +211,10 @@ class Scanner:
         float32): origins (n, 3), directions (n, 3) and far limits (n,), n = profiles × points per profile.
         For benchmarks that cast the same rays with another ray caster."""
         view = _SensorView.build(self, T_O_S, part_motion(np.zeros(3), np.zeros(3)))
-        shifts = motion.offsets()
-        origins = (view.o_P32[None] - (shifts[:, None, None] * view.step_P).astype(np.float32)).reshape(-1, 3)
+        shifts, n_col = motion.offsets(), self.sensor.points_per_profile
+        origins = view.origins(np.arange(len(shifts) * n_col), shifts)
         directions = np.tile(view.d_P32, (len(shifts), 1))
-        n_col = self.sensor.points_per_profile
-        return np.ascontiguousarray(origins), directions, np.tile(self._t_max_tiled[:n_col], len(shifts))
+        return origins, directions, np.tile(self._t_max_tiled[:n_col], len(shifts))
 
     def normals(self, scan: Scan) -> np.ndarray:
         """Unit surface normals (n, 3) in O at a scan's points (outward, of the rotated part)."""

@@ -87,8 +87,14 @@ class SurrogateStudy:
         problem's ``prefetch``; nothing when it has none). Evaluating them afterwards records them as usual."""
         if not hasattr(self.problem, "prefetch"):
             return
-        try:
+        with self._stop_on_interrupt():
             self.problem.prefetch(us, until=self._deadline)
+
+    @contextlib.contextmanager
+    def _stop_on_interrupt(self):
+        """A Ctrl-C in the block (:func:`optipose.errors.is_interrupt`) ends the search as :class:`Stop`."""
+        try:
+            yield
         except (KeyboardInterrupt, SystemError) as exc:
             if not is_interrupt(exc):
                 raise
@@ -104,13 +110,8 @@ class SurrogateStudy:
             if self._share is not None and time.monotonic() <= self._share:
                 raise Share("this sensor count's share of the time budget used up")
             raise Stop("time budget used up")
-        try:
+        with self._stop_on_interrupt():
             result = self.problem.score(np.asarray(u, dtype=float))
-        except (KeyboardInterrupt, SystemError) as exc:
-            if not is_interrupt(exc):
-                raise
-            self.interrupted = True
-            raise Stop("interrupted") from None
         k, value = len(u) // 6, result.objective
         if result.feasible and value < self._best.get(k, (np.inf,))[0]:
             self._best[k] = (value, np.array(u, dtype=float))

@@ -15,6 +15,7 @@ import logging
 
 import numpy as np
 
+from optipose.evaluate.evaluator import log_failures
 from optipose.evaluate.robust import choice_of, make_evaluator
 from optipose.errors import WorkerError
 from optipose.evaluate.objective import reduced_objective
@@ -65,9 +66,10 @@ class BaselineRun:
             return
         try:
             self._result = self._call.result()
-            failed = getattr(self._result, "n_failed", 0)
-            if failed:  # the evaluation ran quiet in its own process: say here what it would have said
-                log.warning("hand layout: %d registrations failed or did not converge (each counts as a 10 deg error)", failed)
+            # it ran quiet in its own process: say here what the validation's own evaluation would have said
+            each = [r for _, r in self._result.results] if hasattr(self._result, "results") else [self._result]
+            for result in each:
+                log_failures(result.per_scan, what="hand layout: ")
         except WorkerError as exc:  # the validation evaluates the hand layout itself instead
             log.warning("the hand layout's evaluation beside the search failed (%s); evaluating it again", exc)
         finally:
