@@ -1,5 +1,6 @@
 """Print the found-vs-hand table (Markdown) of one or more search result folders, in millidegrees; a search
-under a band of conditions (``--objective robust``) also gets hand / found per part, k and condition.
+under a band of conditions (``--objective robust``), or checked under one after its validation (``[search]
+band``, the ``default`` budget), also gets hand / found per part, k and condition.
 
     .venv/bin/python scripts/search_table.py results/search-default-part_a results/search-default-part_b ...
 """
@@ -42,7 +43,8 @@ def band(folders: list[str]) -> None:
     columns = []
     for folder in folders:
         result = load_result(folder)
-        columns += [(result.part, v) for v in result.verdicts() if v.levels()]
+        verdicts = list(result.band_verdicts().values()) or result.verdicts()
+        columns += [(result.part, v) for v in verdicts if v.levels()]
     if not columns:
         return
     print()

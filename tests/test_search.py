@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from optipose.errors import ConfigError
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.search.space import PoseSpace, params_from_pose, pose_from_params
@@ -466,3 +467,52 @@ def test_ctrl_c_inside_a_compiled_kernel_stops_the_search_like_any_ctrl_c():
         study(np.full(6, 0.5))
     assert study.interrupted
     assert not is_interrupt(SystemError("something else"))
+
+
+def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp_path):
+    """After the validation, the found layouts and the hand one again on the held-out seed under the band of
+    ``SearchConfig.band``: per noise level, on disk and read back; the band's x1 level without brackets is
+    the nominal objective itself, so there the hand layout's numbers are the validation's."""
+    from optipose.io import load_result
+    from optipose.io.search import SearchFolder
+    from optipose.search.pipeline import run
+
+    band_file = tmp_path / "band.toml"
+    band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
+    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    config = SearchConfig(sensors=(1, 2), global_evals=20, local_evals=6, joint_evals=8, random_starts=2, select_candidates=0,
+                          band=str(band_file))  # fmt: skip
+    out = tmp_path / "search"
+    stages = []
+    report = run(part, objective, config, 2, SearchFolder(out), jobs=1, on_stage=stages.append)
+    assert report.band is not None and any("under the band" in s for s in stages)
+    for k in (1, 2):
+        levels = [label for label, _ in report.band.found[k].under]
+        assert levels == ["noise x1", "noise x5"] and [label for label, _ in report.band.hand[k].under] == levels
+        assert report.band.hand[k].under[1][1].score > report.band.hand[k].under[0][1].score  # 5x the noise costs
+    import pandas as pd
+
+    at_x1, nominal = (pd.read_csv(out / sub / "stats.csv") for sub in ("band/hand/noise-x1", "validation/hand"))
+    assert np.array_equal(at_x1[["median", "p75"]].to_numpy(), nominal[["median", "p75"]].to_numpy())
+    assert (out / "band" / "comparison.csv").is_file() and (out / "band" / "hand" / "noise-x5" / "per_scan.csv").is_file()
+    saved = load_result(out)
+    assert {k: v.ratio for k, v in saved.band_verdicts().items()} == pytest.approx({v.k: v.ratio for v in report.band.verdicts()})
+    assert saved.config["band"]["conditions"]["noise_scales"] == [1.0, 5.0]
+    # a search under a band of its own validates under it; no second check
+    from optipose.search.validate import band_objective
+
+    assert band_objective(load_objective("robust"), str(band_file)) is None and band_objective(objective, "") is None
+    with pytest.raises(ConfigError, match="unknown objective"):
+        band_objective(objective, "no-such-band")
+
+
+def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought():
+    from optipose.cli.search import verdict_headline
+    from optipose.evaluate.compare import Verdict
+
+    found, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)])
+    nominal = Verdict(1, found, hand)
+    assert verdict_headline(nominal).startswith("k=1: BUY found F1: 2.33x better")
+    worse_there = Verdict(1, _choice([(1, 2), (1, 2), (5, 6)]), hand)
+    assert verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: found F1 2.33x better, but worse under the band"
+    assert verdict_headline(nominal, "hand", Verdict(1, found, hand)).startswith("k=1: BUY")

@@ -231,8 +231,9 @@ def _print_report(console, report, part) -> None:
     label = baseline_label(baseline(part))
     if report.validated:
         verdicts = report.validation.verdicts()
+        band = {v.k: v for v in report.band.verdicts()} if report.band is not None else {}
         for v in verdicts:
-            console.print(verdict_headline(v, label), highlight=False)
+            console.print(verdict_headline(v, label, band.get(v.k)), highlight=False)
         for line in report.validation.unmeasured_lines(label):
             console.print(line, style="bold red", highlight=False)
         lines = report.validation.verdict_lines(label)
@@ -248,6 +249,10 @@ def _print_report(console, report, part) -> None:
             console.print(_band_table(report.validation, part, label))
         for line in lines[: len(verdicts)]:
             console.print(line, highlight=False)
+        if band:
+            console.print(_band_table(report.band, part, label, "under the band"))
+            for v in band.values():
+                console.print(f"under the band: {v.line(label)}", highlight=False)
     console.print(_strategies_table(report.outcome, label))
     for k, layout in sorted(report.layouts.items()):
         console.print(f"[bold]found k={k}[/] (T_O_S, metres; X Y Z mm, roll pitch yaw deg):")
@@ -256,9 +261,13 @@ def _print_report(console, report, part) -> None:
             console.print(f"    {_xyz_rpy(T)}", highlight=False)
 
 
-def verdict_headline(verdict, label: str = "hand") -> str:
-    """The verdict for one k in one short line (under 80 characters for names up to 6): buy or keep."""
+def verdict_headline(verdict, label: str = "hand", band=None) -> str:
+    """The verdict for one k in one short line (under 80 characters for names up to 6): buy or keep.
+    ``band``: the same k's verdict under the band of the check after the validation; a found layout no worse
+    at the preset's noise but worse somewhere in the band is not bought."""
     ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
+    if verdict.no_worse and band is not None and not band.no_worse:
+        return f"k={verdict.k}: KEEP {label} {ref}: found {found} {ratio:.2f}x better, but worse under the band"
     if verdict.no_worse:
         return f"k={verdict.k}: BUY found {found}: {ratio:.2f}x better in sum than {label} {ref}, no axis worse"
     if ratio < 1:
@@ -330,10 +339,10 @@ def _subsets_table(validation, label: str = "hand"):
     return table
 
 
-def _band_table(validation, part, label: str = "hand"):
+def _band_table(validation, part, label: str = "hand", title: str = "per condition"):
     """Per k and noise level of the band: baseline / found in sum, and whether found is no worse on every axis."""
     verdicts = [v for v in validation.verdicts() if v.levels()]
-    table = _narrow_table(f"{part.name}: {label} / found per condition (* found worse on some axis)",
+    table = _narrow_table(f"{part.name}: {label} / found {title} (* found worse on some axis)",
                           [("condition", "left")] + [(f"k={v.k}", "right") for v in verdicts])  # fmt: skip
     for row in zip(*(v.levels() for v in verdicts)):
         table.add_row(row[0][0], *(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row))

@@ -54,16 +54,19 @@ def load_search(folder: Path, config: dict | None = None):
     layouts = {int(p.stem.removeprefix("found_k")): load_layout(p) for p in sorted((folder / "layouts").glob("found_k*.toml"))}
     hand_path = folder / "layouts" / "hand.toml"
     hand = load_layout(hand_path) if hand_path.is_file() else None
-    validation = None
-    if (folder / "comparison.csv").is_file():
-        rows = pd.read_csv(folder / "comparison.csv")
-        found_names = [f"F{i + 1}" for i in range(max(layouts, default=0))]
+    found_names = [f"F{i + 1}" for i in range(max(layouts, default=0))]
+
+    def validation(path: Path):
+        if not path.is_file():
+            return None
+        rows = pd.read_csv(path)
         found = choices_from_comparison(rows[rows.layout == "found"], found_names)
         hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
         protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
-        validation = Validation(protocol, int(config.get("validation_seed", -1)), found, hand_choices)
+        return Validation(protocol, int(config.get("validation_seed", -1)), found, hand_choices)
+
     return SearchResult(folder, config["part"]["name"], int(config["seed"]), str(config.get("budget", "")), config,
-                        layouts, hand, validation)  # fmt: skip
+                        layouts, hand, validation(folder / "comparison.csv"), validation(folder / "band" / "comparison.csv"))  # fmt: skip
 
 
 def choices_from_comparison(rows: pd.DataFrame, names: list[str]) -> dict[int, Choice]:

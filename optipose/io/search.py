@@ -3,7 +3,9 @@
 ``config.toml`` (first), ``history.csv`` and ``cache.npz`` (flushed as the search goes: what was computed
 is never lost, and ``--resume`` replays it), ``layouts/found_k*.toml`` (the surrogate's best first, the
 finalists after the selection), ``selection.csv``, ``surrogate_scores.csv``, ``validation/`` (one
-evaluation folder per evaluated layout) and ``comparison.csv`` (found vs. hand per k and axis).
+evaluation folder per evaluated layout) and ``comparison.csv`` (found vs. hand per k and axis); after a
+check under a band (``SearchConfig.band``), ``band/`` holds the same for it: one folder per layout with one
+evaluation per condition, and ``band/comparison.csv``.
 """
 
 from __future__ import annotations
@@ -29,8 +31,9 @@ class SearchFolder:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
 
-    def start(self, part, objective, config, budget: str, seed: int, validation_seed: int) -> None:
-        _write_search_config(self.folder, part, objective, config, budget, seed, validation_seed)
+    def start(self, part, objective, config, budget: str, seed: int, validation_seed: int, band=None) -> None:
+        """``config.toml``; ``band``: the objective of the check under a band, whose conditions it records."""
+        _write_search_config(self.folder, part, objective, config, budget, seed, validation_seed, band)
 
     def load_cache(self, space_version: int) -> dict:
         return load_cache(self.folder, space_version)
@@ -59,25 +62,38 @@ class SearchFolder:
         """``validation/<name>/``: one evaluation of the validation, as soon as it ends; under a band, one
         evaluation folder per condition (``validation/<name>/noise-x3-draw-1/``) and the robust statistics
         and Table 1 beside them."""
-        sub = self.folder / "validation" / name
-        sub.mkdir(parents=True, exist_ok=True)
-        if not hasattr(result, "results"):
-            write_evaluation(result, sub)
-            return
-        for condition, each in result.results:
-            (sub / condition.slug).mkdir(exist_ok=True)
-            write_evaluation(each, sub / condition.slug)
-        write_csv(result.stats, sub / "stats.csv")
-        write_csv(table1_frame(result.table), sub / "table1.csv")
+        _write_evaluations(self.folder / "validation" / name, result)
 
     def validation(self, validation) -> None:
         """``comparison.csv``: found vs. hand per k and axis."""
         write_csv(comparison_frame(validation), self.folder / "comparison.csv")
 
+    def band_evaluation(self, name: str, result) -> None:
+        """``band/<name>/<condition>/``: one evaluation of the check under the band, as soon as it ends."""
+        _write_evaluations(self.folder / "band" / name, result)
 
-def _write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int) -> Path:
+    def band(self, validation) -> None:
+        """``band/comparison.csv``: found vs. hand per k, axis and noise level under the band."""
+        write_csv(comparison_frame(validation), self.folder / "band" / "comparison.csv")
+
+
+def _write_evaluations(sub: Path, result) -> None:
+    """One evaluation into ``sub``, or under a band one folder per condition and the robust tables."""
+    sub.mkdir(parents=True, exist_ok=True)
+    if not hasattr(result, "results"):
+        write_evaluation(result, sub)
+        return
+    for condition, each in result.results:
+        (sub / condition.slug).mkdir(exist_ok=True)
+        write_evaluation(each, sub / condition.slug)
+    write_csv(result.stats, sub / "stats.csv")
+    write_csv(table1_frame(result.table), sub / "table1.csv")
+
+
+def _write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int, band=None) -> Path:
     from dataclasses import asdict
 
+    extra = {} if band is None else {"band": {"file": config.band, "conditions": asdict(band.conditions)}}
     return write_config(folder, {
         "command": "search",
         "part": {"name": part.name, "source": str(getattr(part, "source", ""))},
@@ -88,6 +104,7 @@ def _write_search_config(folder: Path, part, objective, config, budget: str, see
         "objective": objective.to_dict(),
         "objective_file": objective.source_text,
         "versions": versions(),
+        **extra,
     })  # fmt: skip
 
 

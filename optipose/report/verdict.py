@@ -22,11 +22,12 @@ def verdict_css(verdict: Verdict) -> str:
     return "verdict mixed" if verdict.ratio >= 1 else "verdict bad"
 
 
-def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label: str) -> list[Block]:
+def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label: str, band: dict | None = None) -> list[Block]:
     """An axis a found layout does not measure, one line per k; one coloured line per k (the terminal's), then
     the headline: one found sensor vs. the baseline's largest.
 
-    found, reference : k → Choice; label : ``hand`` or ``conventional``.
+    found, reference : k → Choice; label : ``hand`` or ``conventional``; band : k → the verdict under the band
+    of the check after a nominal search (a found layout worse there is not bought).
     """
     blocks: list[Block] = [Heading("Verdict")]
     unmeasured = (unmeasured_line(k, choice, reference.get(k), label) for k, choice in found.items())
@@ -34,9 +35,12 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     if not verdicts:
         blocks.append(Paragraph(f"no verdict: nothing to compare the found layouts with ({label} layout missing)", "verdict mixed"))
         return blocks
-    blocks.append(verdict_table(verdicts, label))
+    band = band or {}
+    blocks.append(verdict_table(verdicts, label, band))
     for v in verdicts:
-        blocks.append(Paragraph(v.line(label), verdict_css(v)))
+        blocks.append(Paragraph(v.line(label), verdict_css(v) if v.k not in band or band[v.k].no_worse else "verdict mixed"))
+        if v.k in band:
+            blocks.append(Paragraph("under the band: " + band[v.k].line(label), verdict_css(band[v.k])))
     top = max(reference, default=0)
     if 1 in found and top > 1:
         beats = found[1].score < reference[top].score
@@ -46,13 +50,17 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     return blocks
 
 
-def verdict_table(verdicts: list[Verdict], label: str) -> Table:
+def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None) -> Table:
     """Per k: found and baseline sensors, baseline / found in sum, per axis whether found is no worse
-    (median and p75, at every condition of a band), and what to do."""
-    rows = []
+    (median and p75, at every condition of a band), and what to do (``band``: k → the verdict under the band
+    of the check after a nominal search)."""
+    rows, band = [], band or {}
     for v in verdicts:
         gaps = {g.axis for g in v.worse}
         decision = "buy the found sensors" if v.no_worse else (f"keep {label}" if v.ratio < 1 else f"better in sum; keep {label} if no axis may get worse")
+        if v.no_worse and v.k in band and not band[v.k].no_worse:
+            worse = ", ".join(dict.fromkeys(g.axis for g in band[v.k].worse))
+            decision = f"keep {label}: worse on {worse} under the band"
         rows.append((str(v.k), v.found.name, v.reference.name, f"{v.ratio:.2f}x",
                      *("worse" if a in gaps else "no worse" for a in _AXES), decision))  # fmt: skip
     return Table(("k", "found", label, f"{label} / found in sum", *_AXES, "what to do"), tuple(rows),

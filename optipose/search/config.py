@@ -68,6 +68,11 @@ class SearchConfig:
     confirm_candidates: int = 0
     clear_ratio: float = 0.4
     validation: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
+    # after the validation, the found layouts and the hand one again on the held-out seed under the
+    # [conditions] of this objective (a shipped name or a TOML path; "": no check): a layout that wins only
+    # at the preset's noise with perfect brackets is not bought. Skipped when the search's own objective
+    # has a band (its validation is under it already)
+    band: str = ""
 
     def __post_init__(self) -> None:
         if not self.sensors or min(self.sensors) < 1 or max(self.sensors) > 6:
@@ -88,12 +93,12 @@ BUDGETS: dict[str, dict] = {
     ),  # fmt: skip
     "default": dict(
         global_evals=400, local_evals=120, joint_evals=200, max_time=240.0, select_candidates=3, select_time=240.0,
-        polish_evals=90, confirm_candidates=3, screen_samples=4096,
+        polish_evals=90, confirm_candidates=3, screen_samples=4096, band="robust",
     ),  # fmt: skip
     "thorough": dict(
         global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16, screen_samples=16384,
         screen_starts=12, screen_evals=60,
-        select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6,
+        select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6, band="robust",
     ),  # fmt: skip
 }
 

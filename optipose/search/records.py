@@ -170,7 +170,8 @@ class SearchResult:
     """A search as saved in its result folder (:func:`optipose.io.load_result`).
 
     layouts : k → the found layout (sensors F1 … Fk); hand : the hand-placed layout, when the part has one;
-    validation : found vs. hand on the held-out seed (None when the search was interrupted before it).
+    validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
+    band : the same under the band of the check after a nominal search (``SearchConfig.band``), or None.
     """
 
     folder: object
@@ -181,10 +182,15 @@ class SearchResult:
     layouts: dict = field(default_factory=dict, repr=False)
     hand: object = field(default=None, repr=False)
     validation: Validation | None = None
+    band: Validation | None = None
 
     def verdicts(self) -> list[Verdict]:
         """Found vs. hand per k (empty when there is no hand layout or no validation)."""
         return self.validation.verdicts() if self.validation is not None else []
+
+    def band_verdicts(self) -> dict[int, Verdict]:
+        """k → found vs. hand under the band of the check after a nominal search (empty without one)."""
+        return {v.k: v for v in self.band.verdicts()} if self.band is not None else {}
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""

@@ -24,10 +24,25 @@ from optipose.search.records import Validation
 from optipose.seeds import validation_seed
 from optipose.model.baseline import baseline
 
-__all__ = ["validate", "BaselineRun", "nested_groups", "indices_in"]
+__all__ = ["validate", "band_objective", "BaselineRun", "nested_groups", "indices_in"]
 
 log = logging.getLogger(__name__)
 _NICE = 10  # the hand layout's evaluation takes the cores the search leaves idle, and yields where it wants them
+
+
+def band_objective(objective, band: str):
+    """The objective the found layouts are checked under after the validation (``SearchConfig.band``): the
+    search's own, with the ``[conditions]`` of the objective ``band`` (a shipped name or a TOML path); None
+    when there is no check (``band`` empty, or the search's objective has a band of its own, under which it
+    validates already). A bad name is a ConfigError."""
+    from dataclasses import replace
+
+    from optipose.evaluate.objective import load_objective
+
+    if not band or not objective.conditions.trivial:
+        return None
+    conditions = load_objective(band).conditions
+    return None if conditions.trivial else replace(objective, conditions=conditions)
 
 
 def validation_objective(objective, protocol: str = "full"):
@@ -106,6 +121,9 @@ def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int =
     be saved before the next one starts.
     hand_run : a :class:`BaselineRun` of the same part, objective, seed and protocol, whose result stands for
     the hand layout's evaluation (the hand layout is evaluated here when it has none).
+
+    The same function checks the found layouts under a band after a nominal search's validation
+    (:func:`band_objective`): ``objective`` is then the band's.
     """
     vseed = validation_seed(seed)
     objective = validation_objective(objective, protocol)

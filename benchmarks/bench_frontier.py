@@ -1,0 +1,115 @@
+"""Where "no worse than the hand layout on every axis at every noise level" can be had, by the surrogate.
+
+For k = 1 the found sensor must beat the hand layout's best single sensor on each axis's median and 75th
+percentile at every noise level of the band (12 numbers for ``objectives/robust.toml``). This script asks the
+surrogate (``search.surrogate``, the band's noise levels and the bracket term) how many feasible poses of a
+space-filling sample of the search space, each then moved by a local search (and one from each hand sensor) that maximises its smallest
+ratio hand / pose over the 12 statistics, do that, and how much better in sum at the preset's noise the
+best of those is. For k = 2 and 3 the same with k - 1 of the hand sensors kept in their places and the
+sample's pose added (the search's hand-anchored candidates): a kept sensor gives the axes it measures the
+hand layout's own numbers, so a tie there is exact.
+
+    .venv/bin/python benchmarks/bench_frontier.py [--part part_b] [--objective robust] [--samples 1024] [--starts 8]
+
+The surrogate's ranking agrees with ICP only to Spearman ρ ≈ 0.7–0.9 (README, "Surrogate quality"), so a
+count here is the surrogate's view, not ICP's; a zero says the surrogate sees no such pose in the sample.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import time
+
+import numpy as np
+
+from optipose.evaluate.objective import load_objective
+from optipose.model.baseline import baseline
+from optipose.model.part import load_part
+from optipose.search.config import config_from_budget
+from optipose.search.driver import optimize
+from optipose.search.problem import SurrogateProblem
+from optipose.search.surrogate import SensorInfo, predicted_stats
+
+
+def level_stats(infos, objective) -> np.ndarray:
+    """Per noise level, per axis, the predicted median and p75 (deg) of the axis's best subset: (levels, 3, 2)."""
+    band = objective.conditions
+    mounting = (band.mounting_translation, band.mounting_rotation) if band.mounted else None
+    out = []
+    for scale in band.noise_scales:
+        stats = predicted_stats(infos, noise_scales=(scale,), mounting=mounting)
+        rows = [stats["subsets"].index(s) for s in stats["best_subset"]]
+        out.append([[stats["median_deg"][r, a], stats["p75_deg"][r, a]] for a, r in enumerate(rows)])
+    return np.array(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--part", default="part_b", help="a part, or several separated by commas")
+    ap.add_argument("--objective", default="robust")
+    ap.add_argument("--samples", type=int, default=1024)
+    ap.add_argument("--starts", type=int, default=8, help="poses moved by the local search, the best of the sample")
+    ap.add_argument("--evals", type=int, default=60, help="surrogate evaluations of each local search")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    from scipy.stats import qmc
+
+    objective = load_objective(args.objective)
+    print(f"bench_frontier: objective {objective.name}, {args.samples} Sobol poses + {args.starts} local searches of "
+          f"{args.evals}, seed {args.seed}; ratios hand / layout (> 1: better)")  # fmt: skip
+    print(f"{'part':8} {'k':>2} {'kept':>8} {'feasible':>8} {'no worse':>8} {'best min ratio':>14} {'its x1 sum':>10} {'best x1 sum':>11}")
+    for name in args.part.split(","):
+        t0 = time.perf_counter()
+        part = load_part(name)
+        problem = SurrogateProblem(part, objective, config_from_budget("default", (1, 2, 3), band=not objective.conditions.trivial))
+        hand = baseline(part)
+        hand_u = [problem.space.from_pose(T) for T in hand.poses]
+        hand_info = [problem.info(u) for u in hand_u]
+        points = qmc.Sobol(6, scramble=True, seed=args.seed).random(args.samples)
+        problem.prefetch(points)
+        for k in range(1, len(hand.poses) + 1):
+            ref = min(itertools.combinations(range(len(hand_info)), k),
+                      key=lambda c: level_stats([hand_info[i] for i in c], objective).max(axis=0).sum())  # fmt: skip
+            target = level_stats([hand_info[i] for i in ref], objective)
+            for kept in itertools.combinations(range(len(hand_info)), k - 1):
+                base = [hand_info[i] for i in kept]
+
+                def ratios(u6):
+                    info = problem.sensor(u6)
+                    if not isinstance(info, SensorInfo):
+                        return None
+                    stats = level_stats(base + [info], objective)
+                    return float(np.min(target / stats)), float(target[0].sum() / stats[0].sum())
+
+                scored = [(r, u) for u in points if (r := ratios(u)) is not None]
+                order = sorted(range(len(scored)), key=lambda i: -scored[i][0][0])[: args.starts]
+                starts = [scored[i][1] for i in order] + [np.clip(u, 0.0, 1.0) for u in hand_u]  # and from each hand sensor
+                for j, start in enumerate(starts):  # move the best few to maximise the smallest ratio
+                    seen = []
+
+                    def fn(u, grad=None):
+                        r = ratios(np.asarray(u, dtype=float))
+                        if r is not None:
+                            seen.append((r, np.array(u, dtype=float)))
+                        return -r[0] if r is not None else 1.0
+
+                    optimize(fn, "LN_BOBYQA", start, args.evals, args.seed + j)
+                    scored += seen
+                mins = np.array([r[0] for r, _ in scored])
+                sums = np.array([r[1] for r, _ in scored])
+                top = int(np.argmax(mins))
+                ok = mins >= 1.0
+                kept_names = "".join(hand.names[i] for i in kept) or "-"
+                print(f"{name:8} {k:>2} {kept_names:>8} {len(scored):>8} {int(ok.sum()):>8} {mins[top]:>14.2f} "
+                      f"{sums[top]:>10.2f} {sums[ok].max() if ok.any() else float('nan'):>11.2f}")  # fmt: skip
+        print(f"{name:8} hand's best by the surrogate: " + ", ".join(
+            f"k={k} {''.join(hand.names[i] for i in min(itertools.combinations(range(len(hand_info)), k), key=lambda c: level_stats([hand_info[i] for i in c], objective).max(axis=0).sum()))}"
+            for k in range(1, len(hand.poses) + 1)) + f"; {time.perf_counter() - t0:.0f} s")  # fmt: skip
+    print("no worse: poses (of those feasible) predicted no worse on every statistic at every level; best min ratio: the")
+    print("largest smallest ratio over the 12 statistics; its x1 sum: that layout's sum ratio at the preset's noise; best x1")
+    print("sum: the largest sum ratio at the preset's noise among the no-worse ones")
+
+
+if __name__ == "__main__":
+    main()
