@@ -498,6 +498,11 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
     saved = load_result(out)
     assert {k: v.ratio for k, v in saved.band_verdicts().items()} == pytest.approx({v.k: v.ratio for v in report.band.verdicts()})
     assert saved.config["band"]["conditions"]["noise_scales"] == [1.0, 5.0]
+    from optipose.batch.results import trial_results
+    from optipose.batch.spec import TrialSpec
+
+    row = trial_results(out, TrialSpec("part_b", "search", "paper", 2, "default", 2))  # a batch study's row of it
+    assert row["band_ratio"] == pytest.approx(saved.band_verdicts()[2].ratio) and row["band_no_worse"] == saved.band_verdicts()[2].no_worse
     # a search under a band of its own validates under it; no second check
     from optipose.search.validate import band_objective
 

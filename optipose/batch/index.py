@@ -18,7 +18,7 @@ from pathlib import Path
 import pandas as pd
 
 from optipose.batch.records import TrialRecord, TrialState
-from optipose.batch.results import RESULT_COLUMNS, trial_results
+from optipose.batch.results import RESULT_COLUMNS, VERDICT_COLUMNS, trial_results
 from optipose.batch.spec import TrialSpec
 from optipose.batch.trial import TMP_PREFIX, TRIAL_FILE
 from optipose.errors import ConfigError
@@ -114,7 +114,7 @@ def _old_records(folder: Path) -> dict[str, TrialRecord]:
     for row in read_index(folder).to_dict("records"):
         trial = TrialSpec(*(int(row[p]) if p in ("sensors", "seed") else str(row[p]) for p in params))
         fields = {k: ("" if pd.isna(row[k]) else row[k]) for k in ("error", "started", "finished", "worker", "folder")}
-        results = {k: row[k] for k in RESULT_COLUMNS + ["hand_score_deg", "ratio", "no_worse"] if k in row and not _missing(row[k])}
+        results = {k: row[k] for k in RESULT_COLUMNS + VERDICT_COLUMNS if k in row and not _missing(row[k])}
         seconds = {k: float(row.get(k, float("nan"))) for k in ("seconds", "cpu_seconds")}
         out[row["key"]] = TrialRecord(trial, TrialState(row["state"]), results=results, **seconds, **fields)
     return out

@@ -9,7 +9,8 @@ its ``robustness.csv`` (the hand layout's robust choice over the band). The colu
   robust choice, the worst over the band);
 - search only: ``hand_score_deg``, ``hand_<axis>_median_deg``, ``hand_<axis>_p75_deg`` (the hand layout's
   k sensors on the same validation), ``ratio`` (hand score over found) and ``no_worse`` (found no worse
-  on every axis statistic).
+  on every axis statistic); after a check under a band (``[search] band``, the ``default`` budget),
+  ``band_ratio`` (the same at the worst over the band) and ``band_no_worse`` (no worse at every noise level).
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ import numpy as np
 from optipose.batch.spec import TrialSpec
 from optipose.evaluate.objective import AXES
 
-__all__ = ["trial_results", "RESULT_COLUMNS"]
+__all__ = ["trial_results", "RESULT_COLUMNS", "VERDICT_COLUMNS"]
 
 RESULT_COLUMNS = ["sensors_used", "score_deg"] + [f"{a}_{s}" for a in AXES for s in ("median_deg", "p75_deg", "subset")]
+VERDICT_COLUMNS = ["hand_score_deg", "ratio", "no_worse", "band_ratio", "band_no_worse"]  # a search's, against the hand layout
 
 
 def trial_results(folder: str | Path, trial: TrialSpec) -> dict:
@@ -41,7 +43,9 @@ def trial_results(folder: str | Path, trial: TrialSpec) -> dict:
         return _choice_columns(result.validation.found[trial.sensors])
     hand = {f"hand_{key}": value for key, value in _choice_columns(verdict.reference).items() if not key.endswith("subset")}
     hand.pop("hand_sensors_used")
-    return {**_choice_columns(verdict.found), **hand, "ratio": verdict.ratio, "no_worse": bool(verdict.no_worse)}
+    band = result.band_verdicts().get(trial.sensors)
+    checked = {} if band is None else {"band_ratio": band.ratio, "band_no_worse": bool(band.no_worse)}
+    return {**_choice_columns(verdict.found), **hand, "ratio": verdict.ratio, "no_worse": bool(verdict.no_worse), **checked}
 
 
 def _choice_columns(choice) -> dict:
