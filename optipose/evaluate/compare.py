@@ -110,6 +110,25 @@ class Verdict:
             return []
         return [(label, float(r.score / c.score), dominates(c, r)) for (label, c), (_, r) in zip(self.found.under, self.reference.under)]
 
+    def holds_below(self, reference: str = "hand") -> str:
+        """Under a band, when found is no worse on every axis at the band's lowest noise level(s) but not at
+        every level: one line saying where it holds and where not, and that buying it is a bet on the
+        sensor's noise on this part; "" otherwise (no band, no worse everywhere, or worse already at the
+        lowest level)."""
+        import re
+
+        levels = [(float(m.group(1)), label.split(",")[0], ratio, ok) for label, ratio, ok in self.levels()
+                  if (m := re.match(r"noise x([0-9.]+)", label))]  # fmt: skip
+        levels.sort()
+        if not levels or all(ok for *_, ok in levels) or not levels[0][3]:
+            return ""
+        n = next(i for i, (*_, ok) in enumerate(levels) if not ok)
+        held = ", ".join(f"{name} ({ratio:.2f}x better in sum)" for _, name, ratio, _ in levels[:n])
+        lost = ", ".join(f"{name} ({ratio:.2f}x in sum)" for _, name, ratio, _ in levels[n:])
+        return (f"k={self.k}: found {self.found.name} is no worse than {reference} {self.reference.name} on every axis at {held}, "
+                f"worse on some axis at {lost}: it is the better buy only if the sensor's noise on this part, measured on the bench, "
+                f"is {'no more than' if levels[n - 1][0] == 1 else f'at most {levels[n - 1][0]:g}x'} the preset's")  # fmt: skip
+
     def ratios(self) -> list[tuple[str, float]]:
         """Under a band, (level label, reference score over found score) per noise level; else []."""
         return [(label, ratio) for label, ratio, _ in self.levels()]
