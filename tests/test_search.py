@@ -523,16 +523,18 @@ def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought(
     assert verdict_headline(nominal, "hand", Verdict(1, found, hand)).startswith("k=1: BUY")
 
 
-def test_a_found_layout_that_holds_only_at_the_low_noise_says_where_it_holds():
+def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():
     from optipose.evaluate.compare import Verdict
 
     good, bad, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(1, 2), (1, 2), (5, 6)]), _choice([(3, 4), (3, 4), (3, 4)])
     x1, x5 = "noise x1, worst of 2 bracket draws", "noise x5, worst of 2 bracket draws"
     levels = lambda a, b: replace(a, under=((x1, a), (x5, b)))  # noqa: E731
     holds_low = Verdict(1, levels(good, bad), levels(hand, hand))
-    assert holds_low.holds_below("hand") == ("k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), "
-                                             "worse on some axis at noise x5 (1.24x in sum): it is the better buy only if the sensor's noise on this part, "
-                                             "measured on the bench, is no more than the preset's")  # fmt: skip
-    assert Verdict(1, levels(bad, good), levels(hand, hand)).holds_below() == ""  # worse already at the preset's noise
-    assert Verdict(1, levels(good, good), levels(hand, hand)).holds_below() == ""  # no worse everywhere
-    assert Verdict(1, good, hand).holds_below() == ""  # no band
+    assert holds_low.band_advice("hand") == ("k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), "
+                                             "worse on some axis at noise x5 (1.24x in sum): it is the better buy only if the sensor's "
+                                             "noise on this part, measured on the bench, is no more than the preset's")  # fmt: skip
+    holds_high = Verdict(1, levels(bad, good), levels(hand, hand))  # worse already at the preset's noise
+    assert holds_high.band_advice("hand") == ""  # ... and it was worse in the nominal cell too: nothing to add
+    assert "its win rests on brackets more precise than the band's" in holds_high.band_advice("hand", nominal_no_worse=True)
+    assert Verdict(1, levels(good, good), levels(hand, hand)).band_advice() == ""  # no worse everywhere
+    assert Verdict(1, good, hand).band_advice() == ""  # no band

@@ -253,9 +253,10 @@ def _print_report(console, report, part) -> None:
             console.print(_band_table(report.band, part, label, "under the band"))
             for v in band.values():
                 console.print(f"under the band: {v.line(label)}", highlight=False)
+            nominal = {v.k: v.no_worse for v in verdicts}
             for v in band.values():
-                if v.holds_below(label):
-                    console.print(v.holds_below(label), highlight=False)
+                if advice := v.band_advice(label, nominal.get(v.k, False)):
+                    console.print(advice, highlight=False)
     console.print(_strategies_table(report.outcome, label))
     for k, layout in sorted(report.layouts.items()):
         console.print(f"[bold]found k={k}[/] (T_O_S, metres; X Y Z mm, roll pitch yaw deg):")

@@ -41,8 +41,8 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
         blocks.append(Paragraph(v.line(label), verdict_css(v) if v.k not in band or band[v.k].no_worse else "verdict mixed"))
         if v.k in band:
             blocks.append(Paragraph("under the band: " + band[v.k].line(label), verdict_css(band[v.k])))
-            if band[v.k].holds_below(label):
-                blocks.append(Paragraph(band[v.k].holds_below(label), "verdict mixed"))
+            if advice := band[v.k].band_advice(label, v.no_worse):
+                blocks.append(Paragraph(advice, "verdict mixed"))
     top = max(reference, default=0)
     if 1 in found and top > 1:
         beats = found[1].score < reference[top].score
