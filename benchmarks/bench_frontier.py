@@ -13,6 +13,8 @@ hand layout's own numbers, so a tie there is exact.
 
 The surrogate's ranking agrees with ICP only to Spearman ρ ≈ 0.7–0.9 (README, "Surrogate quality"), so a
 count here is the surrogate's view, not ICP's; a zero says the surrogate sees no such pose in the sample.
+Each axis takes its best subset at each noise level separately (the verdict fixes one subset per axis on the
+worst over the band), so the counts are, if anything, generous.
 """
 
 from __future__ import annotations

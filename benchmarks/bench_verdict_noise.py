@@ -6,7 +6,7 @@ be at most the hand layout's. Both are single draws: the noise of 77 scans and, 
 bracket errors per sensor. This script evaluates the *same* layout (default: the part's hand layout) at
 several seeds and applies the product's own test (``evaluate.compare.dominates``) to every ordered pair of
 seeds: how often a layout is "no worse" than an exact copy of itself, and how much better on every
-statistic a layout must be to pass. Nothing here is timed.
+statistic a layout must be to pass. Only the evaluations' total time is printed, for the record.
 
     .venv/bin/python benchmarks/bench_verdict_noise.py [--part part_b] [--objective robust] [--seeds 1,2,3] [--jobs 2]
 """

@@ -57,7 +57,8 @@ def results(tmp_path_factory):
     """A search on a bare STL (its baseline: the conventional placement), a robustness run of its found
     pair against part B's hand layout under a band, and an evaluation: each writes its report."""
     d = tmp_path_factory.mktemp("report")
-    for name, text in (("small.toml", SMALL), ("short.toml", SHORT), ("band.toml", BAND)):
+    # the search checks its answer under the band too (the default budget's stage, here on the short protocol)
+    for name, text in (("small.toml", SMALL + f'band = "{d / "band.toml"}"\n'), ("short.toml", SHORT), ("band.toml", BAND)):
         (d / name).write_text(text)
     shutil.copy(PARTS_DIR / "part_b" / "part_b.stl", d / "block.stl")
     search = run("search", d / "block.stl", "--sensors", "1,2", "--budget", "quick", "--search-config", d / "small.toml",
@@ -75,10 +76,12 @@ def results(tmp_path_factory):
 def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
     lines = results["stdout"].splitlines()
     assert max(len(line) for line in lines) <= 80
-    verdicts = load_result(results["search"]).verdicts()
+    result = load_result(results["search"])
+    verdicts, band = result.verdicts(), result.band_verdicts()
     from optipose.cli.search import verdict_headline
 
-    assert lines[: len(verdicts)] == [verdict_headline(v, "conventional") for v in verdicts]
+    assert set(band) == {v.k for v in verdicts}  # checked under the band
+    assert lines[: len(verdicts)] == [verdict_headline(v, "conventional", band[v.k]) for v in verdicts]
     assert [line[:4] for line in lines[:2]] == ["k=1:", "k=2:"]
     table_row = next(i for i, line in enumerate(lines) if line.lstrip().startswith("1  found"))
     assert table_row > len(verdicts)  # the details come after
@@ -124,7 +127,10 @@ def test_the_report_says_the_verdicts_of_the_result(results):
     md = (results["search"] / "report.md").read_text()
     for line in result.verdict_lines():
         assert html.escape(line) in text and line in md
-    assert text.index("Verdict") < text.index("Table 1") < text.index("Where the sensors go")
+    assert text.index("Verdict") < text.index("Table 1") < text.index("Under the band of a real cell") < text.index("Where the sensors go")
+    for v in result.band_verdicts().values():  # each k's verdict under the band, and its table per level
+        assert html.escape("under the band: " + v.line("conventional")) in text
+        assert f"found (k={v.k}) at every condition of the band" in md
 
 
 def _rz_ry_rx(rpy_deg):

@@ -519,22 +519,28 @@ def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought(
     nominal = Verdict(1, found, hand)
     assert verdict_headline(nominal).startswith("k=1: BUY found F1: 2.33x better")
     worse_there = Verdict(1, _choice([(1, 2), (1, 2), (5, 6)]), hand)
-    assert verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: found F1 2.33x better, but worse under the band"
+    assert verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: F1 2.33x better, but worse under the band"
     assert verdict_headline(nominal, "hand", Verdict(1, found, hand)).startswith("k=1: BUY")
 
 
 def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():
-    from optipose.evaluate.compare import Verdict
+    from optipose.evaluate.compare import Verdict, bought
 
     good, bad, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(1, 2), (1, 2), (5, 6)]), _choice([(3, 4), (3, 4), (3, 4)])
-    x1, x5 = "noise x1, worst of 2 bracket draws", "noise x5, worst of 2 bracket draws"
-    levels = lambda a, b: replace(a, under=((x1, a), (x5, b)))  # noqa: E731
+    x1, x3, x5 = (f"noise x{s}, worst of 2 bracket draws" for s in (1, 3, 5))
+    levels = lambda *cs: replace(cs[0], under=tuple(zip((x1, x5) if len(cs) == 2 else (x1, x3, x5), cs)))  # noqa: E731
     holds_low = Verdict(1, levels(good, bad), levels(hand, hand))
-    assert holds_low.band_advice("hand") == ("k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), "
-                                             "worse on some axis at noise x5 (1.24x in sum): it is the better buy only if the sensor's "
-                                             "noise on this part, measured on the bench, is no more than the preset's")  # fmt: skip
-    holds_high = Verdict(1, levels(bad, good), levels(hand, hand))  # worse already at the preset's noise
-    assert holds_high.band_advice("hand") == ""  # ... and it was worse in the nominal cell too: nothing to add
+    assert holds_low.band_advice("hand", nominal_no_worse=True) == (
+        "k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), worse on some axis at "
+        "noise x5 (1.24x in sum): it is the better buy only if the sensor's noise on this part, measured on the bench, "
+        "is no more than the preset's")  # fmt: skip
+    assert holds_low.band_advice("hand") == ""  # worse in the nominal cell already: no advice to buy it at any noise
+    holds_high = Verdict(1, levels(bad, good), levels(hand, hand))  # worse at the preset's noise with the brackets off
     assert "its win rests on brackets more precise than the band's" in holds_high.band_advice("hand", nominal_no_worse=True)
-    assert Verdict(1, levels(good, good), levels(hand, hand)).band_advice() == ""  # no worse everywhere
-    assert Verdict(1, good, hand).band_advice() == ""  # no band
+    # a level that holds between two that do not is not listed as lost
+    three = Verdict(1, levels(good, bad, good), levels(hand, hand, hand)).band_advice("hand", nominal_no_worse=True)
+    assert "worse on some axis at noise x3 (1.24x in sum): " in three and "at most 1x" not in three
+    assert Verdict(1, levels(good, good), levels(hand, hand)).band_advice(nominal_no_worse=True) == ""  # no worse everywhere
+    assert Verdict(1, good, hand).band_advice(nominal_no_worse=True) == ""  # no band
+    nominal = Verdict(1, good, hand)
+    assert bought(nominal) and bought(nominal, Verdict(1, levels(good, good), levels(hand, hand))) and not bought(nominal, holds_low)

@@ -9,7 +9,7 @@ its ``robustness.csv`` (the hand layout's robust choice over the band). The colu
   robust choice, the worst over the band);
 - search only: ``hand_score_deg``, ``hand_<axis>_median_deg``, ``hand_<axis>_p75_deg`` (the hand layout's
   k sensors on the same validation), ``ratio`` (hand score over found) and ``no_worse`` (found no worse
-  on every axis statistic); after a check under a band (``[search] band``, the ``default`` budget),
+  on every axis statistic); after a check under a band (``[search] band``: the ``default`` and ``thorough`` budgets),
   ``band_ratio`` (the same at the worst over the band) and ``band_no_worse`` (no worse at every noise level).
 """
 

@@ -131,7 +131,8 @@ def write_study_report(folder: Path, index) -> tuple[Path, Path]:
 
 def _summary_table(frame, name: str):
     """Per part and setting: trials (complete/failed), seeds, score median/worst and per-axis medians
-    in millidegrees, and for searches hand/found and how many were no worse on every axis."""
+    in millidegrees, and for searches hand/found and how many were no worse on every axis (and, checked under a
+    band, how many stayed so there: ``in band``)."""
     import math
 
     from rich import box
@@ -141,8 +142,10 @@ def _summary_table(frame, name: str):
         return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{1e3 * value:.2f}"
 
     searches = "ratio_median" in frame
+    banded = searches and "band_no_worse" in frame  # the searches checked their answer under a band
     table = Table(title=f"study {name}: mdeg, median over seeds", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    for col in ("part", "task", "k", "ok/n", "score", "worst", "roll", "pitch", "yaw", *(("hand/f", "no worse") if searches else ())):
+    for col in ("part", "task", "k", "ok/n", "score", "worst", "roll", "pitch", "yaw", *(("hand/f", "no worse") if searches else ()),
+                *(("in band",) if banded else ())):  # fmt: skip
         table.add_column(col, justify="left" if col in ("part", "task") else "right", no_wrap=True)
     for r in frame.to_dict("records"):
         task = r["task"] + (f" {r['budget']}" if r["budget"] else "") + ("" if r["objective"] in ("paper", "robust") else f" {r['objective']}")
@@ -151,5 +154,7 @@ def _summary_table(frame, name: str):
         if searches:
             ratio = r.get("ratio_median")
             cells += ["-" if ratio is None or math.isnan(ratio) else f"{ratio:.2f}", str(r.get("no_worse") or "-")]
+        if banded:
+            cells.append(r["band_no_worse"] if isinstance(r.get("band_no_worse"), str) else "-")
         table.add_row(*cells)
     return table

@@ -231,7 +231,7 @@ def _print_report(console, report, part) -> None:
     label = baseline_label(baseline(part))
     if report.validated:
         verdicts = report.validation.verdicts()
-        band = {v.k: v for v in report.band.verdicts()} if report.band is not None else {}
+        band = report.band.by_k() if report.band is not None else {}
         for v in verdicts:
             console.print(verdict_headline(v, label, band.get(v.k)), highlight=False)
         for line in report.validation.unmeasured_lines(label):
@@ -266,12 +266,15 @@ def _print_report(console, report, part) -> None:
 
 
 def verdict_headline(verdict, label: str = "hand", band=None) -> str:
-    """The verdict for one k in one short line (under 80 characters for names up to 6): buy or keep.
-    ``band``: the same k's verdict under the band of the check after the validation; a found layout no worse
-    at the preset's noise but worse somewhere in the band is not bought."""
+    """The verdict for one k in one short line (under 80 characters for the hand layout and names up to 6):
+    buy or keep. ``band``: the same k's verdict under the band of the check after the validation; a found
+    layout no worse at the preset's noise but worse somewhere in the band is not bought
+    (:func:`optipose.evaluate.compare.bought`)."""
+    from optipose.evaluate.compare import bought
+
     ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
-    if verdict.no_worse and band is not None and not band.no_worse:
-        return f"k={verdict.k}: KEEP {label} {ref}: found {found} {ratio:.2f}x better, but worse under the band"
+    if verdict.no_worse and not bought(verdict, band):
+        return f"k={verdict.k}: KEEP {label} {ref}: {found} {ratio:.2f}x better, but worse under the band"
     if verdict.no_worse:
         return f"k={verdict.k}: BUY found {found}: {ratio:.2f}x better in sum than {label} {ref}, no axis worse"
     if ratio < 1:

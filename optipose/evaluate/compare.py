@@ -22,7 +22,7 @@ import numpy as np
 
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 
-__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "one_versus_many", "unmeasured_line", "mdeg"]
+__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "bought", "one_versus_many", "unmeasured_line", "mdeg"]
 
 _STATISTICS = ("median", "p75")
 
@@ -111,31 +111,34 @@ class Verdict:
         return [(label, float(r.score / c.score), dominates(c, r)) for (label, c), (_, r) in zip(self.found.under, self.reference.under)]
 
     def band_advice(self, reference: str = "hand", nominal_no_worse: bool = False) -> str:
-        """Under a band, what a found layout that is not no worse at every level needs to be the better buy,
-        in one line ("" when there is nothing to say: no band, no worse everywhere, or worse at every level):
+        """Under a band, for a found layout the nominal validation found no worse on every axis
+        (``nominal_no_worse``) but the band does not: what it needs to be the better buy, in one line —
 
-        - no worse at the lowest noise level(s) but not above: a bet on the sensor's noise on this part;
-        - worse at the preset's noise (×1) once the brackets are off, though the nominal validation, with
-          every bracket exact, found it no worse there (``nominal_no_worse``): its win rests on the brackets.
-        """
+        - no worse at the lowest noise level(s) but not at some higher one: a bet on the sensor's noise on
+          this part;
+        - worse at the preset's noise (×1) once the brackets are off, though no worse with every bracket
+          exact: its win rests on the brackets.
+
+        "" otherwise (no band, no worse everywhere, or not no worse in the nominal cell either). The noise
+        scale is read from the level's label (``evaluate.robust.by_level``: ``noise x<scale>…``)."""
         import re
 
         levels = [(float(m.group(1)), label.split(",")[0], ratio, ok, "bracket" in label) for label, ratio, ok in self.levels()
                   if (m := re.match(r"noise x([0-9.]+)", label))]  # fmt: skip
         levels.sort()
-        if not levels or all(level[3] for level in levels):
+        if not nominal_no_worse or not levels or all(level[3] for level in levels):
             return ""
         head = f"k={self.k}: found {self.found.name}"
         if not levels[0][3]:
             scale, name, ratio, _, brackets = levels[0]
-            if not (nominal_no_worse and scale == 1.0 and brackets):
+            if not (scale == 1.0 and brackets):
                 return ""
             return (f"{head} is worse on some axis than {reference} {self.reference.name} at {name} ({ratio:.2f}x in sum) once the "
                     f"brackets are off by the tolerance, though no worse with them exact: its win rests on brackets more precise "
                     f"than the band's (optipose robustness --layout ... ranks which to make precise)")  # fmt: skip
         n = next(i for i, level in enumerate(levels) if not level[3])
         held = ", ".join(f"{name} ({ratio:.2f}x better in sum)" for _, name, ratio, _, _ in levels[:n])
-        lost = ", ".join(f"{name} ({ratio:.2f}x in sum)" for _, name, ratio, _, _ in levels[n:])
+        lost = ", ".join(f"{name} ({ratio:.2f}x in sum)" for _, name, ratio, ok, _ in levels[n:] if not ok)
         return (f"{head} is no worse than {reference} {self.reference.name} on every axis at {held}, "
                 f"worse on some axis at {lost}: it is the better buy only if the sensor's noise on this part, measured on the bench, "
                 f"is {'no more than' if levels[n - 1][0] == 1 else f'at most {levels[n - 1][0]:g}x'} the preset's")  # fmt: skip
@@ -166,6 +169,12 @@ class Verdict:
         if worse:
             return f"{head}, but worse on {'; '.join(worse)} mdeg: keep {ref} if no axis may get worse"
         return f"{head}, no worse on any axis"
+
+
+def bought(verdict: Verdict, band: Verdict | None = None) -> bool:
+    """Whether to buy the found layout of ``verdict``: no worse than the reference on every axis, and, when the
+    search checked it under a band afterwards (``band``: the same k's verdict there), at every level too."""
+    return verdict.no_worse and (band is None or band.no_worse)
 
 
 def _mdeg_or_none(rad: float) -> str:

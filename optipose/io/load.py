@@ -66,7 +66,8 @@ def load_search(folder: Path, config: dict | None = None):
         return Validation(protocol, int(config.get("validation_seed", -1)), found, hand_choices)
 
     return SearchResult(folder, config["part"]["name"], int(config["seed"]), str(config.get("budget", "")), config,
-                        layouts, hand, validation(folder / "comparison.csv"), validation(folder / "band" / "comparison.csv"))  # fmt: skip
+                        layouts, hand, validation(folder / "comparison.csv"),
+                        validation(folder / "band" / "comparison.csv") if "band" in config else None)  # fmt: skip
 
 
 def choices_from_comparison(rows: pd.DataFrame, names: list[str]) -> dict[int, Choice]:

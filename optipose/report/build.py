@@ -8,10 +8,10 @@ Markdown references the same figures as PNG files in ``report_figures/``.
 from __future__ import annotations
 
 import logging
-
-import numpy as np
 from dataclasses import replace
 from pathlib import Path
+
+import numpy as np
 
 from optipose.files import write_text
 from optipose.report.document import Block, Figure, Heading, Paragraph, render_html, render_markdown, write_figures
@@ -100,22 +100,29 @@ def _evaluations(sub: Path) -> tuple[object, str]:
 
 def _band_check(result, label: str) -> list[Block]:
     """The check under the band after a nominal search: what the band is, then per k the found layout and the
-    baseline at each of its noise levels."""
+    baseline at each of its noise levels (or, when the search stopped before it, that it is missing)."""
     from optipose.report.robustness import band_blocks
 
+    if result.band_pending:
+        return [Heading("Under the band of a real cell"), Paragraph(
+            "The search stopped before its check under the band: the verdict above holds for the nominal cell only "
+            "(the preset's noise, every bracket exact); resume the search, or run optipose robustness with its layouts.", "verdict mixed")]  # fmt: skip
     verdicts = result.band_verdicts()
     if not verdicts:
         return []
     band = result.config.get("band", {})
     c = band.get("conditions", {})
-    scales = ", ".join(f"x{s:g}" for s in c.get("noise_scales", []))
-    what = (f"sensor noise at {scales} the preset's, brackets off by up to {1e3 * c.get('mounting_translation', 0):.2g} mm and "
-            f"{np.rad2deg(c.get('mounting_rotation', 0)):.2g}° ({c.get('mounting_draws', 1)} draws per level), the cell zeroed on a master part"
-            if c else "the band's conditions")  # fmt: skip
+    how = c.get("aggregate", "worst")
+    over = "the worst" if how == "worst" else f"the {float(how):g} quantile"
+    what = f"sensor noise at {', '.join(f'x{s:g}' for s in c.get('noise_scales', []))} the preset's"
+    if c.get("mounting_translation") or c.get("mounting_rotation"):
+        what += (f", brackets off by up to {1e3 * c['mounting_translation']:.2g} mm and {np.rad2deg(c['mounting_rotation']):.2g}° "
+                 f"({c.get('mounting_draws', 1)} draw{'s' if c.get('mounting_draws', 1) > 1 else ''} per level, each statistic {over} "
+                 "over them), the cell zeroed on a master part")  # fmt: skip
     blocks: list[Block] = [Heading("Under the band of a real cell"), Paragraph(
         f"The search tuned its layouts at the preset's noise with every bracket where it was drawn. Checked again on the held-out seed "
-        f"under the band of objective '{band.get('file', '?')}': {what}. Each statistic at a noise level is the worst over its bracket draws; "
-        f"a found layout is bought only when it is no worse than the {label} one at every level too.", "note")]  # fmt: skip
+        f"under the band of objective '{band.get('file', '?')}': {what}. A found layout is bought only when it is no worse than the "
+        f"{label} one on every axis at every level too.", "note")]  # fmt: skip
     for _, v in sorted(verdicts.items()):
         blocks += band_blocks("found", v, label)
     return blocks

@@ -7,7 +7,7 @@ records only; the lines are the ones the terminal prints (:meth:`Verdict.line`).
 
 from __future__ import annotations
 
-from optipose.evaluate.compare import Verdict, mdeg, one_versus_many, unmeasured_line
+from optipose.evaluate.compare import Verdict, bought, mdeg, one_versus_many, unmeasured_line
 from optipose.report.document import Block, Heading, Paragraph, Table
 
 __all__ = ["verdict_css", "verdict_blocks", "verdict_table", "table1_rows", "table1_side_by_side", "table1_alone"]
@@ -38,7 +38,7 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     band = band or {}
     blocks.append(verdict_table(verdicts, label, band))
     for v in verdicts:
-        blocks.append(Paragraph(v.line(label), verdict_css(v) if v.k not in band or band[v.k].no_worse else "verdict mixed"))
+        blocks.append(Paragraph(v.line(label), verdict_css(v) if bought(v, band.get(v.k)) or not v.no_worse else "verdict mixed"))
         if v.k in band:
             blocks.append(Paragraph("under the band: " + band[v.k].line(label), verdict_css(band[v.k])))
             if advice := band[v.k].band_advice(label, v.no_worse):
@@ -60,7 +60,7 @@ def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None)
     for v in verdicts:
         gaps = {g.axis for g in v.worse}
         decision = "buy the found sensors" if v.no_worse else (f"keep {label}" if v.ratio < 1 else f"better in sum; keep {label} if no axis may get worse")
-        if v.no_worse and v.k in band and not band[v.k].no_worse:
+        if v.no_worse and not bought(v, band.get(v.k)):
             worse = ", ".join(dict.fromkeys(g.axis for g in band[v.k].worse))
             decision = f"keep {label}: worse on {worse} under the band"
         rows.append((str(v.k), v.found.name, v.reference.name, f"{v.ratio:.2f}x",

@@ -147,6 +147,10 @@ class Validation:
         """Found vs. hand for every k that has both."""
         return [Verdict(k, self.found[k], self.hand[k]) for k in sorted(self.found) if k in self.hand]
 
+    def by_k(self) -> dict[int, Verdict]:
+        """:meth:`verdicts` by k."""
+        return {v.k: v for v in self.verdicts()}
+
     def unmeasured_lines(self, reference: str = "hand") -> list[str]:
         """Per k whose found choice leaves an axis unmeasured, one line saying so
         (:func:`~optipose.evaluate.compare.unmeasured_line`): no found layout of k sensors observes it."""
@@ -189,8 +193,14 @@ class SearchResult:
         return self.validation.verdicts() if self.validation is not None else []
 
     def band_verdicts(self) -> dict[int, Verdict]:
-        """k → found vs. hand under the band of the check after a nominal search (empty without one)."""
-        return {v.k: v for v in self.band.verdicts()} if self.band is not None else {}
+        """k → found vs. hand under the band of the check after a nominal search (empty without one); with
+        :meth:`verdicts`, what :func:`optipose.evaluate.compare.bought` decides on."""
+        return self.band.by_k() if self.band is not None else {}
+
+    @property
+    def band_pending(self) -> bool:
+        """The search was to check its answer under a band but has no such check (it stopped before it)."""
+        return "band" in self.config and self.band is None and self.validation is not None
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""

@@ -41,8 +41,10 @@ def band_objective(objective, band: str):
 
     if not band or not objective.conditions.trivial:
         return None
-    conditions = load_objective(band).conditions
-    return None if conditions.trivial else replace(objective, conditions=conditions)
+    given = load_objective(band)
+    if given.conditions.trivial:
+        return None
+    return replace(objective, name=f"{objective.name} under the band of {given.name}", conditions=given.conditions)
 
 
 def validation_objective(objective, protocol: str = "full"):
