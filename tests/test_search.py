@@ -544,3 +544,30 @@ def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs()
     assert Verdict(1, good, hand).band_advice(nominal_no_worse=True) == ""  # no band
     nominal = Verdict(1, good, hand)
     assert bought(nominal) and bought(nominal, Verdict(1, levels(good, good), levels(hand, hand))) and not bought(nominal, holds_low)
+
+
+def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, monkeypatch):
+    """The validation is done and saved when the check under the band starts: a Ctrl-C there hands the
+    report back with it, the check marked missing (the report says so), instead of losing it."""
+    import optipose.search.validate as validate_module
+    from optipose.io import load_result
+    from optipose.io.search import SearchFolder
+    from optipose.search.pipeline import run
+
+    real, calls = validate_module.validate, []
+
+    def validate(part, objective, *args, **kwargs):
+        calls.append(objective.name)
+        if not objective.conditions.trivial:  # the check under the band
+            raise KeyboardInterrupt
+        return real(part, objective, *args, **kwargs)
+
+    monkeypatch.setattr(validate_module, "validate", validate)
+    band_file = tmp_path / "band.toml"
+    band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
+    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    config = SearchConfig(sensors=(1,), global_evals=12, local_evals=4, random_starts=1, select_candidates=0, band=str(band_file))
+    report = run(part, objective, config, 3, SearchFolder(tmp_path / "search"), jobs=1)
+    assert len(calls) == 2 and report.validated and report.band is None and report.band_interrupted
+    saved = load_result(tmp_path / "search")
+    assert saved.validation is not None and saved.band_pending and not saved.band_verdicts()

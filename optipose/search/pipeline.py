@@ -27,7 +27,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from optipose.errors import OptiposeError
+from optipose.errors import OptiposeError, is_interrupt
 from optipose.model.layout import Layout, SensorPose
 from optipose.search.config import SearchConfig
 from optipose.search.problem import SurrogateProblem
@@ -81,6 +81,7 @@ class SearchReport:
     layouts: dict[int, Layout] = field(default_factory=dict)
     validation: Validation | None = None
     band: Validation | None = None  # the check under the band (SearchConfig.band), when there was one
+    band_interrupted: bool = False  # Ctrl-C stopped the check under the band (the validation is complete)
 
     @property
     def validated(self) -> bool:
@@ -104,7 +105,13 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
 
         stage = on_stage or (lambda text: None)
         stage(f"checking under the band ({len(conditions(band.conditions))} conditions, held-out seed)")
-        report.band = validate(part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation)
+        try:
+            report.band = validate(part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation)
+        except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
+            if not is_interrupt(exc):
+                raise
+            report.band_interrupted = True
+            return report
         sink.band(report.band)
     return report
 
