@@ -571,3 +571,13 @@ def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, m
     assert len(calls) == 2 and report.validated and report.band is None and report.band_interrupted
     saved = load_result(tmp_path / "search")
     assert saved.validation is not None and saved.band_pending and not saved.band_verdicts()
+
+
+def test_a_search_with_nothing_to_compare_with_misses_no_check_under_the_band():
+    from optipose.search.records import SearchResult, Validation
+
+    found = {1: _choice([(1, 2), (1, 2), (1, 2)])}
+    config = {"band": {"file": "robust"}}
+    assert not SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, {})).band_pending
+    assert SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, dict(found))).band_pending
+    assert not SearchResult("f", "p", 0, "default", {}, validation=Validation("full", 1, found, dict(found))).band_pending

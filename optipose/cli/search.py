@@ -81,19 +81,15 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(EXIT_INTERRUPTED)
-    if searched.band_interrupted:  # the validation above is complete; only its check under the band is missing
-        if report:
-            from optipose.cli.report import write_report_after
-
-            write_report_after(folder, console)
-        console.print(f"[yellow]interrupted[/] during the check under the band: the verdicts above hold for the nominal cell "
-                      f"only (results in {folder}); check them with `optipose robustness {part} --layout "
-                      f"{folder}/layouts/found_k{max(searched.layouts)}.toml`, or run the whole search again")  # fmt: skip
-        raise typer.Exit(EXIT_INTERRUPTED)
     if report:
         from optipose.cli.report import write_report_after
 
         write_report_after(folder, console)
+    if searched.band_interrupted:  # the validation above is complete; only its check under the band is missing
+        console.print(f"[yellow]interrupted[/] during the check under the band: the verdicts above hold for the nominal cell "
+                      f"only (results in {folder}); check them with `optipose robustness {part} --layout "
+                      f"{folder}/layouts/found_k{max(searched.layouts)}.toml`, or run the whole search again")  # fmt: skip
+        raise typer.Exit(EXIT_INTERRUPTED)
     console.print(f"results: {folder}")
     return folder
 

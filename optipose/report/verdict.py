@@ -38,7 +38,8 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     band = band or {}
     blocks.append(verdict_table(verdicts, label, band))
     for v in verdicts:
-        blocks.append(Paragraph(v.line(label), verdict_css(v) if bought(v, band.get(v.k)) or not v.no_worse else "verdict mixed"))
+        refused = v.no_worse and not bought(v, band.get(v.k))  # no worse nominally, worse under the band
+        blocks.append(Paragraph(v.line(label), "verdict mixed" if refused else verdict_css(v)))
         if v.k in band:
             blocks.append(Paragraph("under the band: " + band[v.k].line(label), verdict_css(band[v.k])))
             if advice := band[v.k].band_advice(label, v.no_worse):

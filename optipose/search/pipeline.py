@@ -98,22 +98,7 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     study = _study(part, objective, config, sink, resume, on_eval)
     with _baseline_run(part, objective, config, seed, jobs) as hand_run:
-        report = _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run)
-    if band is not None and report.validated and report.validation.hand:  # nothing to compare with: no check
-        from optipose.evaluate.conditions import conditions
-        from optipose.search.validate import validate
-
-        stage = on_stage or (lambda text: None)
-        stage(f"checking under the band ({len(conditions(band.conditions))} conditions, held-out seed)")
-        try:
-            report.band = validate(part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation)
-        except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
-            if not is_interrupt(exc):
-                raise
-            report.band_interrupted = True
-            return report
-        sink.band(report.band)
-    return report
+        return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band)
 
 
 def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int):
@@ -126,7 +111,7 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int):
     return BaselineRun(part, objective, seed, config.validation) if jobs >= 2 else nullcontext()
 
 
-def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run) -> SearchReport:
+def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None) -> SearchReport:
     stage = on_stage or (lambda text: None)
     stage("searching on the surrogate")
     outcome = run_search(part, objective, config, seed, study)
@@ -161,6 +146,19 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run) -
     stage(f"validating on the {config.validation} protocol (held-out noise seed)")
     report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, sink.evaluation, hand_run)
     sink.validation(report.validation)
+    if band is None or not report.validation.hand:  # no band, or nothing to compare with: no check
+        return report
+    from optipose.evaluate.conditions import conditions
+
+    stage(f"checking under the band ({len(conditions(band.conditions))} conditions, held-out seed)")
+    try:
+        report.band = validate(part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation)
+    except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
+        if not is_interrupt(exc):
+            raise
+        report.band_interrupted = True
+        return report
+    sink.band(report.band)
     return report
 
 

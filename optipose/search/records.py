@@ -199,8 +199,9 @@ class SearchResult:
 
     @property
     def band_pending(self) -> bool:
-        """The search was to check its answer under a band but has no such check (it stopped before it)."""
-        return "band" in self.config and self.band is None and self.validation is not None
+        """The search was to check its answer under a band but has no such check (it stopped before it; a
+        search with nothing to compare its layouts with has no check to miss)."""
+        return "band" in self.config and self.band is None and self.validation is not None and bool(self.validation.hand)
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""
