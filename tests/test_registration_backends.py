@@ -156,6 +156,44 @@ def test_a_sampled_reference_finds_the_kd_trees_nearest_points(block):
         np.testing.assert_array_equal(reference.nearest(p, hint)[2], truth)
 
 
+def test_a_sampled_references_tracker_answers_the_kd_trees_nearest_points_at_every_step(block):
+    """An ICP's tracker searches again only the points that moved as far as half the gap to their second-
+    nearest sample: along a path of steps from a millimetre down to a nanometre (and back up), started
+    from the matches where the path starts or from nothing, every step's matches are the KD-tree's."""
+    reference = SampledReference(*sample_surface(block.vertices, block.faces, 0.25e-3, seed=1))
+    rng = np.random.default_rng(4)
+    cloud = reference.points[rng.choice(len(reference.points), 3000)] + rng.normal(scale=3e-5, size=(3000, 3))
+    steps = [2e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 1e-7, 1e-9, 0.0, 1e-9, 1e-6, 1e-4, 2e-3]
+    for track in (reference.tracker(initial=reference.matches(cloud)), reference.tracker()):
+        T = np.eye(4)
+        for i, size in enumerate(steps):
+            p = transform_points(T, cloud)
+            q, n, ids = track(p)
+            truth = reference.closest(p)
+            np.testing.assert_array_equal(ids, truth[2])
+            np.testing.assert_array_equal(q, truth[0])
+            np.testing.assert_array_equal(n, truth[1])
+            if i and steps[i - 1] <= 1e-7:  # settled: nearly every point keeps a margin, which lets steps skip it
+                assert (track.margin > 0).mean() > 0.9
+            step = part_motion(rng.normal(scale=size / 0.02, size=3), CENTRE, rng.normal(scale=size, size=3))  # ~size at the block
+            T = step @ T
+
+
+def test_a_samples_neighbour_list_holds_every_sample_closer_than_its_radius(block):
+    """The walk's certificate rests on this: each sample's list is its KD-tree nearest, in order, up to its
+    radius, and no sample left off the list is closer than the radius."""
+    reference = SampledReference(*sample_surface(block.vertices, block.faces, 0.25e-3, seed=1))
+    near, rho = reference._neighbours()
+    pick = np.random.default_rng(5).choice(len(reference.points), 500, replace=False)
+    for i in pick:
+        d = np.linalg.norm(reference.points - reference.points[i], axis=1)
+        d[i] = np.inf
+        listed = near[i][near[i] >= 0]
+        assert np.all(np.diff(d[listed]) >= 0) and rho[i] > 0
+        closer = np.flatnonzero(d < rho[i])
+        assert set(closer) <= set(listed)
+
+
 def test_the_fitness_stop_runs_open3ds_point_to_point_icp(block, turned):
     """stop = "fitness" in the compiled back-end takes Open3D's steps and stops where Open3D stops (inlier
     fraction and RMSE unchanged, or the iteration cap): the same pose as Open3D's ICP against the same sample."""

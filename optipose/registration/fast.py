@@ -51,14 +51,15 @@ class FastBackend:
         max_d2 = cfg.max_correspondence_distance**2
         converged, it, history, before = False, 0, None, None
         cycle = Cycle(cfg)
+        track = reference.tracker(ids, initial)
         for it in range(1, cfg.max_iterations + 1):
             p = kernels.transform(source, T)
-            if it == 1 and initial is not None:
-                q, n, ids = initial.q, initial.n, initial.ids.copy()
+            q, n, ids = track(p)
+            if cfg.method == "point_to_point":  # the information matrix is summed once, after the last step
+                n_in, sum_d2, c, mq, H = kernels.cross_covariance(p, q, max_d2)
             else:
-                q, n, ids = reference.nearest(p, ids)
-            inlier, c, AtA, Atb, sum_d2 = kernels.normal_equations(p, q, n, max_d2)
-            n_in = int(inlier.sum())
+                inlier, c, AtA, Atb, sum_d2 = kernels.normal_equations(p, q, n, max_d2)
+                n_in = int(inlier.sum())
             if n_in < MIN_POINTS:
                 return Registration.failed(len(source), f"{n_in} points within the correspondence distance", T, it)
             if cfg.stop == "fitness":  # Open3D's test, on the matches at T against those before the last step
@@ -68,7 +69,7 @@ class FastBackend:
                     break
                 before = now
             if cfg.method == "point_to_point":
-                delta = _kabsch(p[inlier], q[inlier])
+                delta = _kabsch_from(H, c, mq)
             else:
                 delta = _solve_point_to_plane(AtA, Atb, c)
             if delta is None:
@@ -85,6 +86,8 @@ class FastBackend:
                 break
             if cfg.method == "point_to_point":
                 T, history = _accelerate(T, delta, c, history)
+        if cfg.method == "point_to_point":
+            AtA = kernels.normal_equations(p, q, n, max_d2)[2]
         return Registration(
             T_target_source=T,
             converged=converged,
@@ -94,7 +97,7 @@ class FastBackend:
             n_points=len(source),
             information=AtA,
             failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
-            matched=ids,
+            matched=ids.copy(),
         )
 
 
@@ -231,7 +234,12 @@ def _accelerate(T: np.ndarray, delta: np.ndarray, c: np.ndarray, previous: np.nd
 def _kabsch(p: np.ndarray, q: np.ndarray, _n=None) -> np.ndarray | None:
     """Rigid transform (4, 4) minimising Σ |R pᵢ + t − qᵢ|² (Arun / Umeyama without scale)."""
     mp, mq = p.mean(axis=0), q.mean(axis=0)
-    U, _, Vt = np.linalg.svd((p - mp).T @ (q - mq))
+    return _kabsch_from((p - mp).T @ (q - mq), mp, mq)
+
+
+def _kabsch_from(H: np.ndarray, mp: np.ndarray, mq: np.ndarray) -> np.ndarray:
+    """The Kabsch transform (4, 4) from the cross-covariance ``H = Σ (pᵢ − p̄)(qᵢ − q̄)ᵀ`` and the centroids."""
+    U, _, Vt = np.linalg.svd(H)
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
     return _make_T(R, mq - R @ mp)

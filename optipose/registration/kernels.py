@@ -369,3 +369,235 @@ def grid_nearest(p, hint, points, origin, cell, shape, start, order, rank):
         else:
             ids[i] = order[g]
     return ids, open_
+
+
+@njit(cache=True, nogil=True)
+def sample_neighbours(points, k, reach, origin, cell, shape, start):
+    """Each of ``points`` (n, 3) (in the cell order of :func:`point_grid`, ``start`` its CSR) with its ``k``
+    nearest other points (n, k) int32, nearest first (ties: lowest index; -1 pads a short list), and a
+    radius ``rho`` (n,): every point closer than ``rho`` is in the list (the k-th distance, or ``reach``
+    cells: the (2 reach + 1)³ cells searched hold every point that close)."""
+    n = points.shape[0]
+    near = np.full((n, k), -1, np.int32)
+    rho = np.empty(n, np.float64)
+    dist = np.empty(k, np.float64)
+    for i in range(n):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        c0 = np.int64(np.floor((px - origin[0]) / cell))
+        c1 = np.int64(np.floor((py - origin[1]) / cell))
+        c2 = np.int64(np.floor((pz - origin[2]) / cell))
+        count = 0
+        for a in range(max(c0 - reach, 0), min(c0 + reach + 1, shape[0])):
+            for b in range(max(c1 - reach, 0), min(c1 + reach + 1, shape[1])):
+                row = (a * shape[1] + b) * shape[2]
+                for d in range(max(c2 - reach, 0), min(c2 + reach + 1, shape[2])):
+                    for j in range(start[row + d], start[row + d + 1]):
+                        if j == i:
+                            continue
+                        d2 = (px - points[j, 0]) ** 2 + (py - points[j, 1]) ** 2 + (pz - points[j, 2]) ** 2
+                        if count == k and (d2 > dist[k - 1] or (d2 == dist[k - 1] and j > near[i, k - 1])):
+                            continue
+                        s = count if count < k else k - 1  # insert, keeping (distance, index) ascending
+                        while s > 0 and (dist[s - 1] > d2 or (dist[s - 1] == d2 and near[i, s - 1] > j)):
+                            dist[s] = dist[s - 1]
+                            near[i, s] = near[i, s - 1]
+                            s -= 1
+                        dist[s] = d2
+                        near[i, s] = j
+                        if count < k:
+                            count += 1
+        rho[i] = min(np.sqrt(dist[k - 1]), reach * cell) if count == k else reach * cell
+    return near, rho
+
+
+WALK = 4  # hops from a point's last nearest reference point toward its new one before the grid is searched
+SETTLE = 1.0 / 16  # cells: a point searched on the grid after moving less than this gets its margin too
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _grid_two(px, py, pz, h, reach, two, points, origin, cell, shape, start, order):
+    """The nearest grid point to (px, py, pz) within ``reach`` cells (searched in the (2 reach + 1)³ cells
+    around its cell, starting from grid point ``h``, -1: none) and, when ``two``, the second-nearest
+    distance (capped at ``reach`` cells: any point outside those cells is farther). Returns (best d²,
+    second d², grid index of the nearest, -1 when none is within reach). Ties: lowest point index."""
+    limit = (reach * cell) ** 2
+    fx, fy, fz = (px - origin[0]) / cell, (py - origin[1]) / cell, (pz - origin[2]) / cell
+    c0, c1, c2 = np.int64(np.floor(fx)), np.int64(np.floor(fy)), np.int64(np.floor(fz))
+    best, second, g = limit, limit, -1
+    if c0 < 0 or c0 >= shape[0] or c1 < 0 or c1 >= shape[1] or c2 < 0 or c2 >= shape[2]:
+        return best, second, g
+    if h >= 0:
+        d2 = (px - points[h, 0]) ** 2 + (py - points[h, 1]) ** 2 + (pz - points[h, 2]) ** 2
+        if d2 < best:
+            best, g = d2, h
+    for a in range(max(c0 - reach, 0), min(c0 + reach + 1, shape[0])):
+        gx = (max(a - fx, 0.0, fx - a - 1.0) * cell) ** 2
+        if gx >= (second if two else best):
+            continue
+        for b in range(max(c1 - reach, 0), min(c1 + reach + 1, shape[1])):
+            gy = gx + (max(b - fy, 0.0, fy - b - 1.0) * cell) ** 2
+            if gy >= (second if two else best):
+                continue
+            row = (a * shape[1] + b) * shape[2]
+            for d in range(max(c2 - reach, 0), min(c2 + reach + 1, shape[2])):
+                if gy + (max(d - fz, 0.0, fz - d - 1.0) * cell) ** 2 >= (second if two else best):
+                    continue
+                for k in range(start[row + d], start[row + d + 1]):
+                    if k == h:
+                        continue
+                    d2 = (px - points[k, 0]) ** 2 + (py - points[k, 1]) ** 2 + (pz - points[k, 2]) ** 2
+                    if d2 < best or (d2 == best and g >= 0 and order[k] < order[g]):
+                        second = min(second, best)
+                        best, g = d2, k
+                    elif d2 < second:
+                        second = d2
+    return best, second, g
+
+
+@njit(cache=True, nogil=True)
+def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neighbours, rho, reach,
+                    points, origin, cell, shape, start, order, rank):  # fmt: skip
+    """The nearest reference point to each point of an ICP's cloud p (n, 3), as :func:`grid_nearest` finds
+    it, searching again only the points that may have changed theirs since they were last searched.
+
+    Per point, kept between calls (updated in place): ``ids`` its nearest (-1: none yet, or left to the
+    global search), ``anchor`` (n, 3) where it was when searched, ``margin`` how far it may move from there
+    and keep its nearest (0: unknown). A point closer to its anchor than its margin is not searched.
+
+    Any other point walks from its last nearest c: among c and c's ``neighbours`` (ref, K) (the reference
+    points nearest c; the list holds every one closer than ``rho[c]``, :func:`sample_neighbours`), every
+    reference point not listed is at least rho(c) − |p − c| from p, so the nearest g found is certain when
+    it is closer than that; if not, the walk moves on to g while g is nearer than c (:data:`WALK` hops).
+    The margin of a certain answer is its distance to the nearest bisector plane between g and another
+    point s, (|p − s|² − |p − g|²) / (2 |s − g|), over the listed points and (bound − |p − g|) / 2 for the
+    rest: a move shorter than that keeps g the nearest. A point the walk cannot settle is searched on the
+    grid from the walk's nearest (within ceil(|p − c| / cell) cells, then ``reach`` cells), with the margin
+    (half the gap between the nearest and second-nearest distances) only when it moved less than
+    :data:`SETTLE` cells or is searched for the first time. The reference point and normal of each point
+    searched are written to ``q`` and ``n``. Ties go to the lowest reference index (a tie leaves no margin).
+    Returns ``open`` (n,) bool: points with no reference point within ``reach`` cells, for a global search
+    (margin zero: searched again next call)."""
+    m = p.shape[0]
+    open_ = np.zeros(m, np.bool_)
+    slow2 = (SETTLE * cell) ** 2
+    K = neighbours.shape[1]
+    for i in range(m):
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        f = ids[i]
+        settle = True  # no last nearest: the first search, worth its margin
+        if f >= 0:
+            moved = (px - anchor[i, 0]) ** 2 + (py - anchor[i, 1]) ** 2 + (pz - anchor[i, 2]) ** 2
+            if moved < margin[i] * margin[i]:
+                continue
+            settle = moved < slow2
+        margin[i] = 0.0
+        anchor[i, 0], anchor[i, 1], anchor[i, 2] = px, py, pz
+        found = -1
+        c = f  # the walk: among c and its neighbours, then from the nearest of them while it comes closer
+        for _ in range(WALK if f >= 0 else 0):
+            dc = (px - ref_points[c, 0]) ** 2 + (py - ref_points[c, 1]) ** 2 + (pz - ref_points[c, 2]) ** 2
+            best, second, g = dc, np.inf, c
+            for j in range(K):
+                k = neighbours[c, j]
+                if k < 0:
+                    break
+                d2 = (px - ref_points[k, 0]) ** 2 + (py - ref_points[k, 1]) ** 2 + (pz - ref_points[k, 2]) ** 2
+                if d2 < best or (d2 == best and k < g):
+                    second = min(second, best)
+                    best, g = d2, k
+                elif d2 < second:
+                    second = d2
+            bound = rho[c] - np.sqrt(dc)
+            if np.sqrt(best) < bound * (1.0 - 1e-12):
+                found = g
+                # how far p may move and keep g: its distance to the nearest bisector plane between g and a
+                # candidate s, (d_s² − d_g²) / (2 |s − g|), and (bound − d_g) / 2 for any point not listed
+                m_ = 0.5 * (bound - np.sqrt(best))
+                for j in range(-1, K):
+                    k = c if j < 0 else neighbours[c, j]
+                    if k < 0:
+                        break
+                    if k == g:
+                        continue
+                    d2 = (px - ref_points[k, 0]) ** 2 + (py - ref_points[k, 1]) ** 2 + (pz - ref_points[k, 2]) ** 2
+                    sg = np.sqrt((ref_points[k, 0] - ref_points[g, 0]) ** 2 + (ref_points[k, 1] - ref_points[g, 1]) ** 2
+                                 + (ref_points[k, 2] - ref_points[g, 2]) ** 2)  # fmt: skip
+                    if sg > 0.0:
+                        m_ = min(m_, (d2 - best) / (2.0 * sg))
+                    else:
+                        m_ = 0.0
+                margin[i] = m_ * (1.0 - 1e-9)
+                break
+            if g == c:
+                break
+            c = g
+        if found < 0:  # on the grid, from the walk's nearest: within ceil(|p - c| / cell) cells of p
+            h, r = -1, 1
+            if f >= 0:
+                h = rank[c]
+                dc = np.sqrt((px - ref_points[c, 0]) ** 2 + (py - ref_points[c, 1]) ** 2 + (pz - ref_points[c, 2]) ** 2)
+                r = min(reach, max(1, np.int64(np.ceil(dc / cell))))
+            best, second, g = _grid_two(px, py, pz, h, r, settle, points, origin, cell, shape, start, order)
+            if g < 0 and reach > r:
+                best, second, g = _grid_two(px, py, pz, h, reach, settle, points, origin, cell, shape, start, order)
+            if g < 0:
+                ids[i] = -1
+                open_[i] = True
+                continue
+            found = order[g]
+            if settle:
+                margin[i] = 0.5 * (np.sqrt(second) - np.sqrt(best)) * (1.0 - 1e-9)
+        ids[i] = found
+        for j in range(3):
+            q[i, j] = ref_points[found, j]
+            n[i, j] = ref_normals[found, j]
+    return open_
+
+
+@njit(cache=True, nogil=True)
+def cross_covariance(p, q, max_d2):
+    """The sums of one point-to-point (Kabsch) step over the pairs within ``sqrt(max_d2)``, in one pass:
+    their count, Σ d² (summed in :func:`normal_equations`' order), the centroids of p and q (3,) and
+    ``Σ (pᵢ − p̄)(qᵢ − q̄)ᵀ`` (3, 3) (summed about the first point, which is near the rest, then centred)."""
+    m = p.shape[0]
+    count = 0
+    sum_d2 = 0.0
+    sp = np.zeros(3)
+    sq = np.zeros(3)
+    H = np.zeros((3, 3))
+    if m == 0:
+        return count, sum_d2, sp, sq, H
+    o0, o1, o2 = p[0, 0], p[0, 1], p[0, 2]
+    for i in range(m):
+        a0, a1, a2 = p[i, 0] - o0, p[i, 1] - o1, p[i, 2] - o2
+        b0, b1, b2 = q[i, 0] - o0, q[i, 1] - o1, q[i, 2] - o2
+        d2 = (a0 - b0) ** 2 + (a1 - b1) ** 2 + (a2 - b2) ** 2
+        if d2 <= max_d2:
+            count += 1
+            sum_d2 += d2
+            sp[0] += a0
+            sp[1] += a1
+            sp[2] += a2
+            sq[0] += b0
+            sq[1] += b1
+            sq[2] += b2
+            H[0, 0] += a0 * b0
+            H[0, 1] += a0 * b1
+            H[0, 2] += a0 * b2
+            H[1, 0] += a1 * b0
+            H[1, 1] += a1 * b1
+            H[1, 2] += a1 * b2
+            H[2, 0] += a2 * b0
+            H[2, 1] += a2 * b1
+            H[2, 2] += a2 * b2
+    if count == 0:
+        return count, sum_d2, sp, sq, H
+    sp /= count
+    sq /= count
+    for r in range(3):
+        for c in range(3):
+            H[r, c] -= count * sp[r] * sq[c]
+    for j in range(3):
+        sp[j] += p[0, j]
+        sq[j] += p[0, j]
+    return count, sum_d2, sp, sq, H

@@ -24,6 +24,8 @@ __all__ = ["SurfaceReference", "SampledReference", "sample_surface"]
 
 _CELL = 0.5e-3  # m: grid cells of nearest(), larger if the part would need more than _MAX_CELLS
 _MAX_CELLS = 4_000_000
+_NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
+_REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
 
 
 class SurfaceReference:
@@ -132,9 +134,39 @@ class SurfaceReference:
             q[open_], _, ids[open_] = self._far(points[open_])
         return q, self.normals[ids], ids
 
+    def matches(self, points: np.ndarray):
+        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is."""
+        from optipose.registration.result import Matches
+
+        return Matches(*self.nearest(points))
+
+    def tracker(self, ids: np.ndarray | None = None, initial=None) -> "Tracker":
+        """The closest points of one ICP's cloud, step after step (:class:`Tracker`: :meth:`nearest` each step,
+        hinted with the last step's faces)."""
+        return Tracker(self, ids, initial)
+
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """A uniform sample of the surface, about one point per ``spacing``² (m); points and normals."""
         return sample_surface(self.vertices, self.faces, spacing, seed)
+
+
+class Tracker:
+    """The closest reference points of one ICP's cloud at each of its steps: ``tracker(p) -> (q, n, ids)``.
+
+    This one asks the reference's ``nearest`` every step with the last step's ids as hints; ``initial``
+    (:class:`~optipose.registration.result.Matches`, the cloud's matches where the ICP starts) answers the
+    first step. A reference may give a tracker of its own that searches less (:class:`SampleTracker`)."""
+
+    def __init__(self, reference, ids: np.ndarray | None = None, initial=None):
+        self.reference, self.ids, self._initial = reference, None if ids is None else np.array(ids, dtype=np.int64), initial
+
+    def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self._initial is not None:
+            initial, self._initial = self._initial, None
+            self.ids = initial.ids.copy()
+            return initial.q, initial.n, self.ids
+        q, n, self.ids = self.reference.nearest(points, self.ids)
+        return q, n, self.ids
 
 
 class SampledReference:
@@ -147,27 +179,39 @@ class SampledReference:
     def __init__(self, points: np.ndarray, normals: np.ndarray, kind: str = "cad-sample"):
         from scipy.spatial import cKDTree
 
-        self.points = np.ascontiguousarray(points, dtype=np.float64)
-        self.normals = np.ascontiguousarray(normals, dtype=np.float64)
+        from optipose.registration import kernels
+
+        points = np.ascontiguousarray(points, dtype=np.float64)
         self.kind = kind
+        # the points are kept in the order of the cells of a grid over them, so that points near in space
+        # are near in memory (a search touches a few cache lines, not a few hundred)
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        spacing = float(np.sqrt(_cloud_area(points, cKDTree(points)) / max(len(points), 1)))
+        cell = max(2.5 * spacing, float(np.prod(hi - lo + 1e-9) / _MAX_CELLS) ** (1 / 3), 1e-6)
+        origin = lo - cell
+        shape = np.floor((hi + cell - origin) / cell).astype(np.int64) + 1
+        start, order = kernels.point_grid(points, origin, cell, shape)
+        self.points = np.ascontiguousarray(points[order])
+        self.normals = np.ascontiguousarray(np.asarray(normals, dtype=np.float64)[order])
         self._tree = cKDTree(self.points)
-        self._point_grid = None
+        identity = np.arange(len(order), dtype=np.int64)
+        self._point_grid = (self.points, origin, cell, shape, start, identity, identity)
+        self._near = None
 
     def _grid(self) -> tuple:
-        """The points per cell of a grid over them (:func:`optipose.registration.kernels.point_grid`), built on first use."""
-        if self._point_grid is None:
+        """The points per cell of a grid over them (:func:`optipose.registration.kernels.point_grid`): the
+        points (in cell order already), origin, cell, shape, CSR start, order and rank (both the identity)."""
+        return self._point_grid
+
+    def _neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each point's :data:`_NEIGHBOURS` nearest other points (n, K), nearest first, and the radius within
+        which the list is complete (:func:`optipose.registration.kernels.sample_neighbours`); built on first use."""
+        if self._near is None:
             from optipose.registration import kernels
 
-            lo, hi = self.points.min(axis=0), self.points.max(axis=0)
-            spacing = float(np.sqrt(_cloud_area(self.points, self._tree) / max(len(self.points), 1)))
-            cell = max(2.5 * spacing, float(np.prod(hi - lo + 1e-9) / _MAX_CELLS) ** (1 / 3), 1e-6)
-            origin = lo - cell
-            shape = np.floor((hi + cell - origin) / cell).astype(np.int64) + 1
-            start, order = kernels.point_grid(self.points, origin, cell, shape)
-            rank = np.empty_like(order)
-            rank[order] = np.arange(len(order))
-            self._point_grid = (np.ascontiguousarray(self.points[order]), origin, cell, shape, start, order, rank)
-        return self._point_grid
+            points, origin, cell, shape, start, _, _ = self._point_grid
+            self._near = kernels.sample_neighbours(points, _NEIGHBOURS, _REACH, origin, cell, shape, start)
+        return self._near
 
     def __repr__(self) -> str:
         return f"SampledReference({self.kind}, {len(self.points)} points)"
@@ -189,12 +233,62 @@ class SampledReference:
             found[open_] = self._tree.query(points[open_])[1]
         return self.points[found], self.normals[found], found
 
+    def matches(self, points: np.ndarray):
+        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is, with margins."""
+        from optipose.registration.result import Matches
+
+        track = SampleTracker(self)
+        q, n, ids = track(points)
+        return Matches(q, n, ids, track.margin)
+
+    def tracker(self, ids: np.ndarray | None = None, initial=None) -> "SampleTracker":
+        """The closest samples of one ICP's cloud, step after step, searching again only the points that
+        may have changed theirs (:class:`SampleTracker`). ``ids`` are first hints; ``initial``, the cloud's
+        matches where the ICP starts, answers the first step."""
+        return SampleTracker(self, ids, initial)
+
     def follow(self, points: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A sample point is only the closest one where the search says so: always search again."""
         return self.points[ids], self.normals[ids], np.zeros(len(points), dtype=bool)
 
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         return self.points, self.normals
+
+
+class SampleTracker:
+    """The closest samples of one ICP's cloud at each of its steps, exactly :meth:`SampledReference.nearest`'s,
+    each point searched again only once it has moved as far as half the gap between its nearest and
+    second-nearest samples where it was last searched (:func:`optipose.registration.kernels.tracked_nearest`):
+    an ICP near its fixed point moves its points by far less than that, so a step costs a pass over the
+    cloud rather than a search per point. ``tracker(p) -> (q, n, ids)``, arrays it updates at the next call."""
+
+    def __init__(self, reference: SampledReference, ids: np.ndarray | None = None, initial=None):
+        self.reference, self._initial = reference, initial
+        self._ids = None if ids is None else np.array(ids, dtype=np.int64)
+        self.q = None  # per point, from the first call on: q, n, ids, anchor, margin (see tracked_nearest)
+
+    def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        from optipose.registration import kernels
+
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        m, ref = len(points), self.reference
+        if self.q is None:
+            if self._initial is not None:  # the matches where the ICP starts: the first step is answered
+                initial, self._initial = self._initial, None
+                self.ids, self.q, self.n = initial.ids.copy(), initial.q.copy(), initial.n.copy()
+                self.anchor = points.copy()
+                self.margin = np.zeros(m) if initial.margin is None else initial.margin.copy()
+                return self.q, self.n, self.ids
+            self.ids = np.full(m, -1, dtype=np.int64) if self._ids is None else self._ids
+            self.anchor, self.margin = np.zeros((m, 3)), np.zeros(m)
+            self.q, self.n = np.empty((m, 3)), np.empty((m, 3))
+        open_ = kernels.tracked_nearest(points, self.ids, self.anchor, self.margin, self.q, self.n, ref.points,
+                                        ref.normals, *ref._neighbours(), _REACH, *ref._grid())  # fmt: skip
+        open_ = np.flatnonzero(open_)
+        if len(open_):  # far from the cloud: the KD-tree, searched again next step (margin zero)
+            found = ref._tree.query(points[open_])[1]
+            self.ids[open_], self.q[open_], self.n[open_] = found, ref.points[found], ref.normals[found]
+        return self.q, self.n, self.ids
 
 
 def _cloud_area(points: np.ndarray, tree) -> float:

@@ -20,16 +20,20 @@ MIN_POINTS = 6  # fewest points (and inliers) a registration is attempted with
 @dataclass
 class Matches:
     """Closest reference points ``q`` (n, 3) m, their unit normals ``n`` (n, 3) and ids ``ids`` (n,) int64
-    for a cloud of n points at identity."""
+    for a cloud of n points at identity; ``margin`` (n,) m, when the reference gives it: how far each point
+    can move before another reference point may be closer (:class:`~optipose.registration.reference.SampleTracker`)."""
 
     q: np.ndarray
     n: np.ndarray
     ids: np.ndarray
+    margin: np.ndarray | None = None
 
     @staticmethod
     def concat(parts: list["Matches"]) -> "Matches":
         """The matches of the stacked clouds, in the order given."""
-        return Matches(*(np.concatenate([getattr(m, k) for m in parts]) for k in ("q", "n", "ids")))
+        q, n, ids = (np.concatenate([getattr(m, k) for m in parts]) for k in ("q", "n", "ids"))
+        margin = np.concatenate([m.margin for m in parts]) if all(m.margin is not None for m in parts) else None
+        return Matches(q, n, ids, margin)
 
 
 @dataclass
