@@ -12,6 +12,11 @@ and an id. Two kinds:
   which makes an iteration near convergence cost a projection rather than a search.
 - :class:`SampledReference` — a point cloud with normals and a KD-tree: a CAD sample at a given spacing
   (``cad-sample``) or the scan at the nominal orientation (``nominal-scan``).
+
+An ICP asks ``reference.tracker(ids, initial)`` for its closest points at every step. The surface's
+:class:`Tracker` calls ``nearest`` with the last step's faces; a sample's :class:`SampleTracker` keeps, per
+point, how far it may move and keep its nearest sample, and searches only the points that moved farther
+(the literal point-to-point ICP crawls for up to 100 steps, most of them moving most points by far less).
 """
 
 from __future__ import annotations
