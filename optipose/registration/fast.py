@@ -52,8 +52,9 @@ class FastBackend:
         converged, it, history, before = False, 0, None, None
         cycle = Cycle(cfg)
         track = reference.tracker(ids, initial)
+        p = np.empty_like(source)  # every step's moved cloud, in one buffer
         for it in range(1, cfg.max_iterations + 1):
-            p = kernels.transform(source, T)
+            p = kernels.transform(source, T, p)
             q, n, ids = track(p)
             if cfg.method == "point_to_point":  # the information matrix is summed once, after the last step
                 n_in, sum_d2, c, mq, H = kernels.cross_covariance(p, q, max_d2)
@@ -69,7 +70,7 @@ class FastBackend:
                     break
                 before = now
             if cfg.method == "point_to_point":
-                delta = _kabsch_from(H, c, mq)
+                delta = kernels.kabsch(H, c, mq)
             else:
                 delta = _solve_point_to_plane(AtA, Atb, c)
             if delta is None:

@@ -83,14 +83,19 @@ def voxel_centroids(points, size, origin):
 
 
 @njit(cache=True, nogil=True)
-def transform(points, T):
-    """``points @ T[:3, :3].T + T[:3, 3]`` (n, 3)."""
+def transform(points, T, out=None):
+    """``points @ T[:3, :3].T + T[:3, 3]`` (n, 3), into ``out`` when given."""
     n = points.shape[0]
-    out = np.empty((n, 3), np.float64)
+    if out is None:
+        out = np.empty((n, 3), np.float64)
+    r00, r01, r02, t0 = T[0, 0], T[0, 1], T[0, 2], T[0, 3]  # in registers: out may not alias T, the compiler can't know
+    r10, r11, r12, t1 = T[1, 0], T[1, 1], T[1, 2], T[1, 3]
+    r20, r21, r22, t2 = T[2, 0], T[2, 1], T[2, 2], T[2, 3]
     for i in range(n):
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        for j in range(3):
-            out[i, j] = T[j, 0] * x + T[j, 1] * y + T[j, 2] * z + T[j, 3]
+        out[i, 0] = r00 * x + r01 * y + r02 * z + t0
+        out[i, 1] = r10 * x + r11 * y + r12 * z + t1
+        out[i, 2] = r20 * x + r21 * y + r22 * z + t2
     return out
 
 
@@ -554,11 +559,11 @@ def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neigh
     return open_
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def cross_covariance(p, q, max_d2):
     """The sums of one point-to-point (Kabsch) step over the pairs within ``sqrt(max_d2)``, in one pass:
-    their count, Σ d² (summed in :func:`normal_equations`' order), the centroids of p and q (3,) and
-    ``Σ (pᵢ − p̄)(qᵢ − q̄)ᵀ`` (3, 3) (summed about the first point, which is near the rest, then centred)."""
+    their count, Σ d², the centroids of p and q (3,) and ``Σ (pᵢ − p̄)(qᵢ − q̄)ᵀ`` (3, 3) (summed about the
+    first point, which is near the rest, then centred; every sum a register of its own)."""
     m = p.shape[0]
     count = 0
     sum_d2 = 0.0
@@ -568,6 +573,8 @@ def cross_covariance(p, q, max_d2):
     if m == 0:
         return count, sum_d2, sp, sq, H
     o0, o1, o2 = p[0, 0], p[0, 1], p[0, 2]
+    a0s = a1s = a2s = b0s = b1s = b2s = 0.0
+    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
     for i in range(m):
         a0, a1, a2 = p[i, 0] - o0, p[i, 1] - o1, p[i, 2] - o2
         b0, b1, b2 = q[i, 0] - o0, q[i, 1] - o1, q[i, 2] - o2
@@ -575,25 +582,28 @@ def cross_covariance(p, q, max_d2):
         if d2 <= max_d2:
             count += 1
             sum_d2 += d2
-            sp[0] += a0
-            sp[1] += a1
-            sp[2] += a2
-            sq[0] += b0
-            sq[1] += b1
-            sq[2] += b2
-            H[0, 0] += a0 * b0
-            H[0, 1] += a0 * b1
-            H[0, 2] += a0 * b2
-            H[1, 0] += a1 * b0
-            H[1, 1] += a1 * b1
-            H[1, 2] += a1 * b2
-            H[2, 0] += a2 * b0
-            H[2, 1] += a2 * b1
-            H[2, 2] += a2 * b2
+            a0s += a0
+            a1s += a1
+            a2s += a2
+            b0s += b0
+            b1s += b1
+            b2s += b2
+            h00 += a0 * b0
+            h01 += a0 * b1
+            h02 += a0 * b2
+            h10 += a1 * b0
+            h11 += a1 * b1
+            h12 += a1 * b2
+            h20 += a2 * b0
+            h21 += a2 * b1
+            h22 += a2 * b2
     if count == 0:
         return count, sum_d2, sp, sq, H
-    sp /= count
-    sq /= count
+    sp[0], sp[1], sp[2] = a0s / count, a1s / count, a2s / count
+    sq[0], sq[1], sq[2] = b0s / count, b1s / count, b2s / count
+    H[0, 0], H[0, 1], H[0, 2] = h00, h01, h02
+    H[1, 0], H[1, 1], H[1, 2] = h10, h11, h12
+    H[2, 0], H[2, 1], H[2, 2] = h20, h21, h22
     for r in range(3):
         for c in range(3):
             H[r, c] -= count * sp[r] * sq[c]
@@ -601,3 +611,20 @@ def cross_covariance(p, q, max_d2):
         sp[j] += p[0, j]
         sq[j] += p[0, j]
     return count, sum_d2, sp, sq, H
+
+
+@njit(cache=True, nogil=True)
+def kabsch(H, mp, mq):
+    """The rigid transform (4, 4) minimising Σ |R pᵢ + t − qᵢ|², from the cross-covariance
+    ``H = Σ (pᵢ − p̄)(qᵢ − q̄)ᵀ`` (3, 3) and the centroids p̄, q̄ (Arun / Umeyama without scale)."""
+    U, _, Vt = np.linalg.svd(H)
+    V = Vt.T
+    if np.linalg.det(V @ U.T) < 0.0:
+        for r in range(3):
+            V[r, 2] = -V[r, 2]
+    R = V @ U.T
+    T = np.eye(4)
+    T[:3, :3] = R
+    for r in range(3):
+        T[r, 3] = mq[r] - (R[r, 0] * mp[0] + R[r, 1] * mp[1] + R[r, 2] * mp[2])
+    return T
