@@ -315,6 +315,17 @@ def test_subsets_started_from_their_sensors_registrations_end_where_identity_wou
     assert b.loc[~single, "iterations"].mean() < a.loc[~single, "iterations"].mean() - 1.5
 
 
+def test_one_sensor_registered_on_its_own_nominal_scan_comes_back(block):
+    """A single sensor against its nominal scan (a sampled reference of its own, tracked step after step):
+    the turn comes back."""
+    layout = Layout((block.layouts["hand"].sensors[0],), name="S1")
+    objective = _objective(("R", "Y"), 1.0, 1.0, reference="nominal-scan", reference_spacing_mm=0.5)
+    with Evaluator(block, objective, seed=5) as ev:
+        per_scan = ev(layout).per_scan
+    assert per_scan["ok"].all()
+    assert np.rad2deg(np.abs(per_scan[["err_roll", "err_yaw"]].to_numpy())).max() < 0.02
+
+
 def test_a_zero_area_face_on_an_edge_never_answers_for_its_neighbours():
     # a box with a sliver triangle along one of its edges (collinear corners: no area, no normal); points
     # around that edge have their closest point on the edge, and must get a face with a normal

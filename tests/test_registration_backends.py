@@ -179,6 +179,16 @@ def test_a_sampled_references_tracker_answers_the_kd_trees_nearest_points_at_eve
             T = step @ T
 
 
+def test_a_sampled_references_tracker_takes_any_hint_and_ignores_one_that_is_not_its_point(block):
+    """Hints only start the search: wrong ones (another point's, or ids past the reference's points, as a
+    surface's face ids would be) still give the KD-tree's nearest points."""
+    reference = SampledReference(*sample_surface(block.vertices, block.faces, 0.5e-3, seed=1))
+    rng = np.random.default_rng(6)
+    p = reference.points[rng.choice(len(reference.points), 2000)] + rng.normal(scale=1e-4, size=(2000, 3))
+    hints = rng.integers(0, 3 * len(reference.points), size=len(p))
+    np.testing.assert_array_equal(reference.tracker(hints)(p)[2], reference.closest(p)[2])
+
+
 def test_a_samples_neighbour_list_holds_every_sample_closer_than_its_radius(block):
     """The walk's certificate rests on this: each sample's list is its KD-tree nearest, in order, up to its
     radius, and no sample left off the list is closer than the radius."""

@@ -271,7 +271,7 @@ def _register_subsets(worker, setup, scans, seed, subsets, references, zeros, na
         point_rows.append({"scan": i, "label": label, "sensor_index": j, "sensor": names[j],
                            "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip
     # every subset against the part's reference: each sensor's matches at identity are searched once
-    shared = references[0] is references[-1] and backend_for(cfg).takes_initial
+    shared = all(r is worker.reference for r in references) and backend_for(cfg).takes_initial
     initial = [worker.reference.matches(c) if len(c) else None for c in clouds] if shared else None
     own: dict = {}  # sensor -> its single registration and centroid, where several sensors start from
     moments = [_moments(c) for c in clouds]

@@ -416,6 +416,7 @@ def sample_neighbours(points, k, reach, origin, cell, shape, start):
 
 
 WALK = 4  # hops from a point's last nearest reference point toward its new one before the grid is searched
+SLACK = 1e-13  # m off every margin: far above the rounding of coordinates within metres of O, so a point that close to a bisector is searched again
 SETTLE = 1.0 / 16  # cells: a point searched on the grid after moving less than this gets its margin too
 
 
@@ -531,7 +532,7 @@ def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neigh
                         m_ = min(m_, (d2 - best) / (2.0 * sg))
                     else:
                         m_ = 0.0
-                margin[i] = m_ * (1.0 - 1e-9)
+                margin[i] = max(m_ * (1.0 - 1e-9) - SLACK, 0.0)
                 break
             if g == c:
                 break
@@ -551,7 +552,7 @@ def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neigh
                 continue
             found = order[g]
             if settle:
-                margin[i] = 0.5 * (np.sqrt(second) - np.sqrt(best)) * (1.0 - 1e-9)
+                margin[i] = max(0.5 * (np.sqrt(second) - np.sqrt(best)) * (1.0 - 1e-9) - SLACK, 0.0)
         ids[i] = found
         for j in range(3):
             q[i, j] = ref_points[found, j]
@@ -576,10 +577,10 @@ def cross_covariance(p, q, max_d2):
     a0s = a1s = a2s = b0s = b1s = b2s = 0.0
     h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
     for i in range(m):
-        a0, a1, a2 = p[i, 0] - o0, p[i, 1] - o1, p[i, 2] - o2
-        b0, b1, b2 = q[i, 0] - o0, q[i, 1] - o1, q[i, 2] - o2
-        d2 = (a0 - b0) ** 2 + (a1 - b1) ** 2 + (a2 - b2) ** 2
+        d2 = (p[i, 0] - q[i, 0]) ** 2 + (p[i, 1] - q[i, 1]) ** 2 + (p[i, 2] - q[i, 2]) ** 2  # as normal_equations does
         if d2 <= max_d2:
+            a0, a1, a2 = p[i, 0] - o0, p[i, 1] - o1, p[i, 2] - o2
+            b0, b1, b2 = q[i, 0] - o0, q[i, 1] - o1, q[i, 2] - o2
             count += 1
             sum_d2 += d2
             a0s += a0

@@ -190,8 +190,9 @@ class SampledReference:
         self.kind = kind
         # the points are kept in the order of the cells of a grid over them, so that points near in space
         # are near in memory (a search touches a few cache lines, not a few hundred)
-        lo, hi = points.min(axis=0), points.max(axis=0)
-        spacing = float(np.sqrt(_cloud_area(points, cKDTree(points)) / max(len(points), 1)))
+        lo, hi = (points.min(axis=0), points.max(axis=0)) if len(points) else (np.zeros(3), np.zeros(3))
+        spacing = float(np.sqrt(_cloud_area(points, cKDTree(points)) / max(len(points), 1))) if len(points) > 1 else 0.0
+        spacing = spacing if np.isfinite(spacing) else 0.0  # one point, or all on one spot
         cell = max(2.5 * spacing, float(np.prod(hi - lo + 1e-9) / _MAX_CELLS) ** (1 / 3), 1e-6)
         origin = lo - cell
         shape = np.floor((hi + cell - origin) / cell).astype(np.int64) + 1
@@ -278,13 +279,14 @@ class SampleTracker:
         points = np.ascontiguousarray(points, dtype=np.float64)
         m, ref = len(points), self.reference
         if self.q is None:
-            if self._initial is not None:  # the matches where the ICP starts: the first step is answered
+            if self._initial is not None:  # the cloud's matches on this reference where the ICP starts: the first step is answered
                 initial, self._initial = self._initial, None
                 self.ids, self.q, self.n = initial.ids.copy(), initial.q.copy(), initial.n.copy()
                 self.anchor = points.copy()
                 self.margin = np.zeros(m) if initial.margin is None else initial.margin.copy()
                 return self.q, self.n, self.ids
             self.ids = np.full(m, -1, dtype=np.int64) if self._ids is None else self._ids
+            self.ids[self.ids >= len(ref.points)] = -1  # a hint that is no point of this reference (any other is safe)
             self.anchor, self.margin = np.zeros((m, 3)), np.zeros(m)
             self.q, self.n = np.empty((m, 3)), np.empty((m, 3))
         open_ = kernels.tracked_nearest(points, self.ids, self.anchor, self.margin, self.q, self.n, ref.points,
