@@ -516,22 +516,23 @@ def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neigh
             bound = rho[c] - np.sqrt(dc)
             if np.sqrt(best) < bound * (1.0 - 1e-12):
                 found = g
-                # how far p may move and keep g: its distance to the nearest bisector plane between g and a
-                # candidate s, (d_s² − d_g²) / (2 |s − g|), and (bound − d_g) / 2 for any point not listed
-                m_ = 0.5 * (bound - np.sqrt(best))
-                for j in range(-1, K):
-                    k = c if j < 0 else neighbours[c, j]
-                    if k < 0:
-                        break
-                    if k == g:
-                        continue
-                    d2 = (px - ref_points[k, 0]) ** 2 + (py - ref_points[k, 1]) ** 2 + (pz - ref_points[k, 2]) ** 2
-                    sg = np.sqrt((ref_points[k, 0] - ref_points[g, 0]) ** 2 + (ref_points[k, 1] - ref_points[g, 1]) ** 2
-                                 + (ref_points[k, 2] - ref_points[g, 2]) ** 2)  # fmt: skip
-                    if sg > 0.0:
-                        m_ = min(m_, (d2 - best) / (2.0 * sg))
-                    else:
-                        m_ = 0.0
+                # how far p may move and keep g: half the gap between the nearest and the second-nearest
+                # (or the unlisted points' bound); for a settling point, worth the pass, its distance to the
+                # nearest bisector plane between g and a candidate s, (d_s² − d_g²) / (2 |s − g|), and
+                # (bound − d_g) / 2 for any point not listed (never less than the half gap)
+                m_ = 0.5 * (min(np.sqrt(second), bound) - np.sqrt(best))
+                if settle:
+                    m_ = 0.5 * (bound - np.sqrt(best))
+                    for j in range(-1, K):
+                        k = c if j < 0 else neighbours[c, j]
+                        if k < 0:
+                            break
+                        if k == g:
+                            continue
+                        d2 = (px - ref_points[k, 0]) ** 2 + (py - ref_points[k, 1]) ** 2 + (pz - ref_points[k, 2]) ** 2
+                        sg = np.sqrt((ref_points[k, 0] - ref_points[g, 0]) ** 2 + (ref_points[k, 1] - ref_points[g, 1]) ** 2
+                                     + (ref_points[k, 2] - ref_points[g, 2]) ** 2)  # fmt: skip
+                        m_ = min(m_, (d2 - best) / (2.0 * sg)) if sg > 0.0 else 0.0
                 margin[i] = max(m_ * (1.0 - 1e-9) - SLACK, 0.0)
                 break
             if g == c:
