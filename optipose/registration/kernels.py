@@ -417,7 +417,7 @@ def sample_neighbours(points, k, reach, origin, cell, shape, start):
 
 WALK = 4  # hops from a point's last nearest reference point toward its new one before the grid is searched
 SLACK = 1e-13  # m off every margin: far above the rounding of coordinates within metres of O, so a point that close to a bisector is searched again
-SETTLE = 1.0 / 16  # cells: a point searched on the grid after moving less than this gets its margin too
+SETTLE = 1.0 / 64  # cells: a point that moved less than this since its last search is settling: its exact margin is worth the work
 
 
 @njit(cache=True, nogil=True, inline="always")
