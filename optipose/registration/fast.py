@@ -235,12 +235,7 @@ def _accelerate(T: np.ndarray, delta: np.ndarray, c: np.ndarray, previous: np.nd
 def _kabsch(p: np.ndarray, q: np.ndarray, _n=None) -> np.ndarray | None:
     """Rigid transform (4, 4) minimising Σ |R pᵢ + t − qᵢ|² (Arun / Umeyama without scale)."""
     mp, mq = p.mean(axis=0), q.mean(axis=0)
-    return _kabsch_from((p - mp).T @ (q - mq), mp, mq)
-
-
-def _kabsch_from(H: np.ndarray, mp: np.ndarray, mq: np.ndarray) -> np.ndarray:
-    """The Kabsch transform (4, 4) from the cross-covariance ``H = Σ (pᵢ − p̄)(qᵢ − q̄)ᵀ`` and the centroids."""
-    U, _, Vt = np.linalg.svd(H)
+    U, _, Vt = np.linalg.svd((p - mp).T @ (q - mq))
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
     return _make_T(R, mq - R @ mp)

@@ -327,14 +327,13 @@ def point_grid(points, origin, cell, shape):
 
 
 @njit(cache=True, nogil=True)
-def grid_nearest(p, hint, points, origin, cell, shape, start, order, rank):
+def grid_nearest(p, hint, points, origin, cell, shape, start):
     """The nearest of the grid's points to each of p (n, 3), searched in the 27 cells around p's cell of
-    :func:`point_grid` (``points`` in the grid's order: ``points[k]`` is point ``order[k]``, point i is
-    ``points[rank[i]]``): exact when the nearest found is closer than ``cell`` (any point outside those
-    cells is at least a cell away). ``hint`` (n,): each point's nearest at the previous ICP step (-1:
-    none); the distance to it bounds the search, so a cell farther than that is not opened. Returns ids
-    (n,) int64 and ``open`` (n,) bool: points with no grid point that close (or outside the grid), left
-    to a global search."""
+    :func:`point_grid` (``points`` stored in the grid's cell order, ``start`` its CSR): exact when the
+    nearest found is closer than ``cell`` (any point outside those cells is at least a cell away).
+    ``hint`` (n,): each point's nearest at the previous ICP step (-1: none); the distance to it bounds the
+    search, so a cell farther than that is not opened. Returns ids (n,) int64 and ``open`` (n,) bool: points
+    with no grid point that close (or outside the grid), left to a global search."""
     n = p.shape[0]
     ids = np.full(n, -1, np.int64)
     open_ = np.zeros(n, np.bool_)
@@ -349,7 +348,7 @@ def grid_nearest(p, hint, points, origin, cell, shape, start, order, rank):
             continue
         best, g = limit, -1
         if hint[i] >= 0:
-            k = rank[hint[i]]
+            k = hint[i]
             d2 = (px - points[k, 0]) ** 2 + (py - points[k, 1]) ** 2 + (pz - points[k, 2]) ** 2
             if d2 < best:
                 best, g = d2, k
@@ -367,12 +366,12 @@ def grid_nearest(p, hint, points, origin, cell, shape, start, order, rank):
                         continue
                     for k in range(start[row + d], start[row + d + 1]):
                         d2 = (px - points[k, 0]) ** 2 + (py - points[k, 1]) ** 2 + (pz - points[k, 2]) ** 2
-                        if d2 < best or (d2 == best and g >= 0 and order[k] < order[g]):
+                        if d2 < best or (d2 == best and g >= 0 and k < g):
                             best, g = d2, k
         if g < 0:
             open_[i] = True
         else:
-            ids[i] = order[g]
+            ids[i] = g
     return ids, open_
 
 
@@ -421,7 +420,7 @@ SETTLE = 1.0 / 64  # cells: a point that moved less than this since its last sea
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _grid_two(px, py, pz, h, reach, two, points, origin, cell, shape, start, order):
+def _grid_two(px, py, pz, h, reach, two, points, origin, cell, shape, start):
     """The nearest grid point to (px, py, pz) within ``reach`` cells (searched in the (2 reach + 1)³ cells
     around its cell, starting from grid point ``h``, -1: none) and, when ``two``, the second-nearest
     distance (capped at ``reach`` cells: any point outside those cells is farther). Returns (best d²,
@@ -452,7 +451,7 @@ def _grid_two(px, py, pz, h, reach, two, points, origin, cell, shape, start, ord
                     if k == h:
                         continue
                     d2 = (px - points[k, 0]) ** 2 + (py - points[k, 1]) ** 2 + (pz - points[k, 2]) ** 2
-                    if d2 < best or (d2 == best and g >= 0 and order[k] < order[g]):
+                    if d2 < best or (d2 == best and g >= 0 and k < g):
                         second = min(second, best)
                         best, g = d2, k
                     elif d2 < second:
@@ -461,8 +460,8 @@ def _grid_two(px, py, pz, h, reach, two, points, origin, cell, shape, start, ord
 
 
 @njit(cache=True, nogil=True)
-def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neighbours, rho, reach,
-                    points, origin, cell, shape, start, order, rank):  # fmt: skip
+def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neighbours, rho, reach, origin, cell, shape,
+                    start):  # fmt: skip
     """The nearest reference point to each point of an ICP's cloud p (n, 3), as :func:`grid_nearest` finds
     it, searching again only the points that may have changed theirs since they were last searched.
 
@@ -541,17 +540,17 @@ def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neigh
         if found < 0:  # on the grid, from the walk's nearest: within ceil(|p - c| / cell) cells of p
             h, r = -1, 1
             if f >= 0:
-                h = rank[c]
+                h = c
                 dc = np.sqrt((px - ref_points[c, 0]) ** 2 + (py - ref_points[c, 1]) ** 2 + (pz - ref_points[c, 2]) ** 2)
                 r = min(reach, max(1, np.int64(np.ceil(dc / cell))))
-            best, second, g = _grid_two(px, py, pz, h, r, settle, points, origin, cell, shape, start, order)
+            best, second, g = _grid_two(px, py, pz, h, r, settle, ref_points, origin, cell, shape, start)
             if g < 0 and reach > r:
-                best, second, g = _grid_two(px, py, pz, h, reach, settle, points, origin, cell, shape, start, order)
+                best, second, g = _grid_two(px, py, pz, h, reach, settle, ref_points, origin, cell, shape, start)
             if g < 0:
                 ids[i] = -1
                 open_[i] = True
                 continue
-            found = order[g]
+            found = g
             if settle:
                 margin[i] = max(0.5 * (np.sqrt(second) - np.sqrt(best)) * (1.0 - 1e-9) - SLACK, 0.0)
         ids[i] = found

@@ -200,13 +200,12 @@ class SampledReference:
         self.points = np.ascontiguousarray(points[order])
         self.normals = np.ascontiguousarray(np.asarray(normals, dtype=np.float64)[order])
         self._tree = cKDTree(self.points)
-        identity = np.arange(len(order), dtype=np.int64)
-        self._point_grid = (self.points, origin, cell, shape, start, identity, identity)
+        self._point_grid = (origin, cell, shape, start)
         self._near = None
 
     def _grid(self) -> tuple:
-        """The points per cell of a grid over them (:func:`optipose.registration.kernels.point_grid`): the
-        points (in cell order already), origin, cell, shape, CSR start, order and rank (both the identity)."""
+        """The grid over the points, which are stored in its cell order (:func:`optipose.registration.kernels.point_grid`):
+        origin, cell, shape and the CSR start of each cell."""
         return self._point_grid
 
     def _neighbours(self) -> tuple[np.ndarray, np.ndarray]:
@@ -215,8 +214,7 @@ class SampledReference:
         if self._near is None:
             from optipose.registration import kernels
 
-            points, origin, cell, shape, start, _, _ = self._point_grid
-            self._near = kernels.sample_neighbours(points, _NEIGHBOURS, _REACH, origin, cell, shape, start)
+            self._near = kernels.sample_neighbours(self.points, _NEIGHBOURS, _REACH, *self._point_grid)
         return self._near
 
     def __repr__(self) -> str:
@@ -233,7 +231,7 @@ class SampledReference:
 
         points = np.ascontiguousarray(points, dtype=np.float64)
         hint = np.full(len(points), -1, dtype=np.int64) if ids is None else np.ascontiguousarray(ids, dtype=np.int64)
-        found, open_ = kernels.grid_nearest(points, hint, *self._grid())
+        found, open_ = kernels.grid_nearest(points, hint, self.points, *self._grid())
         open_ = np.flatnonzero(open_)
         if len(open_):
             found[open_] = self._tree.query(points[open_])[1]
@@ -263,8 +261,9 @@ class SampledReference:
 
 class SampleTracker:
     """The closest samples of one ICP's cloud at each of its steps, exactly :meth:`SampledReference.nearest`'s,
-    each point searched again only once it has moved as far as half the gap between its nearest and
-    second-nearest samples where it was last searched (:func:`optipose.registration.kernels.tracked_nearest`):
+    each point searched again only once it may have left its nearest sample's region: moved as far as the
+    nearest bisector plane between that sample and another (or half the gap to the second-nearest) since it
+    was last searched (:func:`optipose.registration.kernels.tracked_nearest`):
     an ICP near its fixed point moves its points by far less than that, so a step costs a pass over the
     cloud rather than a search per point. ``tracker(p) -> (q, n, ids)``, arrays it updates at the next call."""
 
