@@ -13,7 +13,15 @@ from numba import njit
 @njit(cache=True, nogil=True)
 def voxel_centroids(points, size, origin):
     """Centroids (m, 3) of the points (n, 3) in each cube of side ``size`` of the grid whose corner is at
-    ``origin`` (3,), in the voxels' sorted key order.
+    ``origin`` (3,), in the voxels' sorted key order: :func:`voxel_labels` without labels."""
+    return voxel_labels(points, size, origin, np.empty(0, np.int64))[0]
+
+
+@njit(cache=True, nogil=True)
+def voxel_labels(points, size, origin, labels):
+    """Centroids (m, 3) of the points (n, 3) in each cube of side ``size`` of the grid whose corner is at
+    ``origin`` (3,), in the voxels' sorted key order, and the label (m,) of each voxel's first point
+    (``labels`` (n,), or empty: then the voxels' labels are -1).
 
     Same sums in the same order as ``np.unique`` + ``np.bincount`` (each voxel adds its points in input
     order), so the result is bit-identical. A scan runs along its profiles, so consecutive points mostly
@@ -21,7 +29,8 @@ def voxel_centroids(points, size, origin):
     """
     n = points.shape[0]
     if n == 0:
-        return np.empty((0, 3), np.float64)
+        return np.empty((0, 3), np.float64), np.empty(0, np.int64)
+    labelled = labels.shape[0] > 0
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
     low = np.empty(3, np.float64)
@@ -54,6 +63,7 @@ def voxel_centroids(points, size, origin):
     keys = np.empty(runs, np.int64)  # voxel -> key
     sums = np.zeros((runs, 3), np.float64)
     counts = np.zeros(runs, np.int64)
+    first = np.full(runs, -1, np.int64)  # voxel -> its first point's label
     m = 0
     v = -1
     for i in range(n):
@@ -65,6 +75,8 @@ def voxel_centroids(points, size, origin):
                     v = m
                     table[h] = v
                     keys[v] = key[i]
+                    if labelled:
+                        first[v] = labels[i]
                     m += 1
                     break
                 if keys[v] == key[i]:
@@ -75,11 +87,13 @@ def voxel_centroids(points, size, origin):
         counts[v] += 1
     order = np.argsort(keys[:m])
     out = np.empty((m, 3), np.float64)
+    out_labels = np.empty(m, np.int64)
     for k in range(m):
         v = order[k]
         for j in range(3):
             out[k, j] = sums[v, j] / counts[v]
-    return out
+        out_labels[k] = first[v]
+    return out, out_labels
 
 
 @njit(cache=True, nogil=True)
@@ -194,8 +208,20 @@ def _grid_pass(tri, normals, offsets, origin, cell, shape, margin, slot, faces):
 
 @njit(cache=True, nogil=True)
 def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, start, faces):
-    """Closest points of p (n, 3) on a mesh; ``ids`` (n,) holds a guess of each point's face (-1: none)
-    and gets the answer.
+    """:func:`nearest_into` into new arrays: returns q (n, 3) and ``open`` (n,) bool."""
+    n = p.shape[0]
+    q = np.empty((n, 3), np.float64)
+    nrm = np.empty((n, 3), np.float64)
+    open_ = np.zeros(n, np.bool_)
+    nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, start, faces)
+    return q, open_
+
+
+@njit(cache=True, nogil=True)
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, start, faces):
+    """Closest points of p (n, 3) on a mesh into q (n, 3), their face normals into ``nrm`` (n, 3); ``ids``
+    (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
+    ``open`` (n,) (set True for them, left as they were for the rest).
 
     A point inside its guessed face by more than 2|d| keeps it (as ``follow``). Otherwise the faces
     listed for its grid cell (:func:`face_grid`) are searched exactly: they hold every face within
@@ -209,12 +235,12 @@ def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, s
     ``margin`` from the surface).
     """
     n = p.shape[0]
-    q = np.empty((n, 3), np.float64)
-    open_ = np.zeros(n, np.bool_)
     m2 = margin * margin
+    n_open = 0
     for i in range(n):
         f = ids[i]
         if f >= 0 and _project(p, i, f, planes, plane_c, q)[0]:
+            nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[f, 0, 0], planes[f, 0, 1], planes[f, 0, 2]
             continue
         c = 0
         outside = False
@@ -225,6 +251,7 @@ def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, s
             c = c * shape[j] + cj
         if outside:
             open_[i] = True
+            n_open += 1
             continue
         px, py, pz = p[i, 0], p[i, 1], p[i, 2]
         best = m2
@@ -251,11 +278,13 @@ def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, s
                 best, g_best, bx, by, bz = d2, g, gx, gy, gz
         if g_best < 0:
             open_[i] = True
+            n_open += 1
             continue
         ids[i] = g_best
+        nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
         if not _project(p, i, g_best, planes, plane_c, q)[0]:  # on or near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
-    return q, open_
+    return n_open
 
 
 @njit(cache=True, nogil=True)
@@ -283,22 +312,54 @@ def normal_equations(p, q, n, max_d2):
     if count == 0:
         return inlier, c, AtA, Atb, sum_d2
     c /= count
-    J = np.empty(6)
+    c0, c1, c2 = c[0], c[1], c[2]
+    # every sum a register of its own, each summed over the points in order (the same sums as a loop
+    # over the (6, 6) array, bit for bit, without its loads and stores per point)
+    a00 = a01 = a02 = a03 = a04 = a05 = a11 = a12 = a13 = a14 = a15 = a22 = a23 = a24 = a25 = 0.0
+    a33 = a34 = a35 = a44 = a45 = a55 = 0.0
+    b0 = b1 = b2 = b3 = b4 = b5 = 0.0
     for i in range(m):
         if not inlier[i]:
             continue
-        x, y, z = p[i, 0] - c[0], p[i, 1] - c[1], p[i, 2] - c[2]
+        x, y, z = p[i, 0] - c0, p[i, 1] - c1, p[i, 2] - c2
         nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
-        J[0], J[1], J[2] = y * nz - z * ny, z * nx - x * nz, x * ny - y * nx
-        J[3], J[4], J[5] = nx, ny, nz
+        j0, j1, j2 = y * nz - z * ny, z * nx - x * nz, x * ny - y * nx
         b = (q[i, 0] - p[i, 0]) * nx + (q[i, 1] - p[i, 1]) * ny + (q[i, 2] - p[i, 2]) * nz
-        for r in range(6):
-            Atb[r] += J[r] * b
-            for s in range(r, 6):
-                AtA[r, s] += J[r] * J[s]
+        b0 += j0 * b
+        b1 += j1 * b
+        b2 += j2 * b
+        b3 += nx * b
+        b4 += ny * b
+        b5 += nz * b
+        a00 += j0 * j0
+        a01 += j0 * j1
+        a02 += j0 * j2
+        a03 += j0 * nx
+        a04 += j0 * ny
+        a05 += j0 * nz
+        a11 += j1 * j1
+        a12 += j1 * j2
+        a13 += j1 * nx
+        a14 += j1 * ny
+        a15 += j1 * nz
+        a22 += j2 * j2
+        a23 += j2 * nx
+        a24 += j2 * ny
+        a25 += j2 * nz
+        a33 += nx * nx
+        a34 += nx * ny
+        a35 += nx * nz
+        a44 += ny * ny
+        a45 += ny * nz
+        a55 += nz * nz
+    Atb[0], Atb[1], Atb[2], Atb[3], Atb[4], Atb[5] = b0, b1, b2, b3, b4, b5
+    upper = (a00, a01, a02, a03, a04, a05, a11, a12, a13, a14, a15, a22, a23, a24, a25, a33, a34, a35, a44, a45, a55)
+    k = 0
     for r in range(6):
-        for s in range(r):
-            AtA[r, s] = AtA[s, r]
+        for s in range(r, 6):
+            AtA[r, s] = upper[k]
+            AtA[s, r] = upper[k]
+            k += 1
     return inlier, c, AtA, Atb, sum_d2
 
 

@@ -14,7 +14,7 @@ and an id. Two kinds:
   (``cad-sample``) or the scan at the nominal orientation (``nominal-scan``).
 
 An ICP asks ``reference.tracker(ids, initial)`` for its closest points at every step. The surface's
-:class:`Tracker` calls ``nearest`` with the last step's faces; a sample's :class:`SampleTracker` keeps, per
+:class:`SurfaceTracker` calls ``nearest_into`` with the last step's faces, into arrays of its own; a sample's :class:`SampleTracker` keeps, per
 point, how far it may move and keep its nearest sample, and searches only the points that moved farther
 (the literal point-to-point ICP crawls for up to 100 steps, most of them moving most points by far less).
 """
@@ -128,50 +128,74 @@ class SurfaceReference:
         or, closest to an edge or a corner, that face's closest point. Points outside the grid or
         farther than two cells from the surface get Open3D's answer (float32 off the faces' interiors).
         """
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        ids = _face_hints(ids, len(points), len(self.faces))
+        q, n, open_ = np.empty((len(points), 3)), np.empty((len(points), 3)), np.zeros(len(points), dtype=bool)
+        self.nearest_into(points, ids, q, n, open_)
+        return q, n, ids
+
+    def nearest_into(self, points: np.ndarray, ids: np.ndarray, q: np.ndarray, n: np.ndarray, open_: np.ndarray) -> None:
+        """:meth:`nearest` into the caller's arrays: points (m, 3) float64 contiguous, ids (m,) int64 (the
+        guesses, each -1 or a face, then the answer), q and n (m, 3), ``open_`` (m,) bool all False (and so
+        again on return)."""
         from optipose.registration import kernels
 
-        points = np.ascontiguousarray(points, dtype=np.float64)
-        ids = np.full(len(points), -1, dtype=np.int64) if ids is None else np.array(ids, dtype=np.int64)
-        ids[ids >= len(self.faces)] = -1
-        q, open_ = kernels.nearest(points, ids, self._planes, self._plane_c, self._tri, *self._grid())
-        open_ = np.flatnonzero(open_)
-        if len(open_):
-            q[open_], _, ids[open_] = self._far(points[open_])
-        return q, self.normals[ids], ids
+        if kernels.nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, *self._grid()):
+            far = np.flatnonzero(open_)
+            q[far], n[far], ids[far] = self._far(points[far])
+            open_[far] = False
 
-    def matches(self, points: np.ndarray):
-        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is."""
+    def matches(self, points: np.ndarray, hints: np.ndarray | None = None):
+        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is; ``hints``: a
+        guess of each point's face (-1: none), e.g. the face its scanned points were measured on
+        (:meth:`nearest`: the same answer, found sooner)."""
         from optipose.registration.result import Matches
 
-        return Matches(*self.nearest(points))
+        return Matches(*self.nearest(points, hints))
 
-    def tracker(self, ids: np.ndarray | None = None, initial=None) -> "Tracker":
-        """The closest points of one ICP's cloud, step after step (:class:`Tracker`: :meth:`nearest` each step,
-        hinted with the last step's faces)."""
-        return Tracker(self, ids, initial)
+    def tracker(self, ids: np.ndarray | None = None, initial=None) -> "SurfaceTracker":
+        """The closest points of one ICP's cloud, step after step (:class:`SurfaceTracker`: :meth:`nearest`
+        each step, hinted with the last step's faces)."""
+        return SurfaceTracker(self, ids, initial)
 
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """A uniform sample of the surface, about one point per ``spacing``² (m); points and normals."""
         return sample_surface(self.vertices, self.faces, spacing, seed)
 
 
-class Tracker:
-    """The closest reference points of one ICP's cloud at each of its steps: ``tracker(p) -> (q, n, ids)``.
+def _face_hints(ids: np.ndarray | None, n_points: int, n_faces: int) -> np.ndarray:
+    """Each point's guess of its face as a new int64 array: -1 (none) where not given or not a face."""
+    if ids is None:
+        return np.full(n_points, -1, dtype=np.int64)
+    ids = np.array(ids, dtype=np.int64)
+    ids[(ids >= n_faces) | (ids < 0)] = -1
+    return ids
 
-    This one asks the reference's ``nearest`` every step with the last step's ids as hints; ``initial``
-    (:class:`~optipose.registration.result.Matches`, the cloud's matches where the ICP starts) answers the
-    first step. A reference may give a tracker of its own that searches less (:class:`SampleTracker`)."""
 
-    def __init__(self, reference, ids: np.ndarray | None = None, initial=None):
-        self.reference, self.ids, self._initial = reference, None if ids is None else np.array(ids, dtype=np.int64), initial
+class SurfaceTracker:
+    """The closest surface points of one ICP's cloud at each of its steps: ``tracker(p) -> (q, n, ids)``.
+
+    Each step asks :meth:`SurfaceReference.nearest_into` with the last step's faces as hints (most points
+    keep their face: a projection), into arrays kept for the whole ICP, which the next step overwrites;
+    ``initial`` (:class:`~optipose.registration.result.Matches`, the cloud's matches where the ICP starts)
+    answers the first step."""
+
+    def __init__(self, reference: SurfaceReference, ids: np.ndarray | None = None, initial=None):
+        self.reference, self._initial, self._hints = reference, initial, ids
+        self.ids = self.q = self.n = self._open = None
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self._initial is not None:
             initial, self._initial = self._initial, None
             self.ids = initial.ids.copy()
             return initial.q, initial.n, self.ids
-        q, n, self.ids = self.reference.nearest(points, self.ids)
-        return q, n, self.ids
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        if self.q is None:  # the first step searched here: this ICP's own arrays
+            m = len(points)
+            self.ids = _face_hints(self.ids if self.ids is not None else self._hints, m, len(self.reference.faces))
+            self.q, self.n, self._open = np.empty((m, 3)), np.empty((m, 3)), np.zeros(m, dtype=bool)
+        self.reference.nearest_into(points, self.ids, self.q, self.n, self._open)
+        return self.q, self.n, self.ids
 
 
 class SampledReference:
@@ -237,11 +261,12 @@ class SampledReference:
             found[open_] = self._tree.query(points[open_])[1]
         return self.points[found], self.normals[found], found
 
-    def matches(self, points: np.ndarray):
-        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is, with margins."""
+    def matches(self, points: np.ndarray, hints: np.ndarray | None = None):
+        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is, with margins;
+        ``hints``: a guess of each point's sample (any id: the answer is the same)."""
         from optipose.registration.result import Matches
 
-        track = SampleTracker(self)
+        track = SampleTracker(self, hints)
         q, n, ids = track(points)
         return Matches(q, n, ids, track.margin)
 

@@ -32,7 +32,8 @@ from optipose.transforms import part_motion, validate_pose
 __all__ = ["Scan", "Scanner", "part_scanner", "nominal_scans", "rebuilt_with"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
-_BLOCK_PROFILES = 8  # profiles per unit of work: fixed, so noise draws do not depend on the thread count
+_BLOCK_PROFILES = 8  # profiles per unit of work on a thread pool (each point's noise draw is keyed by its ray, not its block)
+_SERIAL_BLOCK_PROFILES = 32  # ... and on one thread, where smaller blocks only add per-block overhead
 COLUMN_STRIDE = 16  # cast every this many columns, and the columns between only where their anchors disagree
 
 
@@ -112,6 +113,7 @@ class Scanner:
         self.caster = make_caster(self.vertices, self.faces, backend, threads=1)
         self.threads = threads or default_threads()
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        self._block = _BLOCK_PROFILES if self._pool else _SERIAL_BLOCK_PROFILES
         self._plane, self._normals, self._offsets, self._edge_n, self._edge_c = shared_planes(self.vertices, self.faces)
         self._on_hull = _supporting_faces(mesh, self._normals, self._offsets)
         self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
@@ -119,7 +121,7 @@ class Scanner:
         self._ray_lines = ray_lines(self._ray_o_S, self._ray_d_S)
         s = self.sensor
         t_max = ((s.z_far - s.window_z) / self._ray_d_S[:, 2]).astype(np.float32)
-        self._t_max_tiled = np.tile(t_max, _BLOCK_PROFILES)
+        self._t_max = t_max
         n_col, stride = self.sensor.points_per_profile, max(1, int(column_stride))
         self.column_stride = stride
         self._anchors = np.unique(np.r_[np.arange(0, n_col, stride), n_col - 1]) if stride > 1 else None
@@ -165,9 +167,9 @@ class Scanner:
         shifts = motion.offsets()
         views = [_SensorView.build(self, T, T_O_P) for T in poses]
         blocks = [
-            (j, k0, min(k0 + _BLOCK_PROFILES, len(shifts)))
+            (j, k0, min(k0 + self._block, len(shifts)))
             for j in range(len(poses))
-            for k0 in range(0, len(shifts), _BLOCK_PROFILES)
+            for k0 in range(0, len(shifts), self._block)
         ]
 
         run = self._pool.map if self._pool else map
@@ -214,7 +216,7 @@ class Scanner:
         shifts, n_col = motion.offsets(), self.sensor.points_per_profile
         origins = view.origins(np.arange(len(shifts) * n_col), shifts)
         directions = np.tile(view.d_P32, (len(shifts), 1))
-        return origins, directions, np.tile(self._t_max_tiled[:n_col], len(shifts))
+        return origins, directions, np.tile(self._t_max, len(shifts))
 
     def normals(self, scan: Scan) -> np.ndarray:
         """Unit surface normals (n, 3) in O at a scan's points (outward, of the rotated part)."""
@@ -262,20 +264,20 @@ class Scanner:
     def _first_triangles(self, view: "_SensorView", shift_b: np.ndarray) -> np.ndarray:
         """The first triangle (-1: none) of each ray of a block's profiles × columns (see ``column_stride``).
         A profile whose fan (a trapezoid) lies outside the scene's box cannot hit anything and casts no ray."""
-        n_col, caster, t_max, m = self.sensor.points_per_profile, self.caster, self._t_max_tiled, len(shift_b)
+        n_col, caster, t_max, m = self.sensor.points_per_profile, self.caster, self._t_max, len(shift_b)
         moved = shift_b[:, None] * view.step_P
         live = np.flatnonzero(np.all(view.fan_hi - moved >= self._bounds[0], axis=1) & np.all(view.fan_lo - moved <= self._bounds[1], axis=1))
         cols = self._anchors if self._anchors is not None else np.arange(n_col)
         anchor_tri = np.full((m, len(cols)), -1, dtype=np.int32)
         if len(live):
             rays = (live[:, None] * n_col + cols[None]).ravel()
-            anchor_tri[live] = np.asarray(caster.first_triangle(view.origins(rays, shift_b), view.d_tiled[rays], t_max[rays])).reshape(len(live), len(cols))
+            anchor_tri[live] = np.asarray(caster.first_triangle(view.origins(rays, shift_b), view.d_P32[rays % n_col], t_max[rays % n_col])).reshape(len(live), len(cols))
         if self._anchors is None:
             return anchor_tri.ravel()
         tri, need = fill_columns(anchor_tri, self._anchors, n_col, self._plane, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw,
                                  view.q, view.b, view.apex_P, view.d_P, view.step_P, self._edge_n, self._edge_c)  # fmt: skip
         if len(need):
-            tri[need] = caster.first_triangle(view.origins(need, shift_b), view.d_tiled[need], t_max[need])
+            tri[need] = caster.first_triangle(view.origins(need, shift_b), view.d_P32[need % n_col], t_max[need % n_col])
         return tri
 
     def _receiver_sees(self, view, T, col, shift, tri) -> np.ndarray:
@@ -345,7 +347,6 @@ class _SensorView:
     d_P: np.ndarray  # (n_col, 3) unit ray directions
     o_P32: np.ndarray  # (n_col, 3) ray origins on the window line, float32 for Embree
     d_P32: np.ndarray
-    d_tiled: np.ndarray  # (block rays, 3) float32: d_P32 for every profile of a block
     receiver_P: np.ndarray  # (3,)
     step_P: np.ndarray  # (3,)
     fan_lo: np.ndarray  # (3,) the box of the fan's trapezoid (window to far limit) at shift 0
@@ -372,7 +373,7 @@ class _SensorView:
         d_P = scanner._ray_d_S @ R_PS.T
         n, off = scanner._normals, scanner._offsets
         step_P = R_PO[:, 0].copy()
-        t_far = scanner._t_max_tiled[: len(d_P)][[0, -1]]
+        t_far = scanner._t_max[[0, -1]]
         corners = np.vstack([o_P[[0, -1]], o_P[[0, -1]] + t_far[:, None] * d_P[[0, -1]]])
         return cls(
             T_O_S=T_O_S,
@@ -380,7 +381,6 @@ class _SensorView:
             d_P=d_P,
             o_P32=o_P.astype(np.float32),
             d_P32=d_P.astype(np.float32),
-            d_tiled=np.tile(d_P.astype(np.float32), (_BLOCK_PROFILES, 1)),
             receiver_P=receiver_P,
             step_P=step_P,
             fan_lo=corners.min(axis=0) - 1e-6,
