@@ -36,8 +36,9 @@ def measure_hits(
         f = tri[i]
         if f < 0 or f >= n_part:  # a miss, or an occluder (faces from n_part on): nothing measured
             continue
-        col = i % n_col
-        shift = shift_b[i // n_col]
+        k = i // n_col
+        col = i - k * n_col
+        shift = shift_b[k]
         c = ray_cos[col]
         den = c * nu[f] + ray_sin[col] * nw[f]  # n·d = -cos(AoI)
         if den >= 0.0:
@@ -168,26 +169,32 @@ def unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride, plane):
 # Standard normal quantiles at the centres of 2^16 equal-probability cells: a draw is the inverse CDF of a
 # uniform, interpolated between neighbouring quantiles (tails end at ±4.3σ, where a 2 µm σ is 9 µm).
 _N_CELLS = 1 << 16
-NORMAL_QUANTILES = np.sqrt(2.0) * __import__("scipy.special", fromlist=["erfinv"]).erfinv(
+_QUANTILES = np.sqrt(2.0) * __import__("scipy.special", fromlist=["erfinv"]).erfinv(
     2.0 * (np.arange(_N_CELLS) + 0.5) / _N_CELLS - 1.0
 )
+# per cell: its quantile and the differences to the next and from the previous one (0 at the ends), in
+# one row, so a draw reads one cache line
+NORMAL_QUANTILES = np.ascontiguousarray(np.stack([
+    _QUANTILES,
+    np.r_[_QUANTILES[1:], _QUANTILES[-1]] - _QUANTILES,
+    _QUANTILES - np.r_[_QUANTILES[0], _QUANTILES[:-1]],
+    np.zeros(_N_CELLS),
+], axis=1))  # fmt: skip
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _normal(key, table):
-    """A standard normal draw from a 64-bit key: splitmix64 → a uniform → inverse CDF by table. Counter-
-    based, so a point's noise depends only on (seed, sensor, ray), never on threads or block order."""
+    """A standard normal draw from a 64-bit key: splitmix64 → a uniform → inverse CDF by table
+    (:data:`NORMAL_QUANTILES`). Counter-based, so a point's noise depends only on (seed, sensor, ray),
+    never on threads or block order."""
     z = key + np.uint64(0x9E3779B97F4A7C15)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
     z = z ^ (z >> np.uint64(31))
     cell = np.int64(z >> np.uint64(48))  # top 16 bits: the cell
     frac = np.float64((z >> np.uint64(16)) & np.uint64(0xFFFF)) * (1.0 / 65536.0) - 0.5  # position in it
-    if frac >= 0.0:
-        nxt = min(cell + 1, table.shape[0] - 1)
-        return table[cell] + frac * (table[nxt] - table[cell])
-    prv = max(cell - 1, 0)
-    return table[cell] + frac * (table[cell] - table[prv])
+    side = 1 if frac >= 0.0 else 2  # toward the next quantile, or from the previous one
+    return table[cell, 0] + frac * table[cell, side]
 
 
 @njit(cache=True, nogil=True)
@@ -204,10 +211,13 @@ def write_points(
     noisy = noise_key != 0
     with_raw = raw.shape[0] > 0
     base = np.uint64(k0 * n_col)
+    k, row = 0, 0  # the profile of ray i and its first ray: idx ascends, so they are followed, not divided out
     for h in range(idx.shape[0]):
         i = idx[h]
-        k = i // n_col
-        col = i - k * n_col
+        while i >= row + n_col:
+            k += 1
+            row += n_col
+        col = i - row
         c = ray_cos[col]
         z = apex_z + T[h] * c
         if noisy:
