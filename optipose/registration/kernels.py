@@ -66,8 +66,13 @@ def voxel_labels(points, size, origin, labels):
     first = np.full(runs, -1, np.int64)  # voxel -> its first point's label
     m = 0
     v = -1
+    s0 = s1 = s2 = 0.0  # the current run's voxel sums, in registers: the same additions in the same order
+    c = 0
     for i in range(n):
         if i == 0 or key[i] != key[i - 1]:
+            if v >= 0:
+                sums[v, 0], sums[v, 1], sums[v, 2] = s0, s1, s2
+                counts[v] = c
             h = (key[i] * np.int64(-7046029254386353131)) >> 20 & (cap - 1)
             while True:
                 v = table[h]
@@ -82,9 +87,13 @@ def voxel_labels(points, size, origin, labels):
                 if keys[v] == key[i]:
                     break
                 h = (h + 1) & (cap - 1)
-        for j in range(3):
-            sums[v, j] += points[i, j]
-        counts[v] += 1
+            s0, s1, s2, c = sums[v, 0], sums[v, 1], sums[v, 2], counts[v]
+        s0 += points[i, 0]
+        s1 += points[i, 1]
+        s2 += points[i, 2]
+        c += 1
+    sums[v, 0], sums[v, 1], sums[v, 2] = s0, s1, s2
+    counts[v] = c
     order = np.argsort(keys[:m])
     out = np.empty((m, 3), np.float64)
     out_labels = np.empty(m, np.int64)
@@ -271,6 +280,9 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, lo, hi, origin, ce
                 gap = max(lo[g, j] - p[i, j], p[i, j] - hi[g, j], 0.0)
                 box += gap * gap
             if box > best:
+                continue
+            h = planes[g, 0, 0] * px + planes[g, 0, 1] * py + planes[g, 0, 2] * pz - plane_c[g, 0]
+            if h * h > best * (1.0 + 1e-6) + 1e-22:  # its plane alone is farther (with room for rounding: no tie is lost)
                 continue
             gx, gy, gz = _closest_on_triangle(px, py, pz, tri[g, 0], tri[g, 1], tri[g, 2])
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
