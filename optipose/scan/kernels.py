@@ -234,3 +234,40 @@ def write_points(
         points[h, 2] = R[2, 0] * xs + R[2, 2] * z + t[2]
         profile[h] = k0 + k
         column[h] = col
+
+
+@njit(cache=True, nogil=True)
+def block_rays(rays, n_col, shift_b, o_P32, d_P32, step_P, t_max):
+    """Embree's input for rays (n,) of a block (profile in the block × ``n_col`` + column): float32 origins
+    (n, 3) on the window line moved back by the profile's shift (m) along ``step_P``, directions (n, 3)
+    and far limits (n,) — what ``o_P32[col] - float32(shift · step_P)`` etc. give in numpy, in one pass."""
+    n = rays.shape[0]
+    o = np.empty((n, 3), np.float32)
+    d = np.empty((n, 3), np.float32)
+    t = np.empty(n, np.float32)
+    for i in range(n):
+        k = rays[i] // n_col
+        col = rays[i] - k * n_col
+        for j in range(3):
+            o[i, j] = o_P32[col, j] - np.float32(shift_b[k] * step_P[j])
+            d[i, j] = d_P32[col, j]
+        t[i] = t_max[col]
+    return o, d, t
+
+
+@njit(cache=True, nogil=True)
+def shadow_rays(T, col, shift, tri, apex_P, d_P, step_P, receiver_P, normals, offset):
+    """Shadow rays of hits (n,): from each hit (``T`` along ray ``col`` of the profile at ``shift``, m),
+    lifted ``offset`` off its face ``tri`` along the normal, to the receiver; float32 starts and
+    directions (n, 3) for Embree, each from the float64 arithmetic the numpy form does, in its order."""
+    n = T.shape[0]
+    start = np.empty((n, 3), np.float32)
+    direction = np.empty((n, 3), np.float32)
+    for i in range(n):
+        for j in range(3):
+            step = shift[i] * step_P[j]
+            s = apex_P[j] + T[i] * d_P[col[i], j] - step + offset * normals[tri[i], j]
+            start[i, j] = s
+            direction[i, j] = (receiver_P[j] - step) - s
+    return start, direction
+

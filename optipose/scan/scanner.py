@@ -23,7 +23,9 @@ import numpy as np
 
 from optipose.model.material import Material, load_material
 from optipose.model.motion import ScanMotion
-from optipose.scan.kernels import NORMAL_QUANTILES, fill_columns, measure_hits, split_at_anchors, unsure_between_anchors, write_points
+from optipose.scan.kernels import (
+    NORMAL_QUANTILES, block_rays, fill_columns, measure_hits, shadow_rays, split_at_anchors, unsure_between_anchors, write_points,
+)  # fmt: skip
 from optipose.scan.profiles import EMPTY, ray_lines
 from optipose.scan.raycast import default_threads, make_caster, shared_planes
 from optipose.model.sensor import SensorModel, load_sensor
@@ -271,13 +273,13 @@ class Scanner:
         anchor_tri = np.full((m, len(cols)), -1, dtype=np.int32)
         if len(live):
             rays = (live[:, None] * n_col + cols[None]).ravel()
-            anchor_tri[live] = np.asarray(caster.first_triangle(view.origins(rays, shift_b), view.d_P32[rays % n_col], t_max[rays % n_col])).reshape(len(live), len(cols))
+            anchor_tri[live] = np.asarray(caster.first_triangle(*view.rays(rays, shift_b, t_max))).reshape(len(live), len(cols))
         if self._anchors is None:
             return anchor_tri.ravel()
         tri, need = fill_columns(anchor_tri, self._anchors, n_col, self._plane, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw,
                                  view.q, view.b, view.apex_P, view.d_P, view.step_P, self._edge_n, self._edge_c)  # fmt: skip
         if len(need):
-            tri[need] = caster.first_triangle(view.origins(need, shift_b), view.d_P32[need % n_col], t_max[need % n_col])
+            tri[need] = caster.first_triangle(*view.rays(need, shift_b, t_max))
         return tri
 
     def _receiver_sees(self, view, T, col, shift, tri) -> np.ndarray:
@@ -286,12 +288,8 @@ class Scanner:
         Only hits on faces off the convex hull come here: a face in a supporting plane of the part that
         faces the receiver cannot be shadowed, since the whole part lies behind that plane.
         """
-        step = shift[:, None] * view.step_P
-        p = view.apex_P + T[:, None] * view.d_P[col] - step
-        normal = self._normals[tri]
-        start = p + _SHADOW_OFFSET * normal
-        receiver = view.receiver_P - step
-        return ~self.caster.occluded(start, receiver - start, np.ones(len(T)))
+        start, direction = shadow_rays(T, col, shift, tri, view.apex_P, view.d_P, view.step_P, view.receiver_P, self._normals, _SHADOW_OFFSET)
+        return ~self.caster.occluded(start, direction, np.ones(len(T), dtype=np.float32))
 
 
 def rebuilt_with(scan: Scan, T_O_S: np.ndarray, shifts: np.ndarray) -> Scan:
@@ -356,6 +354,11 @@ class _SensorView:
     q: np.ndarray
     b: np.ndarray
     a: np.ndarray
+
+    def rays(self, rays: np.ndarray, shift_b: np.ndarray, t_max: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Embree's float32 origins (n, 3), directions (n, 3) and far limits (n,) of a block's rays (profile
+        in the block × columns + column) at its shifts (m,): :func:`optipose.scan.kernels.block_rays`."""
+        return block_rays(np.ascontiguousarray(rays, dtype=np.int64), len(self.o_P32), shift_b, self.o_P32, self.d_P32, self.step_P, t_max)
 
     def origins(self, rays: np.ndarray, shift_b: np.ndarray) -> np.ndarray:
         """(n, 3) float32 origins of a block's rays (profile in the block × columns + column) at its shifts (m,)."""
