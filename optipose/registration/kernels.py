@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+_WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
+
 
 @njit(cache=True, nogil=True)
 def voxel_centroids(points, size, origin):
@@ -215,24 +217,37 @@ def _grid_pass(tri, normals, offsets, origin, cell, shape, margin, slot, faces):
                     slot[c] += 1
 
 
-@njit(cache=True, nogil=True)
-def nearest(p, ids, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, start, faces):
-    """:func:`nearest_into` into new arrays: returns q (n, 3) and ``open`` (n,) bool."""
-    n = p.shape[0]
-    q = np.empty((n, 3), np.float64)
-    nrm = np.empty((n, 3), np.float64)
-    open_ = np.zeros(n, np.bool_)
-    nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, start, faces)
-    return q, open_
+@njit(cache=True, nogil=True, inline="always")
+def _walk(p, i, f, planes, plane_c, adjacent, q):
+    """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
+    face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
+    the first face p[i] lies inside of by more than 2|d| (its projection in q[i]), or -1."""
+    g = f
+    for _ in range(_WALK):
+        worst, k_out = np.inf, -1
+        for k in range(1, 4):
+            hk = planes[g, k, 0] * p[i, 0] + planes[g, k, 1] * p[i, 1] + planes[g, k, 2] * p[i, 2] - plane_c[g, k]
+            if hk < worst:
+                worst, k_out = hk, k - 1
+        if worst >= 0.0:  # it projects inside g, only too near an edge for its distance: no face is surer
+            return -1
+        g = adjacent[g, k_out]
+        if g < 0:
+            return -1
+        if _project(p, i, g, planes, plane_c, q)[0]:
+            return g
+    return -1
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, lo, hi, origin, cell, shape, margin, start, faces):
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, lo, hi, origin, cell, shape, margin, start, faces):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their face normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
 
-    A point inside its guessed face by more than 2|d| keeps it (as ``follow``). Otherwise the faces
+    A point inside its guessed face by more than 2|d| keeps it (as ``follow``); one that left it walks
+    across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face it lies inside of
+    by more than 2|d| — the test that keeps a guess. Otherwise the faces
     listed for its grid cell (:func:`face_grid`) are searched exactly: they hold every face within
     ``margin`` of the cell, so the answer is certain when the closest point found is within ``margin``
     (faces whose bounding box (lo, hi) is farther than the best so far are skipped; the guessed face
@@ -248,9 +263,12 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, lo, hi, origin, ce
     n_open = 0
     for i in range(n):
         f = ids[i]
-        if f >= 0 and _project(p, i, f, planes, plane_c, q)[0]:
-            nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[f, 0, 0], planes[f, 0, 1], planes[f, 0, 2]
-            continue
+        if f >= 0:
+            g = f if _project(p, i, f, planes, plane_c, q)[0] else _walk(p, i, f, planes, plane_c, adjacent, q)
+            if g >= 0:
+                ids[i] = g
+                nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
+                continue
         c = 0
         outside = False
         for j in range(3):

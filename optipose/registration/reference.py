@@ -63,6 +63,7 @@ class SurfaceReference:
         self._scene.add_triangles(mesh)
         self.area = 0.5 * float(area2.sum())
         self._tri = np.ascontiguousarray(tri)
+        self._adjacent = _adjacent_faces(self.faces)
         self._face_grid = None
 
     def _grid(self) -> tuple:
@@ -140,7 +141,7 @@ class SurfaceReference:
         again on return)."""
         from optipose.registration import kernels
 
-        if kernels.nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, *self._grid()):
+        if kernels.nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, *self._grid()):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
@@ -161,6 +162,21 @@ class SurfaceReference:
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """A uniform sample of the surface, about one point per ``spacing``² (m); points and normals."""
         return sample_surface(self.vertices, self.faces, spacing, seed)
+
+
+def _adjacent_faces(faces: np.ndarray) -> np.ndarray:
+    """(f, 3) int64: the face across each face's edge k (corner k to corner k + 1), -1 on a boundary;
+    where more than two faces share an edge, one of the others."""
+    f = len(faces)
+    edges = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)  # (3f, 2), row 3·face + k
+    _, group = np.unique(edges, axis=0, return_inverse=True)
+    group = group.ravel()
+    order = np.argsort(group, kind="stable")
+    adjacent = np.full(3 * f, -1, dtype=np.int64)
+    same = group[order[1:]] == group[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
+    a, b = order[:-1][same], order[1:][same]
+    adjacent[a], adjacent[b] = b // 3, a // 3
+    return adjacent.reshape(f, 3)
 
 
 def _face_hints(ids: np.ndarray | None, n_points: int, n_faces: int) -> np.ndarray:
