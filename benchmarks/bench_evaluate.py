@@ -1,7 +1,8 @@
 """Time of the full paper protocol on part B's hand-placed three-sensor layout (77 orientations, 7 subsets),
 at the default settings and unshortened (every column cast, every subset's ICP from identity) on the same
 seed in the same run: the wall time of each, their ratio, and Table 1 of both side by side with the
-largest difference of any per-axis median or 75th percentile. Then the share spent in ray casting vs.
+largest difference of any per-axis median or 75th percentile; and the option the shipped objective leaves
+off, ``subset_start = "combined"``, against the same unshortened run. Then the share spent in ray casting vs.
 registration, and the ratio against a naive loop (re-scan per subset, Open3D voxel down-sampling and
 Open3D point-to-point ICP against a dense CAD sample, its KD-tree rebuilt on every call) timed in the
 same process on a few orientations.
@@ -102,8 +103,9 @@ def main() -> None:
     # optipose: the full protocol, as shipped and unshortened, same seed
     runs = {"default": objective}
     if args.unshortened:
-        # the shipped stride, every subset's ICP from identity: what the combined start alone changes
-        runs["identity start"] = replace(objective, registration=replace(objective.registration, subset_start="identity"))
+        # the option the shipped objective leaves off: each multi-sensor subset starts where its sensors' own
+        # registrations put it (faster; a few registrations end at another fixed point of the same ICP)
+        runs["combined start"] = replace(objective, registration=replace(objective.registration, subset_start="combined"))
         runs["unshortened"] = replace(objective, scan=replace(objective.scan, column_stride=1),
                                       registration=replace(objective.registration, subset_start="identity"))  # fmt: skip
     # start the worker processes first (imports, compiled kernels), so neither run pays for them
@@ -121,11 +123,11 @@ def main() -> None:
     result, wall = results["default"], walls["default"]
     if args.unshortened:
         side_by_side(results["default"], results["unshortened"], walls["default"], walls["unshortened"], args.jobs)
-        same = _largest_difference(results["identity start"], results["unshortened"])
-        print(f"identity start at the shipped stride: {walls['identity start']:.1f} s wall, "
-              f"{results['identity start'].per_scan['iterations'].mean():.2f} iterations per registration; largest "
+        same = _largest_difference(results["combined start"], results["unshortened"])
+        print(f"subset_start = \"combined\" at the shipped stride: {walls['combined start']:.1f} s wall, "
+              f"{results['combined start'].per_scan['iterations'].mean():.2f} iterations per registration; largest "
               f"difference of a Table 1 median or p75 from the unshortened run: {100 * same[0]:.2f} % ({same[1]:.4f} mdeg)")
-        moved = _moved_registrations(results["default"], results["unshortened"])
+        moved = _moved_registrations(results["combined start"], results["unshortened"])
         print(f"registrations whose estimate the combined start moves by over 0.002 mdeg: {moved[0]} of {moved[1]} "
               f"(largest {moved[2]:.4f} mdeg): another fixed point of the same ICP")
     cpu = result.timings["scan"] + result.timings["register"]

@@ -29,7 +29,6 @@ from optipose.evaluate.objective import AXES, RegistrationConfig, ScanConfig
 from optipose.evaluate.statistics import unobservable_axes
 from optipose.model.layout import Layout
 from optipose.registration import Matches, backend_for, grid_origin, register, remove_outliers, voxel_down
-from optipose.registration.preprocess import voxel_down_labelled
 from optipose.registration.backends import combined_start
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
@@ -177,7 +176,7 @@ class _Worker:
         mounted cell of this condition's draw or (``exact``) by a cell with exact brackets."""
         seed = zeroing_seed(self.setup.seed, self.condition.draw)
         scans = self.scan(models, poses, seed, exact=exact, noise=False)
-        (clouds, _), out = _clouds(self.setup.registration, scans, seed), []
+        clouds, out = _clouds(self.setup.registration, scans, seed), []
         for subset, reference in zip(subsets, references):
             reg, _ = _register(self, clouds, subset, reference)
             if not reg.ok:  # its estimate still stands in for the bias; say so
@@ -243,22 +242,18 @@ def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[l
     return rows, point_rows, timing
 
 
-def _clouds(cfg: RegistrationConfig, scans, seed: int) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
-    """Each sensor's scan down-sampled (and cleaned of outliers when the objective asks): (m, 3) m each,
-    and, against the CAD surface, each point's first guess of its closest face (the face the first of its
-    voxel's scanned points was measured on; ``None`` otherwise). ``seed`` is the orientation's noise seed;
-    under ``voxel_grid = "random"`` it places the grid, one grid for all the sensors of a scan (the cell
-    merges their clouds in one frame)."""
+def _clouds(cfg: RegistrationConfig, scans, seed: int) -> list[np.ndarray]:
+    """Each sensor's scan down-sampled (and cleaned of outliers when the objective asks): (m, 3) m each.
+    ``seed`` is the orientation's noise seed; under ``voxel_grid = "random"`` it places the grid, one
+    grid for all the sensors of a scan (the cell merges their clouds in one frame)."""
     origin = grid_origin(seed, cfg.voxel_size) if cfg.voxel_grid == "random" else None
-    hinted = cfg.reference == "cad-surface" and not cfg.outlier_removal
-    clouds, faces = [], []
+    clouds = []
     for scan in scans:
-        cloud, face = voxel_down_labelled(scan.points, scan.face if hinted else None, cfg.voxel_size, origin)
+        cloud = voxel_down(scan.points, cfg.voxel_size, origin)
         if cfg.outlier_removal:
             cloud = remove_outliers(cloud, cfg.outlier_neighbors, cfg.outlier_std_ratio)
         clouds.append(cloud)
-        faces.append(face if hinted else None)
-    return clouds, faces
+    return clouds
 
 
 def _register(worker, clouds, subset, reference, initial=None, start=None):
@@ -271,13 +266,13 @@ def _register(worker, clouds, subset, reference, initial=None, start=None):
 
 def _register_subsets(worker, setup, scans, seed, subsets, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
     cfg = setup.registration
-    clouds, faces = _clouds(cfg, scans, seed)
+    clouds = _clouds(cfg, scans, seed)
     for j, (scan, cloud) in enumerate(zip(scans, clouds)):
         point_rows.append({"scan": i, "label": label, "sensor_index": j, "sensor": names[j],
                            "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip
     # every subset against the part's reference: each sensor's matches at identity are searched once
     shared = all(r is worker.reference for r in references) and backend_for(cfg).takes_initial
-    initial = [worker.reference.matches(c, f) if len(c) else None for c, f in zip(clouds, faces)] if shared else None
+    initial = [worker.reference.matches(c) if len(c) else None for c in clouds] if shared else None
     own: dict = {}  # sensor -> its single registration and centroid, where several sensors start from
     moments = [_moments(c) for c in clouds]
     T_O_P = part_motion(rpy, setup.centre, offset)

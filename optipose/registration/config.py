@@ -38,4 +38,4 @@ class RegistrationConfig:
     # a registration that converges with an RMSE over this (m) fails ("rmse ... over max_rmse_mm"): a wrong
     # basin or a wrong reference, which the ICP's own tests pass; 0 = no such test
     max_rmse: float = 0.0
-    subset_start: str = "combined"  # a subset of several sensors starts where its sensors' own registrations put it, or at "identity"
+    subset_start: str = "identity"  # every subset from identity, or "combined": a subset of several sensors starts where its sensors' own registrations put it

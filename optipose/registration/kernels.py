@@ -15,15 +15,7 @@ _WALK = 4  # faces a point that left its face's guess walks across before the gr
 @njit(cache=True, nogil=True)
 def voxel_centroids(points, size, origin):
     """Centroids (m, 3) of the points (n, 3) in each cube of side ``size`` of the grid whose corner is at
-    ``origin`` (3,), in the voxels' sorted key order: :func:`voxel_labels` without labels."""
-    return voxel_labels(points, size, origin, np.empty(0, np.int64))[0]
-
-
-@njit(cache=True, nogil=True)
-def voxel_labels(points, size, origin, labels):
-    """Centroids (m, 3) of the points (n, 3) in each cube of side ``size`` of the grid whose corner is at
-    ``origin`` (3,), in the voxels' sorted key order, and the label (m,) of each voxel's first point
-    (``labels`` (n,), or empty: then the voxels' labels are -1).
+    ``origin`` (3,), in the voxels' sorted key order.
 
     Same sums in the same order as ``np.unique`` + ``np.bincount`` (each voxel adds its points in input
     order), so the result is bit-identical. A scan runs along its profiles, so consecutive points mostly
@@ -31,8 +23,7 @@ def voxel_labels(points, size, origin, labels):
     """
     n = points.shape[0]
     if n == 0:
-        return np.empty((0, 3), np.float64), np.empty(0, np.int64)
-    labelled = labels.shape[0] > 0
+        return np.empty((0, 3), np.float64)
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
     low = np.empty(3, np.float64)
@@ -65,7 +56,6 @@ def voxel_labels(points, size, origin, labels):
     keys = np.empty(runs, np.int64)  # voxel -> key
     sums = np.zeros((runs, 3), np.float64)
     counts = np.zeros(runs, np.int64)
-    first = np.full(runs, -1, np.int64)  # voxel -> its first point's label
     m = 0
     v = -1
     s0 = s1 = s2 = 0.0  # the current run's voxel sums, in registers: the same additions in the same order
@@ -82,8 +72,6 @@ def voxel_labels(points, size, origin, labels):
                     v = m
                     table[h] = v
                     keys[v] = key[i]
-                    if labelled:
-                        first[v] = labels[i]
                     m += 1
                     break
                 if keys[v] == key[i]:
@@ -98,13 +86,11 @@ def voxel_labels(points, size, origin, labels):
     counts[v] = c
     order = np.argsort(keys[:m])
     out = np.empty((m, 3), np.float64)
-    out_labels = np.empty(m, np.int64)
     for k in range(m):
         v = order[k]
         for j in range(3):
             out[k, j] = sums[v, j] / counts[v]
-        out_labels[k] = first[v]
-    return out, out_labels
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["voxel_down", "voxel_down_labelled", "grid_origin", "remove_outliers", "information_matrix"]
+__all__ = ["voxel_down", "grid_origin", "remove_outliers", "information_matrix"]
 
 
 def voxel_down(points: np.ndarray, size: float, origin=None) -> np.ndarray:
@@ -19,21 +19,13 @@ def voxel_down(points: np.ndarray, size: float, origin=None) -> np.ndarray:
     round millimetres has faces on the planes of a grid at O's origin; :func:`grid_origin` gives a scan a
     grid of its own (``[registration] voxel_grid = "random"``).
     """
-    return voxel_down_labelled(points, None, size, origin)[0]
-
-
-def voxel_down_labelled(points: np.ndarray, labels: np.ndarray | None, size: float, origin=None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`voxel_down`, and the label of each voxel's first point (m,) int64 — e.g. the face a scanned
-    point was measured on, a good first guess of its voxel's closest face. ``labels`` (n,) or ``None``
-    (then every voxel's label is -1); with ``size`` ≤ 0 the points and labels come back unchanged."""
-    from optipose.registration.kernels import voxel_labels
+    from optipose.registration.kernels import voxel_centroids
 
     points = np.asarray(points, dtype=np.float64)
-    labels = np.empty(0, np.int64) if labels is None else np.ascontiguousarray(labels, dtype=np.int64)
     if size <= 0 or len(points) == 0:
-        return points, labels if len(labels) == len(points) else np.full(len(points), -1, np.int64)
+        return points
     origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
-    return voxel_labels(np.ascontiguousarray(points), float(size), origin, labels)
+    return voxel_centroids(np.ascontiguousarray(points), float(size), origin)
 
 
 def grid_origin(seed, size: float) -> np.ndarray:

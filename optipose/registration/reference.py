@@ -146,13 +146,13 @@ class SurfaceReference:
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
 
-    def matches(self, points: np.ndarray, hints: np.ndarray | None = None):
-        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is; ``hints``: a
-        guess of each point's face (-1: none), e.g. the face its scanned points were measured on
-        (:meth:`nearest`: the same answer, found sooner)."""
+    def matches(self, points: np.ndarray):
+        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is: searched, not
+        guessed (a guess is kept by a test that trusts a point near its face; at identity a point can be a
+        millimetre off, past the far face of a thin sheet)."""
         from optipose.registration.result import Matches
 
-        return Matches(*self.nearest(points, hints))
+        return Matches(*self.nearest(points))
 
     def tracker(self, ids: np.ndarray | None = None, initial=None) -> "SurfaceTracker":
         """The closest points of one ICP's cloud, step after step (:class:`SurfaceTracker`: :meth:`nearest`
@@ -277,12 +277,11 @@ class SampledReference:
             found[open_] = self._tree.query(points[open_])[1]
         return self.points[found], self.normals[found], found
 
-    def matches(self, points: np.ndarray, hints: np.ndarray | None = None):
-        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is, with margins;
-        ``hints``: a guess of each point's sample (any id: the answer is the same)."""
+    def matches(self, points: np.ndarray):
+        """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is, with margins."""
         from optipose.registration.result import Matches
 
-        track = SampleTracker(self, hints)
+        track = SampleTracker(self)
         q, n, ids = track(points)
         return Matches(q, n, ids, track.margin)
 
