@@ -7,9 +7,10 @@ registration, and the ratio against a naive loop (re-scan per subset, Open3D vox
 Open3D point-to-point ICP against a dense CAD sample, its KD-tree rebuilt on every call) timed in the
 same process on a few orientations.
 
-    .venv/bin/python benchmarks/bench_evaluate.py [--jobs 2] [--naive 4] [--no-unshortened]
+    .venv/bin/python benchmarks/bench_evaluate.py [--jobs 2] [--naive 4] [--no-unshortened] [--repeats 3]
 
-Figures, not asserts: the machine may be shared, so compare the ratios printed here, not seconds across runs.
+Figures, not asserts: the machine may be shared, so compare the ratios printed here, not seconds across runs;
+each run is repeated (``--repeats``, interleaved rounds) and its median wall time printed.
 """
 
 from __future__ import annotations
@@ -84,6 +85,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--naive", type=int, default=4, help="orientations timed with the naive loop")
     ap.add_argument("--no-unshortened", dest="unshortened", action="store_false", help="skip the unshortened run")
+    ap.add_argument("--repeats", type=int, default=3, help="rounds of the runs; each wall time printed is their median")
     args = ap.parse_args()
 
     import open3d as o3d
@@ -115,11 +117,19 @@ def main() -> None:
         ev(layout)
     print(f"worker start-up and a 2-scan evaluation: {time.perf_counter() - t0:.1f} s (not counted below)")
     results, walls = {}, {}
-    for name, obj in runs.items():
-        with Evaluator(part, obj, seed=0, jobs=args.jobs) as ev:
-            t0 = time.perf_counter()
-            results[name] = ev(layout)
-            walls[name] = time.perf_counter() - t0
+    for _ in range(args.repeats):  # rounds over the runs, interleaved, so a slow spell of the machine hits all of them
+        for name, obj in runs.items():
+            with Evaluator(part, obj, seed=0, jobs=args.jobs) as ev:
+                t0 = time.perf_counter()
+                result = ev(layout)
+                walls.setdefault(name, []).append(time.perf_counter() - t0)
+            if name in results and not results[name].per_scan.equals(result.per_scan):
+                raise SystemExit(f"{name}: a repeat gave other per-scan results")
+            results[name] = result
+    if args.repeats > 1:
+        for name, w in walls.items():
+            print(f"{name}: {args.repeats} rounds, wall {', '.join(f'{x:.2f}' for x in w)} s; median {np.median(w):.2f} s (same results each round)")
+    walls = {name: float(np.median(w)) for name, w in walls.items()}
     result, wall = results["default"], walls["default"]
     if args.unshortened:
         side_by_side(results["default"], results["unshortened"], walls["default"], walls["unshortened"], args.jobs)

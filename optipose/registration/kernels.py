@@ -162,10 +162,14 @@ def _project(p, i, f, planes, plane_c, q):
 
 
 @njit(cache=True, nogil=True)
-def face_grid(tri, normals, offsets, origin, cell, shape, margin):
+def face_grid(tri, normals, offsets, lo, hi, origin, cell, shape, margin):
     """Faces listed per cell of a grid (origin (3,), cube side ``cell``, ``shape`` (3,) cells): every face
     within ``margin`` of the cell (bounding box and plane within margin of the cell's box, a superset).
-    Returns CSR start (cells + 1,) and face list, faces ascending in each cell."""
+    Returns CSR start (cells + 1,), the face list and each listed face's ``bound`` (m): no point of the
+    cell is nearer the face than that (the gap between the cell's box and the face's bounding box
+    ``lo``/``hi`` (f, 3), or its plane's distance from the cell's centre less the half-diagonal). Each
+    cell's faces are in ascending order of bound (ties by face id), so a search can stop at the first face
+    bound farther than its best."""
     n_cells = shape[0] * shape[1] * shape[2]
     start = np.zeros(n_cells + 1, np.int64)
     _grid_pass(tri, normals, offsets, origin, cell, shape, margin, start[1:], np.empty(0, np.int64))
@@ -173,7 +177,26 @@ def face_grid(tri, normals, offsets, origin, cell, shape, margin):
         start[c + 1] += start[c]
     faces = np.empty(start[n_cells], np.int64)
     _grid_pass(tri, normals, offsets, origin, cell, shape, margin, start[:-1].copy(), faces)
-    return start, faces
+    bound = np.empty(faces.shape[0], np.float64)
+    half_diag = 0.5 * np.sqrt(3.0) * cell
+    for c in range(n_cells):
+        if start[c + 1] == start[c]:
+            continue
+        i, rest = c // (shape[1] * shape[2]), c % (shape[1] * shape[2])
+        j, k = rest // shape[2], rest % shape[2]
+        box_lo = (origin[0] + i * cell, origin[1] + j * cell, origin[2] + k * cell)
+        for e in range(start[c], start[c + 1]):
+            g = faces[e]
+            gap2 = 0.0
+            for a in range(3):
+                gap = max(lo[g, a] - (box_lo[a] + cell), box_lo[a] - hi[g, a], 0.0)
+                gap2 += gap * gap
+            centre = normals[g, 0] * (box_lo[0] + 0.5 * cell) + normals[g, 1] * (box_lo[1] + 0.5 * cell) + normals[g, 2] * (box_lo[2] + 0.5 * cell)
+            bound[e] = max(max(np.sqrt(gap2), abs(centre - offsets[g]) - half_diag) * (1.0 - 1e-9) - 1e-15, 0.0)  # a hair under, for rounding
+        order = np.argsort(bound[start[c] : start[c + 1]], kind="mergesort")
+        faces[start[c] : start[c + 1]] = faces[start[c] : start[c + 1]][order]
+        bound[start[c] : start[c + 1]] = bound[start[c] : start[c + 1]][order]
+    return start, faces, bound
 
 
 @njit(cache=True, nogil=True)
@@ -226,7 +249,7 @@ def _walk(p, i, f, planes, plane_c, adjacent, q):
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, lo, hi, origin, cell, shape, margin, start, faces):
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, lo, hi, origin, cell, shape, margin, start, faces, bound):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their face normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
@@ -270,12 +293,16 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, lo, hi, 
         best = m2
         g_best = -1
         bx, by, bz = 0.0, 0.0, 0.0
-        if f >= 0:
+        if f < 0 and i > 0:  # no guess: the last point's face (a neighbour in a voxel-ordered cloud) seeds the search
+            f = ids[i - 1]
+        if f >= 0:  # a seed only prunes: every listed face is still searched, ties go to the lowest id
             gx, gy, gz = _closest_on_triangle(px, py, pz, tri[f, 0], tri[f, 1], tri[f, 2])
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
             if d2 <= best:
                 best, g_best, bx, by, bz = d2, f, gx, gy, gz
         for k in range(start[c], start[c + 1]):
+            if bound[k] * bound[k] > best:  # this face and every one after it are farther than the best
+                break
             g = faces[k]
             if planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0:
                 continue  # a zero-area face (no normal) lies on its neighbours' edges: they answer for it

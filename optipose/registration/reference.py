@@ -78,8 +78,9 @@ class SurfaceReference:
             margin = 2 * cell  # exact for points within a millimetre of the surface at the default cell
             origin = lo.min(axis=0) - margin
             shape = np.floor((hi.max(axis=0) + margin - origin) / cell).astype(np.int64) + 1
-            start, faces = face_grid(self._tri, self.normals, self.offsets, origin, cell, shape, margin)
-            self._face_grid = (np.ascontiguousarray(lo), np.ascontiguousarray(hi), origin, cell, shape, margin, start, faces)
+            lo, hi = np.ascontiguousarray(lo), np.ascontiguousarray(hi)
+            start, faces, bound = face_grid(self._tri, self.normals, self.offsets, lo, hi, origin, cell, shape, margin)
+            self._face_grid = (lo, hi, origin, cell, shape, margin, start, faces, bound)
         return self._face_grid
 
     def __repr__(self) -> str:
