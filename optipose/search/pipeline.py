@@ -97,21 +97,25 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
     band = band_objective(objective, config.band)  # a bad name fails here, before any work
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     study = _study(part, objective, config, sink, resume, on_eval)
-    with _baseline_run(part, objective, config, seed, jobs) as hand_run:
-        return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band)
+    with _baseline_run(part, objective, config, seed, jobs) as hand_run, _baseline_run(part, band, config, seed, jobs, last=True) as band_run:
+        return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run)
 
 
-def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int):
-    """The hand layout's validation, started beside the surrogate search when there are cores for both
-    (``jobs`` ≥ 2); a do-nothing context otherwise."""
+def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, last: bool = False):
+    """The hand layout's validation (``objective``: the search's, or the band's for the check after it),
+    started beside the surrogate search when there are cores for both (``jobs`` ≥ 2); a do-nothing
+    context otherwise, or without an objective. ``last``: at the lowest priority, so that it takes only
+    what nothing else wants (it is not waited for before the selection, whose clock is wall time)."""
     from contextlib import nullcontext
 
     from optipose.search.validate import BaselineRun
 
-    return BaselineRun(part, objective, seed, config.validation) if jobs >= 2 else nullcontext()
+    if objective is None or jobs < 2:
+        return nullcontext()
+    return BaselineRun(part, objective, seed, config.validation, last=last)
 
 
-def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None) -> SearchReport:
+def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None, band_run=None) -> SearchReport:
     stage = on_stage or (lambda text: None)
     stage("searching on the surrogate")
     outcome = run_search(part, objective, config, seed, study)
@@ -152,7 +156,7 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
 
     stage(f"checking under the band ({len(conditions(band.conditions))} conditions, held-out seed)")
     try:
-        report.band = validate(part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation)
+        report.band = validate(part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation, band_run)
     except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
         if not is_interrupt(exc):
             raise

@@ -28,6 +28,7 @@ __all__ = ["validate", "band_objective", "BaselineRun", "nested_groups", "indice
 
 log = logging.getLogger(__name__)
 _NICE = 10  # the hand layout's evaluation takes the cores the search leaves idle, and yields where it wants them
+_LAST = 19  # ... and its check under the band, which runs on through the selection, yields to everything
 
 
 def band_objective(objective, band: str):
@@ -58,10 +59,12 @@ class BaselineRun:
     thread), so it takes one core while the search uses the rest.
 
     ``result()`` waits for it: ``None`` when the part has no baseline, or the evaluation failed or was
-    stopped (the validation then evaluates the hand layout itself); ``close()`` stops it.
+    stopped (the validation then evaluates the hand layout itself); ``close()`` stops it. ``last``: at the
+    lowest priority (the hand layout under the band of the check after a nominal search, which runs on
+    through the selection and yields to it).
     """
 
-    def __init__(self, part, objective, seed: int, protocol: str = "full"):
+    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False):
         import multiprocessing
         import pickle
 
@@ -73,7 +76,7 @@ class BaselineRun:
             return
         args = (part, validation_objective(objective, protocol), validation_seed(seed), layout)
         try:
-            self._call = Background(_evaluate, *args, nice=_NICE)
+            self._call = Background(_evaluate, *args, nice=_LAST if last else _NICE)
         except (OSError, pickle.PicklingError, AttributeError, TypeError) as exc:  # the validation evaluates it instead
             log.warning("could not start the hand layout's evaluation beside the search (%s)", exc)
 
