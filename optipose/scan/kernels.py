@@ -211,8 +211,15 @@ def write_points(
     noisy = noise_key != 0
     with_raw = raw.shape[0] > 0
     base = np.uint64(k0 * n_col)
+    m = idx.shape[0]
+    scale = np.empty(m, np.float64)  # each point's noise along z_S, in a pass of its own (no branch, no gather of rays)
+    if noisy:
+        key = noise_key * np.uint64(0x100000001B3)
+        for h in range(m):
+            inten = min(max(intensity[h], threshold), 1.0)
+            scale[h] = _normal(key ^ (base + np.uint64(idx[h])), table) * (noise_sigma / np.sqrt(inten))
     k, row = 0, 0  # the profile of ray i and its first ray: idx ascends, so they are followed, not divided out
-    for h in range(idx.shape[0]):
+    for h in range(m):
         i = idx[h]
         while i >= row + n_col:
             k += 1
@@ -221,9 +228,7 @@ def write_points(
         c = ray_cos[col]
         z = apex_z + T[h] * c
         if noisy:
-            inten = min(max(intensity[h], threshold), 1.0)
-            draw = _normal(noise_key * np.uint64(0x100000001B3) ^ (base + np.uint64(i)), table)
-            z += draw * (noise_sigma / np.sqrt(inten)) * c  # along the ray, seen in z_S
+            z += scale[h] * c  # along the ray, seen in z_S
             if z_resolution > 0.0:
                 z = np.floor(z / z_resolution + 0.5) * z_resolution
         if with_raw:
