@@ -227,6 +227,15 @@ def _grid_pass(tri, normals, offsets, origin, cell, shape, margin, slot, faces):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _inset2(p, i, f, planes, plane_c):
+    """The square of how far inside face f's edges p[i] projects, or -1 where it projects outside."""
+    inset = np.inf
+    for k in range(1, 4):
+        inset = min(inset, planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k])
+    return inset * inset if inset > 0.0 else -1.0
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _walk(p, i, f, planes, plane_c, adjacent, q):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
@@ -249,7 +258,8 @@ def _walk(p, i, f, planes, plane_c, adjacent, q):
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, lo, hi, origin, cell, shape, margin, start, faces, bound):
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, lo, hi, origin, cell, shape, margin, start, faces,
+                 bound):  # fmt: skip
     """Closest points of p (n, 3) on a mesh into q (n, 3), their face normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
@@ -295,17 +305,21 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, lo, hi, 
         bx, by, bz = 0.0, 0.0, 0.0
         if f < 0 and i > 0:  # no guess: the last point's face (a neighbour in a voxel-ordered cloud) seeds the search
             f = ids[i - 1]
+        inset2 = -1.0  # squared: how far inside the best face p projects (-1: not inside)
         if f >= 0:  # a seed only prunes: every listed face is still searched, ties go to the lowest id
             gx, gy, gz = _closest_on_triangle(px, py, pz, tri[f, 0], tri[f, 1], tri[f, 2])
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
             if d2 <= best:
                 best, g_best, bx, by, bz = d2, f, gx, gy, gz
+                inset2 = _inset2(p, i, f, planes, plane_c)
         for k in range(start[c], start[c + 1]):
             if bound[k] * bound[k] > best:  # this face and every one after it are farther than the best
                 break
             g = faces[k]
-            if planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0:
-                continue  # a zero-area face (no normal) lies on its neighbours' edges: they answer for it
+            if g == g_best or (planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0):
+                continue  # the seed again; or a zero-area face (no normal), on its neighbours' edges: they answer for it
+            if plane_id[g] == plane_id[g_best] and inset2 > best * 1e-6 + 1e-18:
+                continue  # in the plane of the best face, which p projects well inside of: farther by at least that inset
             box = 0.0
             for j in range(3):
                 gap = max(lo[g, j] - p[i, j], p[i, j] - hi[g, j], 0.0)
@@ -319,6 +333,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, lo, hi, 
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
             if d2 < best or (d2 == best and (g_best < 0 or g < g_best)):
                 best, g_best, bx, by, bz = d2, g, gx, gy, gz
+                inset2 = _inset2(p, i, g, planes, plane_c)
         if g_best < 0:
             open_[i] = True
             n_open += 1

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from optipose.scan.raycast import edge_planes
+from optipose.scan.raycast import edge_planes, shared_planes
 
 __all__ = ["SurfaceReference", "SampledReference", "sample_surface"]
 
@@ -64,6 +64,7 @@ class SurfaceReference:
         self.area = 0.5 * float(area2.sum())
         self._tri = np.ascontiguousarray(tri)
         self._adjacent = _adjacent_faces(self.faces)
+        self._plane_id = np.ascontiguousarray(shared_planes(self.vertices, self.faces)[0])  # faces in one plane share a number
         self._face_grid = None
 
     def _grid(self) -> tuple:
@@ -142,7 +143,7 @@ class SurfaceReference:
         again on return)."""
         from optipose.registration import kernels
 
-        if kernels.nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, *self._grid()):
+        if kernels.nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id, *self._grid()):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
