@@ -30,8 +30,8 @@ CASES = [(name, method) for name in BACKENDS for method in get_backend(name).met
 
 
 def _config(name: str, method: str, **changes):
-    # a step of 1e-5°: point-to-point ICP crawls (each step ~0.8 of the last), so the paper objective's 1e-4°
-    # (ample for point-to-plane's Gauss-Newton steps) would stop it a few 1e-4° short of its fixed point
+    # a step of 1e-5° whatever the paper objective says: point-to-point ICP crawls (each step ~0.8 of the
+    # last), and 1e-4° (ample for point-to-plane's Gauss-Newton steps) stopped it 2.8e-4° short of the turn
     cfg = replace(load_objective("paper").registration, backend=name, method=method, max_iterations=500,
                   tolerance_rotation=np.deg2rad(1e-5), tolerance_translation=1e-8)  # fmt: skip
     return replace(cfg, **changes)

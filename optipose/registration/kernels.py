@@ -273,9 +273,11 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     starts the search, which prunes more). A point inside the face found by more than 2|d| gets its
     projection on the face's plane, like a followed point; a point closest to an edge or a corner gets
     the closest point of that face, in float64 (where faces tie exactly, at their common edge, the lowest
-    face id takes the point, whatever the guess: the point is the same, the normal the face's). Returns q (n, 3)
-    and ``open`` (n,) bool: points left to the global search (outside the grid or farther than
-    ``margin`` from the surface).
+    face id takes the point, whatever the guess: the point is the same, the normal the face's). Points left
+    to the global search (outside the grid or farther than ``margin`` from the surface) are marked in
+    ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer its face than any
+    face not adjacent to it (true near a part's surface; not for a point past the middle of a thin sheet,
+    or in a slot narrower than twice its distance): the search's answer otherwise.
     """
     n = p.shape[0]
     m2 = margin * margin

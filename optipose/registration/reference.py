@@ -127,7 +127,7 @@ class SurfaceReference:
         ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
         inside its face by more than twice its distance keeps it (:meth:`follow`). Any other point is searched exactly among
         the faces listed for its cell of a grid over the part (every face within two cells of the cell,
-        :func:`optipose.registration.kernels.nearest`): it gets the closest face's float64 projection,
+        :func:`optipose.registration.kernels.nearest_into`): it gets the closest face's float64 projection,
         or, closest to an edge or a corner, that face's closest point. Points outside the grid or
         farther than two cells from the surface get Open3D's answer (float32 off the faces' interiors).
         """
