@@ -215,10 +215,8 @@ class Scanner:
         float32): origins (n, 3), directions (n, 3) and far limits (n,), n = profiles × points per profile.
         For benchmarks that cast the same rays with another ray caster."""
         view = _SensorView.build(self, T_O_S, part_motion(np.zeros(3), np.zeros(3)))
-        shifts, n_col = motion.offsets(), self.sensor.points_per_profile
-        origins = view.origins(np.arange(len(shifts) * n_col), shifts)
-        directions = np.tile(view.d_P32, (len(shifts), 1))
-        return origins, directions, np.tile(self._t_max, len(shifts))
+        shifts = motion.offsets()
+        return view.rays(np.arange(len(shifts) * self.sensor.points_per_profile), shifts, self._t_max)
 
     def normals(self, scan: Scan) -> np.ndarray:
         """Unit surface normals (n, 3) in O at a scan's points (outward, of the rotated part)."""
@@ -359,11 +357,6 @@ class _SensorView:
         """Embree's float32 origins (n, 3), directions (n, 3) and far limits (n,) of a block's rays (profile
         in the block × columns + column) at its shifts (m,): :func:`optipose.scan.kernels.block_rays`."""
         return block_rays(np.ascontiguousarray(rays, dtype=np.int64), len(self.o_P32), shift_b, self.o_P32, self.d_P32, self.step_P, t_max)
-
-    def origins(self, rays: np.ndarray, shift_b: np.ndarray) -> np.ndarray:
-        """(n, 3) float32 origins of a block's rays (profile in the block × columns + column) at its shifts (m,)."""
-        n_col = len(self.o_P32)
-        return self.o_P32[rays % n_col] - (shift_b[rays // n_col][:, None] * self.step_P).astype(np.float32)
 
     @classmethod
     def build(cls, scanner: "Scanner", T_O_S: np.ndarray, T_O_P: np.ndarray) -> "_SensorView":
