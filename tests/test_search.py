@@ -220,6 +220,26 @@ def test_results_never_violate_the_constraints(part_b_problem):
             assert abs(T[0, 0]) <= np.sin(np.deg2rad(cfg.line_skew_max_deg)) + 1e-9  # the line's turn toward the motion
 
 
+@pytest.mark.parametrize("head_gap", [-0.003, 0.0, 0.004, 0.03])
+def test_the_head_gap_shortcut_gives_the_exact_tests_verdict(part_b_problem, head_gap):
+    # pairs of heads near each other and far apart: the bounding-sphere shortcut never changes the violation
+    from optipose.model.collision import heads_clearance
+
+    part, objective, cfg = part_b_problem
+    problem = SurrogateProblem(part, objective, replace(cfg, head_gap=head_gap))
+    rng = np.random.default_rng(7)
+    base = rng.random((400, 6))
+    near = np.clip(base + rng.normal(0.0, 0.04, base.shape), 0.0, 1.0)  # a second head close to the first
+    skipped = 0
+    for u in np.hstack([base, np.where(rng.random((400, 1)) < 0.5, near, rng.random((400, 6)))]):
+        a, b = problem.space.to_poses(u)
+        gap = heads_clearance(problem.collision.sensor, a, problem.collision.sensor, b)
+        exact = 1.0 + min(head_gap - gap, 0.1) * 10 if gap < head_gap else 0.0
+        assert problem._head_gaps(u, 0.0) == exact
+        skipped += gap >= head_gap
+    assert 50 < skipped < 400  # both kinds of pairs were met
+
+
 def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
     part, objective, cfg = part_b_problem
     problem = SurrogateProblem(part, objective, cfg)

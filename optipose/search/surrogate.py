@@ -109,13 +109,15 @@ class Surrogate:
     turns : (m, 3) roll, pitch, yaw (rad) of the part at which the voxel bias is sampled, e.g.
         :func:`protocol_turns` of the objective; default: eight turns of ±2° (empty: no bias model).
     columns : laser columns per profile in the reduced scan; ``step_factor`` : profile step multiplier.
+    threads : the scanner's threads for one scan (default one: a reduced scan is a few ten thousand rays, too
+        few to share; the search scores several poses at once instead, :meth:`optipose.search.problem.SurrogateProblem.prefetch`).
     mounting : whether to compute the bracket term's matrices (``A_turns``, ``N_turns``: one more turn per
         pose and a map per turn); an objective whose brackets are exact never reads them.
     """
 
     def __init__(
         self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0,
-        threads: int | None = None, extra_variance: float = 0.0, turns: np.ndarray | None = None,
+        threads: int | None = 1, extra_variance: float = 0.0, turns: np.ndarray | None = None,
         noise_band: float = 1.0, mounting: bool = True,
     ):  # fmt: skip
         from optipose.model.sensor import load_sensor
