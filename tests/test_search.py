@@ -541,6 +541,29 @@ def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought(
     worse_there = Verdict(1, _choice([(1, 2), (1, 2), (5, 6)]), hand)
     assert verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: F1 2.33x better, but worse under the band"
     assert verdict_headline(nominal, "hand", Verdict(1, found, hand)).startswith("k=1: BUY")
+    # a nominal search that never checked under a band (quick): better in the ideal cell, not a buy
+    assert verdict_headline(nominal, checked=False) == "k=1: found F1 2.33x better, no axis worse, in the ideal cell"
+    assert verdict_headline(worse_there, checked=False) == verdict_headline(worse_there)  # a worse axis reads the same
+
+
+def test_an_answer_never_checked_under_a_band_is_not_a_buy():
+    from optipose.evaluate.compare import Verdict
+    from optipose.report.verdict import verdict_table
+    from optipose.search.records import SearchResult, Validation
+
+    nominal = Verdict(1, _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)]))
+    assert verdict_table([nominal], "hand").rows[0][-1] == "buy the found sensors"
+    assert verdict_table([nominal], "hand", unchecked=True).rows[0][-1].startswith("better in the ideal cell; check under the band")
+    ideal = {"objective": {"conditions": {"noise_scales": [1.0], "mounting_translation": 0.0, "mounting_rotation": 0.0}}}
+    banded = {"objective": {"conditions": {"noise_scales": [1.0, 5.0], "mounting_translation": 2e-4, "mounting_rotation": 1.7e-3}}}
+    validation = Validation("full", 1, {}, {})
+
+    def result(config):
+        return SearchResult(None, "part_b", 0, "quick", config, validation=validation)
+
+    assert result(ideal).unchecked  # quick: a nominal search with no check planned
+    assert not result({**ideal, "band": {"file": "robust"}}).unchecked  # default: the check under the band
+    assert not result(banded).unchecked  # a search under the band validates under it
 
 
 def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():

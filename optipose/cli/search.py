@@ -76,7 +76,10 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         raise typer.Exit(EXIT_INTERRUPTED) from None
     if searched.validated:
         _draw_layouts(folder, the_part, searched.layouts)
-    _print_report(Console(), searched, the_part)
+    # a nominal search that did not check its answer under a band (quick, or `band = ""`) says so: its "better"
+    # holds in the simulation's ideal cell only, which is not yet a reason to buy
+    unchecked = the_objective.conditions.trivial and searched.band is None and not searched.band_interrupted
+    _print_report(Console(), searched, the_part, unchecked)
     if searched.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
@@ -225,11 +228,12 @@ def _draw_layouts(folder: Path, part, layouts) -> None:
             logging.getLogger(__name__).warning("could not draw found_k%d: %s", k, exc)
 
 
-def _print_report(console, report, part) -> None:
+def _print_report(console, report, part, unchecked: bool = False) -> None:
     """The verdict first, one line per k (:func:`verdict_headline`), then the details: found vs. the
     baseline per axis on the validation protocol (the records ``comparison.csv`` was written from, which
     :func:`optipose.io.load_result` reads back), the subsets each axis uses, the band, the full verdict
-    lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal."""
+    lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
+    ``unchecked``: the answer was never checked under a band (a nominal search without the check)."""
     from optipose.evaluate.compare import mdeg
     from optipose.model.baseline import baseline, baseline_label
 
@@ -238,7 +242,11 @@ def _print_report(console, report, part) -> None:
         verdicts = report.validation.verdicts()
         band = report.band.by_k() if report.band is not None else {}
         for v in verdicts:
-            console.print(verdict_headline(v, label, band.get(v.k)), highlight=False)
+            console.print(verdict_headline(v, label, band.get(v.k), checked=not unchecked), highlight=False)
+        if unchecked and any(v.no_worse for v in verdicts):
+            from optipose.evaluate.compare import UNCHECKED
+
+            console.print(UNCHECKED, style="yellow", highlight=False)
         for line in report.validation.unmeasured_lines(label):
             console.print(line, style="bold red", highlight=False)
         lines = report.validation.verdict_lines(label)
@@ -270,16 +278,20 @@ def _print_report(console, report, part) -> None:
             console.print(f"    {_xyz_rpy(T)}", highlight=False)
 
 
-def verdict_headline(verdict, label: str = "hand", band=None) -> str:
+def verdict_headline(verdict, label: str = "hand", band=None, checked: bool = True) -> str:
     """The verdict for one k in one short line (under 80 characters for the hand layout and names up to 6):
     buy or keep. ``band``: the same k's verdict under the band of the check after the validation; a found
     layout no worse at the preset's noise but worse somewhere in the band is not bought
-    (:func:`optipose.evaluate.compare.bought`)."""
+    (:func:`optipose.evaluate.compare.bought`). ``checked=False``: the answer was never checked under a
+    band (a nominal search without the check), so a layout no worse in the ideal cell is better there, not
+    yet bought."""
     from optipose.evaluate.compare import bought
 
     ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
     if verdict.no_worse and not bought(verdict, band):
         return f"k={verdict.k}: KEEP {label} {ref}: {found} {ratio:.2f}x better, but worse under the band"
+    if verdict.no_worse and not checked:
+        return f"k={verdict.k}: found {found} {ratio:.2f}x better, no axis worse, in the ideal cell"
     if verdict.no_worse:
         return f"k={verdict.k}: BUY found {found}: {ratio:.2f}x better in sum than {label} {ref}, no axis worse"
     if ratio < 1:

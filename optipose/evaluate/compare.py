@@ -22,7 +22,7 @@ import numpy as np
 
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 
-__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "bought", "one_versus_many", "unmeasured_line", "mdeg"]
+__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "bought", "UNCHECKED", "one_versus_many", "unmeasured_line", "mdeg"]
 
 _STATISTICS = ("median", "p75")
 
@@ -169,6 +169,11 @@ class Verdict:
         if worse:
             return f"{head}, but worse on {'; '.join(worse)} mdeg: keep {ref} if no axis may get worse"
         return f"{head}, no worse on any axis"
+
+
+# what a nominal search's verdict says when it never checked its answer under a band (``--budget quick``)
+UNCHECKED = ("checked in the ideal cell only (the preset's noise, every bracket exact), not under the band of a real "
+             "cell: run --budget default before buying")  # fmt: skip
 
 
 def bought(verdict: Verdict, band: Verdict | None = None) -> bool:

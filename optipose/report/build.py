@@ -146,7 +146,7 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         blocks.append(Paragraph("the search stopped before its validation: no verdict; the layouts below are its best so far", "verdict mixed"))
     else:
         protocol = "the full protocol" if validation.protocol == "full" else "the REDUCED protocol (14 scans; --budget default for the full one)"
-        blocks += verdict_blocks(result.verdicts(), validation.found, validation.hand, label, result.band_verdicts())
+        blocks += verdict_blocks(result.verdicts(), validation.found, validation.hand, label, result.band_verdicts(), result.unchecked)
         blocks.append(Paragraph(f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "
                                 f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
                                 "A verdict says 'better in sum' from the summed per-axis medians and 75th percentiles, and 'no worse on any axis' "

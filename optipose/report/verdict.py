@@ -7,7 +7,7 @@ records only; the lines are the ones the terminal prints (:meth:`Verdict.line`).
 
 from __future__ import annotations
 
-from optipose.evaluate.compare import Verdict, bought, mdeg, one_versus_many, unmeasured_line
+from optipose.evaluate.compare import UNCHECKED, Verdict, bought, mdeg, one_versus_many, unmeasured_line
 from optipose.report.document import Block, Heading, Paragraph, Table
 
 __all__ = ["verdict_css", "verdict_blocks", "verdict_table", "table1_rows", "table1_side_by_side", "table1_alone"]
@@ -22,12 +22,14 @@ def verdict_css(verdict: Verdict) -> str:
     return "verdict mixed" if verdict.ratio >= 1 else "verdict bad"
 
 
-def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label: str, band: dict | None = None) -> list[Block]:
+def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label: str, band: dict | None = None,
+                   unchecked: bool = False) -> list[Block]:  # fmt: skip
     """An axis a found layout does not measure, one line per k; one coloured line per k (the terminal's), then
     the headline: one found sensor vs. the baseline's largest.
 
     found, reference : k → Choice; label : ``hand`` or ``conventional``; band : k → the verdict under the band
-    of the check after a nominal search (a found layout worse there is not bought).
+    of the check after a nominal search (a found layout worse there is not bought); unchecked : the answer was
+    never checked under a band (a layout no worse in the ideal cell is not yet one to buy).
     """
     blocks: list[Block] = [Heading("Verdict")]
     unmeasured = (unmeasured_line(k, choice, reference.get(k), label) for k, choice in found.items())
@@ -36,7 +38,9 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
         blocks.append(Paragraph(f"no verdict: nothing to compare the found layouts with ({label} layout missing)", "verdict mixed"))
         return blocks
     band = band or {}
-    blocks.append(verdict_table(verdicts, label, band))
+    blocks.append(verdict_table(verdicts, label, band, unchecked))
+    if unchecked and any(v.no_worse for v in verdicts):
+        blocks.append(Paragraph(UNCHECKED[0].upper() + UNCHECKED[1:] + ".", "verdict mixed"))
     for v in verdicts:
         refused = v.no_worse and not bought(v, band.get(v.k))  # no worse nominally, worse under the band
         blocks.append(Paragraph(v.line(label), "verdict mixed" if refused else verdict_css(v)))
@@ -53,14 +57,15 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     return blocks
 
 
-def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None) -> Table:
+def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None, unchecked: bool = False) -> Table:
     """Per k: found and baseline sensors, baseline / found in sum, per axis whether found is no worse
     (median and p75, at every condition of a band), and what to do (``band``: k → the verdict under the band
-    of the check after a nominal search)."""
+    of the check after a nominal search; ``unchecked``: never checked under a band)."""
     rows, band = [], band or {}
+    buy = "better in the ideal cell; check under the band before buying" if unchecked else "buy the found sensors"
     for v in verdicts:
         gaps = {g.axis for g in v.worse}
-        decision = "buy the found sensors" if v.no_worse else (f"keep {label}" if v.ratio < 1 else f"better in sum; keep {label} if no axis may get worse")
+        decision = buy if v.no_worse else (f"keep {label}" if v.ratio < 1 else f"better in sum; keep {label} if no axis may get worse")
         if v.no_worse and not bought(v, band.get(v.k)):
             worse = ", ".join(dict.fromkeys(g.axis for g in band[v.k].worse))
             decision = f"keep {label}: worse on {worse} under the band"

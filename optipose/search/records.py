@@ -203,6 +203,14 @@ class SearchResult:
         search with nothing to compare its layouts with has no check to miss)."""
         return "band" in self.config and self.band is None and self.validation is not None and bool(self.validation.hand)
 
+    @property
+    def unchecked(self) -> bool:
+        """The answer holds for the ideal cell only: a nominal search (one noise level, exact brackets) that was
+        not to check it under a band (``--budget quick``, or ``[search] band = ""``)."""
+        c = self.config.get("objective", {}).get("conditions", {})
+        nominal = list(c.get("noise_scales", [1.0])) == [1.0] and not c.get("mounting_translation") and not c.get("mounting_rotation")
+        return nominal and "band" not in self.config and self.validation is not None
+
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""
         from optipose.model.baseline import baseline_label
