@@ -257,36 +257,3 @@ def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
         screen(SubProblem(study, np.zeros(0)), config, 1, seed=0)
     assert 16 <= len(study.history) < config.screen_samples
     assert any(e.state.name == "FEASIBLE" for e in study.history)
-
-
-def test_a_voxel_is_labelled_with_its_first_points_label():
-    from optipose.registration.kernels import labelled_voxel_centroids, voxel_centroids
-
-    # voxels of 1: (0,0,0) holds points 0, 2 and 4, (1,0,0) points 1 and 3 (a scan revisits a voxel)
-    points = np.array([[0.1, 0.2, 0.3], [1.5, 0.5, 0.5], [0.3, 0.4, 0.5], [1.7, 0.1, 0.1], [0.8, 0.9, 0.1]])
-    labels = np.array([7, 3, 9, 4, 5], dtype=np.int64)
-    centroids, first = labelled_voxel_centroids(points, 1.0, np.zeros(3), labels)
-    np.testing.assert_allclose(centroids, [[0.4, 0.5, 0.3], [1.6, 0.3, 0.3]], atol=1e-15)
-    assert first.tolist() == [7, 3]
-    assert np.array_equal(centroids, voxel_centroids(points, 1.0, np.zeros(3)))  # the same sums either way
-
-
-@pytest.mark.parametrize("name", ["part_a", "part_b", "part_c"])
-def test_the_scan_faces_as_guesses_give_the_searched_closest_points(name):
-    # the surrogate guesses a voxel centroid's closest face from its first point's: the answer must be the
-    # one the search gives without a guess, bit for bit, on every turn of every hand sensor
-    from optipose.evaluate.objective import load_objective as load
-    from optipose.search.surrogate import protocol_turns
-
-    part = load_part(name)
-    surrogate = Surrogate(part, turns=protocol_turns(load("paper")))
-    surrogate.ready()
-    checked = 0
-    for T_O_S in part.layouts["hand"].poses:
-        scan = surrogate.scanner.scan(T_O_S, surrogate.motion, centre=surrogate.centre, noise=False)
-        for T in surrogate.motions:
-            v, n, r, _ = surrogate._turned(scan.points, T, scan.face.astype(np.int64))
-            q, n_searched, _ = surrogate._reference.nearest(v)
-            assert np.array_equal(n, n_searched) and np.array_equal(r, np.einsum("ij,ij->i", v - q, n_searched))
-            checked += len(v)
-    assert checked > 1000

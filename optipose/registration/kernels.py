@@ -21,22 +21,9 @@ def voxel_centroids(points, size, origin):
     order), so the result is bit-identical. A scan runs along its profiles, so consecutive points mostly
     share a voxel: only the first point of each run is looked up, in a hash table sized by the runs.
     """
-    return _centroids(points, size, origin, np.empty(0, np.int64))[0]
-
-
-@njit(cache=True, nogil=True)
-def labelled_voxel_centroids(points, size, origin, labels):
-    """:func:`voxel_centroids`, and each voxel's label (m,): ``labels`` (n,) of its first point (e.g. the
-    face a scanned point lies on, a guess for the centroid's closest face)."""
-    return _centroids(points, size, origin, labels)
-
-
-@njit(cache=True, nogil=True)
-def _centroids(points, size, origin, labels):
     n = points.shape[0]
-    labelled = labels.shape[0] == n
     if n == 0:
-        return np.empty((0, 3), np.float64), np.empty(0, np.int64)
+        return np.empty((0, 3), np.float64)
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
     low = np.empty(3, np.float64)
@@ -67,7 +54,6 @@ def _centroids(points, size, origin, labels):
         cap *= 2
     table = np.full(cap, -1, np.int64)  # slot -> voxel
     keys = np.empty(runs, np.int64)  # voxel -> key
-    first = np.empty(runs if labelled else 0, np.int64)  # voxel -> the label of its first point
     sums = np.zeros((runs, 3), np.float64)
     counts = np.zeros(runs, np.int64)
     m = 0
@@ -86,8 +72,6 @@ def _centroids(points, size, origin, labels):
                     v = m
                     table[h] = v
                     keys[v] = key[i]
-                    if labelled:
-                        first[v] = labels[i]
                     m += 1
                     break
                 if keys[v] == key[i]:
@@ -102,14 +86,11 @@ def _centroids(points, size, origin, labels):
     counts[v] = c
     order = np.argsort(keys[:m])
     out = np.empty((m, 3), np.float64)
-    label = np.empty(m if labelled else 0, np.int64)
     for k in range(m):
         v = order[k]
         for j in range(3):
             out[k, j] = sums[v, j] / counts[v]
-        if labelled:
-            label[k] = first[v]
-    return out, label
+    return out
 
 
 @njit(cache=True, nogil=True)

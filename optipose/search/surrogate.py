@@ -164,14 +164,13 @@ class Surrogate:
         # the number of points a full-fidelity scan puts there; its tangential spread does not matter
         var = self.full_sensor.noise_sigma**2 / inten / (counts * self.scale) + self.extra_variance
         J = np.hstack([np.cross(p, n), n]) / np.sqrt(var)[:, None]
-        A, G, A_turns, N_turns = self._bias(scan.points, scan.face.astype(np.int64), T_O_S)
+        A, G, A_turns, N_turns = self._bias(scan.points, T_O_S)
         noisy = self._noise_bias(scan, T_O_S, G) if G is not None and self.noise_band > 1.0 else None
         return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G, A_turns, N_turns, noisy, self.noise_band)
 
-    def _bias(self, points: np.ndarray, faces: np.ndarray, T_O_S: np.ndarray) -> tuple:
+    def _bias(self, points: np.ndarray, T_O_S: np.ndarray) -> tuple:
         """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and
-        per turn and at the nominal orientation, the mounting term's normal matrices and maps. ``faces``
-        (n,): the triangle each point lies on."""
+        per turn and at the nominal orientation, the mounting term's normal matrices and maps."""
         if not len(self.motions):
             return None, None, None, None
         self.ready()
@@ -182,7 +181,7 @@ class Surrogate:
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
             if m == 0 and not self.mounting:
                 continue
-            v, n, r, J = self._turned(points, T, faces)
+            v, n, r, J = self._turned(points, T)
             if self.mounting:
                 A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
             if m > 0:
@@ -190,17 +189,15 @@ class Surrogate:
                 A += J.T @ J / len(self.motions)
         return A, G, A_turns, N_turns
 
-    def _turned(self, points: np.ndarray, T: np.ndarray, faces: np.ndarray) -> tuple:
+    def _turned(self, points: np.ndarray, T: np.ndarray) -> tuple:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
         centroids v (in the part's frame), their surface normals n, signed distances r to the CAD surface
-        and point-to-plane rows J = [(v − c) × n, n] about the rotation centre c. ``faces`` (n,): each
-        point's triangle; a voxel's first point's is the guess of its centroid's closest face (kept only
-        where the centroid lies well inside it: ``SurfaceReference.nearest``)."""
-        from optipose.registration.kernels import labelled_voxel_centroids
+        and point-to-plane rows J = [(v − c) × n, n] about the rotation centre c."""
+        from optipose.registration.kernels import voxel_centroids
 
-        turned, guess = labelled_voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3), faces)
+        turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
         v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
-        q, n, _ = self._reference.nearest(v, guess)
+        q, n, _ = self._reference.nearest(v)
         return v, n, np.einsum("ij,ij->i", v - q, n), np.hstack([np.cross(v - self.centre, n), n])
 
     def _noise_bias(self, scan, T_O_S: np.ndarray, G: np.ndarray) -> np.ndarray:
@@ -223,11 +220,10 @@ class Surrogate:
         rng = np.random.default_rng(20221536)  # fixed, so a pose always scores the same
         eps = rng.standard_normal(len(scan)) * (s.noise_sigma * self.noise_band / np.sqrt(inten))
         out = np.zeros_like(G)
-        faces = scan.face.astype(np.int64)
         for sign in (1.0, -1.0):
             points = scan.points + sign * eps[:, None] * u
             for m, T in enumerate(self.motions):
-                _, _, r, J = self._turned(points, T, faces)
+                _, _, r, J = self._turned(points, T)
                 out[m] += 0.5 * (J.T @ r)
         return out - G
 
