@@ -63,8 +63,10 @@ def _part(config: dict):
         return None
 
 
-def _views(part, layouts: dict, enabled: bool) -> list[Block]:
-    """The 3D views (part, heads, fans, keep-outs, a nominal scan's points) of each named layout."""
+def _views(part, layouts: dict, enabled: bool, drawn: Path | None = None) -> list[Block]:
+    """The 3D views (part, heads, fans, keep-outs, a nominal scan's points) of each named layout; ``drawn``:
+    a folder where a layout's views may be drawn already (a search's ``layouts/<name>.png``, by the same
+    function, no older than ``<name>.toml``), taken as they are instead of drawn again."""
     from optipose.report.figures import layout_views
 
     blocks: list[Block] = [Heading("Where the sensors go")]
@@ -75,7 +77,7 @@ def _views(part, layouts: dict, enabled: bool) -> list[Block]:
     shown = replace(part, layouts={**part.layouts, **layouts})
     for name, layout in layouts.items():
         try:
-            png = layout_views(shown, name)
+            png = _drawn(drawn, name) or layout_views(shown, name)
         except Exception as exc:  # a picture must never cost the report
             log.warning("report: could not draw %s: %s", name, exc)
             blocks.append(Paragraph(f"{name}: no picture ({exc})", "note"))
@@ -84,6 +86,16 @@ def _views(part, layouts: dict, enabled: bool) -> list[Block]:
                              "front and the top; heads (boxes), laser fans (dashed), measuring ranges (filled), keep-outs "
                              "(dotted) and the points of a nominal scan, one colour per sensor"))  # fmt: skip
     return blocks
+
+
+def _drawn(folder: Path | None, name: str) -> bytes | None:
+    """``folder/<name>.png`` when it was drawn after ``folder/<name>.toml`` was written, else None."""
+    if folder is None:
+        return None
+    png, toml = folder / f"{name}.png", folder / f"{name}.toml"
+    if png.is_file() and toml.is_file() and png.stat().st_mtime_ns >= toml.stat().st_mtime_ns:
+        return png.read_bytes()
+    return None
 
 
 def _evaluations(sub: Path) -> tuple[object, str]:
@@ -160,7 +172,7 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     layouts = {f"found_k{k}": lay for k, lay in sorted(result.layouts.items())}
     if result.hand is not None:
         layouts[label] = replace(result.hand, name=label)
-    blocks += _views(_part(result.config), layouts, views)
+    blocks += _views(_part(result.config), layouts, views, folder / "layouts")
     blocks.append(Heading("Poses for the robot program"))
     for name, layout in layouts.items():
         blocks += layout_section(name, layout)
@@ -229,7 +241,7 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         blocks += band_blocks(name, v, label)
     blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
     layouts = {(label if n == "hand" else n): replace(lay, name=label if n == "hand" else n) for n, lay in result.layouts.items()}
-    blocks += _views(_part(result.config), layouts, views)
+    blocks += _views(_part(result.config), layouts, views, folder / "layouts")
     blocks.append(Heading("Poses for the robot program"))
     for name, layout in layouts.items():
         blocks += layout_section(name, layout)
