@@ -259,3 +259,18 @@ def test_a_study_table_sorts_in_the_browser(results, browser, tmp_path):
     assert column() == ["a", "c", "b"]
     assert errors == []
     page.close()
+
+
+def test_a_layouts_drawn_views_are_taken_only_when_no_older_than_its_file(tmp_path):
+    import os
+
+    from optipose.report.build import _drawn
+
+    (tmp_path / "found_k1.toml").write_text("x")
+    (tmp_path / "found_k1.png").write_bytes(b"png")
+    toml = (tmp_path / "found_k1.toml").stat().st_mtime_ns
+    os.utime(tmp_path / "found_k1.png", ns=(toml, toml + 1))
+    assert _drawn(tmp_path, "found_k1") == b"png"
+    os.utime(tmp_path / "found_k1.png", ns=(toml, toml - 10**9))  # drawn before the layout was written: stale
+    assert _drawn(tmp_path, "found_k1") is None
+    assert _drawn(tmp_path, "hand") is None and _drawn(None, "found_k1") is None
