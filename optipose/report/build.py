@@ -241,7 +241,7 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         blocks += band_blocks(name, v, label)
     blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
     layouts = {(label if n == "hand" else n): replace(lay, name=label if n == "hand" else n) for n, lay in result.layouts.items()}
-    blocks += _views(_part(result.config), layouts, views, folder / "layouts")
+    blocks += _views(_part(result.config), layouts, views)
     blocks.append(Heading("Poses for the robot program"))
     for name, layout in layouts.items():
         blocks += layout_section(name, layout)
