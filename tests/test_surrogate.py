@@ -257,3 +257,24 @@ def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
         screen(SubProblem(study, np.zeros(0)), config, 1, seed=0)
     assert 16 <= len(study.history) < config.screen_samples
     assert any(e.state.name == "FEASIBLE" for e in study.history)
+
+
+def test_a_subset_met_before_is_looked_up_with_the_same_numbers():
+    # the memo keyed by the sensors' keys, in order: a screen re-scores the placed sensors' subsets thousands
+    # of times; what it returns must be what computing them gives, bit for bit, under a band too
+    part = load_part("part_b")
+    objective = load_objective("robust")
+    band = objective.conditions
+    surrogate = Surrogate(part, voxel=objective.registration.voxel_size, turns=np.deg2rad(np.array(TURNS[:3], float)),
+                          noise_band=max(band.noise_scales))  # fmt: skip
+    infos = [surrogate.info(T) for T in part.layouts["hand"].poses]
+    kw = dict(noise_scales=band.noise_scales, mounting=(band.mounting_translation, band.mounting_rotation))
+    memo: dict = {}
+    for order in ([0, 1], [0, 2], [0, 1, 2], [2, 0], [1]):
+        chosen = [infos[i] for i in order]
+        looked_up = predicted_stats(chosen, memo=memo, keys=[f"S{i + 1}" for i in order], **kw)
+        computed = predicted_stats(chosen, **kw)
+        for name in ("median_deg", "p75_deg", "axis_score", "level_axis_score"):
+            assert np.array_equal(looked_up[name], computed[name]), (order, name)
+        assert looked_up["score"] == computed["score"] and looked_up["best_subset"] == computed["best_subset"]
+    assert len(memo) == 3 + 2 + 2 + 1 + 0  # S1 S2 S1S2; S3 S1S3; S2S3 S1S2S3; S3S1 (another order); S2 met already

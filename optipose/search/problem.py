@@ -56,10 +56,12 @@ class SurrogateProblem:
     cache : shared per-sensor cache (u key → :class:`SensorInfo` or :class:`Violation`), e.g. a resumed one.
     targets : k → per-axis surrogate scores (deg) of the best hand-placed k-subset, for the shortfall: (3,),
         or (levels, 3) under a band, each noise level's (``level_axis_score``).
+    subsets : shared memo of sensor subsets' predicted statistics (:func:`predicted_stats`), e.g. another
+        problem's of the same part and objective.
     """
 
     def __init__(self, part, objective, config: SearchConfig, surrogate: Surrogate | None = None,
-                 cache: dict | None = None, targets: dict[int, np.ndarray] | None = None):  # fmt: skip
+                 cache: dict | None = None, targets: dict[int, np.ndarray] | None = None, subsets: dict | None = None):  # fmt: skip
         self.part, self.objective, self.config = part, objective, config
         stat = objective.statistic
         self.weights = (tuple(stat.weights), stat.median_weight, stat.p75_weight)
@@ -72,6 +74,7 @@ class SurrogateProblem:
         self._head_sphere = (box := 0.5 * (corners.min(axis=0) + corners.max(axis=0)), float(np.linalg.norm(corners - box, axis=1).max()))
         self._cache: dict = {} if cache is None else cache
         self._given: dict = {}  # u key → SensorInfo of a sensor scored as given (:meth:`info`)
+        self._subsets: dict = {} if subsets is None else subsets  # sensor subsets' predicted statistics (predicted_stats' memo)
         self._targets = dict(targets or {})
         # the objective's band (SPEC §9): every predicted statistic is the worst over it, brackets off by the tolerance
         band = objective.conditions
@@ -79,7 +82,7 @@ class SurrogateProblem:
 
     def with_targets(self, targets: dict[int, np.ndarray]) -> "SurrogateProblem":
         """The same problem (surrogate, cache) measured against these per-axis targets."""
-        return SurrogateProblem(self.part, self.objective, self.config, self.surrogate, self._cache, targets)
+        return SurrogateProblem(self.part, self.objective, self.config, self.surrogate, self._cache, targets, self._subsets)
 
     @property
     def cache(self):
@@ -162,7 +165,8 @@ class SurrogateProblem:
             constraint = constraint or ("head_gap" if violation > before else "")
         if violation > 0:
             return LayoutScore(float("nan"), None, violation, constraint)
-        stats = predicted_stats(parts, *self.weights, **self.band)
+        keys = [_key(u[6 * i : 6 * i + 6]) for i in range(k)]
+        stats = predicted_stats(parts, *self.weights, **self.band, memo=self._subsets, keys=keys)
         return LayoutScore(stats["score"] + self.shortfall(k, stats), stats)
 
     def _head_gaps(self, u: np.ndarray, violation: float) -> float:

@@ -268,7 +268,8 @@ def _axis_stats(sigma: np.ndarray, delta: np.ndarray | None) -> tuple[np.ndarray
 
 
 def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_weight=1.0, p75_weight=1.0,
-                    noise_scales: tuple[float, ...] = (1.0,), mounting: tuple[float, float] | None = None) -> dict:  # fmt: skip
+                    noise_scales: tuple[float, ...] = (1.0,), mounting: tuple[float, float] | None = None,
+                    memo: dict | None = None, keys: list | None = None) -> dict:  # fmt: skip
     """The surrogate's Table 1 for a layout: every non-empty subset's predicted per-axis median and 75th
     percentile (degrees), each axis's best subset, its per-axis score and the weighted score of the per-axis
     best; ``level_axis_score`` (levels, 3) is each noise level's per-axis score on its own best subsets.
@@ -279,11 +280,18 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     mounting : (translation m, rotation rad), the brackets' tolerance (± per axis), or None: the zeroed
     cell's error from bracket errors (:mod:`optipose.search.mounting`) adds its variance, the same at every
     noise level, to the noise's at each turn. It needs the turns (``A_turns``); without them it is left out.
+    memo, keys : a dict kept between calls and one key per sensor (its pose's): a subset's statistics depend
+    only on its sensors, in order, so a subset met before (a screen adds one new sensor to the same placed
+    ones thousands of times) is looked up instead of computed again — the same numbers, bit for bit.
     """
     k = len(infos)
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
     levels = np.zeros((len(noise_scales), len(subsets), 2, 3))  # each level's own median and p75 (rad)
     for s, c in enumerate(subsets):
+        key = None if memo is None else (tuple(keys[i] for i in c), tuple(noise_scales), mounting)
+        if key is not None and key in memo:
+            levels[:, s] = memo[key]
+            continue
         H = sum(infos[i].H for i in c)
         have_bias = all(infos[i].G is not None for i in c)
         A = sum(infos[i].A for i in c) if have_bias else None
@@ -299,6 +307,8 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
                 d = bias_rotation(A, sum(infos[i].G + (scale / infos[i].noise_band) ** 2 * infos[i].G_noise for i in c))
             m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d)
             levels[n, s] = m, q
+        if key is not None:
+            memo[key] = levels[:, s].copy()
     median, p75 = np.rad2deg(levels.max(axis=0)).transpose(1, 0, 2)  # the worst over the levels
     best = _best_subsets(median, p75)
     axis = np.array([median_weight * median[s, a] + p75_weight * p75[s, a] for a, s in enumerate(best)])
