@@ -70,8 +70,9 @@ class SurrogateProblem:
                                                 mounting=objective.conditions.mounted)  # fmt: skip
         self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
         self.collision = collision_model(part)
-        corners = self.collision.sensor.head_box_corners()  # the head box's bounding sphere: centre in S, radius
-        self._head_sphere = (box := 0.5 * (corners.min(axis=0) + corners.max(axis=0)), float(np.linalg.norm(corners - box, axis=1).max()))
+        corners = self.collision.sensor.head_box_corners()
+        middle = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
+        self._head_sphere = (middle, float(np.linalg.norm(corners - middle, axis=1).max()))  # the head box's bounding sphere in S
         self._cache: dict = {} if cache is None else cache
         self._given: dict = {}  # u key → SensorInfo of a sensor scored as given (:meth:`info`)
         self._subsets: dict = {} if subsets is None else subsets  # sensor subsets' predicted statistics (predicted_stats' memo)
@@ -92,7 +93,9 @@ class SurrogateProblem:
     # --- one sensor ------------------------------------------------------------------------------
     def sensor(self, u6: np.ndarray) -> SensorInfo | Violation:
         """The sensor's information, or its constraint violation when it is infeasible on its own."""
-        key = _key(u6)
+        return self._cached(_key(u6))
+
+    def _cached(self, key: tuple) -> SensorInfo | Violation:
         if key not in self._cache:
             self._cache[key] = self._sensor_at(key)
         return self._cache[key]
@@ -156,7 +159,8 @@ class SurrogateProblem:
             stats = predicted_stats([self.info(u[6 * i : 6 * i + 6]) for i in range(len(u) // 6)], *self.weights, **self.band)
             return LayoutScore(stats["score"], stats)
         k = len(u) // 6
-        parts = [self.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
+        keys = [_key(u[6 * i : 6 * i + 6]) for i in range(k)]  # the cache's, and the subsets' memo's
+        parts = [self._cached(key) for key in keys]
         violated = [p for p in parts if isinstance(p, Violation)]
         violation = sum(p.amount for p in violated)
         constraint = violated[0].constraint if violated else ""
@@ -165,7 +169,6 @@ class SurrogateProblem:
             constraint = constraint or ("head_gap" if violation > before else "")
         if violation > 0:
             return LayoutScore(float("nan"), None, violation, constraint)
-        keys = [_key(u[6 * i : 6 * i + 6]) for i in range(k)]
         stats = predicted_stats(parts, *self.weights, **self.band, memo=self._subsets, keys=keys)
         return LayoutScore(stats["score"] + self.shortfall(k, stats), stats)
 

@@ -207,9 +207,12 @@ class SearchResult:
     def unchecked(self) -> bool:
         """The answer holds for the ideal cell only: a nominal search (one noise level, exact brackets) that was
         not to check it under a band (``--budget quick``, or ``[search] band = ""``)."""
+        from optipose.evaluate.conditions import ConditionsConfig
+
         c = self.config.get("objective", {}).get("conditions", {})
-        nominal = list(c.get("noise_scales", [1.0])) == [1.0] and not c.get("mounting_translation") and not c.get("mounting_rotation")
-        return nominal and "band" not in self.config and self.validation is not None
+        searched = ConditionsConfig(noise_scales=tuple(c.get("noise_scales", (1.0,))), mounting_translation=c.get("mounting_translation", 0.0),
+                                    mounting_rotation=c.get("mounting_rotation", 0.0))  # fmt: skip
+        return searched.trivial and "band" not in self.config and self.validation is not None
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""
