@@ -15,6 +15,7 @@ from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import StatisticConfig, load_objective, reduced_objective
 from optipose.evaluate.robust import evaluate_robust, robust_stats
 from optipose.model.part import load_part
+from optipose.model.sensor import load_sensor
 from optipose.scan.scanner import part_scanner, rebuilt_with
 from optipose.scan.profiles import profiles_to_points
 from optipose.transforms import matrix_to_rpy
@@ -61,6 +62,35 @@ def test_a_zero_tolerance_and_a_one_level_band_give_exactly_the_objective(part_b
     robust = evaluate_robust(part_b, layout, objective, seed=4)
     assert len(robust.results) == 1
     assert robust.results[0][1].per_scan.equals(plain.per_scan) and robust.table == plain.table
+
+
+def test_one_cast_gives_every_noise_level_exactly_as_a_scanner_of_that_noise(part_b):
+    # where a ray hits does not depend on the noise: Scanner.scan_levels casts once and writes each level,
+    # which must be what a scanner whose sensor has that many times the noise gives, bit for bit
+    poses, rpy = part_b.layouts["hand"].poses, np.deg2rad([0.8, -0.4, 1.2])
+    scanner = part_scanner(part_b, threads=1)
+    levels = scanner.scan_levels(poses, part_b.motion, (1.0, 5.0), rpy=rpy, centre=part_b.rotation_centre, rng=9)
+    sensor = load_sensor(part_b.sensor)
+    noisier = part_scanner(part_b, sensor=replace(sensor, noise_sigma=sensor.noise_sigma * 5.0), threads=1)
+    for level, alone in zip(levels, (scanner, noisier)):
+        for a, b in zip(level, alone.scan_many(poses, part_b.motion, rpy=rpy, centre=part_b.rotation_centre, rng=9)):
+            assert np.array_equal(a.points, b.points) and np.array_equal(a.raw, b.raw) and np.array_equal(a.face, b.face)
+    assert not np.array_equal(levels[0][0].points, levels[1][0].points)  # the noise differs, the hits do not
+    assert np.array_equal(levels[0][0].face, levels[1][0].face)
+
+
+def test_conditions_of_one_bracket_draw_evaluated_together_are_each_evaluated_alone(part_b):
+    # Evaluator.under scans the noise levels of a draw together; each result must be the one the condition
+    # gives on its own, on two workers too (the master scans' zeros are shared, the noise is not)
+    objective = _short(load_objective("paper"))
+    layout = part_b.layouts["hand"]
+    band = [Condition(s, d, 0.2e-3, np.deg2rad(0.1)) for s in (1.0, 5.0) for d in (0, 1)]
+    with Evaluator(part_b, objective, seed=6, jobs=2) as evaluator:
+        together = evaluator.under(layout, band)
+        alone = [evaluator(layout, c) for c in band]
+    for a, b in zip(together, alone):
+        assert a.per_scan.equals(b.per_scan) and a.stats.equals(b.stats)
+    assert not together[0].per_scan.equals(together[2].per_scan)  # x1 and x5 of draw 0 differ
 
 
 def test_mounting_draws_are_reproducible_within_the_tolerance_and_differ_per_sensor_and_draw():

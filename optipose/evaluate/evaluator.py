@@ -30,7 +30,7 @@ from optipose.evaluate.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
-from optipose.evaluate.worker import WorkerSetup, run_chunk
+from optipose.evaluate.worker import WorkerSetup, run_levels
 from optipose.model.layout import Layout, SensorPose
 
 __all__ = ["Evaluator", "EvaluatorWrapper", "EvaluationResult", "evaluate", "log_failures"]
@@ -157,12 +157,31 @@ class Evaluator:
     def __call__(self, layout: Layout | list[np.ndarray], condition: Condition | None = None) -> EvaluationResult:
         """Evaluate a layout (or a list of 4×4 ``T_O_S``, named S1, S2, …), under ``condition`` when given
         (default: the evaluator's); the workers keep their scanners and reference across conditions."""
+        return self.under(layout, [condition or self.setup.condition])[0]
+
+    def under(self, layout: Layout | list[np.ndarray], conditions: list[Condition]) -> list[EvaluationResult]:
+        """One evaluation of ``layout`` per condition, in their order. Conditions that differ only in their
+        noise scale (one bracket draw at several noise levels) are scanned together: each orientation is
+        cast once for all of them (:func:`optipose.evaluate.worker.run_levels`), and each result is the one
+        ``self(layout, condition)`` gives."""
         if not isinstance(layout, Layout):
             layout = Layout(tuple(SensorPose(f"S{i + 1}", np.asarray(T, float)) for i, T in enumerate(layout)), name="poses")
-        t0 = time.perf_counter()
-        chunks = _chunks(self.tasks(), self.jobs)
-        setup = self.setup if condition is None else replace(self.setup, condition=condition)
-        outputs = self.executor.map(functools.partial(run_chunk, setup, layout), chunks)
+        groups: dict = {}  # a condition at noise scale 1 -> the conditions that share its scans
+        for c in conditions:
+            groups.setdefault(replace(c, noise_scale=1.0), []).append(c)
+        out = {}
+        for key, group in groups.items():
+            t0 = time.perf_counter()
+            levels = tuple(dict.fromkeys(c.noise_scale for c in group))
+            setup = replace(self.setup, condition=replace(key, noise_scale=levels[0]))
+            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels), _chunks(self.tasks(), self.jobs))
+            wall = (time.perf_counter() - t0) / len(levels)
+            for n, level in enumerate(levels):
+                out[replace(key, noise_scale=level)] = self._result(layout, [o[n] for o in outputs], wall)
+        return [out[c] for c in conditions]
+
+    def _result(self, layout: Layout, outputs: list[tuple], wall: float) -> EvaluationResult:
+        """The workers' (rows, point rows, seconds) of one condition as an :class:`EvaluationResult`."""
         rows = [r for out in outputs for r in out[0]]
         point_rows = [r for out in outputs for r in out[1]]
         per_scan = pd.DataFrame(rows).sort_values(["scan", "subset_index"], kind="stable").reset_index(drop=True)
@@ -170,7 +189,7 @@ class Evaluator:
         stats = summarize(per_scan, self.objective.statistic)
         table = best_choices(stats, layout.names, self.objective.statistic, len(self.perturbations))
         timings = {k: float(sum(out[2][k] for out in outputs)) for k in ("scan", "register")}
-        timings["wall"] = time.perf_counter() - t0
+        timings["wall"] = wall
         log_failures(per_scan, self._failure_level)
         return EvaluationResult(self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings)
 

@@ -60,7 +60,7 @@ class RobustEvaluator(EvaluatorWrapper):
         self.conditions = conditions(self.objective.conditions)
 
     def __call__(self, layout) -> RobustResult:
-        return robust_result([(c, self.evaluator(layout, c)) for c in self.conditions], self.objective)
+        return robust_result(list(zip(self.conditions, self.evaluator.under(layout, self.conditions))), self.objective)
 
 
 def make_evaluator(part, objective, seed: int = 0, jobs: int = 1, quiet: bool = False, executor=None):

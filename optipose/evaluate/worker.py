@@ -33,7 +33,7 @@ from optipose.registration.backends import combined_start
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 
-__all__ = ["WorkerSetup", "run_chunk", "sensor_groups"]
+__all__ = ["WorkerSetup", "run_chunk", "run_levels", "sensor_groups"]
 
 log = logging.getLogger(__name__)
 _TRANSLATION = ("x", "y", "z")
@@ -94,7 +94,7 @@ class _Worker:
         self.setup = setup
         self.condition = setup.condition  # the condition of the chunk being run (run_chunk sets it)
         self.mesh = trimesh.Trimesh(setup.vertices, setup.faces, process=False)
-        self.scanners: dict = {}  # (model, noise scale) -> Scanner
+        self.scanners: dict = {}  # model -> Scanner (at every noise scale)
         cfg = setup.registration
         if cfg.reference == "cad-sample":
             self.reference = SampledReference(*sample_surface(setup.vertices, setup.faces, cfg.reference_spacing), kind="cad-sample")
@@ -105,45 +105,48 @@ class _Worker:
         self._exact_master: dict = {}
 
     def _scanner(self, model):
-        """The scanner of a sensor model (``None``: the part's) at the condition's noise scale, built once."""
-        from optipose.model.sensor import load_sensor
+        """The scanner of a sensor model (``None``: the part's), built once; it scans every noise level."""
         from optipose.scan.scanner import Scanner
 
-        s, scale = self.setup, self.condition.noise_scale
-        key = (model, scale)
-        if key not in self.scanners:
+        s = self.setup
+        if model not in self.scanners:
             sensor = s.sensor if model is None else model
-            if scale != 1.0:
-                sensor = load_sensor(sensor)
-                sensor = replace(sensor, noise_sigma=sensor.noise_sigma * scale)
-            self.scanners[key] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders),
-                                          column_stride=s.column_stride)  # fmt: skip
-        return self.scanners[key]
+            self.scanners[model] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders),
+                                           column_stride=s.column_stride)  # fmt: skip
+        return self.scanners[model]
 
     def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None, exact=False,
              noise=True) -> list:  # fmt: skip
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
-        orientation ``rpy`` (rad) and ``offset`` (m); ``seed`` is the orientation's noise seed; ``exact``:
-        as if the brackets were exact, whatever the condition; ``noise=False``: exact surface points."""
+        orientation ``rpy`` (rad) and ``offset`` (m) under the condition; ``seed`` is the orientation's
+        noise seed; ``exact``: as if the brackets were exact, whatever the condition; ``noise=False``: exact
+        surface points."""
+        return self.scan_levels(models, poses, seed, (self.condition.noise_scale,), rpy, offset, exact, noise)[0]
+
+    def scan_levels(self, models: list, poses: list[np.ndarray], seed: int, levels: tuple[float, ...], rpy=(0.0, 0.0, 0.0),
+                    offset=None, exact=False, noise=True) -> list[list]:  # fmt: skip
+        """:meth:`scan` at each noise scale of ``levels`` (the condition's brackets, its noise scale
+        replaced): one list of scans per level, from one ray cast (:meth:`Scanner.scan_levels`)."""
         groups = sensor_groups(models, self.setup.sensor)
         condition, nominal = self.condition, poses
         mounted = condition.draw is not None and not exact
         if mounted:  # each sensor stands at its true pose
             poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
-        scans = [None] * len(poses)
+        scans = [[None] * len(poses) for _ in levels]
         for g, (model, idx) in enumerate(groups):
             if not idx:
                 continue
             scanner = self._scanner(model)
-            out = scanner.scan_many([poses[j] for j in idx], self.setup.motion, rpy=rpy, centre=self.setup.centre,
-                                    offset=offset, rng=group_seed(seed, g), noise=noise, raw=False)  # fmt: skip
-            for j, scan in zip(idx, out):
-                scans[j] = scan
+            out = scanner.scan_levels([poses[j] for j in idx], self.setup.motion, levels, rpy=rpy, centre=self.setup.centre,
+                                      offset=offset, rng=group_seed(seed, g), noise=noise, raw=False)  # fmt: skip
+            for level, level_out in zip(scans, out):
+                for j, scan in zip(idx, level_out):
+                    level[j] = scan
         if mounted:  # ... and the cell rebuilds its cloud with the drawn pose
             from optipose.scan.scanner import rebuilt_with
 
             shifts = self.setup.motion.offsets()
-            scans = [rebuilt_with(scan, T, shifts) for scan, T in zip(scans, nominal)]
+            scans = [[rebuilt_with(scan, T, shifts) for scan, T in zip(level, nominal)] for level in scans]
         return scans
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
@@ -217,29 +220,43 @@ def _with_normals(points: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[list[dict], list[dict], dict]:
-    """Scan and register a list of orientations of ``layout``.
+    """Scan and register a list of orientations of ``layout`` under ``setup.condition``.
 
     tasks : (scan index, rpy (3,) rad, offset (3,) m, noise seed, label) per orientation.
     Returns rows per (scan, subset), rows per (scan, sensor) and the seconds spent ("scan", "register").
     """
+    return run_levels(setup, layout, tasks, (setup.condition.noise_scale,))[0]
+
+
+def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...]) -> list[tuple]:
+    """:func:`run_chunk` under ``setup.condition`` at each noise scale of ``levels`` (its bracket draw, its
+    noise scale replaced): each orientation is cast once for all of them. One (rows, point rows, seconds)
+    per level; the casting's seconds are shared out equally."""
     worker = _STATE.get(setup.token)
     if worker is None:
         _STATE.clear()  # one evaluator's state per process at a time
         worker = _STATE[setup.token] = _Worker(setup)
-    worker.condition = setup.condition
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
     subsets = all_subsets(len(poses))
-    references = worker.references(models, poses, subsets)
-    zeros = worker.zero(models, poses, subsets, references)
-    rows, point_rows, timing = [], [], {"scan": 0.0, "register": 0.0}
+    conditions = [replace(setup.condition, noise_scale=level) for level in levels]
+    cells = []  # per level: its references and zeros
+    for condition in conditions:
+        worker.condition = condition
+        references = worker.references(models, poses, subsets)
+        cells.append((references, worker.zero(models, poses, subsets, references)))
+    outputs = [([], [], {"scan": 0.0, "register": 0.0}) for _ in levels]
     for i, rpy, offset, seed, label in tasks:
         t0 = time.perf_counter()
-        scans = worker.scan(models, poses, seed, rpy=rpy, offset=offset)
-        t1 = time.perf_counter()
-        rows += _register_subsets(worker, setup, scans, seed, subsets, references, zeros, names, i, rpy, offset, label, point_rows)
-        timing["scan"] += t1 - t0
-        timing["register"] += time.perf_counter() - t1
-    return rows, point_rows, timing
+        worker.condition = conditions[0]
+        scans = worker.scan_levels(models, poses, seed, levels, rpy=rpy, offset=offset)
+        cast = (time.perf_counter() - t0) / len(levels)
+        for condition, level_scans, (references, zeros), (rows, point_rows, timing) in zip(conditions, scans, cells, outputs):
+            t1 = time.perf_counter()
+            worker.condition = condition
+            rows += _register_subsets(worker, setup, level_scans, seed, subsets, references, zeros, names, i, rpy, offset, label, point_rows)
+            timing["scan"] += cast
+            timing["register"] += time.perf_counter() - t1
+    return outputs
 
 
 def _clouds(cfg: RegistrationConfig, scans, seed: int) -> list[np.ndarray]:

@@ -163,6 +163,24 @@ class Scanner:
             whatever the thread count. ``noise=False`` gives exact, unquantised surface points.
         raw : ``False`` (the evaluator's: it reads only the points) leaves ``Scan.raw`` empty, (0, columns).
         """
+        return self.scan_levels(poses, motion, (1.0,), rpy, centre, offset, rng, noise, raw)[0]
+
+    def scan_levels(
+        self,
+        poses: list[np.ndarray],
+        motion: ScanMotion,
+        noise_scales: tuple[float, ...],
+        rpy: np.ndarray = (0.0, 0.0, 0.0),
+        centre: np.ndarray = (0.0, 0.0, 0.0),
+        offset: np.ndarray | None = None,
+        rng: np.random.Generator | int | None = 0,
+        noise: bool = True,
+        raw: bool = True,
+    ) -> list[list[Scan]]:
+        """:meth:`scan_many` at several noise levels at once: one list of scans per scale of ``noise_scales``,
+        each as a scanner whose sensor's ``noise_sigma`` is that many times this one's would take it. The
+        rays are cast once (where they hit does not depend on the noise), and every level draws the same
+        standard normals per ray, scaled by its σ."""
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
         seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
         T_O_P = part_motion(np.asarray(rpy, float), np.asarray(centre, float), offset)
@@ -179,8 +197,13 @@ class Scanner:
         keys = [np.uint64(int(k) | 1) for k in np.random.default_rng([seed, 0x5CA7]).integers(1, 2**63, len(poses))]
         keys = keys if noise else [np.uint64(0)] * len(poses)
         hits = list(run(lambda blk: self._block_hits(views[blk[0]], shifts, blk[1], blk[2]), blocks))
+        return [self._written(poses, views, blocks, hits, keys, shifts, T_O_P, rpy, raw, self.sensor.noise_sigma * scale)
+                for scale in noise_scales]  # fmt: skip
 
-        # Phase 2 writes every block straight into its slice of the scan's arrays: no concatenation.
+    def _written(self, poses, views, blocks, hits, keys, shifts, T_O_P, rpy, raw: bool, sigma: float) -> list[Scan]:
+        """Phase 2 of a scan: every block's hits written straight into its slice of the scans' arrays (no
+        concatenation), with noise of ``sigma`` (m) at full intensity."""
+        run = self._pool.map if self._pool else map
         n_col, scans, jobs = self.sensor.points_per_profile, [], []
         for j, T_O_S in enumerate(poses):
             mine = [(blk, h) for blk, h in zip(blocks, hits) if blk[0] == j]
@@ -201,7 +224,7 @@ class Scanner:
             s = self.sensor
             write_points(
                 idx, T, inten, keys[j], NORMAL_QUANTILES, n_col, k0, shifts[k0:k1], self._ray_cos, *self._ray_lines, s.apex_z,
-                s.noise_sigma, s.detection_threshold, s.z_resolution, view.T_O_S[:3, :3], view.T_O_S[:3, 3],
+                sigma, s.detection_threshold, s.z_resolution, view.T_O_S[:3, :3], view.T_O_S[:3, 3],
                 scan.raw[k0:k1].reshape(-1), scan.points[sl], scan.profile[sl], scan.column[sl],
             )  # fmt: skip
             scan.intensity[sl] = inten
