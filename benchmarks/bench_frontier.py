@@ -9,13 +9,18 @@ best of those is. For k = 2 and 3 the same with k - 1 of the hand sensors kept i
 sample's pose added (the search's hand-anchored candidates): a kept sensor gives the axes it measures the
 hand layout's own numbers, so a tie there is exact.
 
-    .venv/bin/python benchmarks/bench_frontier.py [--part part_b] [--objective robust] [--samples 1024] [--starts 8] [--icp N]
+    .venv/bin/python benchmarks/bench_frontier.py [--part part_b] [--objective robust] [--samples 1024] [--starts 8]
+        [--icp N [--icp-k 1,2,3] [--icp-kept S2,S1S3]]
 
-``--icp N`` then measures what the surrogate only predicts, for one sensor: the N poses with the largest
-smallest ratio (distinct ones) and the hand layout are evaluated by ICP under every condition of the band on
-the full protocol with another noise seed (``--seed`` + 1), and each pose is compared with the hand layout's
-best single sensor per noise level, as the search's validation compares (each statistic the worst over the
-level's bracket draws).
+``--icp N`` then measures what the surrogate only predicts: for each k and kept set, the N distinct poses the
+surrogate ranks best — those it predicts no worse first, by their sum at the preset's noise (the poses that could
+make "no worse and 2x better"), then the rest by their smallest ratio — and the hand layout are evaluated by ICP
+under every condition of the band on the full protocol with another noise seed (``--seed`` + 1), and each is
+compared with the hand layout's best k-choice per noise level, as the search's validation compares (each
+statistic the worst over the level's bracket draws). For k >= 2 the pose takes the lowest free place of the hand
+layout (the other places keep their hand sensors, each with its index's noise draws and bracket errors), and
+the choice of the kept sensors and the pose is compared. ``--icp-k`` limits the ICP to some k, ``--icp-kept``
+to kept sets by name (``S2,S1S3``).
 
 The surrogate's ranking agrees with ICP only to Spearman ρ ≈ 0.7–0.9 (README, "Surrogate quality"), so a
 count here is the surrogate's view, not ICP's; a zero says the surrogate sees no such pose in the sample.
@@ -60,7 +65,9 @@ def main() -> None:
     ap.add_argument("--starts", type=int, default=8, help="poses moved by the local search, the best of the sample")
     ap.add_argument("--evals", type=int, default=60, help="surrogate evaluations of each local search")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--icp", type=int, default=0, help="evaluate this many of the best single poses by ICP under the band")
+    ap.add_argument("--icp", type=int, default=0, help="evaluate this many of the best poses of each k and kept set by ICP under the band")
+    ap.add_argument("--icp-k", default="1,2,3", help="the k to evaluate by ICP")
+    ap.add_argument("--icp-kept", default="", help="only these kept sets by ICP, e.g. S2,S1S3 (default: all)")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     from scipy.stats import qmc
@@ -113,8 +120,9 @@ def main() -> None:
                 kept_names = "".join(hand.names[i] for i in kept) or "-"
                 print(f"{name:8} {k:>2} {kept_names:>8} {len(scored):>8} {int(ok.sum()):>8} {mins[top]:>14.2f} "
                       f"{sums[top]:>10.2f} {sums[ok].max() if ok.any() else float('nan'):>11.2f}")  # fmt: skip
-                if k == 1 and args.icp:
-                    icp_check(part, objective, problem, hand, scored, args)
+                wanted = not args.icp_kept or kept_names in args.icp_kept.split(",")
+                if args.icp and str(k) in args.icp_k.split(",") and wanted:
+                    icp_check(part, objective, problem, hand, kept, k, scored, args)
         print(f"{name:8} hand's best by the surrogate: " + ", ".join(
             f"k={k} {''.join(hand.names[i] for i in min(itertools.combinations(range(len(hand_info)), k), key=lambda c: level_stats([hand_info[i] for i in c], objective).max(axis=0).sum()))}"
             for k in range(1, len(hand.poses) + 1)) + f"; {time.perf_counter() - t0:.0f} s")  # fmt: skip
@@ -123,31 +131,39 @@ def main() -> None:
     print("sum: the largest sum ratio at the preset's noise among the no-worse ones")
 
 
-def icp_check(part, objective, problem, hand, scored, args) -> None:
-    """The ``--icp`` best single poses by the surrogate's smallest ratio, and the hand layout, by ICP under the
-    band (full protocol, seed + 1): per pose and noise level, hand / pose in sum and whether it is no worse
-    on every statistic; then how many statistics it loses, and by how much at most."""
+def icp_check(part, objective, problem, hand, kept: tuple[int, ...], k: int, scored, args) -> None:
+    """The ``--icp`` best poses of this k and kept set by the surrogate (see the module doc), and the hand
+    layout, by ICP under the band (full protocol, seed + 1): per pose and noise level, hand / layout in sum
+    and whether it is no worse on every statistic; then how many statistics it loses, and by how much at most."""
     from optipose.evaluate.compare import Verdict
-    from optipose.evaluate.robust import make_evaluator
+    from optipose.evaluate.robust import choice_of, make_evaluator
     from optipose.model.layout import Layout, SensorPose
 
-    picks: list[tuple[float, np.ndarray]] = []
-    for r, u in sorted(scored, key=lambda t: -t[0][0]):
+    picks: list[tuple[tuple[float, float], np.ndarray]] = []
+    for r, u in sorted(scored, key=lambda t: (-min(t[0][0], 1.0), -t[0][1] if t[0][0] >= 1.0 else -t[0][0])):
         if all(np.abs(u - p).max() > 0.02 for _, p in picks):  # distinct poses, not one basin's neighbours
-            picks.append((r[0], u))
+            picks.append((r, u))
         if len(picks) == args.icp:
             break
+    free = min(i for i in range(len(hand.poses)) if i not in kept)
     t0 = time.perf_counter()
     with make_evaluator(part, objective, seed=args.seed + 1, jobs=args.jobs, quiet=True) as evaluator:
-        reference = next(c for c in evaluator(hand).table if c.k == 1)
-        print(f"  ICP under the band, seed {args.seed + 1}, full protocol: the hand layout's best single sensor {reference.name}")
+        reference = next(c for c in evaluator(hand).table if c.k == k)
+        print(f"  ICP under the band, seed {args.seed + 1}, full protocol: the hand layout's best choice of {k}: {reference.name}"
+              + (f"; the pose in place {free + 1}" if k > 1 else ""))  # fmt: skip
         for j, (predicted, u) in enumerate(picks):
-            result = evaluator(Layout((SensorPose("F1", problem.space.to_pose(u)),), name=f"frontier{j}"))
-            v = Verdict(1, next(c for c in result.table if c.k == 1), reference)
+            if k == 1:
+                layout, sensors = Layout((SensorPose("F1", problem.space.to_pose(u)),), name=f"frontier{j}"), (0,)
+            else:
+                poses = list(hand.sensors)
+                poses[free] = SensorPose("F", problem.space.to_pose(u))
+                layout, sensors = Layout(tuple(poses), name=f"frontier{j}"), tuple(sorted((*kept, free)))
+            result = evaluator(layout)
+            v = Verdict(k, choice_of(result, sensors), reference)
             gaps = v.worse
             levels = "  ".join(f"{label.split(',')[0]} {ratio:.2f}{'' if ok else '*'}" for label, ratio, ok in v.levels())
             worst = max((g.found / g.reference for g in gaps), default=float("nan"))
-            print(f"  pose {j}: surrogate smallest ratio {predicted:.2f}; ICP hand / pose {levels}; "
+            print(f"  pose {j}: surrogate smallest ratio {predicted[0]:.2f}, x1 sum {predicted[1]:.2f}; ICP hand / layout {levels}; "
                   f"worse on {len(gaps)} of {6 * len(v.levels())} statistics (at most {worst:.2f}x)")  # fmt: skip
     print(f"  ({time.perf_counter() - t0:.0f} s; * = worse on some statistic at that level)")
 

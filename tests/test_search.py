@@ -427,6 +427,26 @@ def test_the_hand_layout_evaluated_beside_the_search_is_the_one_validate_would_c
     assert validation.hand[1].score == here.table[0].score
 
 
+def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_evaluators():
+    # the check under the band after a nominal search runs the hand layout's bracket draws in processes of
+    # their own (each draw's noise levels together): the result must be RobustEvaluator's, condition by condition
+    from optipose.evaluate.robust import RobustEvaluator
+    from optipose.search.validate import BaselineRun, band_objective
+    from optipose.seeds import validation_seed
+
+    part = load_part("part_b")
+    objective = band_objective(_short(load_objective("paper")), "robust")
+    with BaselineRun(part, objective, seed=3, last=True, processes=2) as run:
+        assert len(run._calls) == 2  # one process per bracket draw
+        beside = run.result()
+    with RobustEvaluator(part, objective, seed=validation_seed(3)) as evaluator:
+        here = evaluator(part.layouts["hand"])
+    assert [c for c, _ in beside.results] == [c for c, _ in here.results] and len(here.results) == 4
+    for (_, a), (_, b) in zip(beside.results, here.results):
+        assert a.per_scan.equals(b.per_scan)
+    assert beside.stats.equals(here.stats) and beside.table == here.table
+
+
 def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
     from optipose.search.validate import BaselineRun, validate
 

@@ -12,11 +12,13 @@ whatever runs it: the scans' noise comes from the seed and the scan's index, not
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 
-from optipose.evaluate.evaluator import log_failures
-from optipose.evaluate.robust import choice_of, make_evaluator
+from optipose.evaluate.conditions import conditions
+from optipose.evaluate.evaluator import Evaluator, log_failures
+from optipose.evaluate.robust import choice_of, make_evaluator, robust_result
 from optipose.errors import WorkerError
 from optipose.evaluate.objective import reduced_objective
 from optipose.model.layout import Layout
@@ -61,34 +63,43 @@ class BaselineRun:
     ``result()`` waits for it: ``None`` when the part has no baseline, or the evaluation failed or was
     stopped (the validation then evaluates the hand layout itself); ``close()`` stops it. ``last``: at the
     lowest priority (the hand layout under the band of the check after a nominal search, which runs on
-    through the selection and yields to it).
+    through the selection and yields to it). ``processes``: under a band, its bracket draws are shared
+    out over up to this many processes (each draw's noise levels scanned together), so that once the search
+    and the found layouts' check are done the hand layout's check takes every core, not one.
     """
 
-    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False):
+    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False, processes: int = 1):
         import multiprocessing
         import pickle
 
         from optipose.evaluate.background import Background
 
-        self._call = self._result = None
+        self._calls, self._result = [], None
         layout = baseline(part)
         if layout is None or multiprocessing.current_process().daemon:  # a daemonic worker (Dask) may not start one
             return
-        args = (part, validation_objective(objective, protocol), validation_seed(seed), layout)
+        objective = validation_objective(objective, protocol)
+        self._objective, self._conditions = objective, conditions(objective.conditions)
+        draws = list(dict.fromkeys(replace(c, noise_scale=1.0) for c in self._conditions))
+        shares = [draws[i :: max(1, min(processes, len(draws)))] for i in range(max(1, min(processes, len(draws))))]
+        self._shares = [[c for c in self._conditions if replace(c, noise_scale=1.0) in share] for share in shares]
         try:
-            self._call = Background(_evaluate, *args, nice=_LAST if last else _NICE)
+            for share in self._shares:
+                args = (part, objective, validation_seed(seed), layout, share)
+                self._calls.append(Background(_evaluate, *args, nice=_LAST if last else _NICE))
         except (OSError, pickle.PicklingError, AttributeError, TypeError) as exc:  # the validation evaluates it instead
+            self.close()
             log.warning("could not start the hand layout's evaluation beside the search (%s)", exc)
 
     def wait(self) -> None:
-        """Wait until the evaluation has ended (and its process with it)."""
-        if self._call is None:
+        """Wait until the evaluation has ended (and its processes with it)."""
+        if not self._calls:
             return
         try:
-            self._result = self._call.result()
-            # it ran quiet in its own process: say here what the validation's own evaluation would have said
-            each = [r for _, r in self._result.results] if hasattr(self._result, "results") else [self._result]
-            for result in each:
+            done = {c: r for share, call in zip(self._shares, self._calls) for c, r in zip(share, call.result())}
+            each = [done[c] for c in self._conditions]
+            self._result = each[0] if self._objective.conditions.trivial else robust_result(list(zip(self._conditions, each)), self._objective)
+            for result in each:  # it ran quiet in its own process: say here what the validation's own evaluation would have said
                 log_failures(result.per_scan, what="hand layout: ")
         except WorkerError as exc:  # the validation evaluates the hand layout itself instead
             log.warning("the hand layout's evaluation beside the search failed (%s); evaluating it again", exc)
@@ -101,9 +112,9 @@ class BaselineRun:
         return self._result
 
     def close(self) -> None:
-        if self._call is not None:
-            self._call.close()
-            self._call = None
+        for call in self._calls:
+            call.close()
+        self._calls = []
 
     def __enter__(self) -> "BaselineRun":
         return self
@@ -112,10 +123,10 @@ class BaselineRun:
         self.close()
 
 
-def _evaluate(part, objective, seed: int, layout):
-    """One evaluation, in the baseline's process."""
-    with make_evaluator(part, objective, seed=seed, jobs=1, quiet=True) as evaluator:
-        return evaluator(layout)
+def _evaluate(part, objective, seed: int, layout, under: list) -> list:
+    """The evaluations of ``layout`` under some conditions of the band, in the baseline's process."""
+    with Evaluator(part, objective, seed=seed, jobs=1, quiet=True) as evaluator:
+        return evaluator.under(layout, under)
 
 
 def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full",
