@@ -120,6 +120,20 @@ def test_a_cloud_rebuilt_with_another_pose_is_what_the_raw_profiles_give(part_b)
     assert np.abs(rebuilt.points - scan.points).max() > 1e-4  # the bracket error moved the cloud
 
 
+def test_a_cloud_built_with_the_drawn_pose_is_the_scan_rebuilt_with_it(part_b):
+    # the evaluator builds a mounted sensor's cloud with the drawn pose straight from the sensor-frame
+    # measurements (Scanner.scan_levels(built=)); it must be the true pose's scan rebuilt, to rounding
+    T_drawn = part_b.layouts["hand"].poses[1]
+    T_true = T_drawn @ mounting_error(Condition(1.0, 0, 0.2e-3, np.deg2rad(0.1)), 4, 1)
+    scanner, rpy = part_scanner(part_b, threads=1), np.deg2rad([-1.2, 0.4, 2.0])
+    true, = scanner.scan_levels([T_true], part_b.motion, (5.0,), rpy=rpy, centre=part_b.rotation_centre, rng=8)[0]
+    built, = scanner.scan_levels([T_true], part_b.motion, (5.0,), rpy=rpy, centre=part_b.rotation_centre, rng=8, built=[T_drawn])[0]
+    rebuilt = rebuilt_with(true, T_drawn, part_b.motion.offsets())
+    assert np.array_equal(built.T_O_S, T_drawn) and np.array_equal(built.face, true.face)
+    assert np.abs(built.points - rebuilt.points).max() < 1e-12
+    assert np.abs(built.points - true.points).max() > 1e-5  # the bracket error is there
+
+
 def test_the_zeroed_cell_takes_the_constant_bias_off(part_b):
     # one sensor turned 0.2 deg on its bracket, noise all but off: the rebuilt cloud is the true one turned
     # rigidly (and sheared along the scan), so without zeroing every scan would be off by about that much;

@@ -10,7 +10,8 @@ a seed of their own (:func:`optipose.seeds.group_seed`), so no two models share 
 
 Under a :class:`~optipose.evaluate.conditions.Condition` the sensors' noise is scaled, and when the
 brackets are off each sensor scans from its true pose while its cloud is rebuilt with the drawn one
-(:func:`optipose.scan.scanner.rebuilt_with`); the cell is then zeroed on a master part at the nominal
+(built with it straight from the sensor-frame measurements: ``Scanner.scan_levels(built=...)``, what
+:func:`optipose.scan.scanner.rebuilt_with` gives without the round trip through the true pose); the cell is then zeroed on a master part at the nominal
 orientation: what the brackets add to each subset's estimate there is taken off every estimate
 (:meth:`_Worker.zero`).
 """
@@ -138,15 +139,11 @@ class _Worker:
                 continue
             scanner = self._scanner(model)
             out = scanner.scan_levels([poses[j] for j in idx], self.setup.motion, levels, rpy=rpy, centre=self.setup.centre,
-                                      offset=offset, rng=group_seed(seed, g), noise=noise, raw=False)  # fmt: skip
+                                      offset=offset, rng=group_seed(seed, g), noise=noise, raw=False,
+                                      built=[nominal[j] for j in idx] if mounted else None)  # ... and the cell builds its cloud with the drawn pose
             for level, level_out in zip(scans, out):
                 for j, scan in zip(idx, level_out):
                     level[j] = scan
-        if mounted:  # ... and the cell rebuilds its cloud with the drawn pose
-            from optipose.scan.scanner import rebuilt_with
-
-            shifts = self.setup.motion.offsets()
-            scans = [[rebuilt_with(scan, T, shifts) for scan, T in zip(level, nominal)] for level in scans]
         return scans
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:

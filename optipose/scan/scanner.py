@@ -176,11 +176,17 @@ class Scanner:
         rng: np.random.Generator | int | None = 0,
         noise: bool = True,
         raw: bool = True,
+        built: list[np.ndarray] | None = None,
     ) -> list[list[Scan]]:
         """:meth:`scan_many` at several noise levels at once: one list of scans per scale of ``noise_scales``,
         each as a scanner whose sensor's ``noise_sigma`` is that many times this one's would take it. The
         rays are cast once (where they hit does not depend on the noise), and every level draws the same
-        standard normals per ray, scaled by its σ."""
+        standard normals per ray, scaled by its σ.
+
+        built : per sensor, the pose (4×4 ``T_O_S``) its cloud is built with when it is not the pose it scans
+            from — a bracket off its drawing: the device measures in its own frame and the cell turns that into
+            O with the pose it believes (:func:`rebuilt_with` of the scan, without the round trip through the
+            true pose); each scan's ``T_O_S`` is then that pose."""
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
         seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
         T_O_P = part_motion(np.asarray(rpy, float), np.asarray(centre, float), offset)
@@ -197,12 +203,13 @@ class Scanner:
         keys = [np.uint64(int(k) | 1) for k in np.random.default_rng([seed, 0x5CA7]).integers(1, 2**63, len(poses))]
         keys = keys if noise else [np.uint64(0)] * len(poses)
         hits = list(run(lambda blk: self._block_hits(views[blk[0]], shifts, blk[1], blk[2]), blocks))
-        return [self._written(poses, views, blocks, hits, keys, shifts, T_O_P, rpy, raw, self.sensor.noise_sigma * scale)
+        built = poses if built is None else [validate_pose(T, f"built pose {i + 1}") for i, T in enumerate(built)]
+        return [self._written(built, blocks, hits, keys, shifts, T_O_P, rpy, raw, self.sensor.noise_sigma * scale)
                 for scale in noise_scales]  # fmt: skip
 
-    def _written(self, poses, views, blocks, hits, keys, shifts, T_O_P, rpy, raw: bool, sigma: float) -> list[Scan]:
+    def _written(self, poses, blocks, hits, keys, shifts, T_O_P, rpy, raw: bool, sigma: float) -> list[Scan]:
         """Phase 2 of a scan: every block's hits written straight into its slice of the scans' arrays (no
-        concatenation), with noise of ``sigma`` (m) at full intensity."""
+        concatenation), with noise of ``sigma`` (m) at full intensity, each sensor's points in O by ``poses``."""
         run = self._pool.map if self._pool else map
         n_col, scans, jobs = self.sensor.points_per_profile, [], []
         for j, T_O_S in enumerate(poses):
@@ -215,16 +222,16 @@ class Scanner:
             )  # fmt: skip
             start = 0
             for blk, h in mine:
-                jobs.append((scan, views[j], blk, h, slice(start, start + len(h[0]))))
+                jobs.append((scan, blk, h, slice(start, start + len(h[0]))))
                 start += len(h[0])
             scans.append(scan)
 
         def write(job):
-            scan, view, (j, k0, k1), (idx, T, inten, tri), sl = job
+            scan, (j, k0, k1), (idx, T, inten, tri), sl = job
             s = self.sensor
             write_points(
                 idx, T, inten, keys[j], NORMAL_QUANTILES, n_col, k0, shifts[k0:k1], self._ray_cos, *self._ray_lines, s.apex_z,
-                sigma, s.detection_threshold, s.z_resolution, view.T_O_S[:3, :3], view.T_O_S[:3, 3],
+                sigma, s.detection_threshold, s.z_resolution, scan.T_O_S[:3, :3], scan.T_O_S[:3, 3],
                 scan.raw[k0:k1].reshape(-1), scan.points[sl], scan.profile[sl], scan.column[sl],
             )  # fmt: skip
             scan.intensity[sl] = inten
