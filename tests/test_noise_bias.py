@@ -244,3 +244,50 @@ def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
     import time
 
     assert anchored(problem, hand, (0,), outcome, 1, n=2, evals=20, until=time.monotonic() - 1.0) == []
+
+
+def test_each_levels_statistics_are_those_of_the_level_alone(infos):
+    # predicted_stats' level_axis_stats (levels, axes, median/p75) must be what each noise level gives on its own
+    pair = [infos["F1", 5.0], infos["S3", 5.0]]
+    both = predicted_stats(pair, noise_scales=(1.0, 5.0))["level_axis_stats"]
+    for n, scale in enumerate((1.0, 5.0)):
+        alone = predicted_stats(pair, noise_scales=(scale,))
+        rows = [alone["subsets"].index(c) for c in alone["best_subset"]]
+        expected = [[alone["median_deg"][r, a], alone["p75_deg"][r, a]] for a, r in enumerate(rows)]
+        np.testing.assert_array_equal(both[n], expected)
+    assert np.all(both[1] > both[0])  # five times the noise: every statistic worse
+
+
+def test_the_maxmin_layouts_keep_hand_sensors_and_hold_each_statistic_best(part_b):
+    # under the robust band: k - 1 hand sensors stay exactly in their places, and the free place holds the
+    # pose whose smallest ratio hand / layout over the 12 statistics is at least that of every pose of the pool
+    from scipy.stats import qmc
+
+    from optipose.search.candidates import _gap_floors, _gap_violation, maxmin_anchored
+    from optipose.search.config import SearchConfig
+    from optipose.search.problem import SurrogateProblem
+
+    problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
+    problem.prefetch(qmc.Sobol(6, scramble=True, seed=3).random(48))
+    hand = part_b.layouts["hand"].poses
+    hand_info = [problem.info(problem.space.from_pose(T)) for T in hand]
+
+    def smallest(infos):
+        level = lambda xs: predicted_stats(xs, noise_scales=(1.0, 5.0), mounting=problem.band["mounting"])["level_axis_stats"]  # noqa: E731
+        target = min((level([hand_info[i] for i in c]) for c in [(0, 1), (0, 2), (1, 2)]), key=lambda t: t.max(axis=0).sum())
+        return float(np.min(target / level(infos)))
+
+    (found,) = maxmin_anchored(problem, hand, 2, n=1, evals=10)
+    kept = [i for i in (0, 1) if np.allclose(found.poses[i], hand[i], atol=1e-9)]
+    assert len(kept) == 1 and found.strategy == "hand-anchored, max-min"
+    free = 1 - kept[0]
+    mine = smallest([problem.info(found.sensor(i)) for i in (0, 1)])
+    floors = _gap_floors(problem, hand, 2)
+    others = []
+    for key, info in problem.cache.items():
+        u = np.concatenate([np.array(key) if i == free else problem.space.from_pose(hand[i]) for i in (0, 1)])
+        if isinstance(info, SensorInfo) and _gap_violation(problem, u, [free], 2, floors) == 0:
+            others.append(smallest([info if i == free else hand_info[i] for i in (0, 1)]))
+    assert len(others) > 10
+    # below 1 it is chosen by its smallest ratio; from 1 on (predicted no worse) by its sum at x1
+    assert mine >= min(max(others), 1.0) - 1e-12

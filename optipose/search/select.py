@@ -35,7 +35,7 @@ from optipose.evaluate.compare import excess, rank
 from optipose.evaluate.conditions import conditions
 from optipose.evaluate.robust import make_evaluator
 from optipose.evaluate.objective import reduced_objective
-from optipose.search.candidates import anchored, candidates
+from optipose.search.candidates import anchored, candidates, maxmin_anchored
 from optipose.search.confirm import Confirmer
 from optipose.search.polish import hand_start, polish
 from optipose.search.records import Found, IcpEvaluation, SearchOutcome
@@ -99,19 +99,22 @@ def _reference(k: int, hand, confirmer: Confirmer | None, records: list[IcpEvalu
 
 def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage) -> Pool:
     """Every candidate of k on the reduced protocol, until the time is up (the best hand-anchored one and the
-    surrogate's best at least): first the hand layout's used sensors with found ones in the other places
-    (:func:`optipose.search.candidates.anchored`)."""
+    surrogate's best at least): first, under a band, k − 1 hand sensors with the sensor that makes each statistic
+    hold best (:func:`optipose.search.candidates.maxmin_anchored`), then the hand layout's used sensors with
+    found ones in the other places (:func:`optipose.search.candidates.anchored`)."""
     pool: Pool = []
-    first = []
+    first, maxmin = [], []
     if reference is not None:
         used = tuple(sorted({i for a in reference.axes for i in a.subset}))
         cfg = study.problem.config
-        first = anchored(study.problem, baseline(part).poses, used, outcome, k, evals=cfg.anchor_evals,
-                         until=time.monotonic() + (deadline - time.monotonic()) / 2)  # fmt: skip
+        if not study.problem.objective.conditions.trivial:  # under a band: each statistic asked to hold, first
+            maxmin = maxmin_anchored(study.problem, baseline(part).poses, k, until=time.monotonic() + (deadline - time.monotonic()) / 4)
+        first = maxmin + anchored(study.problem, baseline(part).poses, used, outcome, k, evals=cfg.anchor_evals,
+                          until=time.monotonic() + (deadline - time.monotonic()) / 2)  # fmt: skip
     rest = candidates(study.problem, study.history, outcome, k, per_k, finalists)
     # whatever the clock says, the best hand-anchored layout and the surrogate's own best are evaluated: a
     # selection cut after the first of them would make the answer the machine's load, not the search's
-    required = {0, len(first)}
+    required = {0, len(maxmin), len(first)}
     for n, cand in enumerate(first + rest):
         if time.monotonic() > deadline and pool and n not in required:
             if n > len(first):

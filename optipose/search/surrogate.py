@@ -272,7 +272,8 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
                     memo: dict | None = None, keys: list | None = None) -> dict:  # fmt: skip
     """The surrogate's Table 1 for a layout: every non-empty subset's predicted per-axis median and 75th
     percentile (degrees), each axis's best subset, its per-axis score and the weighted score of the per-axis
-    best; ``level_axis_score`` (levels, 3) is each noise level's per-axis score on its own best subsets.
+    best; ``level_axis_score`` (levels, 3) is each noise level's per-axis score on its own best subsets, and
+    ``level_axis_stats`` (levels, 3, 2) their median and 75th percentile (degrees).
 
     noise_scales : the sensor noise σ times each of these; each statistic is the worst over them. The
     information matrix scales with 1/σ² and the voxel bias not at all, so a band costs one more 6×6 inverse
@@ -315,8 +316,8 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     # each level alone, its axes on that level's own best subsets: what the comparison with the hand layout
     # level by level sees (one level: the same numbers as ``axis_score``)
     per_level = np.rad2deg(levels)
-    level_axis = np.array([[median_weight * lv[s, 0, a] + p75_weight * lv[s, 1, a] for a, s in enumerate(_best_subsets(lv[:, 0], lv[:, 1]))]
-                           for lv in per_level])  # fmt: skip
+    level_stats = np.array([[lv[s, :, a] for a, s in enumerate(_best_subsets(lv[:, 0], lv[:, 1]))] for lv in per_level])
+    level_axis = median_weight * level_stats[:, :, 0] + p75_weight * level_stats[:, :, 1]
     return {
         "subsets": subsets,
         "median_deg": median,
@@ -324,6 +325,7 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
         "best_subset": [subsets[s] for s in best],
         "axis_score": axis,
         "level_axis_score": level_axis,
+        "level_axis_stats": level_stats,
         "score": float(np.dot(weights, axis)),
     }
 
