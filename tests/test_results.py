@@ -51,6 +51,21 @@ def test_a_found_layout_worse_in_sum_says_keep_and_a_bare_part_gets_no_verdict()
     assert Validation("full", 1, found=VALIDATION.found).verdict_lines() == []  # a bare STL: no hand layout, no verdict
 
 
+def test_a_found_layout_that_ties_the_hand_one_is_not_bought():
+    # a found triple whose choice measures every axis on the hand sensors it keeps ties the hand layout:
+    # no worse, but nothing gained, so the answer is to keep the hand layout, not to buy a bracket
+    from optipose.cli.search import verdict_headline
+    from optipose.evaluate.compare import bought
+
+    hand = _choice((0, 1, 2), S, [(0.1, 0.2), (0.05, 0.1), (0.1, 0.3)])
+    tie = Verdict(3, Choice(3, (0, 1, 2), "F1F2F3", hand.axes, hand.score), hand)
+    assert tie.no_worse and tie.tie and not bought(tie)
+    assert tie.line() == "k=3: found F1F2F3 ties hand S1S2S3 on every axis: keep S1S2S3"
+    assert verdict_headline(tie) == "k=3: KEEP hand S1S2S3: found F1F2F3 ties it on every axis"
+    better = Verdict(3, _choice((0, 1, 2), F, [(0.1, 0.2), (0.05, 0.1), (0.1, 0.25)]), hand)  # yaw p75 better, the rest equal
+    assert better.no_worse and not better.tie and bought(better)
+
+
 def test_dominance_excess_and_rank_agree():
     hand, found = VALIDATION.hand[1], VALIDATION.found[1]
     assert not dominates(found, hand) and dominates(hand, hand)

@@ -288,6 +288,8 @@ def verdict_headline(verdict, label: str = "hand", band=None, checked: bool = Tr
     from optipose.evaluate.compare import bought
 
     ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
+    if verdict.tie:
+        return f"k={verdict.k}: KEEP {label} {ref}: found {found} ties it on every axis"
     if verdict.no_worse and not bought(verdict, band):
         return f"k={verdict.k}: KEEP {label} {ref}: {found} {ratio:.2f}x better, but worse under the band"
     if verdict.no_worse and not checked:

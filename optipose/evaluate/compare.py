@@ -152,6 +152,12 @@ class Verdict:
         """No axis statistic worse than the reference's: replacing the reference loses nothing."""
         return dominates(self.found, self.reference)
 
+    @property
+    def tie(self) -> bool:
+        """Every axis statistic equal to the reference's (at every condition): replacing it gains nothing, as
+        when the choice measures every axis on hand sensors a found layout keeps in their places."""
+        return self.no_worse and dominates(self.reference, self.found)
+
     def line(self, reference: str = "hand") -> str:
         """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace;
         ``reference`` names the baseline (``hand``, ``conventional``)."""
@@ -164,6 +170,8 @@ class Verdict:
         robust = " at the worst over the band" if self.ratios() else ""
         than = f"x {'better' if ratio >= 1 else 'worse'} in sum{robust} than {reference} {ref}"
         head = f"k={self.k}: found {name} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
+        if self.tie:
+            return f"k={self.k}: found {name} ties {reference} {ref} on every axis: keep {ref}"
         if worse and ratio < 1:
             return f"{head} and worse on {'; '.join(worse)} mdeg: keep {ref}"
         if worse:
@@ -177,9 +185,10 @@ UNCHECKED = ("checked in the ideal cell only (the preset's noise, every bracket 
 
 
 def bought(verdict: Verdict, band: Verdict | None = None) -> bool:
-    """Whether to buy the found layout of ``verdict``: no worse than the reference on every axis, and, when the
-    search checked it under a band afterwards (``band``: the same k's verdict there), at every level too."""
-    return verdict.no_worse and (band is None or band.no_worse)
+    """Whether to buy the found layout of ``verdict``: no worse than the reference on every axis and better on
+    some (a tie gains nothing), and, when the search checked it under a band afterwards (``band``: the same
+    k's verdict there), no worse at every level too."""
+    return verdict.no_worse and not verdict.tie and (band is None or band.no_worse)
 
 
 def _mdeg_or_none(rad: float) -> str:

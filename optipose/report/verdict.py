@@ -42,7 +42,7 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     if unchecked and any(v.no_worse for v in verdicts):
         blocks.append(Paragraph(UNCHECKED[0].upper() + UNCHECKED[1:] + ".", "verdict mixed"))
     for v in verdicts:
-        refused = v.no_worse and not bought(v, band.get(v.k))  # no worse nominally, worse under the band
+        refused = v.no_worse and not bought(v, band.get(v.k))  # no worse nominally, worse under the band (or a tie)
         blocks.append(Paragraph(v.line(label), "verdict mixed" if refused else verdict_css(v)))
         if v.k in band:
             blocks.append(Paragraph("under the band: " + band[v.k].line(label), verdict_css(band[v.k])))
@@ -66,7 +66,9 @@ def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None,
     for v in verdicts:
         gaps = {g.axis for g in v.worse}
         decision = buy if v.no_worse else (f"keep {label}" if v.ratio < 1 else f"better in sum; keep {label} if no axis may get worse")
-        if v.no_worse and not bought(v, band.get(v.k)):
+        if v.tie:
+            decision = f"keep {label}: the found choice ties it"
+        elif v.no_worse and not bought(v, band.get(v.k)):
             worse = ", ".join(dict.fromkeys(g.axis for g in band[v.k].worse))
             decision = f"keep {label}: worse on {worse} under the band"
         rows.append((str(v.k), v.found.name, v.reference.name, f"{v.ratio:.2f}x",

@@ -19,7 +19,7 @@ from optipose.search.records import PENALTY, Evaluation, Found, SearchOutcome
 from optipose.search.surrogate import SensorInfo, predicted_stats
 from optipose.search.study import Stop
 
-__all__ = ["candidates", "distinct", "anchored", "maxmin_anchored"]
+__all__ = ["candidates", "distinct", "anchored", "maxmin_anchored", "kept_exactly"]
 
 
 def candidates(problem: SurrogateProblem, history: list[Evaluation], outcome: SearchOutcome, k: int, per_k: int,
@@ -126,7 +126,7 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
             if len(fill) > 1 and not all(apart(a, [b], 1e-9) for a, b in itertools.combinations(fill, 2)):
                 continue
             u6s = {i: hand_u[i] for i in keep} | dict(zip(free, fill))
-            found = _anchored_layout(problem, [u6s[i] for i in range(k)], free, floors)
+            found = _anchored_layout(problem, [u6s[i] for i in range(k)], free, floors, hand_poses)
             if found is not None:
                 these.append(found)
         if evals > 0 and these:
@@ -134,7 +134,7 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
             for found in these:
                 values[id(found)] = _anchored_value(problem, found.u, kept, k, floors)
             if time.monotonic() < until:
-                refined = _refined(problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors)
+                refined = _refined(problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors, hand_poses)
                 values[id(refined)] = _anchored_value(problem, refined.u, kept, k, floors)
                 these = these + [refined] if keep else [refined]  # nothing kept: the others are the search's own candidates
             elif not keep:
@@ -209,22 +209,32 @@ def maxmin_anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: 
             scored += seen
         if scored:
             r, u6 = min(scored, key=rank)
-            best.append((r, place(u6)))
+            best.append((r, place(u6), free))
     out = []
-    for _, u in sorted(best, key=rank)[:n]:
+    for _, u, free in sorted(best, key=lambda t: rank(t[:2]))[:n]:
         score = problem.score(u, constrained=False)
-        out.append(Found(k, "hand-anchored, max-min", u, problem.space.to_poses(u), score.value, score.stats))
+        out.append(Found(k, "hand-anchored, max-min", u, kept_exactly(problem, u, [free], hand_poses), score.value, score.stats))
     return out
 
 
-def _anchored_layout(problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict) -> Found | None:
+def kept_exactly(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]) -> list[np.ndarray]:
+    """The poses of a hand-anchored layout (6k,): the found sensors' from their numbers, and every other place
+    the hand sensor's pose itself. Through the [0, 1] numbers a pose comes back a few ulps off, and under
+    bracket errors ICP is chaotic at that level (README, "Run time"): a kept sensor would then measure
+    0.3 % (up to 5 %) off the hand layout's own, and a tie would not be one."""
+    poses = problem.space.to_poses(u)
+    return [poses[i] if i in free else np.array(hand_poses[i], dtype=float) for i in range(len(poses))]
+
+
+def _anchored_layout(problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict,
+                     hand_poses: list[np.ndarray]) -> Found | None:  # fmt: skip
     """The layout of these sensors (one (6,) per place) scored on the surrogate as given (the kept heads are
     the baseline's); None when a found head is too close to another."""
     u, k = np.concatenate(u6s), len(u6s)
     if _gap_violation(problem, u, free, k, floors) > 0:
         return None
     score = problem.score(u, constrained=False)
-    return Found(k, "hand-anchored", u, problem.space.to_poses(u), score.value, score.stats)
+    return Found(k, "hand-anchored", u, kept_exactly(problem, u, free, hand_poses), score.value, score.stats)
 
 
 def _gap_floors(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: int) -> dict:
@@ -261,7 +271,8 @@ def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int
     return stats["score"] + problem.shortfall(k, stats)
 
 
-def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals: int, until: float, floors: dict) -> Found:
+def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals: int, until: float, floors: dict,
+             hand_poses: list[np.ndarray]) -> Found:  # fmt: skip
     """``start`` with its found sensors moved by the local algorithm on :func:`_anchored_value`, the kept
     ones fixed; the best layout it met (``start`` itself when it met none better)."""
     slots = np.concatenate([np.arange(6 * i, 6 * i + 6) for i in range(k) if i not in kept])
@@ -283,7 +294,8 @@ def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals:
     infos = [kept[i] if i in kept else problem.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
     infos = [problem.info(u[6 * i : 6 * i + 6]) if isinstance(x, Violation) else x for i, x in enumerate(infos)]
     stats = predicted_stats(infos, *problem.weights, **problem.band)
-    return Found(k, "hand-anchored, refined", u, problem.space.to_poses(u), stats["score"], stats)
+    return Found(k, "hand-anchored, refined", u, kept_exactly(problem, u, [i for i in range(k) if i not in kept], hand_poses),
+                 stats["score"], stats)  # fmt: skip
 
 
 def distinct_sensors(sensors: list[np.ndarray], min_distance: float = 0.02) -> list[np.ndarray]:

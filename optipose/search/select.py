@@ -58,6 +58,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
     """
     end = time.monotonic() + max_time
     config = study.problem.config
+    band = not objective.conditions.trivial
     finalists, records = {}, []
     confirmer = Confirmer(part, objective, selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
     with make_evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
@@ -69,7 +70,7 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
             pool = _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage)
             if not pool:
                 continue
-            key, best, choice = min(pool, key=lambda t: t[0])
+            key, best, choice = min(pool, key=lambda t: _order(t, reference, band))
             polished = reference is not None and (key[0] or key[1] > reference.score / 2) and config.polish_evals > 0
             if polished:  # not yet no worse on every axis and 2x better in sum
                 best, choice = _polish(study, part, evaluator, pool, best, reference, records, on_stage)
@@ -82,6 +83,15 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
     if confirmer is not None:
         confirmer.adopt_subsets(study.problem, finalists, records, on_stage)
     return finalists, records
+
+
+def _order(entry, reference, band: bool) -> tuple:
+    """The selection's order of a pool entry (rank, layout, choice): no worse than the hand layout on every
+    axis first; under a band then the least excess over it (a layout is bought only when it is no worse at
+    every level, so there the lowest sum that loses an axis is the wrong pick: on A the greedy triple, 1.6x
+    better in sum on 14 scans, lost pitch by 3.6x under the band); then the lower score."""
+    (worse, score), _, choice = entry
+    return (worse, excess(choice, reference) if band and worse and reference is not None else 0.0, score)
 
 
 def _reference(k: int, hand, confirmer: Confirmer | None, records: list[IcpEvaluation], on_stage):
@@ -108,7 +118,7 @@ def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, ref
         used = tuple(sorted({i for a in reference.axes for i in a.subset}))
         cfg = study.problem.config
         if not study.problem.objective.conditions.trivial:  # under a band: each statistic asked to hold, first
-            maxmin = maxmin_anchored(study.problem, baseline(part).poses, k, until=time.monotonic() + (deadline - time.monotonic()) / 4)
+            maxmin = maxmin_anchored(study.problem, baseline(part).poses, k, until=deadline)  # the clock only as a safety net
         first = maxmin + anchored(study.problem, baseline(part).poses, used, outcome, k, evals=cfg.anchor_evals,
                           until=time.monotonic() + (deadline - time.monotonic()) / 2)  # fmt: skip
     rest = candidates(study.problem, study.history, outcome, k, per_k, finalists)
