@@ -447,6 +447,20 @@ def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_ev
     assert beside.stats.equals(here.stats) and beside.table == here.table
 
 
+def test_a_found_pair_inside_the_triple_in_another_order_shares_its_evaluation():
+    # hand-anchored layouts keep the hand poses exactly, so a found pair can be the triple's sensors in
+    # another order: validation evaluates the triple once and takes the pair's choice from it (sorted indices)
+    from optipose.search.validate import nested_groups, validate
+
+    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    hand = part.layouts["hand"]
+    layouts = {3: hand, 2: replace(hand, name="pair", sensors=(hand.sensors[2], hand.sensors[1]))}
+    assert nested_groups(layouts) == [[3, 2]]
+    validation = validate(part, objective, layouts, 2, 1)
+    assert validation.found[2].sensors == (1, 2) and validation.found[2].name == "S2S3"
+    assert validation.found[3].score == validation.hand[3].score  # the hand triple itself
+
+
 def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
     from optipose.search.validate import BaselineRun, validate
 
