@@ -119,7 +119,9 @@ def _restated_by_level(choice: Choice, levels: list[tuple[str, dict]], objective
 
 def choice_of(result, sensors: tuple[int, ...]) -> Choice:
     """The choice of exactly these sensors of an evaluated layout (each axis its best subset of them), from
-    an :class:`EvaluationResult` or a :class:`RobustResult` (then restated at each noise level)."""
+    an :class:`EvaluationResult` or a :class:`RobustResult` (then restated at each noise level). The sensors
+    are a set: in any order (a found pair can sit inside the found triple in another order)."""
+    sensors = tuple(sorted(sensors))
     if isinstance(result, EvaluationResult):
         return choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), result.objective.statistic, result.n_scans)
     objective = result.results[0][1].objective
