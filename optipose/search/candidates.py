@@ -229,7 +229,7 @@ def kept_exactly(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand
 def _anchored_poses(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]) -> list[np.ndarray]:
     """The poses :func:`anchored` gives its layouts: under a band the kept places hold the hand poses
     themselves (:func:`kept_exactly`); a nominal search keeps the poses its numbers give, as its answers were
-    measured (nominal ICP on the thin part C moves a selection's statistic by up to 20 % with those ulps, and
+    measured (nominal ICP on the thin part C moves a selection's statistic by up to 22 % with those ulps, and
     with it C's answer: README, "The search under the band")."""
     if problem.objective.conditions.trivial:
         return problem.space.to_poses(u)
