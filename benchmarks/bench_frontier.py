@@ -46,15 +46,11 @@ from optipose.search.surrogate import SensorInfo, predicted_stats
 
 
 def level_stats(infos, objective) -> np.ndarray:
-    """Per noise level, per axis, the predicted median and p75 (deg) of the axis's best subset: (levels, 3, 2)."""
+    """Per noise level, per axis, the predicted median and p75 (deg) of the axis's best subset at that level:
+    (levels, 3, 2), as the search's max-min candidates see them (``level_axis_stats``)."""
     band = objective.conditions
     mounting = (band.mounting_translation, band.mounting_rotation) if band.mounted else None
-    out = []
-    for scale in band.noise_scales:
-        stats = predicted_stats(infos, noise_scales=(scale,), mounting=mounting)
-        rows = [stats["subsets"].index(s) for s in stats["best_subset"]]
-        out.append([[stats["median_deg"][r, a], stats["p75_deg"][r, a]] for a, r in enumerate(rows)])
-    return np.array(out)
+    return predicted_stats(infos, noise_scales=band.noise_scales, mounting=mounting)["level_axis_stats"]
 
 
 def main() -> None:

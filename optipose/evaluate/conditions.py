@@ -28,7 +28,7 @@ from optipose.errors import ConfigError
 from optipose.seeds import mounting_seed
 from optipose.transforms import make_T, rpy_to_matrix
 
-__all__ = ["ConditionsConfig", "Condition", "conditions", "band_ends", "mounting_error", "conditions_from_table", "aggregate"]
+__all__ = ["ConditionsConfig", "Condition", "conditions", "by_draw", "band_ends", "mounting_error", "conditions_from_table", "aggregate"]
 
 _MM, _DEG = 1e-3, np.pi / 180
 
@@ -88,6 +88,16 @@ def conditions(cfg: ConditionsConfig) -> list[Condition]:
     """Every condition of the band: each noise level with each mounting draw (noise levels first)."""
     draws = list(range(cfg.mounting_draws)) if cfg.mounted else [None]
     return [Condition(s, d, cfg.mounting_translation, cfg.mounting_rotation) for s in cfg.noise_scales for d in draws]
+
+
+def by_draw(conditions: list[Condition]) -> list[list[Condition]]:
+    """The conditions grouped by what they share but the noise scale (a bracket draw at several noise
+    levels), in the order they first appear: the conditions one ray cast serves
+    (:meth:`optipose.evaluate.evaluator.Evaluator.under`)."""
+    groups: dict = {}
+    for c in conditions:
+        groups.setdefault(replace(c, noise_scale=1.0), []).append(c)
+    return list(groups.values())
 
 
 def band_ends(cfg: ConditionsConfig) -> ConditionsConfig:

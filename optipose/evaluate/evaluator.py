@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from optipose.evaluate.conditions import Condition
+from optipose.evaluate.conditions import Condition, by_draw
 from optipose.evaluate.assignment import Choice, best_choices
 from optipose.evaluate.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
@@ -166,18 +166,15 @@ class Evaluator:
         ``self(layout, condition)`` gives."""
         if not isinstance(layout, Layout):
             layout = Layout(tuple(SensorPose(f"S{i + 1}", np.asarray(T, float)) for i, T in enumerate(layout)), name="poses")
-        groups: dict = {}  # a condition at noise scale 1 -> the conditions that share its scans
-        for c in conditions:
-            groups.setdefault(replace(c, noise_scale=1.0), []).append(c)
         out = {}
-        for key, group in groups.items():
+        for group in by_draw(conditions):
             t0 = time.perf_counter()
             levels = tuple(dict.fromkeys(c.noise_scale for c in group))
-            setup = replace(self.setup, condition=replace(key, noise_scale=levels[0]))
+            setup = replace(self.setup, condition=group[0])
             outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels), _chunks(self.tasks(), self.jobs))
             wall = (time.perf_counter() - t0) / len(levels)
             for n, level in enumerate(levels):
-                out[replace(key, noise_scale=level)] = self._result(layout, [o[n] for o in outputs], wall)
+                out[replace(group[0], noise_scale=level)] = self._result(layout, [o[n] for o in outputs], wall)
         return [out[c] for c in conditions]
 
     def _result(self, layout: Layout, outputs: list[tuple], wall: float) -> EvaluationResult:

@@ -123,9 +123,9 @@ def choice_of(result, sensors: tuple[int, ...]) -> Choice:
     are a set: in any order (a found pair can sit inside the found triple in another order)."""
     sensors = tuple(sorted(sensors))
     if isinstance(result, EvaluationResult):
-        return choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), result.objective.statistic, result.n_scans)
+        return choose(sensors, result.layout.names, stats_by_key(result.stats), result.objective.statistic, result.n_scans)
     objective = result.results[0][1].objective
-    choice = choose(tuple(sensors), result.layout.names, stats_by_key(result.stats), objective.statistic, result.n_scans)
+    choice = choose(sensors, result.layout.names, stats_by_key(result.stats), objective.statistic, result.n_scans)
     return _restated_by_level(choice, _levels_by_key(result.results, objective), objective)
 
 

@@ -12,11 +12,10 @@ whatever runs it: the scans' noise comes from the seed and the scan's index, not
 from __future__ import annotations
 
 import logging
-from dataclasses import replace
 
 import numpy as np
 
-from optipose.evaluate.conditions import conditions
+from optipose.evaluate.conditions import by_draw, conditions
 from optipose.evaluate.evaluator import Evaluator, log_failures
 from optipose.evaluate.robust import choice_of, make_evaluator, robust_result
 from optipose.errors import WorkerError
@@ -80,9 +79,9 @@ class BaselineRun:
             return
         objective = validation_objective(objective, protocol)
         self._objective, self._conditions = objective, conditions(objective.conditions)
-        draws = list(dict.fromkeys(replace(c, noise_scale=1.0) for c in self._conditions))
-        shares = [draws[i :: max(1, min(processes, len(draws)))] for i in range(max(1, min(processes, len(draws))))]
-        self._shares = [[c for c in self._conditions if replace(c, noise_scale=1.0) in share] for share in shares]
+        draws = by_draw(self._conditions)
+        n = max(1, min(processes, len(draws)))
+        self._shares = [[c for group in draws[i::n] for c in group] for i in range(n)]
         try:
             for share in self._shares:
                 args = (part, objective, validation_seed(seed), layout, share)
