@@ -22,7 +22,7 @@ layout (the other places keep their hand sensors, each with its index's noise dr
 the choice of the kept sensors and the pose is compared. ``--icp-k`` limits the ICP to some k, ``--icp-kept``
 to kept sets by name (``S2,S1S3``).
 
-The surrogate's ranking agrees with ICP only to Spearman ρ ≈ 0.7–0.9 (README, "Surrogate quality"), so a
+The surrogate's ranking agrees with ICP only to Spearman ρ ≈ 0.7–0.9 (docs/method.md, 'How well the surrogate ranks layouts'), so a
 count here is the surrogate's view, not ICP's; a zero says the surrogate sees no such pose in the sample.
 Each axis takes its best subset at each noise level separately (the verdict fixes one subset per axis on the
 worst over the band), so the counts are, if anything, generous.

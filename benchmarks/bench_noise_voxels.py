@@ -2,7 +2,7 @@
 the objective's voxel down-sampling and without it (every raw point registered).
 
 Equal-weight voxel centroids turn noise along the ray into a bias that grows as σ² where faces cut voxels
-obliquely (README, "Noise through the voxels"). Default: part B's single sensor ``F1`` of the nominal quick
+obliquely (docs/conditions.md, 'Noise through the voxels'). Default: part B's single sensor ``F1`` of the nominal quick
 search (seed 0; a grazing view of few voxels, ``tests/test_noise_bias.py``) and hand S3 beside it.
 
     .venv/bin/python benchmarks/bench_noise_voxels.py [--part part_b] [--scales 1,2,3,5] [--seed 1] [--jobs 2]
@@ -23,9 +23,9 @@ from optipose.model.layout import Layout, SensorPose, load_layout
 from optipose.model.part import load_part
 from optipose.model.sensor import load_sensor
 
-F1 = np.array([[-0.383022221559, 0.663413948169, 0.642787609687, 0.014444444072],
-               [0.866025403784, 0.5, -0.0, 0.004080000091],
-               [-0.321393804843, 0.556670399226, -0.766044443119, -0.002792000008],
+F1 = np.array([[-0.383_022_221_559, 0.663_413_948_169, 0.642_787_609_687, 0.014_444_444_072],
+               [0.866_025_403_784, 0.5, -0.0, 0.004_080_000_091],
+               [-0.321_393_804_843, 0.556_670_399_226, -0.766_044_443_119, -0.002_792_000_008],
                [0.0, 0.0, 0.0, 1.0]])  # fmt: skip
 AXES = ("roll", "pitch", "yaw")
 

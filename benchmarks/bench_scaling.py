@@ -12,7 +12,7 @@ per orientation, and the peak memory; and the growth against the first rung of t
 - sensors: 1 to 6: the hand layout's S1, S2, S3, then the same three moved 8 mm along the motion
   (every subset is registered: 2^k - 1 of them, as Table 1's assignment needs).
 
-    .venv/bin/python benchmarks/bench_scaling.py [--axes mesh,length,sensors] [--max-faces 2000000]
+    .venv/bin/python benchmarks/bench_scaling.py [--axes mesh,length,sensors] [--max-faces N]   # N: default two million
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""NLopt global algorithms against random search on the surrogate, on the same evaluation budget (SPEC §6).
+"""NLopt global algorithms against random search on the surrogate, on the same evaluation budget (docs/method.md, "The search").
 
 Problems: one sensor (6 variables) on part_a, part_b and part_c, and two sensors placed jointly (12
 variables) on part_b, scored by :class:`optipose.search.problem.SurrogateProblem` with the ``paper`` objective and

@@ -1,4 +1,4 @@
-"""How well does the surrogate rank layouts against ICP? (SPEC §6)
+"""How well does the surrogate rank layouts against ICP? (docs/method.md, "The surrogate")
 
 Draws feasible layouts of ``--sensors`` sensors at random for a part (seeded), adds the part's hand-placed
 sensors (each alone, or each k of them), scores each with the surrogate and with the objective's own ICP on

@@ -1,4 +1,4 @@
-"""Rigid transforms and the orientation convention (SPEC §1).
+"""Rigid transforms and the orientation convention (docs/conventions.md).
 
 Roll, pitch, yaw are extrinsic rotations about x_O, y_O, z_O: ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
 Poses are 4×4 homogeneous matrices named by their frames, ``T_target_source`` maps points expressed in

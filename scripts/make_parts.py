@@ -1,11 +1,11 @@
-"""Build the three shipped parts (SPEC §7) as watertight meshes from named parameters.
+"""Build the three shipped parts (docs/parts.md) as watertight meshes from named parameters.
 
 Usage: ``.venv/bin/python scripts/make_parts.py [OUT_DIR]`` (default: the repo's ``parts/``). Writes
 ``OUT_DIR/part_a/part_a.stl`` etc., binary STL in **metres**. The CAD models of the paper are not
 published, so these are parametric re-creations with the paper's sizes and the features its text names.
 Lengths below are in millimetres (the constants say so); the meshes are scaled to metres on export.
 
-Object frame (SPEC §1): the part is carried along ``+x_O``; its length runs along x from 0 to L, its
+Object frame (docs/conventions.md): the part is carried along ``+x_O``; its length runs along x from 0 to L, its
 width along y centred on 0, its height along z from 0 (the bottom, where the flange holds it) up.
 
 The build is deterministic: manifold3d booleans on the same inputs give the same triangles, and the STL

@@ -1,6 +1,6 @@
 """Print nominal-scan point counts per sensor for the shipped parts' hand layouts.
 
-Usage: ``.venv/bin/python scripts/point_counts.py [PART ...] [--markdown]`` (the README's Parts table is
+Usage: ``.venv/bin/python scripts/point_counts.py [PART ...] [--markdown]`` (docs/parts.md's point counts are
 the ``--markdown`` output).
 """
 

@@ -27,7 +27,7 @@ fi
 
 # The lock file pins every package; --frozen refuses to drift from it. Byte-code is compiled here, once:
 # where PYTHONDONTWRITEBYTECODE is set (this machine sets it) every process, each evaluator worker
-# included, would otherwise compile every module it imports from source (README, "Start-up").
+# included, would otherwise compile every module it imports from source (benchmarks/README.md, "Start-up").
 uv sync --frozen --extra dev --extra bench -q --compile-bytecode
 .venv/bin/python -m compileall -q optipose >/dev/null
 echo "setup: ready (.venv/bin/optipose)"

@@ -17,11 +17,11 @@ from optipose.search.surrogate import Surrogate, SensorInfo, predicted_stats, pr
 from optipose.transforms import make_T, rpy_to_matrix
 
 # a single sensor found by the nominal quick search on part B (seed 0): a grazing view of few voxels whose
-# error at 5x the preset's noise ICP measured at 35.7 mdeg in sum against hand S3's 9.7 (README, "the noise's
+# error at 5x the preset's noise ICP measured at 35.7 mdeg in sum against hand S3's 9.7 (docs/conditions.md, "the noise's
 # own bias"); at the preset's noise it is the better of the two
-F1 = np.array([[-0.383022221559, 0.663413948169, 0.642787609687, 0.014444444072],
-               [0.866025403784, 0.5, -0.0, 0.004080000091],
-               [-0.321393804843, 0.556670399226, -0.766044443119, -0.002792000008],
+F1 = np.array([[-0.383_022_221_559, 0.663_413_948_169, 0.642_787_609_687, 0.014_444_444_072],
+               [0.866_025_403_784, 0.5, -0.0, 0.004_080_000_091],
+               [-0.321_393_804_843, 0.556_670_399_226, -0.766_044_443_119, -0.002_792_000_008],
                [0.0, 0.0, 0.0, 1.0]])  # fmt: skip
 
 

@@ -142,7 +142,7 @@ def _rz_ry_rx(rpy_deg):
 
 
 def test_the_xyz_rpy_shown_rebuilds_each_sensors_T_O_S(results):
-    """SPEC §1: R = Rz(yaw)·Ry(pitch)·Rx(roll), built here by hand from the numbers the report prints."""
+    """docs/conventions.md: R = Rz(yaw)·Ry(pitch)·Rx(roll), built here by hand from the numbers the report prints."""
     result = load_result(results["search"])
     md = (results["search"] / "report.md").read_text()
     shown = re.findall(r"# (\w+): X Y Z \(mm\), roll pitch yaw \(deg, extrinsic xyz\)\n([-0-9., ]+)", md)

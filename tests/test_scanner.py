@@ -1,4 +1,4 @@
-"""The virtual scanner against answers worked out by hand (SPEC §2–3)."""
+"""The virtual scanner against answers worked out by hand (docs/sensor.md)."""
 
 from __future__ import annotations
 
@@ -138,7 +138,7 @@ def distance_to_bracket(points: np.ndarray) -> np.ndarray:
 
 
 T_DIAG = np.array(  # the paper's S1 (eq. 1), R moved onto the bracket
-    [[0, 1, 0, 0.020], [0.7071068, 0, 0.7071068, -0.012], [0.7071068, 0, -0.7071068, 0.012], [0, 0, 0, 1]]
+    [[0, 1, 0, 0.020], [0.707_106_8, 0, 0.707_106_8, -0.012], [0.707_106_8, 0, -0.707_106_8, 0.012], [0, 0, 0, 1]]
 )
 
 

@@ -22,10 +22,10 @@ from optipose.search.study import SurrogateStudy
 from optipose.search.surrogate_search import run_search
 from optipose.search.surrogate import Surrogate, predicted_stats, rotation_sigma
 
-PAPER_B = {  # SPEC §7: z_S of the paper's S1, S2, S3 and their (alpha, beta, psi) in this parameterisation
-    "S1": ((0, 0.7071068, -0.7071068), (0, -45, 0)),
+PAPER_B = {  # docs/parts.md: z_S of the paper's S1, S2, S3 and their (alpha, beta, psi) in this parameterisation
+    "S1": ((0, 0.707_106_8, -0.707_106_8), (0, -45, 0)),
     "S2": ((0, 0, -1), (0, -90, 0)),
-    "S3": ((0, -0.7071068, -0.7071068), (0, -135, 0)),
+    "S3": ((0, -0.707_106_8, -0.707_106_8), (0, -135, 0)),
 }
 
 

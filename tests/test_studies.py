@@ -1,4 +1,4 @@
-"""Long studies (``pytest -m slow``): the claims the README makes about the search, re-measured."""
+"""Long studies (``pytest -m slow``): the claims docs/results.md makes about the search, re-measured."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from optipose.search.pipeline import run
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "part, ks",
-    [("part_a", (1, 2, 3)), ("part_b", (1, 2, 3)), ("part_c", (2, 3))],  # about 3, 3.3 and 1.8 minutes (session 12 CLI runs)
+    [("part_a", (1, 2, 3)), ("part_b", (1, 2, 3)), ("part_c", (2, 3))],  # run times: benchmarks/README.md, 'Whole commands'
 )
 def test_default_search_beats_the_hand_placed_layout(tmp_path, part, ks):
-    # README "Results on parts A, B and C": these found layouts are >= 2x better than the hand-placed
+    # docs/results.md, "The main command": these found layouts are >= 2x better than the hand-placed
     # sensors and no worse on any axis, on the held-out validation seed (C k = 1 is no worse on any axis
     # but only 1.2x better in sum: the tie with the hand S3).
     report = run(load_part(part), load_objective("paper"), config_from_budget("default", (1, 2, 3)), 0, SearchFolder(tmp_path), jobs=2)

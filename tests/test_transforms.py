@@ -1,4 +1,4 @@
-"""Frames and the orientation convention (SPEC §1), checked by hand and by property."""
+"""Frames and the orientation convention (docs/conventions.md), checked by hand and by property."""
 
 from __future__ import annotations
 

@@ -128,7 +128,7 @@ class DaskPool:
             except (OSError, TimeoutError):
                 self._client.close()
                 raise ConfigError(f"the Dask scheduler at {scheduler} has no workers (start some with `dask worker {scheduler}`)") from None
-            # every worker thread runs one trial (remote workers are started with --nthreads 1, README); as
+            # every worker thread runs one trial (remote workers are started with --nthreads 1: docs/batch.md, "On several machines"); as
             # many trials are kept in flight as there are worker threads now
             self.workers = sum(w["nthreads"] for w in self._client.scheduler_info()["workers"].values())
             self.plan = plan(self.workers, cores=self.workers, trial_jobs=trial_jobs)

@@ -8,7 +8,7 @@ task that raises gives a failed record (its error in one line) and leaves no fol
 on with the next trial.
 
 Results land on the file system the workers write to: a study on several machines needs its folder
-on a file system they share with the client (README, "Batch studies").
+on a file system they share with the client (docs/batch.md, "On several machines").
 """
 
 from __future__ import annotations

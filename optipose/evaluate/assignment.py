@@ -1,4 +1,4 @@
-"""Per-axis configuration assignment: the paper's Table 1 (SPEC §5).
+"""Per-axis configuration assignment: the paper's Table 1 (docs/method.md, "The assignment: the paper's Table 1").
 
 For a layout of n sensors every non-empty subset (2ⁿ − 1) has per-axis statistics. Within a choice C of
 k sensors, each axis takes the subset of C with the lowest median (ties: lowest 75th percentile); a

@@ -1,4 +1,4 @@
-"""Conditions a layout must survive (SPEC §9): a band of sensor noise and the brackets' mounting tolerance.
+"""Conditions a layout must survive (docs/conditions.md): a band of sensor noise and the brackets' mounting tolerance.
 
 An objective file's ``[conditions]`` table says which::
 

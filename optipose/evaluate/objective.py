@@ -1,6 +1,6 @@
 """Objective files: the perturbation protocol, the registration settings and the statistic, from TOML.
 
-An objective names everything that turns a layout into a number (SPEC §3–5). The shipped ones live in
+An objective names everything that turns a layout into a number (docs/method.md). The shipped ones live in
 ``objectives/<name>.toml`` (``paper`` reproduces the paper). Files speak degrees and millimetres
 (``*_deg``, ``*_mm`` keys); the typed config here is SI (radians, metres). See ``objectives/paper.toml``
 for every key with its meaning.

@@ -1,6 +1,6 @@
 """Per-axis orientation errors, their statistics, and which axes a cloud can observe at all.
 
-Errors are ``rpy_estimated − rpy_set`` (radians, signed; statistics use the magnitude, SPEC §4). A scan
+Errors are ``rpy_estimated − rpy_set`` (radians, signed; statistics use the magnitude, docs/method.md, "The evaluator"). A scan
 whose registration failed or did not converge is counted in ``n_failed``, never silently dropped: the
 median and 75th percentile (what Table 1 and every score use) count it as an error of ``FAILED_ERROR``
 (10°, worse than any measured one), so failures push a subset's order statistics up instead of leaving

@@ -1,7 +1,7 @@
 """The baseline a search and a report compare against: the part's hand-placed layout, or for a part
 without one (a bare STL) the **conventional placement** the shipped parts use.
 
-The conventional placement (SPEC §7, the paper's Part B): three sensors in one plane across the motion
+The conventional placement (docs/parts.md, the paper's Part B): three sensors in one plane across the motion
 (their laser lines across ``+x_O``, ``y_S = ±x_O``), R mid-length along x —
 
 * S1 looking down at 45° from ``-y`` at the part's left long top edge ``(x_c, y_min, z_max)``,

@@ -1,4 +1,4 @@
-"""Does a sensor head hit the part (swept along the scan) or a keep-out box? (SPEC §6 constraints)
+"""Does a sensor head hit the part (swept along the scan) or a keep-out box? (docs/method.md, "Constraints")
 
 The head is the sensor's oriented box (:meth:`SensorModel.head_box_corners`, in S) placed by ``T_O_S``.
 During a scan the part travels along ``+x_O`` by the motion's offsets, and so do its keep-outs (the flange

@@ -1,4 +1,4 @@
-"""Surface materials: returned laser intensity as a function of the angle of incidence (SPEC §2).
+"""Surface materials: returned laser intensity as a function of the angle of incidence (docs/sensor.md, "Materials").
 
 A material is a curve ``intensity(AoI)``; AoI is the angle between the laser ray and the surface
 normal, in radians (0 = head-on). Intensity is relative to a white diffuse reference. A curve comes

@@ -1,4 +1,4 @@
-"""Loading and checking part meshes; everything downstream is in metres (SPEC §1)."""
+"""Loading and checking part meshes; everything downstream is in metres (docs/conventions.md, "Units")."""
 
 from __future__ import annotations
 

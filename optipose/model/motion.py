@@ -1,4 +1,4 @@
-"""The scan's motion: the part carried along ``+x_O`` in equal steps while the sensors stay still (SPEC §3)."""
+"""The scan's motion: the part carried along ``+x_O`` in equal steps while the sensors stay still (docs/method.md, "The scan and the protocol")."""
 
 from __future__ import annotations
 

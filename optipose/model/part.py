@@ -79,7 +79,7 @@ class Part:
     mesh : ``trimesh.Trimesh`` in metres.
     material, sensor : preset names (or paths) for :class:`optipose.scan.scanner.Scanner`.
     motion : the scan's travel along +x_O.
-    rotation_centre : (3,) m, the centre of the orientation offsets (SPEC §3).
+    rotation_centre : (3,) m, the centre of the orientation offsets (docs/method.md, "The scan and the protocol").
     keepouts : boxes fixed to the part that sensor heads must avoid.
     layouts : named sensor layouts, e.g. ``layouts["hand"]`` (the paper-style baseline) or, without one,
         ``layouts["conventional"]`` (:func:`optipose.model.baseline.baseline` picks).

@@ -1,4 +1,4 @@
-"""The LLT sensor model: measuring trapezoid, laser fan, receiver and head box (SPEC §2).
+"""The LLT sensor model: measuring trapezoid, laser fan, receiver and head box (docs/sensor.md).
 
 Sensor frame S: origin at the middle-range point R, ``z_S`` from the head toward the part, ``x_S`` along
 the laser line, ``y_S = z_S × x_S``. The emitter window is at ``z_S = -reference_distance``. The laser

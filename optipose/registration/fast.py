@@ -167,7 +167,7 @@ class PlainBackend:
 class Cycle:
     """An ICP caught in a cycle. Where the clouds of several sensors disagree (a bracket off its drawn
     pose), some points sit on the edge between two faces' closest-point regions and change sides every
-    few steps: the pose then repeats with a period of 2 to ~10 steps, or jitters about one place, and
+    few steps: the pose then repeats with a period of a few steps, or jitters about one place, and
     the steps never fall below the tolerance. The registration has settled as far as it can when
 
     * the pose comes back within the tolerances to one it had up to ``window`` steps ago (a cycle), or

@@ -65,7 +65,7 @@ def voxel_centroids(points, size, origin):
             if v >= 0:
                 sums[v, 0], sums[v, 1], sums[v, 2] = s0, s1, s2
                 counts[v] = c
-            h = (key[i] * np.int64(-7046029254386353131)) >> 20 & (cap - 1)
+            h = (key[i] * np.int64(-7_046_029_254_386_353_131)) >> 20 & (cap - 1)
             while True:
                 v = table[h]
                 if v < 0:

@@ -1,5 +1,5 @@
 """Layouts as a robot program wants them: each sensor's 4×4 ``T_O_S`` and its XYZ (mm) + RPY (deg), with
-a copy button (SPEC §1: RPY extrinsic about x_O, y_O, z_O, ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``)."""
+a copy button (docs/conventions.md: RPY extrinsic about x_O, y_O, z_O, ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The virtual LLT scanner (SPEC §2–3, paper Algorithms 1–3).
+"""The virtual LLT scanner (docs/sensor.md, docs/method.md; paper Algorithms 1–3).
 
 The part is set to an orientation about a rotation centre and carried along ``+x_O`` in steps while the
 sensors stay still. Rather than moving the mesh, the scanner moves the rays into the part's frame, so

@@ -220,8 +220,8 @@ def maxmin_anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: 
 def kept_exactly(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]) -> list[np.ndarray]:
     """The poses of a hand-anchored layout (6k,): the found sensors' from their numbers, and every other place
     the hand sensor's pose itself. Through the [0, 1] numbers a pose comes back a few ulps off, and under
-    bracket errors ICP is chaotic at that level (README, "Run time"): a kept sensor would then measure
-    0.3 % (up to 5 %) off the hand layout's own, and a tie would not be one."""
+    bracket errors ICP is chaotic at that level (docs/conditions.md, 'The search under the band'): a kept sensor would then measure
+    a little off the hand layout's own, and a tie would not be one."""
     poses = problem.space.to_poses(u)
     return [poses[i] if i in free else np.array(hand_poses[i], dtype=float) for i in range(len(poses))]
 
@@ -229,8 +229,8 @@ def kept_exactly(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand
 def _anchored_poses(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]) -> list[np.ndarray]:
     """The poses :func:`anchored` gives its layouts: under a band the kept places hold the hand poses
     themselves (:func:`kept_exactly`); a nominal search keeps the poses its numbers give, as its answers were
-    measured (nominal ICP on the thin part C moves a selection's statistic by up to 22 % with those ulps, and
-    with it C's answer: README, "The search under the band")."""
+    measured (nominal ICP on the thin part C moves a selection's statistic with those ulps, and
+    with it C's answer: docs/conditions.md, "The search under the band")."""
     if problem.objective.conditions.trivial:
         return problem.space.to_poses(u)
     return kept_exactly(problem, u, free, hand_poses)

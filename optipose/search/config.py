@@ -33,7 +33,7 @@ class SearchConfig:
     alpha_max_deg: float = 60.0
     # the laser line may turn at most this far from across the motion (the angle between the line and the
     # plane normal to the scan axis): a line turned toward the motion re-scans its own strip, covers less
-    # of the part across the motion, and fools the surrogate (README, "The line-turn limit"); 90 turns the
+    # of the part across the motion, and fools the surrogate (docs/method.md, "Constraints"); 90 turns the
     # constraint off
     line_skew_max_deg: float = 60.0
     random_starts: int = 8  # extra random start points scored before each greedy stage
@@ -87,7 +87,7 @@ class SearchConfig:
 
 BUDGETS: dict[str, dict] = {
     # quick: greedy only, so the layouts are nested and one evaluation validates k = 1, 2, 3 (the hand
-    # layout's runs beside the search); a small screen finds basins DIRECT-L's 70 evaluations miss (README,
+    # layout's runs beside the search); a small screen finds basins DIRECT-L's 70 evaluations miss (docs/method.md,
     # "Budgets"); no check under the band, so its verdicts say they hold in the ideal cell only
     "quick": dict(
         global_evals=70, local_evals=20, max_time=25.0, random_starts=4, select_candidates=0, strategy="greedy",
@@ -106,12 +106,12 @@ BUDGETS: dict[str, dict] = {
 
 
 # Under a band of conditions every ICP evaluation runs each condition of the band's ends (4 for
-# objectives/robust.toml, with bracket errors ~2x a nominal condition's work each): the default budget then
+# objectives/robust.toml, each more work than a nominal condition: bracket errors slow ICP): the default budget then
 # spends its ICP work on the selection and the validation over the band, not on a polish and a
-# confirmation; the selection's statistic already pools every condition's scans (README, "The search
+# confirmation; the selection's statistic already pools every condition's scans (docs/conditions.md, "The search
 # under the band").
 BAND_BUDGETS: dict[str, dict] = {
-    # a sensor pose costs the band's surrogate ~5x a nominal one's (the noise and bracket terms): 4,096 screen
+    # a sensor pose costs the band's surrogate several nominal ones (the noise and bracket terms): 4,096 screen
     # poses would take the whole clock, and k = 1 and 2 got no greedy stage at all
     "default": dict(max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024, anchor_evals=80),
 }

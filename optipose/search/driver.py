@@ -1,4 +1,4 @@
-"""The NLopt driver: one way to run a global or local NLopt algorithm on [0, 1]ⁿ (SPEC §6).
+"""The NLopt driver: one way to run a global or local NLopt algorithm on [0, 1]ⁿ (docs/method.md, "The search").
 
 The objective records what it sees (a :class:`~optipose.search.study.SurrogateStudy` keeps the history
 and the best), so :func:`optimize` returns nothing; NLopt's own stops end quietly, a

@@ -1,5 +1,5 @@
 """The surrogate's bracket mounting-error term: how much a zeroed cell's estimate moves with the part's
-orientation when the sensors' brackets are off their drawings (SPEC §9, issue #13).
+orientation when the sensors' brackets are off their drawings (docs/conditions.md, issue #13).
 
 A sensor whose true pose is ``T_O_S @ E`` (E a small rigid error, rotation r and translation t in the
 sensor's frame) measures a surface point y (where it was, in O, when its profile was taken) as

@@ -189,7 +189,7 @@ def _study(part, objective, config, sink: ResultSink, resume: bool, on_eval) -> 
     def flush(_evaluation) -> None:
         # every _FLUSH_EVERY evaluations, but no sooner than _FLUSH_GAP s and 10x the last write's own time
         # after it: a write is the whole history and cache, so counting evaluations alone made the writes
-        # grow with the search (61 of 264 s of a default search on part B)
+        # grow with the search until they took a large share of its time
         now = time.monotonic()
         if len(study.history) - flushed["n"] >= _FLUSH_EVERY and now - flushed["at"] >= max(_FLUSH_GAP, 10 * flushed["took"]):
             _flush(sink, study)

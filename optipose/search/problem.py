@@ -77,7 +77,7 @@ class SurrogateProblem:
         self._given: dict = {}  # u key → SensorInfo of a sensor scored as given (:meth:`info`)
         self._subsets: dict = {} if subsets is None else subsets  # sensor subsets' predicted statistics (predicted_stats' memo)
         self._targets = dict(targets or {})
-        # the objective's band (SPEC §9): every predicted statistic is the worst over it, brackets off by the tolerance
+        # the objective's band (docs/conditions.md): every predicted statistic is the worst over it, brackets off by the tolerance
         band = objective.conditions
         self.band = dict(noise_scales=band.noise_scales, mounting=(band.mounting_translation, band.mounting_rotation) if band.mounted else None)
 
@@ -104,7 +104,7 @@ class SurrogateProblem:
         """Compute the sensors ``us`` (n, 6) not yet in the cache on ``threads`` threads (default: the cores),
         in order, a few per thread at a time, until ``time.monotonic()`` passes ``until``; scoring them later
         costs a lookup. The surrogate's scan, voxels and closest points run compiled and release the GIL:
-        two threads score 1.7x as many poses per second here. The cache ends the same as scoring them one
+        two threads score more poses per second than one. The cache ends the same as scoring them one
         by one."""
         import time
         from concurrent.futures import ThreadPoolExecutor
@@ -174,7 +174,7 @@ class SurrogateProblem:
 
     def _head_gaps(self, u: np.ndarray, violation: float) -> float:
         """``violation`` plus that of the head-to-head gap of every pair of sensors that is below ``head_gap``.
-        Two heads far enough apart that the exact test (SAT, ~20x dearer) cannot find them too close are not
+        Two heads far enough apart that the exact test (SAT, far dearer) cannot find them too close are not
         tested: disjoint bounding spheres when ``head_gap`` ≤ 0 (the boxes are disjoint, so SAT's gap is
         positive); otherwise centres d apart, d/√3 − 2·radius beyond the gap (along one of the first box's
         axes the centres are at least d/√3 apart, and SAT tests that axis)."""

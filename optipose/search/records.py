@@ -26,7 +26,7 @@ PENALTY = 1e3
 class EvalState(enum.Enum):
     FEASIBLE = "feasible"
     INFEASIBLE = "infeasible"  # a constraint is violated: never a result
-    FAILED = "failed"  # the evaluation itself gave no answer (e.g. no registration of an axis succeeded)
+    FAILED = "failed"  # the evaluation itself gave no answer (e.g. every registration of an axis failed)
 
 
 @dataclass(frozen=True)

@@ -88,8 +88,8 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
 def _order(entry, reference, band: bool) -> tuple:
     """The selection's order of a pool entry (rank, layout, choice): no worse than the hand layout on every
     axis first; under a band then the least excess over it (a layout is bought only when it is no worse at
-    every level, so there the lowest sum that loses an axis is the wrong pick: on A the greedy triple, 1.6x
-    better in sum on 14 scans, lost pitch by 3.6x under the band); then the lower score."""
+    every level, so there the lowest sum that loses an axis is the wrong pick: on A the greedy triple, better
+    in sum on 14 scans, lost pitch under the band); then the lower score."""
     (worse, score), _, choice = entry
     return (worse, excess(choice, reference) if band and worse and reference is not None else 0.0, score)
 

@@ -1,4 +1,4 @@
-"""Six numbers per sensor ↔ a sensor pose ``T_O_S`` (SPEC §6).
+"""Six numbers per sensor ↔ a sensor pose ``T_O_S`` (docs/method.md, "Parameterisation").
 
 Parameterisation, chosen for how LLT sensors are mounted around a part carried along ``+x_O``:
 

@@ -1,4 +1,4 @@
-"""The cheap surrogate for the global search: predicted per-axis orientation error of a layout (SPEC §6).
+"""The cheap surrogate for the global search: predicted per-axis orientation error of a layout (docs/method.md, "The surrogate").
 
 For one nominal scan per sensor, the point-to-plane information matrix
 
@@ -34,7 +34,7 @@ What the surrogate models, and why:
   all sensors). The predicted errors are |δ + σ·z| over the turns and fixed standard-normal quantiles z.
   Turning a scan is not re-scanning the turned part (which points are seen and how densely change a
   little), but it moves the edges through the grid as the protocol does; how close it comes to ICP is
-  measured by ``benchmarks/bench_surrogate_ranking.py`` (figures in the README).
+  measured by ``benchmarks/bench_surrogate_ranking.py`` (figures in docs/method.md, 'How well the surrogate ranks layouts').
 * **the noise's own bias.** A voxel's point is the equal-weight centroid of the raw points that fall in it,
   and the noise along each ray decides which do: where a face cuts a voxel obliquely the points pushed in
   and out do not balance, a bias that grows as σ² and that the information matrix cannot see (a grazing
@@ -42,7 +42,7 @@ What the surrogate models, and why:
   (``noise_band``, the band's top scale) voxelises each turn twice more with every raw point moved by +ε
   and by −ε along its ray (one draw, the same for both): the mean less the noise-free ΣJᵀr keeps what is
   even in the noise and cancels what is odd, and each level s adds (s / top)² of it. One draw is itself
-  noisy, and ICP's re-matching is not in it; README, "The surrogate's noise bias term", has its ranking.
+  noisy, and ICP's re-matching is not in it; docs/conditions.md, "The surrogate under the band", has its ranking.
 * **the brackets.** Under an objective whose band has a mounting tolerance, a sensor's true pose is off
   its drawing and the cell is zeroed on a master part; the change with orientation of the compromise
   between sensors whose clouds disagree is linearised in the bracket errors at the same turns and added as
@@ -136,7 +136,7 @@ class Surrogate:
         self.centre = np.asarray(part.rotation_centre, dtype=float)
         # the turns' grid shifts are fixed (not the search's seed), so a pose always scores the same
         turns = DEFAULT_TURNS if turns is None else np.asarray(turns, dtype=float).reshape(-1, 3)
-        shifts = np.random.default_rng(20221536).random((len(turns), 3)) * voxel
+        shifts = np.random.default_rng(20_221_536).random((len(turns), 3)) * voxel
         self.turns = turns
         self.motions = [part_motion(rpy, self.centre, shift) for rpy, shift in zip(turns, shifts)]
         self.noise_band = float(noise_band)  # the highest noise scale the objective's band asks for
@@ -217,7 +217,7 @@ class Surrogate:
         else:
             u = np.broadcast_to(T_O_S[:3, 2], scan.points.shape)
         inten = np.clip(scan.intensity.astype(float), s.detection_threshold, 1.0)
-        rng = np.random.default_rng(20221536)  # fixed, so a pose always scores the same
+        rng = np.random.default_rng(20_221_536)  # fixed, so a pose always scores the same
         eps = rng.standard_normal(len(scan)) * (s.noise_sigma * self.noise_band / np.sqrt(inten))
         out = np.zeros_like(G)
         for sign in (1.0, -1.0):

@@ -238,7 +238,7 @@ def _search(files: Path, out: Path, *more: str) -> list[str]:
 @pytest.mark.slow
 def test_a_search_killed_part_way_resumes_to_the_uninterrupted_result(files):
     # measured: 13 s uninterrupted; killed at the first flush of its history (100 evaluations of ~160 when
-    # it flushed every 100; since session 10 no sooner than 10 s apart, so here at the end of the surrogate
+    # it flushed every 100; now no sooner than 10 s apart, so here at the end of the surrogate
     # stage, before the ICP validation), then resumed; 23-30 s in all at nice 19 on the shared machine
     (files / "small_search.toml").write_text(SMALL_SEARCH)
     whole, killed = files / "search_whole", files / "search_killed"

@@ -85,7 +85,7 @@ def test_a_wrong_reference_shows_in_fitness_and_rmse(part_b, s1_cloud):
         mesh = load_part(other).mesh
         wrong = register(cloud, SurfaceReference(mesh.vertices, mesh.faces), cfg)
         # measured: RMSE 1.4 and 1.6 mm against 7.7 µm, fitness 0.99 and 0.85; the ICP still calls it
-        # converged (see README, "Stress tests": no RMSE threshold fails it)
+        # converged (see docs/testing.md, "Stress tests": no RMSE threshold fails it)
         assert wrong.rmse > 100 * right.rmse and wrong.fitness < 1.0
 
 
