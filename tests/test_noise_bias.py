@@ -17,8 +17,8 @@ from optipose.search.surrogate import Surrogate, SensorInfo, predicted_stats, pr
 from optipose.transforms import make_T, rpy_to_matrix
 
 # a single sensor found by the nominal quick search on part B (seed 0): a grazing view of few voxels whose
-# error at 5x the preset's noise ICP measured at 35.7 mdeg in sum against hand S3's 9.7 (docs/conditions.md, "the noise's
-# own bias"); at the preset's noise it is the better of the two
+# error at 5x the preset's noise ICP measured at 35.7 mdeg in sum against hand S3's 9.7 (docs/conditions.md,
+# "Noise through the voxels"); at the preset's noise it is the better of the two
 F1 = np.array([[-0.383_022_221_559, 0.663_413_948_169, 0.642_787_609_687, 0.014_444_444_072],
                [0.866_025_403_784, 0.5, -0.0, 0.004_080_000_091],
                [-0.321_393_804_843, 0.556_670_399_226, -0.766_044_443_119, -0.002_792_000_008],
