@@ -212,7 +212,7 @@ def _bias(choice: Choice, names: tuple, nominal: EvaluationResult, runs: list[di
 
 
 def _mean_errors(result: EvaluationResult, subsets: list[str]) -> list[float]:
-    """Per axis of BIAS_AXES the mean signed error (rad, m) of its subset's registrations that converged."""
+    """Per axis of BIAS_AXES the mean signed error (rad, m) of its subset's registrations marked ok."""
     rows = result.per_scan[result.per_scan["ok"]]
     out = []
     for axis, subset in zip(BIAS_AXES, subsets):

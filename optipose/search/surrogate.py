@@ -136,7 +136,7 @@ class Surrogate:
         self.centre = np.asarray(part.rotation_centre, dtype=float)
         # the turns' grid shifts are fixed (not the search's seed), so a pose always scores the same
         turns = DEFAULT_TURNS if turns is None else np.asarray(turns, dtype=float).reshape(-1, 3)
-        shifts = np.random.default_rng(20_221_536).random((len(turns), 3)) * voxel
+        shifts = np.random.default_rng(2022_1536).random((len(turns), 3)) * voxel
         self.turns = turns
         self.motions = [part_motion(rpy, self.centre, shift) for rpy, shift in zip(turns, shifts)]
         self.noise_band = float(noise_band)  # the highest noise scale the objective's band asks for
@@ -217,7 +217,7 @@ class Surrogate:
         else:
             u = np.broadcast_to(T_O_S[:3, 2], scan.points.shape)
         inten = np.clip(scan.intensity.astype(float), s.detection_threshold, 1.0)
-        rng = np.random.default_rng(20_221_536)  # fixed, so a pose always scores the same
+        rng = np.random.default_rng(2022_1536)  # fixed, so a pose always scores the same
         eps = rng.standard_normal(len(scan)) * (s.noise_sigma * self.noise_band / np.sqrt(inten))
         out = np.zeros_like(G)
         for sign in (1.0, -1.0):
