@@ -19,7 +19,7 @@ other, hold poses nobody mounts: β runs from +90° (looking up from under the p
 round to +90° again, with −90° (straight down) in the middle; ψ runs from −90° to 270° (both ends: the
 laser line along the motion, which sweeps nothing), with the receiver on the +x side (ψ = 0) at a quarter
 and on the −x side (ψ = 180°) at three quarters. With ψ in (−180°, 180°] instead, half of the
-receiver-on-−x poses sat at one face and half at the other: part B's best single sensor (ψ = −172°,
+receiver-on-−x poses sat at one face and half at the other: part B's best single sensor (receiver on −x,
 found by random sampling) was in a basin that ran off the box, and the search never reached it.
 """
 
