@@ -240,9 +240,9 @@ def test_the_surrogate_predicts_across_the_noise_band_without_rescanning():
     one = predicted_stats([SensorInfo(H, 10_000, 1_000)])
     five = predicted_stats([SensorInfo(H / 25, 10_000, 1_000)])
     band = predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0, 3.0, 5.0))
-    assert np.array_equal(band["median_deg"], five["median_deg"]) and band["score"] == five["score"]  # the worst is x5
-    assert np.allclose(five["median_deg"] / one["median_deg"], 5.0, rtol=1e-3)
-    assert np.array_equal(predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0,))["p75_deg"], one["p75_deg"])
+    assert np.array_equal(band.median_deg, five.median_deg) and band.score == five.score  # the worst is x5
+    assert np.allclose(five.median_deg / one.median_deg, 5.0, rtol=1e-3)
+    assert np.array_equal(predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0,)).p75_deg, one.p75_deg)
 
 
 def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():

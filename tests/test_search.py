@@ -107,7 +107,7 @@ def test_rotation_sigma_of_a_known_information_matrix():
 def test_flat_plate_surrogate_says_yaw_is_unobservable(flat_plate):
     plate, down = flat_plate
     info = Surrogate(plate).info(down)
-    roll, pitch, yaw = predicted_stats([info])["median_deg"][0]
+    roll, pitch, yaw = predicted_stats([info]).median_deg[0]
     # By hand: a voxel's point is the mean of the raw points in it, so on a plane the information is that
     # of all N = 80 profiles x 3200 columns raw points with σ = 2 µm (white, head-on: intensity ≈ 1).
     # Roll information is N·E[y²]/σ², y uniform over the line (half-width 17.36 mm at 1 mm beyond R);
