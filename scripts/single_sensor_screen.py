@@ -60,10 +60,10 @@ def main() -> None:
         info = problem.sensor(u)
         if isinstance(info, SensorInfo):
             stats = predicted_stats([info], *weights)
-            scored.append((stats.score, stats.axis_score, u))
+            scored.append((stats.score, stats.axis_score, u, stats))
     print(f"{len(scored)} of {args.samples} poses feasible, {time.monotonic() - t0:.0f} s")
     scored.sort(key=lambda t: t[0])
-    for score, axes, u in scored[: args.show]:
+    for score, axes, u, _ in scored[: args.show]:
         pose = problem.space.describe(problem.space.to_pose(u))
         print(f"  sum {1e3 * score:.3f} mdeg (hand / this {best_hand.score / score:.2f}), this / hand per axis {np.round(axes / target, 2)}: {pose}")
     dominating = [t for t in scored if np.all(t[1] <= target)]
@@ -89,7 +89,7 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
     # rank and polish on the search's own score with its per-axis penalty at margin 1 and weight 20
     config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)
     problem = SurrogateProblem(part, objective, config, problem.surrogate, cache=dict(problem.cache), targets={1: target})
-    key = lambda t: t[0] + problem.shortfall(1, {"axis_score": t[1]})  # noqa: E731
+    key = lambda t: t[0] + problem.shortfall(1, t[3])  # noqa: E731
     starts: list[np.ndarray] = []
     for t in sorted(scored, key=key):
         if len(starts) >= args.icp:

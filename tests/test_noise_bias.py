@@ -219,10 +219,10 @@ def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
     from optipose.search.problem import SurrogateProblem
 
     problem = SurrogateProblem(part_b, load_objective("paper"), SearchConfig(hand_margin=1.0, hand_weight=1.0))
-    stats = {"axis_score": np.array([1.0, 2.0, 3.0]), "level_axis_score": np.array([[1.0, 2.0, 3.0]])}
+    stats = replace(_STATED, axis_score=np.array([1.0, 2.0, 3.0]), level_axis_score=np.array([[1.0, 2.0, 3.0]]))
     one = problem.with_targets({1: np.array([[1.0, 1.0, 4.0]])})
     assert one.shortfall(1, stats) == pytest.approx(1.0)
-    band = {"axis_score": np.array([5.0, 5.0, 5.0]), "level_axis_score": np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]])}
+    band = replace(_STATED, axis_score=np.array([5.0, 5.0, 5.0]), level_axis_score=np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]]))
     targets = problem.with_targets({1: np.array([[1.0, 1.0, 1.0], [6.0, 6.0, 6.0]])})
     assert targets.shortfall(1, band) == pytest.approx(1.0)  # pitch at the first level, though 5 < 6 at the worst
 
