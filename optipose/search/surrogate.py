@@ -195,7 +195,7 @@ class Surrogate:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
         centroids v (in the part's frame), their surface normals n, signed distances r to the CAD surface
         and point-to-plane rows J = [(v − c) × n, n] about the rotation centre c."""
-        from optipose.registration.kernels import voxel_centroids
+        from optipose.registration.voxels import voxel_centroids
 
         turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
         v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
