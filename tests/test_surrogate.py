@@ -13,7 +13,7 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.registration.reference import SurfaceReference
 from optipose.registration import register, voxel_down
-from optipose.scan.scanner import part_scanner
+from optipose.scan.scanner import PartPose, part_scanner
 from optipose.search.surrogate import Surrogate, SensorInfo, bias_rotation, predicted_stats
 from optipose.transforms import invert_T, matrix_to_rpy
 
@@ -31,7 +31,7 @@ def _roll_errors_mdeg(part, cfg, reference, T, voxel: float, noise: bool) -> np.
     scanner = part_scanner(part)
     out = []
     for i, rpy in enumerate(np.deg2rad(np.array(TURNS, dtype=float))):
-        scan = scanner.scan(T, part.motion, rpy=rpy, centre=part.rotation_centre, rng=i + 1, noise=noise)
+        scan = scanner.scan(T, part.motion, PartPose(rpy, part.rotation_centre), rng=i + 1, noise=noise)
         cloud = voxel_down(scan.points, voxel) if voxel > 0 else scan.points[::4]
         T_est = invert_T(register(cloud, reference, cfg).T_target_source)
         out.append(matrix_to_rpy(T_est[:3, :3])[0] - rpy[0])
@@ -142,7 +142,7 @@ def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
 
     part, _, _ = part_b
     T = part.layouts["hand"].poses[0]
-    scan = part_scanner(part).scan(T, part.motion, centre=part.rotation_centre, noise=False)
+    scan = part_scanner(part).scan(T, part.motion, PartPose(centre=part.rotation_centre), noise=False)
     xi = np.array([3e-5, -2e-5, 4e-5, 2e-6, -3e-6, 1e-6])  # small: the rebuild is linear in it to ~1e-5
     true = replace(scan, T_O_S=T @ make_T(rpy_to_matrix(xi[:3]), xi[3:]))
     moved = rebuilt_with(true, T, part.motion.offsets()).points - scan.points

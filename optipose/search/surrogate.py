@@ -60,6 +60,7 @@ import numpy as np
 from scipy.stats import norm
 
 from optipose.model.motion import ScanMotion
+from optipose.scan.pose import PartPose
 from optipose.scan.scanner import Scanner
 from optipose.search.mounting import mounting_maps, mounting_variance
 from optipose.transforms import part_motion
@@ -154,7 +155,7 @@ class Surrogate:
 
     def info(self, T_O_S: np.ndarray) -> SensorInfo:
         """Information matrix of one sensor pose from a noise-free nominal scan."""
-        scan = self.scanner.scan(T_O_S, self.motion, centre=self.centre, noise=False)
+        scan = self.scanner.scan(T_O_S, self.motion, PartPose(centre=self.centre), noise=False)
         if len(scan) == 0:
             return SensorInfo(np.zeros((6, 6)), 0, 0)
         normals = self.scanner.normals(scan)
