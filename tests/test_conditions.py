@@ -248,7 +248,7 @@ def test_the_surrogate_predicts_across_the_noise_band_without_rescanning():
 def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():
     from optipose.evaluate.conditions import ConditionsConfig, band_ends
     from optipose.search.config import config_from_budget
-    from optipose.search.pipeline import search_objective
+    from optipose.search.objectives import search_objective
 
     band = ConditionsConfig((3.0, 1.0, 5.0, 2.0), 2e-4, 1e-3, 2)
     assert band_ends(band) == ConditionsConfig((1.0, 5.0), 2e-4, 1e-3, 2)
