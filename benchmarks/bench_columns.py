@@ -23,7 +23,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from optipose.model.part import load_part
-    from optipose.scan.scanner import part_scanner
+    from optipose.scan.scanner import PartPose, part_scanner
 
     part = load_part("part_b")
     poses = list(part.layouts["hand"].poses)
@@ -45,7 +45,7 @@ def main() -> None:
 
         scanner.caster.first_triangle, scanner.caster.occluded = cast, shade
         scanners[stride] = scanner
-    scan = lambda s: s.scan_many(poses, part.motion, rpy=rpy, centre=part.rotation_centre, rng=5)  # noqa: E731
+    scan = lambda s: s.scan_many(poses, part.motion, PartPose(rpy, part.rotation_centre), rng=5)  # noqa: E731
     clouds = {s: scan(scanners[s]) for s in strides}  # also compiles and warms
     rays = {s: dict(counts[s]) for s in strides}
     times = {s: [] for s in strides}

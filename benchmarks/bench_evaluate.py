@@ -29,12 +29,14 @@ def naive_orientation(scanner, part, layout, rpy, seed, target, voxel, max_iter)
     """One orientation the straightforward way: per subset, scan its sensors, merge, down-sample, ICP."""
     import open3d as o3d
 
+    from optipose.scan.pose import PartPose
+
     reg = o3d.pipelines.registration
     t_scan = t_reg = 0.0
     for k in range(1, len(layout) + 1):
         for subset in combinations(range(len(layout)), k):
             t0 = time.perf_counter()
-            scans = scanner.scan_many([layout.poses[j] for j in subset], part.motion, rpy=rpy, centre=part.rotation_centre, rng=seed)
+            scans = scanner.scan_many([layout.poses[j] for j in subset], part.motion, PartPose(rpy, part.rotation_centre), rng=seed)
             t1 = time.perf_counter()
             pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.vstack([s.points for s in scans])))
             src = pcd.voxel_down_sample(voxel)

@@ -173,9 +173,9 @@ def _surrogate_table(s: dict, weights) -> tuple[float, list, list]:
     from optipose.evaluate.assignment import UNOBSERVABLE_PENALTY
 
     (w, mw, pw), score, med, q = weights, 0.0, [], []
-    for a, sub in enumerate(s["best_subset"]):
-        j = s["subsets"].index(sub)
-        m, p = 1e3 * s["median_deg"][j, a], 1e3 * s["p75_deg"][j, a]
+    for a, sub in enumerate(s.best_subset):
+        j = s.subsets.index(sub)
+        m, p = 1e3 * s.median_deg[j, a], 1e3 * s.p75_deg[j, a]
         if m >= UNOBSERVABLE_MDEG:
             m = p = np.nan
             score += w[a] * 1e3 * np.rad2deg(UNOBSERVABLE_PENALTY) * (mw + pw)

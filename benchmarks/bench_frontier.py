@@ -50,7 +50,7 @@ def level_stats(infos, objective) -> np.ndarray:
     (levels, 3, 2), as the search's max-min candidates see them (``level_axis_stats``)."""
     band = objective.conditions
     mounting = (band.mounting_translation, band.mounting_rotation) if band.mounted else None
-    return predicted_stats(infos, noise_scales=band.noise_scales, mounting=mounting)["level_axis_stats"]
+    return predicted_stats(infos, noise_scales=band.noise_scales, mounting=mounting).level_axis_stats
 
 
 def main() -> None:

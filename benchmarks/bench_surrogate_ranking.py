@@ -78,7 +78,7 @@ def main() -> None:
     for label, (icp_score, icp_axes) in icp.items():
         print(f"-- against ICP, {label}")
         for name, stats in scores[label].items():
-            _report(name, np.array([s["score"] for s in stats]), np.array([s["axis_score"] for s in stats]), icp_score, icp_axes)
+            _report(name, np.array([s.score for s in stats]), np.array([s.axis_score for s in stats]), icp_score, icp_axes)
     n = len(layouts)
     print(f"time per layout: surrogate scans {1e3 * t_info / n:.0f} ms, ICP {args.protocol} protocol {t_icp / n:.2f} s")
 

@@ -49,9 +49,9 @@ def main() -> None:
     problem = SurrogateProblem(part, objective, SearchConfig())
     weights = problem.weights
     hand = {s.name: predicted_stats([problem.surrogate.info(np.asarray(s.T_O_S))], *weights) for s in part.layouts["hand"].sensors}
-    name, best_hand = min(hand.items(), key=lambda kv: kv[1]["score"])
-    target = best_hand["axis_score"]
-    print(f"{part.name}: best hand sensor {name}, predicted roll / pitch / yaw {np.round(1e3 * target, 3)} mdeg, sum {1e3 * best_hand['score']:.3f}")
+    name, best_hand = min(hand.items(), key=lambda kv: kv[1].score)
+    target = best_hand.axis_score
+    print(f"{part.name}: best hand sensor {name}, predicted roll / pitch / yaw {np.round(1e3 * target, 3)} mdeg, sum {1e3 * best_hand.score:.3f}")
 
     t0 = time.monotonic()
     points = qmc.Sobol(6, scramble=True, seed=args.seed).random(args.samples)
@@ -60,17 +60,17 @@ def main() -> None:
         info = problem.sensor(u)
         if isinstance(info, SensorInfo):
             stats = predicted_stats([info], *weights)
-            scored.append((stats["score"], stats["axis_score"], u))
+            scored.append((stats.score, stats.axis_score, u, stats))
     print(f"{len(scored)} of {args.samples} poses feasible, {time.monotonic() - t0:.0f} s")
     scored.sort(key=lambda t: t[0])
-    for score, axes, u in scored[: args.show]:
+    for score, axes, u, _ in scored[: args.show]:
         pose = problem.space.describe(problem.space.to_pose(u))
-        print(f"  sum {1e3 * score:.3f} mdeg (hand / this {best_hand['score'] / score:.2f}), this / hand per axis {np.round(axes / target, 2)}: {pose}")
+        print(f"  sum {1e3 * score:.3f} mdeg (hand / this {best_hand.score / score:.2f}), this / hand per axis {np.round(axes / target, 2)}: {pose}")
     dominating = [t for t in scored if np.all(t[1] <= target)]
-    twice = [t for t in dominating if t[0] <= best_hand["score"] / 2]
+    twice = [t for t in dominating if t[0] <= best_hand.score / 2]
     print(f"no worse than {name} on every axis: {len(dominating)}; of those, at least 2x better in sum: {len(twice)}")
     if dominating:
-        print(f"  best of those: hand / this {best_hand['score'] / dominating[0][0]:.2f} in sum")
+        print(f"  best of those: hand / this {best_hand.score / dominating[0][0]:.2f} in sum")
     if args.icp > 0:
         icp_check(part, objective, problem, scored, target, args)
 
@@ -89,7 +89,7 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
     # rank and polish on the search's own score with its per-axis penalty at margin 1 and weight 20
     config = replace(problem.config, hand_margin=1.0, hand_weight=20.0)
     problem = SurrogateProblem(part, objective, config, problem.surrogate, cache=dict(problem.cache), targets={1: target})
-    key = lambda t: t[0] + problem.shortfall(1, {"axis_score": t[1]})  # noqa: E731
+    key = lambda t: t[0] + problem.shortfall(1, t[3])  # noqa: E731
     starts: list[np.ndarray] = []
     for t in sorted(scored, key=key):
         if len(starts) >= args.icp:

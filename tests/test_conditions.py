@@ -16,7 +16,7 @@ from optipose.evaluate.objective import StatisticConfig, load_objective, reduced
 from optipose.evaluate.robust import evaluate_robust, robust_stats
 from optipose.model.part import load_part
 from optipose.model.sensor import load_sensor
-from optipose.scan.scanner import part_scanner, rebuilt_with
+from optipose.scan.scanner import PartPose, part_scanner, rebuilt_with
 from optipose.scan.profiles import profiles_to_points
 from optipose.transforms import matrix_to_rpy
 
@@ -69,11 +69,11 @@ def test_one_cast_gives_every_noise_level_exactly_as_a_scanner_of_that_noise(par
     # which must be what a scanner whose sensor has that many times the noise gives, bit for bit
     poses, rpy = part_b.layouts["hand"].poses, np.deg2rad([0.8, -0.4, 1.2])
     scanner = part_scanner(part_b, threads=1)
-    levels = scanner.scan_levels(poses, part_b.motion, (1.0, 5.0), rpy=rpy, centre=part_b.rotation_centre, rng=9)
+    levels = scanner.scan_levels(poses, part_b.motion, (1.0, 5.0), PartPose(rpy, part_b.rotation_centre), rng=9)
     sensor = load_sensor(part_b.sensor)
     noisier = part_scanner(part_b, sensor=replace(sensor, noise_sigma=sensor.noise_sigma * 5.0), threads=1)
     for level, alone in zip(levels, (scanner, noisier)):
-        for a, b in zip(level, alone.scan_many(poses, part_b.motion, rpy=rpy, centre=part_b.rotation_centre, rng=9)):
+        for a, b in zip(level, alone.scan_many(poses, part_b.motion, PartPose(rpy, part_b.rotation_centre), rng=9)):
             assert np.array_equal(a.points, b.points) and np.array_equal(a.raw, b.raw) and np.array_equal(a.face, b.face)
     assert not np.array_equal(levels[0][0].points, levels[1][0].points)  # the noise differs, the hits do not
     assert np.array_equal(levels[0][0].face, levels[1][0].face)
@@ -109,7 +109,7 @@ def test_a_cloud_rebuilt_with_another_pose_is_what_the_raw_profiles_give(part_b)
     T_drawn = part_b.layouts["hand"].poses[0]
     T_true = T_drawn @ mounting_error(Condition(1.0, 0, 0.5e-3, np.deg2rad(0.3)), 1, 0)
     scanner = part_scanner(part_b)
-    scan = scanner.scan(T_true, part_b.motion, centre=part_b.rotation_centre, rng=3)
+    scan = scanner.scan(T_true, part_b.motion, PartPose(centre=part_b.rotation_centre), rng=3)
     shifts = part_b.motion.offsets()
     assert np.array_equal(rebuilt_with(scan, T_true, shifts).points, scan.points) or np.allclose(
         rebuilt_with(scan, T_true, shifts).points, scan.points, atol=1e-12)  # fmt: skip
@@ -126,8 +126,8 @@ def test_a_cloud_built_with_the_drawn_pose_is_the_scan_rebuilt_with_it(part_b):
     T_drawn = part_b.layouts["hand"].poses[1]
     T_true = T_drawn @ mounting_error(Condition(1.0, 0, 0.2e-3, np.deg2rad(0.1)), 4, 1)
     scanner, rpy = part_scanner(part_b, threads=1), np.deg2rad([-1.2, 0.4, 2.0])
-    true, = scanner.scan_levels([T_true], part_b.motion, (5.0,), rpy=rpy, centre=part_b.rotation_centre, rng=8)[0]
-    built, = scanner.scan_levels([T_true], part_b.motion, (5.0,), rpy=rpy, centre=part_b.rotation_centre, rng=8, built=[T_drawn])[0]
+    true, = scanner.scan_levels([T_true], part_b.motion, (5.0,), PartPose(rpy, part_b.rotation_centre), rng=8)[0]
+    built, = scanner.scan_levels([T_true], part_b.motion, (5.0,), PartPose(rpy, part_b.rotation_centre), rng=8, built=[T_drawn])[0]
     rebuilt = rebuilt_with(true, T_drawn, part_b.motion.offsets())
     assert np.array_equal(built.T_O_S, T_drawn) and np.array_equal(built.face, true.face)
     assert np.abs(built.points - rebuilt.points).max() < 1e-12
@@ -240,15 +240,15 @@ def test_the_surrogate_predicts_across_the_noise_band_without_rescanning():
     one = predicted_stats([SensorInfo(H, 10_000, 1_000)])
     five = predicted_stats([SensorInfo(H / 25, 10_000, 1_000)])
     band = predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0, 3.0, 5.0))
-    assert np.array_equal(band["median_deg"], five["median_deg"]) and band["score"] == five["score"]  # the worst is x5
-    assert np.allclose(five["median_deg"] / one["median_deg"], 5.0, rtol=1e-3)
-    assert np.array_equal(predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0,))["p75_deg"], one["p75_deg"])
+    assert np.array_equal(band.median_deg, five.median_deg) and band.score == five.score  # the worst is x5
+    assert np.allclose(five.median_deg / one.median_deg, 5.0, rtol=1e-3)
+    assert np.array_equal(predicted_stats([SensorInfo(H, 10_000, 1_000)], noise_scales=(1.0,)).p75_deg, one.p75_deg)
 
 
 def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():
     from optipose.evaluate.conditions import ConditionsConfig, band_ends
     from optipose.search.config import config_from_budget
-    from optipose.search.pipeline import search_objective
+    from optipose.search.objectives import search_objective
 
     band = ConditionsConfig((3.0, 1.0, 5.0, 2.0), 2e-4, 1e-3, 2)
     assert band_ends(band) == ConditionsConfig((1.0, 5.0), 2e-4, 1e-3, 2)

@@ -21,7 +21,7 @@ from optipose.seeds import group_seed
 from optipose.model.layout import Layout, SensorPose
 from optipose.model.motion import ScanMotion
 from optipose.registration import voxel_down
-from optipose.scan.scanner import Scanner
+from optipose.scan.scanner import PartPose, Scanner
 
 DOWN = np.array([[0, 1, 0, 0.015], [1, 0, 0, 0.0], [0, 0, -1, 0.002], [0, 0, 0, 1.0]])  # R on the top face
 TILTED = np.array([[0, 1, 0, 0.015], [0.8, 0, 0.6, -0.004], [0.6, 0, -0.8, 0.002], [0, 0, 0, 1.0]])
@@ -156,7 +156,7 @@ def test_a_sensor_naming_another_model_is_scanned_with_it(plate, objective, seri
     pd.testing.assert_frame_equal(mixed.points[mixed.points["sensor_index"] < 2].reset_index(drop=True), serial.points)
     alone = Scanner(plate.mesh, "keyence-lj-x8060", plate.material)
     for i, rpy, offset, seed, _ in tasks:
-        scan = alone.scan(DOWN, plate.motion, rpy=rpy, centre=plate.rotation_centre, offset=offset, rng=group_seed(seed, 1))
+        scan = alone.scan(DOWN, plate.motion, PartPose(rpy, plate.rotation_centre, offset), rng=group_seed(seed, 1))
         row = mixed.points[(mixed.points["scan"] == i) & (mixed.points["sensor"] == "S3")].iloc[0]
         assert row["n_points"] == len(scan.points)
         assert row["n_points_down"] == len(voxel_down(scan.points, ev.objective.registration.voxel_size))

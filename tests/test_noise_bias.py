@@ -87,7 +87,7 @@ def infos(part_b):
 
 
 def _score(info, scale):
-    return predicted_stats([info], noise_scales=(scale,))["score"]
+    return predicted_stats([info], noise_scales=(scale,)).score
 
 
 def test_without_a_band_there_is_no_noise_bias_term(infos):
@@ -133,12 +133,15 @@ def test_the_search_gives_the_surrogate_the_bands_top(part_b):
 
 
 # -- hand-anchored candidates ---------------------------------------------------------------------------
+_STATED = predicted_stats([SensorInfo(np.eye(6), 1, 1)])  # a stage's layouts carry a prediction; these tests never read it
+
+
 def _outcome(problem, sensors):
     from optipose.search.records import Found, SearchOutcome
 
-    found = {1: Found(1, "greedy", problem.space.from_pose(F1), [F1], 0.0, {"score": 0.0})}
+    found = {1: Found(1, "greedy", problem.space.from_pose(F1), [F1], 0.0, _STATED)}
     found |= {len(sensors) + 1: Found(len(sensors) + 1, "greedy", np.concatenate([problem.space.from_pose(T) for T in [F1, *sensors]]),
-                                      [F1, *sensors], 0.0, {"score": 0.0})}  # fmt: skip
+                                      [F1, *sensors], 0.0, _STATED)}  # fmt: skip
     return SearchOutcome(found, {}, {}, {}, [])
 
 
@@ -216,10 +219,10 @@ def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
     from optipose.search.problem import SurrogateProblem
 
     problem = SurrogateProblem(part_b, load_objective("paper"), SearchConfig(hand_margin=1.0, hand_weight=1.0))
-    stats = {"axis_score": np.array([1.0, 2.0, 3.0]), "level_axis_score": np.array([[1.0, 2.0, 3.0]])}
+    stats = replace(_STATED, axis_score=np.array([1.0, 2.0, 3.0]), level_axis_score=np.array([[1.0, 2.0, 3.0]]))
     one = problem.with_targets({1: np.array([[1.0, 1.0, 4.0]])})
     assert one.shortfall(1, stats) == pytest.approx(1.0)
-    band = {"axis_score": np.array([5.0, 5.0, 5.0]), "level_axis_score": np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]])}
+    band = replace(_STATED, axis_score=np.array([5.0, 5.0, 5.0]), level_axis_score=np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]]))
     targets = problem.with_targets({1: np.array([[1.0, 1.0, 1.0], [6.0, 6.0, 6.0]])})
     assert targets.shortfall(1, band) == pytest.approx(1.0)  # pitch at the first level, though 5 < 6 at the worst
 
@@ -235,7 +238,7 @@ def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
     problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
     hand = part_b.layouts["hand"].poses
     far = np.clip(problem.space.from_pose(hand[2]) + 0.02, 0.0, 1.0)
-    outcome = SearchOutcome({1: Found(1, "greedy", far, problem.space.to_poses(far), 0.0, {"score": 0.0})}, {}, {}, {}, [])
+    outcome = SearchOutcome({1: Found(1, "greedy", far, problem.space.to_poses(far), 0.0, _STATED)}, {}, {}, {}, [])
     assert anchored(problem, hand, (0,), outcome, 1) == []
     (one,) = anchored(problem, hand, (0,), outcome, 1, n=2, evals=20)
     assert one.strategy == "hand-anchored, refined" and one.k == 1
@@ -249,11 +252,11 @@ def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
 def test_each_levels_statistics_are_those_of_the_level_alone(infos):
     # predicted_stats' level_axis_stats (levels, axes, median/p75) must be what each noise level gives on its own
     pair = [infos["F1", 5.0], infos["S3", 5.0]]
-    both = predicted_stats(pair, noise_scales=(1.0, 5.0))["level_axis_stats"]
+    both = predicted_stats(pair, noise_scales=(1.0, 5.0)).level_axis_stats
     for n, scale in enumerate((1.0, 5.0)):
         alone = predicted_stats(pair, noise_scales=(scale,))
-        rows = [alone["subsets"].index(c) for c in alone["best_subset"]]
-        expected = [[alone["median_deg"][r, a], alone["p75_deg"][r, a]] for a, r in enumerate(rows)]
+        rows = [alone.subsets.index(c) for c in alone.best_subset]
+        expected = [[alone.median_deg[r, a], alone.p75_deg[r, a]] for a, r in enumerate(rows)]
         np.testing.assert_array_equal(both[n], expected)
     assert np.all(both[1] > both[0])  # five times the noise: every statistic worse
 
@@ -273,7 +276,7 @@ def test_the_maxmin_layouts_keep_hand_sensors_and_hold_each_statistic_best(part_
     hand_info = [problem.info(problem.space.from_pose(T)) for T in hand]
 
     def smallest(infos):
-        level = lambda xs: predicted_stats(xs, noise_scales=(1.0, 5.0), mounting=problem.band["mounting"])["level_axis_stats"]  # noqa: E731
+        level = lambda xs: predicted_stats(xs, noise_scales=(1.0, 5.0), mounting=problem.band["mounting"]).level_axis_stats  # noqa: E731
         target = min((level([hand_info[i] for i in c]) for c in [(0, 1), (0, 2), (1, 2)]), key=lambda t: t.max(axis=0).sum())
         return float(np.min(target / level(infos)))
 

@@ -9,7 +9,7 @@ import trimesh
 from optipose.model.material import load_material
 from optipose.scan.profiles import EMPTY, profiles_to_points, read_profiles, write_profiles
 from optipose.model.motion import ScanMotion
-from optipose.scan.scanner import Scanner
+from optipose.scan.scanner import PartPose, Scanner
 from optipose.model.sensor import load_sensor
 from optipose.transforms import invert_T, part_motion, transform_points
 
@@ -109,11 +109,11 @@ def test_tilted_plate_past_the_materials_aoi_limit_returns_nothing():
     motion = ScanMotion(2 * MM)
     # Pitch the plate about y_O through R: the laser meets it at AoI ≈ pitch (the fan's own spread is
     # in the y-z plane and adds at most 6.3°, in quadrature).
-    past = Scanner(mesh, SENSOR, material).scan(T_DOWN, motion, rpy=np.deg2rad([0, limit + 3, 0]))
+    past = Scanner(mesh, SENSOR, material).scan(T_DOWN, motion, PartPose(np.deg2rad([0, limit + 3, 0])))
     assert len(past) == 0
     # The same geometry is measured when the material allows it, so it is the material that drops out.
-    assert len(Scanner(mesh, SENSOR, "white-diffuse").scan(T_DOWN, motion, rpy=np.deg2rad([0, limit + 3, 0]))) > 0
-    within = Scanner(mesh, SENSOR, material).scan(T_DOWN, motion, rpy=np.deg2rad([0, limit - 10, 0]))
+    assert len(Scanner(mesh, SENSOR, "white-diffuse").scan(T_DOWN, motion, PartPose(np.deg2rad([0, limit + 3, 0])))) > 0
+    within = Scanner(mesh, SENSOR, material).scan(T_DOWN, motion, PartPose(np.deg2rad([0, limit - 10, 0])))
     assert len(within) > 0.9 * motion.n_profiles * 3200
 
 
@@ -147,11 +147,25 @@ def test_zero_noise_gives_exact_surface_points(bracket, rpy_deg):
     scanner = Scanner(bracket, SENSOR, "white-diffuse")
     rpy = np.deg2rad(rpy_deg)
     centre = np.array([0.02, 0.0, 0.01])
-    scan = scanner.scan(T_DIAG, ScanMotion(40 * MM), rpy=rpy, centre=centre, noise=False)
+    scan = scanner.scan(T_DIAG, ScanMotion(40 * MM), PartPose(rpy, centre), noise=False)
     assert len(scan) > 10_000
     # back into the part's own frame, every point must lie on the CAD surface
     local = transform_points(invert_T(part_motion(rpy, centre)), scan.points)
     assert distance_to_bracket(local).max() < 1e-12
+
+
+def test_the_part_pose_is_one_record(bracket):
+    # where the part stands (orientation about a centre, then an offset) travels as one PartPose: the scan
+    # carries its pose, and the old loose (rpy, centre, offset) arguments are refused, not misread as a seed
+    rpy, centre, offset = np.deg2rad([0.5, -1.0, 0.3]), np.array([0.02, 0.0, 0.01]), np.array([1e-3, 0.0, -0.5e-3])
+    pose = PartPose(rpy, centre, offset)
+    assert np.array_equal(pose.T_O_P, part_motion(rpy, centre, offset))
+    assert np.array_equal(PartPose().T_O_P, np.eye(4))
+    scanner = Scanner(bracket, SENSOR, "white-diffuse")
+    scan = scanner.scan(T_DIAG, ScanMotion(10 * MM), pose, noise=False)
+    assert np.array_equal(scan.T_O_P, pose.T_O_P) and np.array_equal(scan.rpy, rpy)
+    with pytest.raises(TypeError, match="PartPose"):
+        scanner.scan(T_DIAG, ScanMotion(10 * MM), rpy)
 
 
 def test_noisy_points_lie_on_the_surface_within_the_noise(bracket):
@@ -217,7 +231,7 @@ def test_empty_points_use_the_device_marker(tmp_path):
 def test_normals_follow_the_rotated_part():
     scanner = Scanner(plate(0.0), SENSOR, "white-diffuse")
     rpy = np.deg2rad([1.5, -2.0, 0.5])
-    scan = scanner.scan(T_DOWN, ScanMotion(2 * MM), rpy=rpy, noise=False)
+    scan = scanner.scan(T_DOWN, ScanMotion(2 * MM), PartPose(rpy), noise=False)
     normals = scanner.normals(scan)
     expected = part_motion(rpy, np.zeros(3))[:3, 2]  # the plate's +z, rotated
     assert len(scan) > 0 and np.allclose(normals, expected, atol=1e-12)
@@ -252,8 +266,8 @@ def test_casting_only_anchor_columns_gives_the_same_points_as_casting_every_colu
     every, anchors = part_scanner(part, column_stride=1), part_scanner(part, column_stride=stride)
     for rpy_deg in ([0.0, 0.0, 0.0], [1.7, -1.3, 0.9]):
         rpy = np.deg2rad(rpy_deg)
-        a = every.scan_many(poses, part.motion, rpy=rpy, centre=part.rotation_centre, rng=3)
-        b = anchors.scan_many(poses, part.motion, rpy=rpy, centre=part.rotation_centre, rng=3)
+        a = every.scan_many(poses, part.motion, PartPose(rpy, part.rotation_centre), rng=3)
+        b = anchors.scan_many(poses, part.motion, PartPose(rpy, part.rotation_centre), rng=3)
         for x, y in zip(a, b):
             assert len(x) > 10_000
             np.testing.assert_array_equal(x.points, y.points)
@@ -294,6 +308,6 @@ def test_profiles_whose_fan_misses_the_parts_box_cast_no_ray_and_change_nothing(
             return _first(origins, *args)
 
         scanner.caster.first_triangle = counted
-    a, b = (s.scan(pose, part.motion, rpy=np.deg2rad([0.7, -0.4, 1.1]), centre=part.rotation_centre, rng=4) for s in scanners.values())
+    a, b = (s.scan(pose, part.motion, PartPose(np.deg2rad([0.7, -0.4, 1.1]), part.rotation_centre), rng=4) for s in scanners.values())
     np.testing.assert_array_equal(a.points, b.points)
     assert len(a) > 10_000 and cast["box"] < 0.5 * cast["everything"]  # 4 of 5 profiles miss; anchors are most of the rest

@@ -107,7 +107,7 @@ def test_rotation_sigma_of_a_known_information_matrix():
 def test_flat_plate_surrogate_says_yaw_is_unobservable(flat_plate):
     plate, down = flat_plate
     info = Surrogate(plate).info(down)
-    roll, pitch, yaw = predicted_stats([info])["median_deg"][0]
+    roll, pitch, yaw = predicted_stats([info]).median_deg[0]
     # By hand: a voxel's point is the mean of the raw points in it, so on a plane the information is that
     # of all N = 80 profiles x 3200 columns raw points with σ = 2 µm (white, head-on: intensity ≈ 1).
     # Roll information is N·E[y²]/σ², y uniform over the line (half-width 17.36 mm at 1 mm beyond R);
@@ -431,7 +431,8 @@ def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_ev
     # the check under the band after a nominal search runs the hand layout's bracket draws in processes of
     # their own (each draw's noise levels together): the result must be RobustEvaluator's, condition by condition
     from optipose.evaluate.robust import RobustEvaluator
-    from optipose.search.validate import BaselineRun, band_objective
+    from optipose.search.objectives import band_objective
+    from optipose.search.validate import BaselineRun
     from optipose.seeds import validation_seed
 
     part = load_part("part_b")
@@ -558,11 +559,35 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
     row = trial_results(out, TrialSpec("part_b", "search", "paper", 2, "default", 2))  # a batch study's row of it
     assert row["band_ratio"] == pytest.approx(saved.band_verdicts()[2].ratio) and row["band_no_worse"] == saved.band_verdicts()[2].no_worse
     # a search under a band of its own validates under it; no second check
-    from optipose.search.validate import band_objective
+    from optipose.search.objectives import band_objective
 
     assert band_objective(load_objective("robust"), str(band_file)) is None and band_objective(objective, "") is None
     with pytest.raises(ConfigError, match="unknown objective"):
         band_objective(objective, "no-such-band")
+
+
+def test_each_stage_objective_is_derived_in_one_place():
+    # the table of optipose.search.objectives: the surrogate as given; selection and polish on the reduced
+    # protocol, confirmation on the full one, both at the band's ends; validation on the whole band
+    from optipose.evaluate.conditions import band_ends
+    from optipose.evaluate.objective import reduced_objective
+    from optipose.search.objectives import STAGES, stage_objective
+
+    robust = load_objective("robust")
+    for objective in (load_objective("paper"), robust):
+        stage = {name: stage_objective(objective, name, band="robust") for name in STAGES}
+        assert stage["surrogate"] is objective and stage["validation"] is objective
+        ends = objective.conditions if objective.conditions.trivial else band_ends(objective.conditions)
+        assert stage["confirmation"].conditions == ends and stage["confirmation"].protocol == objective.protocol
+        assert repr(stage["selection"]) == repr(stage["polish"]) == repr(reduced_objective(stage["confirmation"]))
+        assert repr(stage_objective(objective, "validation", "reduced")) == repr(reduced_objective(objective))
+        # a check under another band only after a nominal search, with that band's conditions
+        assert (stage["band"] is None) == (not objective.conditions.trivial)
+    band = stage_objective(load_objective("paper"), "band", band="robust")
+    assert band.conditions == robust.conditions and band.protocol == load_objective("paper").protocol
+    assert stage_objective(band, "selection").conditions.noise_scales == (min(robust.conditions.noise_scales), max(robust.conditions.noise_scales))
+    with pytest.raises(ValueError, match="no stage"):
+        stage_objective(robust, "polishing")
 
 
 def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought():

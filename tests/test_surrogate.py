@@ -3,6 +3,7 @@ bracket mounting term (linear in the bracket errors, zeroed with the cell, kept 
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -12,7 +13,7 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.registration.reference import SurfaceReference
 from optipose.registration import register, voxel_down
-from optipose.scan.scanner import part_scanner
+from optipose.scan.scanner import PartPose, part_scanner
 from optipose.search.surrogate import Surrogate, SensorInfo, bias_rotation, predicted_stats
 from optipose.transforms import invert_T, matrix_to_rpy
 
@@ -30,7 +31,7 @@ def _roll_errors_mdeg(part, cfg, reference, T, voxel: float, noise: bool) -> np.
     scanner = part_scanner(part)
     out = []
     for i, rpy in enumerate(np.deg2rad(np.array(TURNS, dtype=float))):
-        scan = scanner.scan(T, part.motion, rpy=rpy, centre=part.rotation_centre, rng=i + 1, noise=noise)
+        scan = scanner.scan(T, part.motion, PartPose(rpy, part.rotation_centre), rng=i + 1, noise=noise)
         cloud = voxel_down(scan.points, voxel) if voxel > 0 else scan.points[::4]
         T_est = invert_T(register(cloud, reference, cfg).T_target_source)
         out.append(matrix_to_rpy(T_est[:3, :3])[0] - rpy[0])
@@ -86,10 +87,10 @@ def test_bias_of_a_subset_is_the_step_of_its_summed_equations():
         r = rng.normal(size=(3, 50))
         infos.append(SensorInfo(np.eye(6) * 1e12, 10_000, 100, J.T @ J, r @ J))
     stats = predicted_stats(infos)
-    both = stats["subsets"].index((0, 1))
+    both = stats.subsets.index((0, 1))
     delta = bias_rotation(infos[0].A + infos[1].A, infos[0].G + infos[1].G)
     # with σ ≈ 0 (huge H), the median |error| is the median of |δ| over the three phases
-    assert np.allclose(stats["median_deg"][both], np.rad2deg(np.median(np.abs(delta), axis=0)), rtol=1e-3)
+    assert np.allclose(stats.median_deg[both], np.rad2deg(np.median(np.abs(delta), axis=0)), rtol=1e-3)
 
 
 def test_plane_seen_head_on_has_no_voxel_bias(flat_plate):
@@ -112,6 +113,27 @@ def hand_b_infos(part_b):
     return [surrogate.info(T) for T in part.layouts["hand"].poses]
 
 
+def test_the_prediction_record_is_consistent(hand_b_infos):
+    # the fields of one Prediction agree with each other: the per-axis best subsets are the paper's
+    # assignment (lowest median, ties by p75), the axis scores are theirs, and the score is their weighted sum
+    weights, median_weight, p75_weight = (1.0, 2.0, 0.5), 1.0, 0.5
+    p = predicted_stats(hand_b_infos, weights, median_weight, p75_weight, noise_scales=(1.0, 3.0, 5.0), mounting=MOUNTING)
+    n = len(hand_b_infos)
+    assert p.subsets == tuple(c for r in range(1, n + 1) for c in itertools.combinations(range(n), r))
+    assert p.median_deg.shape == p.p75_deg.shape == (2**n - 1, 3) and p.axis_score.shape == (3,)
+    assert p.level_axis_score.shape == (3, 3) and p.level_axis_stats.shape == (3, 3, 2)
+    for a, best in enumerate(p.best_subset):
+        row = p.subsets.index(best)
+        assert min(zip(p.median_deg[:, a], p.p75_deg[:, a])) == (p.median_deg[row, a], p.p75_deg[row, a])
+        assert p.axis_score[a] == median_weight * p.median_deg[row, a] + p75_weight * p.p75_deg[row, a]
+    assert p.score == float(np.dot(weights, p.axis_score))
+    # each level on its own best subsets: no level's best median is above the band's (the worst over levels)
+    assert np.array_equal(p.level_axis_score, median_weight * p.level_axis_stats[..., 0] + p75_weight * p.level_axis_stats[..., 1])
+    assert np.all(p.level_axis_stats[..., 0].max(axis=0) <= p.median_deg.min(axis=0))
+    with pytest.raises(AttributeError):
+        p.score = 0.0  # frozen
+
+
 def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
     # independent reference: the scanner's own rebuild of a cloud whose sensor stood off its drawn pose
     from optipose.scan.scanner import rebuilt_with
@@ -120,7 +142,7 @@ def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
 
     part, _, _ = part_b
     T = part.layouts["hand"].poses[0]
-    scan = part_scanner(part).scan(T, part.motion, centre=part.rotation_centre, noise=False)
+    scan = part_scanner(part).scan(T, part.motion, PartPose(centre=part.rotation_centre), noise=False)
     xi = np.array([3e-5, -2e-5, 4e-5, 2e-6, -3e-6, 1e-6])  # small: the rebuild is linear in it to ~1e-5
     true = replace(scan, T_O_S=T @ make_T(rpy_to_matrix(xi[:3]), xi[3:]))
     moved = rebuilt_with(true, T, part.motion.offsets()).points - scan.points
@@ -134,16 +156,16 @@ def test_without_mounting_the_prediction_is_todays(hand_b_infos):
     from optipose.search.surrogate import _axis_stats, rotation_sigma
 
     stats = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0))
-    assert all(np.array_equal(stats[key], predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=None)[key])
+    assert all(np.array_equal(getattr(stats, key), getattr(predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=None), key))
                for key in ("median_deg", "p75_deg", "axis_score"))  # fmt: skip
-    for s, c in enumerate(stats["subsets"]):
+    for s, c in enumerate(stats.subsets):
         delta = bias_rotation(sum(hand_b_infos[i].A for i in c), sum(hand_b_infos[i].G for i in c))
         H = sum(hand_b_infos[i].H for i in c)
         m = np.maximum(*[_axis_stats(rotation_sigma(H / k**2), delta)[0] for k in (1.0, 5.0)])
-        assert np.array_equal(stats["median_deg"][s], np.rad2deg(m))
+        assert np.array_equal(stats.median_deg[s], np.rad2deg(m))
     # a zero tolerance is no term at all
     zero = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=(0.0, 0.0))
-    assert np.array_equal(zero["median_deg"], stats["median_deg"]) and np.array_equal(zero["p75_deg"], stats["p75_deg"])
+    assert np.array_equal(zero.median_deg, stats.median_deg) and np.array_equal(zero.p75_deg, stats.p75_deg)
 
 
 def test_one_sensors_bracket_translation_is_zeroed_away(hand_b_infos):
@@ -172,7 +194,7 @@ def test_mounting_term_grows_linearly_with_the_tolerance(hand_b_infos):
     assert np.allclose(np.sqrt(two), 2 * np.sqrt(one), rtol=1e-9)  # standard deviation ∝ tolerance
     # in the prediction: the pair's error grows with the tolerance, toward the term alone when it dominates
     pair = [hand_b_infos[0], hand_b_infos[2]]
-    p75 = [predicted_stats(pair, mounting=(f * MOUNTING[0], f * MOUNTING[1]))["p75_deg"][2] for f in (0.0, 1.0, 4.0, 8.0)]
+    p75 = [predicted_stats(pair, mounting=(f * MOUNTING[0], f * MOUNTING[1])).p75_deg[2] for f in (0.0, 1.0, 4.0, 8.0)]
     assert np.all(np.diff(np.array(p75), axis=0) >= 0) and np.all(p75[3] > p75[0])
     assert np.allclose(p75[3] / p75[2], 2.0, rtol=0.15)
 
@@ -190,8 +212,8 @@ def test_search_cache_keeps_the_mounting_term(tmp_path, hand_b_infos):
         assert all(np.array_equal(getattr(loaded[key], f), getattr(cache[key], f)) for f in ("H", "A", "G", "A_turns", "N_turns"))
     assert loaded[(0.4,) * 6].N_turns is None and loaded[(0.3,) * 6] == ("clearance", 1.5)
     pair = [loaded[(0.1,) * 6], loaded[(0.2,) * 6]]
-    assert np.array_equal(predicted_stats(pair, mounting=MOUNTING)["p75_deg"],
-                          predicted_stats([hand_b_infos[0], hand_b_infos[2]], mounting=MOUNTING)["p75_deg"])  # fmt: skip
+    assert np.array_equal(predicted_stats(pair, mounting=MOUNTING).p75_deg,
+                          predicted_stats([hand_b_infos[0], hand_b_infos[2]], mounting=MOUNTING).p75_deg)  # fmt: skip
     # a cache from before the mounting term is not reused: its poses would score without it
     data = dict(np.load(tmp_path / "cache.npz"))
     np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k not in ("A_turns", "N_turns")})
@@ -275,6 +297,6 @@ def test_a_subset_met_before_is_looked_up_with_the_same_numbers():
         looked_up = predicted_stats(chosen, memo=memo, keys=[f"S{i + 1}" for i in order], **kw)
         computed = predicted_stats(chosen, **kw)
         for name in ("median_deg", "p75_deg", "axis_score", "level_axis_score"):
-            assert np.array_equal(looked_up[name], computed[name]), (order, name)
-        assert looked_up["score"] == computed["score"] and looked_up["best_subset"] == computed["best_subset"]
+            assert np.array_equal(getattr(looked_up, name), getattr(computed, name)), (order, name)
+        assert looked_up.score == computed.score and looked_up.best_subset == computed.best_subset
     assert len(memo) == 3 + 2 + 2 + 1 + 0  # S1 S2 S1S2; S3 S1S3; S2S3 S1S2S3; S3S1 (another order); S2 met already

@@ -57,7 +57,7 @@ def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path |
 
     from optipose.model.collision import check_sensors_outside
     from optipose.model.part import load_part
-    from optipose.scan.scanner import part_scanner
+    from optipose.scan.scanner import PartPose, part_scanner
 
     if out and out.suffix.lower() not in CLOUD_SUFFIXES:  # refuse before the work, not after
         raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
@@ -66,7 +66,7 @@ def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path |
     check_sensors_outside(the_part, the_layout)
     scanner = part_scanner(the_part, sensor, material)
     rpy = np.deg2rad(rpy_deg)
-    scans = scanner.scan_many(the_layout.poses, the_part.motion, rpy, the_part.rotation_centre, rng=seed, noise=noise)
+    scans = scanner.scan_many(the_layout.poses, the_part.motion, PartPose(rpy, the_part.rotation_centre), rng=seed, noise=noise)
 
     console = Console()
     console.print(_summary_table(the_part, scanner, the_layout, scans, list(rpy_deg)))

@@ -381,6 +381,6 @@ def _strategies_table(outcome, label: str = "hand"):
                                [("k", "right"), ("greedy", "right"), ("joint", "right"), (_short(label), "right"), ("winner", "right")])  # fmt: skip
     for k in sorted(outcome.found):
         g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
-        fmt = lambda f: f"{1e3 * f.stats['score']:.3f}" if f is not None and f.stats else "-"  # noqa: E731
+        fmt = lambda f: f"{1e3 * f.stats.score:.3f}" if f is not None and f.stats else "-"  # noqa: E731
         strategies.add_row(str(k), fmt(g), fmt(j), fmt(h), outcome.found[k].strategy)
     return strategies

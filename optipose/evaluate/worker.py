@@ -31,6 +31,7 @@ from optipose.evaluate.statistics import unobservable_axes
 from optipose.model.layout import Layout
 from optipose.registration import Matches, backend_for, grid_origin, register, remove_outliers, voxel_down
 from optipose.registration.backends import combined_start
+from optipose.scan.pose import PartPose
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion
 
@@ -138,8 +139,8 @@ class _Worker:
             if not idx:
                 continue
             scanner = self._scanner(model)
-            out = scanner.scan_levels([poses[j] for j in idx], self.setup.motion, levels, rpy=rpy, centre=self.setup.centre,
-                                      offset=offset, rng=group_seed(seed, g), noise=noise, raw=False,
+            out = scanner.scan_levels([poses[j] for j in idx], self.setup.motion, levels, PartPose(rpy, self.setup.centre, offset),
+                                      rng=group_seed(seed, g), noise=noise, raw=False,
                                       built=[nominal[j] for j in idx] if mounted else None)  # ... and the cell builds its cloud with the drawn pose
             for level, level_out in zip(scans, out):
                 for j, scan in zip(idx, level_out):

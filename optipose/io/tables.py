@@ -80,7 +80,7 @@ def surrogate_frame(outcome) -> pd.DataFrame:
     for k, f in sorted(outcome.found.items()):
         for label, g in (("found", f), ("greedy", outcome.greedy.get(k)), ("joint", outcome.joint.get(k)), ("hand", outcome.hand.get(k))):
             if g is not None and g.stats:
-                rows.append({"k": k, "layout": label, "fidelity": "surrogate", "score_deg": g.stats["score"], "penalised_deg": g.score})
+                rows.append({"k": k, "layout": label, "fidelity": "surrogate", "score_deg": g.stats.score, "penalised_deg": g.score})
     return pd.DataFrame(rows)
 
 

@@ -5,7 +5,10 @@
 - :mod:`~optipose.registration.backends` — :func:`register` and the back-ends by name
   (:mod:`~optipose.registration.fast`, :mod:`~optipose.registration.open3d_icp`);
 - :mod:`~optipose.registration.result` — the :class:`Registration` and :class:`Matches` records;
-- :mod:`~optipose.registration.config` — :class:`RegistrationConfig`, the settings an objective file resolves to.
+- :mod:`~optipose.registration.config` — :class:`RegistrationConfig`, the settings an objective file resolves to;
+- the compiled kernels, one module per concept: :mod:`~optipose.registration.voxels` (voxel centroids),
+  :mod:`~optipose.registration.closest_surface` and :mod:`~optipose.registration.closest_samples` (closest
+  points on the CAD surface, nearest reference samples), :mod:`~optipose.registration.normal_equations` (one ICP step's passes).
 
 Importing this package is light: SciPy, numba and Open3D load when a back-end first runs.
 """

@@ -2,7 +2,7 @@
 point-to-point (Kabsch on closest points, the paper's method) or point-to-plane (a linearised 6×6 solve
 per step), from identity.
 
-:class:`FastBackend` (``fast``) runs each step as three compiled passes (:mod:`optipose.registration.kernels`):
+:class:`FastBackend` (``fast``) runs each step as three compiled passes (:mod:`optipose.registration.normal_equations`):
 move the cloud, find closest points from the faces of the previous step (``reference.nearest``), sum the
 normal equations, whose ``AᵀA`` at the last step is also the information matrix.
 :class:`PlainBackend` (``plain``) is the same loop in numpy on ``closest``/``follow``: the readable
@@ -43,7 +43,7 @@ class FastBackend:
                  start: tuple[np.ndarray, np.ndarray] | None = None) -> Registration:  # fmt: skip
         """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity.
         ``start``: (T (4, 4), ids (n,)) a pose to start from instead, and each point's match there as a hint."""
-        from optipose.registration import kernels
+        from optipose.registration.normal_equations import cross_covariance, kabsch, normal_equations, transform
 
         source = np.ascontiguousarray(source, dtype=np.float64)
         T, ids = (np.eye(4), None) if start is None else (np.array(start[0], dtype=float), np.array(start[1]))
@@ -54,12 +54,12 @@ class FastBackend:
         track = reference.tracker(ids, initial)
         p = np.empty_like(source)  # every step's moved cloud, in one buffer
         for it in range(1, cfg.max_iterations + 1):
-            p = kernels.transform(source, T, p)
+            p = transform(source, T, p)
             q, n, ids = track(p)
             if cfg.method == "point_to_point":  # the information matrix is summed once, after the last step
-                n_in, sum_d2, c, mq, H = kernels.cross_covariance(p, q, max_d2)
+                n_in, sum_d2, c, mq, H = cross_covariance(p, q, max_d2)
             else:
-                inlier, c, AtA, Atb, sum_d2 = kernels.normal_equations(p, q, n, max_d2)
+                inlier, c, AtA, Atb, sum_d2 = normal_equations(p, q, n, max_d2)
                 n_in = int(inlier.sum())
             if n_in < MIN_POINTS:
                 return Registration.failed(len(source), f"{n_in} points within the correspondence distance", T, it)
@@ -70,7 +70,7 @@ class FastBackend:
                     break
                 before = now
             if cfg.method == "point_to_point":
-                delta = kernels.kabsch(H, c, mq)
+                delta = kabsch(H, c, mq)
             else:
                 delta = _solve_point_to_plane(AtA, Atb, c)
             if delta is None:
@@ -88,7 +88,7 @@ class FastBackend:
             if cfg.method == "point_to_point":
                 T, history = _accelerate(T, delta, c, history)
         if cfg.method == "point_to_point":
-            AtA = kernels.normal_equations(p, q, n, max_d2)[2]
+            AtA = normal_equations(p, q, n, max_d2)[2]
         return Registration(
             T_target_source=T,
             converged=converged,

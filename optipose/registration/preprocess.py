@@ -19,7 +19,7 @@ def voxel_down(points: np.ndarray, size: float, origin=None) -> np.ndarray:
     round millimetres has faces on the planes of a grid at O's origin; :func:`grid_origin` gives a scan a
     grid of its own (``[registration] voxel_grid = "random"``).
     """
-    from optipose.registration.kernels import voxel_centroids
+    from optipose.registration.voxels import voxel_centroids
 
     points = np.asarray(points, dtype=np.float64)
     if size <= 0 or len(points) == 0:

@@ -68,10 +68,10 @@ class SurfaceReference:
         self._face_grid = None
 
     def _grid(self) -> tuple:
-        """The faces near each cell of a ``_CELL`` grid over the part (see :func:`optipose.registration.kernels.face_grid`),
+        """The faces near each cell of a ``_CELL`` grid over the part (see :func:`optipose.registration.closest_surface.face_grid`),
         with the faces' bounding boxes; built on first use."""
         if self._face_grid is None:
-            from optipose.registration.kernels import face_grid
+            from optipose.registration.closest_surface import face_grid
 
             lo, hi = self._tri.min(axis=1), self._tri.max(axis=1)
             extent = hi.max(axis=0) - lo.min(axis=0)
@@ -127,7 +127,7 @@ class SurfaceReference:
         ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
         inside its face by more than twice its distance keeps it (:meth:`follow`). Any other point is searched exactly among
         the faces listed for its cell of a grid over the part (every face within two cells of the cell,
-        :func:`optipose.registration.kernels.nearest_into`): it gets the closest face's float64 projection,
+        :func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
         or, closest to an edge or a corner, that face's closest point. Points outside the grid or
         farther than two cells from the surface get Open3D's answer (float32 off the faces' interiors).
         """
@@ -141,9 +141,9 @@ class SurfaceReference:
         """:meth:`nearest` into the caller's arrays: points (m, 3) float64 contiguous, ids (m,) int64 (the
         guesses, each -1 or a face, then the answer), q and n (m, 3), ``open_`` (m,) bool all False (and so
         again on return)."""
-        from optipose.registration import kernels
+        from optipose.registration.closest_surface import nearest_into
 
-        if kernels.nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id, *self._grid()):
+        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id, *self._grid()):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
@@ -226,7 +226,7 @@ class SampledReference:
     def __init__(self, points: np.ndarray, normals: np.ndarray, kind: str = "cad-sample"):
         from scipy.spatial import cKDTree
 
-        from optipose.registration import kernels
+        from optipose.registration.closest_samples import point_grid
 
         points = np.ascontiguousarray(points, dtype=np.float64)
         self.kind = kind
@@ -238,7 +238,7 @@ class SampledReference:
         cell = max(2.5 * spacing, float(np.prod(hi - lo + 1e-9) / _MAX_CELLS) ** (1 / 3), 1e-6)
         origin = lo - cell
         shape = np.floor((hi + cell - origin) / cell).astype(np.int64) + 1
-        start, order = kernels.point_grid(points, origin, cell, shape)
+        start, order = point_grid(points, origin, cell, shape)
         self.points = np.ascontiguousarray(points[order])
         self.normals = np.ascontiguousarray(np.asarray(normals, dtype=np.float64)[order])
         self._tree = cKDTree(self.points)
@@ -246,17 +246,17 @@ class SampledReference:
         self._near = None
 
     def _grid(self) -> tuple:
-        """The grid over the points, which are stored in its cell order (:func:`optipose.registration.kernels.point_grid`):
+        """The grid over the points, which are stored in its cell order (:func:`optipose.registration.closest_samples.point_grid`):
         origin, cell, shape and the CSR start of each cell."""
         return self._point_grid
 
     def _neighbours(self) -> tuple[np.ndarray, np.ndarray]:
         """Each point's :data:`_NEIGHBOURS` nearest other points (n, K), nearest first, and the radius within
-        which the list is complete (:func:`optipose.registration.kernels.sample_neighbours`); built on first use."""
+        which the list is complete (:func:`optipose.registration.closest_samples.sample_neighbours`); built on first use."""
         if self._near is None:
-            from optipose.registration import kernels
+            from optipose.registration.closest_samples import sample_neighbours
 
-            self._near = kernels.sample_neighbours(self.points, _NEIGHBOURS, _REACH, *self._point_grid)
+            self._near = sample_neighbours(self.points, _NEIGHBOURS, _REACH, *self._point_grid)
         return self._near
 
     def __repr__(self) -> str:
@@ -269,11 +269,11 @@ class SampledReference:
     def nearest(self, points: np.ndarray, ids: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The closest sample points, the same as :meth:`closest`'s: the grid answers the points near the
         cloud (``ids``, each point's match at the previous ICP step, bounds its search), the KD-tree the others."""
-        from optipose.registration import kernels
+        from optipose.registration.closest_samples import grid_nearest
 
         points = np.ascontiguousarray(points, dtype=np.float64)
         hint = np.full(len(points), -1, dtype=np.int64) if ids is None else np.ascontiguousarray(ids, dtype=np.int64)
-        found, open_ = kernels.grid_nearest(points, hint, self.points, *self._grid())
+        found, open_ = grid_nearest(points, hint, self.points, *self._grid())
         open_ = np.flatnonzero(open_)
         if len(open_):
             found[open_] = self._tree.query(points[open_])[1]
@@ -305,7 +305,7 @@ class SampleTracker:
     """The closest samples of one ICP's cloud at each of its steps, exactly :meth:`SampledReference.nearest`'s,
     each point searched again only once it may have left its nearest sample's region: moved as far as the
     nearest bisector plane between that sample and another (or half the gap to the second-nearest) since it
-    was last searched (:func:`optipose.registration.kernels.tracked_nearest`):
+    was last searched (:func:`optipose.registration.closest_samples.tracked_nearest`):
     an ICP near its fixed point moves its points by far less than that, so a step costs a pass over the
     cloud rather than a search per point. ``tracker(p) -> (q, n, ids)``, arrays it updates at the next call."""
 
@@ -315,7 +315,7 @@ class SampleTracker:
         self.q = None  # per point, from the first call on: q, n, ids, anchor, margin (see tracked_nearest)
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        from optipose.registration import kernels
+        from optipose.registration.closest_samples import tracked_nearest
 
         points = np.ascontiguousarray(points, dtype=np.float64)
         m, ref = len(points), self.reference
@@ -330,8 +330,8 @@ class SampleTracker:
             self.ids[self.ids >= len(ref.points)] = -1  # a hint that is no point of this reference (any other is safe)
             self.anchor, self.margin = np.zeros((m, 3)), np.zeros(m)
             self.q, self.n = np.empty((m, 3)), np.empty((m, 3))
-        open_ = kernels.tracked_nearest(points, self.ids, self.anchor, self.margin, self.q, self.n, ref.points,
-                                        ref.normals, *ref._neighbours(), _REACH, *ref._grid())  # fmt: skip
+        open_ = tracked_nearest(points, self.ids, self.anchor, self.margin, self.q, self.n, ref.points,
+                                ref.normals, *ref._neighbours(), _REACH, *ref._grid())  # fmt: skip
         open_ = np.flatnonzero(open_)
         if len(open_):  # far from the cloud: the KD-tree, searched again next step (margin zero)
             found = ref._tree.query(points[open_])[1]

@@ -26,12 +26,13 @@ from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import (
     NORMAL_QUANTILES, block_rays, fill_columns, measure_hits, shadow_rays, split_at_anchors, unsure_between_anchors, write_points,
 )  # fmt: skip
+from optipose.scan.pose import NOMINAL, PartPose
 from optipose.scan.profiles import EMPTY, ray_lines
 from optipose.scan.raycast import default_threads, make_caster, shared_planes
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
-__all__ = ["Scan", "Scanner", "part_scanner", "nominal_scans", "rebuilt_with"]
+__all__ = ["Scan", "Scanner", "PartPose", "part_scanner", "nominal_scans", "rebuilt_with"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work on a thread pool (each point's noise draw is keyed by its ray, not its block)
@@ -131,53 +132,27 @@ class Scanner:
         self._intensity_grid = self.material.intensity(np.arccos(np.linspace(0.0, 1.0, 8193)))
 
     # ------------------------------------------------------------------------------------------------
-    def scan(
-        self,
-        T_O_S: np.ndarray,
-        motion: ScanMotion,
-        rpy: np.ndarray = (0.0, 0.0, 0.0),
-        centre: np.ndarray = (0.0, 0.0, 0.0),
-        offset: np.ndarray | None = None,
-        rng: np.random.Generator | int | None = 0,
-        noise: bool = True,
-    ) -> Scan:
+    def scan(self, T_O_S: np.ndarray, motion: ScanMotion, part_pose: PartPose = NOMINAL,
+             rng: np.random.Generator | int | None = 0, noise: bool = True) -> Scan:  # fmt: skip
         """Scan with one sensor; see :meth:`scan_many`."""
-        return self.scan_many([T_O_S], motion, rpy, centre, offset, rng, noise)[0]
+        return self.scan_many([T_O_S], motion, part_pose, rng, noise)[0]
 
-    def scan_many(
-        self,
-        poses: list[np.ndarray],
-        motion: ScanMotion,
-        rpy: np.ndarray = (0.0, 0.0, 0.0),
-        centre: np.ndarray = (0.0, 0.0, 0.0),
-        offset: np.ndarray | None = None,
-        rng: np.random.Generator | int | None = 0,
-        noise: bool = True,
-        raw: bool = True,
-    ) -> list[Scan]:
-        """Scan the part at orientation ``rpy`` (radians, about ``centre`` in m) with every sensor in ``poses``.
+    def scan_many(self, poses: list[np.ndarray], motion: ScanMotion, part_pose: PartPose = NOMINAL,
+                  rng: np.random.Generator | int | None = 0, noise: bool = True, raw: bool = True) -> list[Scan]:  # fmt: skip
+        """Scan the part, standing at ``part_pose`` (its orientation about its rotation centre, and an offset),
+        with every sensor in ``poses``.
 
         poses : list of 4×4 ``T_O_S`` (sensor poses in O at the nominal scan position).
-        offset : (3,) m, an extra translation of the part (protocols with translation offsets).
+        part_pose : a :class:`~optipose.scan.pose.PartPose` (default: unturned, about O's origin).
         rng : a seed or a Generator (one draw is taken from it); the same seed gives the same clouds
             whatever the thread count. ``noise=False`` gives exact, unquantised surface points.
         raw : ``False`` (the evaluator's: it reads only the points) leaves ``Scan.raw`` empty, (0, columns).
         """
-        return self.scan_levels(poses, motion, (1.0,), rpy, centre, offset, rng, noise, raw)[0]
+        return self.scan_levels(poses, motion, (1.0,), part_pose, rng, noise, raw)[0]
 
-    def scan_levels(
-        self,
-        poses: list[np.ndarray],
-        motion: ScanMotion,
-        noise_scales: tuple[float, ...],
-        rpy: np.ndarray = (0.0, 0.0, 0.0),
-        centre: np.ndarray = (0.0, 0.0, 0.0),
-        offset: np.ndarray | None = None,
-        rng: np.random.Generator | int | None = 0,
-        noise: bool = True,
-        raw: bool = True,
-        built: list[np.ndarray] | None = None,
-    ) -> list[list[Scan]]:
+    def scan_levels(self, poses: list[np.ndarray], motion: ScanMotion, noise_scales: tuple[float, ...],
+                    part_pose: PartPose = NOMINAL, rng: np.random.Generator | int | None = 0, noise: bool = True,
+                    raw: bool = True, built: list[np.ndarray] | None = None) -> list[list[Scan]]:  # fmt: skip
         """:meth:`scan_many` at several noise levels at once: one list of scans per scale of ``noise_scales``,
         each as a scanner whose sensor's ``noise_sigma`` is that many times this one's would take it. The
         rays are cast once (where they hit does not depend on the noise), and every level draws the same
@@ -187,9 +162,11 @@ class Scanner:
             from — a bracket off its drawing: the device measures in its own frame and the cell turns that into
             O with the pose it believes (:func:`rebuilt_with` of the scan, without the round trip through the
             true pose); each scan's ``T_O_S`` is then that pose."""
+        if not isinstance(part_pose, PartPose):  # a caller of the old (rpy, centre, offset) arguments
+            raise TypeError(f"part_pose must be a PartPose, not {type(part_pose).__name__}")
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
         seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
-        T_O_P = part_motion(np.asarray(rpy, float), np.asarray(centre, float), offset)
+        T_O_P = part_pose.T_O_P
         shifts = motion.offsets()
         views = [_SensorView.build(self, T, T_O_P) for T in poses]
         blocks = [
@@ -204,7 +181,7 @@ class Scanner:
         keys = keys if noise else [np.uint64(0)] * len(poses)
         hits = list(run(lambda blk: self._block_hits(views[blk[0]], shifts, blk[1], blk[2]), blocks))
         built = poses if built is None else [validate_pose(T, f"built pose {i + 1}") for i, T in enumerate(built)]
-        return [self._written(built, blocks, hits, keys, shifts, T_O_P, rpy, raw, self.sensor.noise_sigma * scale)
+        return [self._written(built, blocks, hits, keys, shifts, T_O_P, part_pose.rpy, raw, self.sensor.noise_sigma * scale)
                 for scale in noise_scales]  # fmt: skip
 
     def _written(self, poses, blocks, hits, keys, shifts, T_O_P, rpy, raw: bool, sigma: float) -> list[Scan]:
@@ -355,7 +332,7 @@ def nominal_scans(part, layout: str = "hand") -> dict:
         model = pose.sensor or part.sensor
         if model not in scanners:
             scanners[model] = part_scanner(part, model)
-        out[pose.name] = scanners[model].scan(pose.T_O_S, part.motion, centre=part.rotation_centre)
+        out[pose.name] = scanners[model].scan(pose.T_O_S, part.motion, PartPose(centre=part.rotation_centre))
     return out
 
 

@@ -166,7 +166,7 @@ def maxmin_anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: 
     scales, mounting = problem.band["noise_scales"], problem.band["mounting"]
 
     def per_level(infos) -> np.ndarray:  # (levels, 3 axes, median and p75) of each level's best subsets, deg
-        return predicted_stats(infos, noise_scales=scales, mounting=mounting)["level_axis_stats"]
+        return predicted_stats(infos, noise_scales=scales, mounting=mounting).level_axis_stats
 
     target = min((per_level([hand[i] for i in c]) for c in itertools.combinations(range(len(hand)), k)), key=lambda t: t.max(axis=0).sum())
     feasible = [(key, info) for key, info in problem.cache.items() if isinstance(info, SensorInfo)]
@@ -278,7 +278,7 @@ def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int
     if violation > 0:
         return PENALTY + violation
     stats = predicted_stats([infos[i] for i in range(k)], *problem.weights, **problem.band)
-    return stats["score"] + problem.shortfall(k, stats)
+    return stats.score + problem.shortfall(k, stats)
 
 
 def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals: int, until: float, floors: dict,
@@ -305,7 +305,7 @@ def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals:
     infos = [problem.info(u[6 * i : 6 * i + 6]) if isinstance(x, Violation) else x for i, x in enumerate(infos)]
     stats = predicted_stats(infos, *problem.weights, **problem.band)
     return Found(k, "hand-anchored, refined", u, _anchored_poses(problem, u, [i for i in range(k) if i not in kept], hand_poses),
-                 stats["score"], stats)  # fmt: skip
+                 stats.score, stats)  # fmt: skip
 
 
 def distinct_sensors(sensors: list[np.ndarray], min_distance: float = 0.02) -> list[np.ndarray]:

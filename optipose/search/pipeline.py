@@ -6,7 +6,7 @@
    history and cache flushed to the folder as it goes, the surrogate's best layouts written at its end;
 3. the ICP selection, polish and confirmation (:mod:`optipose.search.select`), after which the finalists
    replace the surrogate's best; under a band of conditions they score the robust statistic over the
-   band's ends (:func:`search_objective`) and compare with the hand layout condition by condition;
+   band's ends (:func:`optipose.search.objectives.search_objective`) and compare with the hand layout condition by condition;
 4. validation on a noise seed the search never saw (:mod:`optipose.search.validate`), under every
    condition of the band: the numbers reported. A search whose objective has no band then checks the
    found layouts and the hand one under the band of ``SearchConfig.band`` (the ``default`` and ``thorough`` budgets:
@@ -30,6 +30,7 @@ from typing import Protocol
 from optipose.errors import OptiposeError, is_interrupt
 from optipose.model.layout import Layout, SensorPose
 from optipose.search.config import SearchConfig
+from optipose.search.objectives import stage_objective
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import Found, SearchOutcome, Validation
 from optipose.search.space import SPACE_VERSION
@@ -38,7 +39,7 @@ from optipose.search.surrogate_search import run_search
 from optipose.seeds import validation_seed
 from optipose.model.baseline import baseline
 
-__all__ = ["SearchReport", "ResultSink", "run", "found_layout", "search_objective", "NoFeasibleLayout"]
+__all__ = ["SearchReport", "ResultSink", "run", "found_layout", "NoFeasibleLayout"]
 
 log = logging.getLogger(__name__)
 _FLUSH_EVERY = 100  # evaluations between writes of the history and the cache...
@@ -92,9 +93,7 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
         jobs: int = 1, resume: bool = False, on_eval=None, on_stage=None) -> SearchReport:  # fmt: skip
     """Search, validate and hand everything to ``sink``. ``on_eval(evaluation)`` follows the surrogate
     search; ``on_stage(text)`` is told when a stage starts; ``resume`` reloads the sink's cache."""
-    from optipose.search.validate import band_objective
-
-    band = band_objective(objective, config.band)  # a bad name fails here, before any work
+    band = stage_objective(objective, "band", band=config.band)  # a bad name fails here, before any work
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     study = _study(part, objective, config, sink, resume, on_eval)
     with _baseline_run(part, objective, config, seed, jobs) as hand_run, _baseline_run(part, band, config, seed, jobs, last=True) as band_run:
@@ -137,7 +136,7 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
             hand_run.wait()
         stage("selecting finalists by ICP on a reduced protocol")
         finalists, records = select_finalists(
-            part, search_objective(objective), outcome, study, seed, config.select_candidates, config.select_time, on_stage, jobs
+            part, objective, outcome, study, seed, config.select_candidates, config.select_time, on_stage, jobs
         )
         sink.selection(records)
         report.layouts = _layouts({**outcome.found, **finalists})
@@ -164,16 +163,6 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
         return report
     sink.band(report.band)
     return report
-
-
-def search_objective(objective):
-    """The objective the ICP stages (selection, polish, confirmation) score with: under a band, the band's
-    ends (:func:`optipose.evaluate.conditions.band_ends`); validation runs the whole band."""
-    from dataclasses import replace
-
-    from optipose.evaluate.conditions import band_ends
-
-    return objective if objective.conditions.trivial else replace(objective, conditions=band_ends(objective.conditions))
 
 
 def _study(part, objective, config, sink: ResultSink, resume: bool, on_eval) -> SurrogateStudy:

@@ -59,7 +59,7 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
         return None, None, records
     u = best[1]
     score = problem.score(u)
-    return Found(k, "ICP polish", u, problem.space.to_poses(u), score.objective, score.stats or {}), best[2], records
+    return Found(k, "ICP polish", u, problem.space.to_poses(u), score.objective, score.stats), best[2], records
 
 
 def hand_start(problem: SurrogateProblem, hand_layout, reference) -> list[Found]:
@@ -67,4 +67,4 @@ def hand_start(problem: SurrogateProblem, hand_layout, reference) -> list[Found]
     itself on every axis, so a local search from it that keeps that while lowering the sum is what a user
     who already owns these mounts wants."""
     u = np.concatenate([problem.space.from_pose(hand_layout.poses[i]) for i in reference.sensors])
-    return [Found(reference.k, "hand start", u, problem.space.to_poses(u), problem.score(u).objective, {})]
+    return [Found(reference.k, "hand start", u, problem.space.to_poses(u), problem.score(u).objective)]

@@ -30,7 +30,7 @@ from optipose.model.collision import collision_model, heads_clearance
 from optipose.search.config import SearchConfig
 from optipose.search.records import LayoutScore
 from optipose.search.space import PoseSpace
-from optipose.search.surrogate import SensorInfo, Surrogate, predicted_stats, protocol_turns
+from optipose.search.surrogate import Prediction, SensorInfo, Surrogate, predicted_stats, protocol_turns
 
 __all__ = ["SurrogateProblem", "Violation"]
 
@@ -157,7 +157,7 @@ class SurrogateProblem:
         """
         if not constrained:
             stats = predicted_stats([self.info(u[6 * i : 6 * i + 6]) for i in range(len(u) // 6)], *self.weights, **self.band)
-            return LayoutScore(stats["score"], stats)
+            return LayoutScore(stats.score, stats)
         k = len(u) // 6
         keys = [_key(u[6 * i : 6 * i + 6]) for i in range(k)]  # the cache's, and the subsets' memo's
         parts = [self._cached(key) for key in keys]
@@ -170,7 +170,7 @@ class SurrogateProblem:
         if violation > 0:
             return LayoutScore(float("nan"), None, violation, constraint)
         stats = predicted_stats(parts, *self.weights, **self.band, memo=self._subsets, keys=keys)
-        return LayoutScore(stats["score"] + self.shortfall(k, stats), stats)
+        return LayoutScore(stats.score + self.shortfall(k, stats), stats)
 
     def _head_gaps(self, u: np.ndarray, violation: float) -> float:
         """``violation`` plus that of the head-to-head gap of every pair of sensors that is below ``head_gap``.
@@ -191,7 +191,7 @@ class SurrogateProblem:
                 violation += 1.0 + min(gap_min - gap, 0.1) * 10
         return violation
 
-    def shortfall(self, k: int, stats: dict) -> float:
+    def shortfall(self, k: int, stats: Prediction) -> float:
         """The per-axis penalty (deg) for axes predicted worse than the margin times the hand layout's, noise
         level by noise level under a band (the worst over the band is the top level's on nearly every axis,
         so it cannot see an axis lost at the preset's noise: the comparison with the hand layout can)."""
@@ -199,7 +199,7 @@ class SurrogateProblem:
         if target is None or self.config.hand_margin <= 0:
             return 0.0
         margin, weights = self.config.hand_margin, self.weights[0]
-        values, target = np.atleast_2d(stats["level_axis_score"]), np.atleast_2d(target)
+        values, target = np.atleast_2d(stats.level_axis_score), np.atleast_2d(target)
         if len(target) != len(values):
             raise ValueError(f"hand targets for {len(target)} noise level(s), the layout's for {len(values)}: give each level's (level_axis_score)")
         return float(self.config.hand_weight * sum(weighted_excess(v, t, margin, weights) for v, t in zip(values, target)))

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from optipose.evaluate.compare import Verdict, one_versus_many, unmeasured_line
+
+if TYPE_CHECKING:  # importing the surrogate loads the scanner; the records only name its type
+    from optipose.search.surrogate import Prediction
 
 __all__ = ["EvalState", "LayoutScore", "Evaluation", "Found", "IcpEvaluation", "SearchOutcome", "Validation", "SearchResult", "PENALTY"]
 
@@ -34,12 +38,12 @@ class LayoutScore:
     """The surrogate's answer for one layout.
 
     value : deg, the predicted score plus the per-axis shortfall against the hand layout (NaN when infeasible).
-    stats : the surrogate's Table 1 (:func:`optipose.search.surrogate.predicted_stats`), None when infeasible.
+    stats : the surrogate's Table 1 (:class:`optipose.search.surrogate.Prediction`), None when infeasible.
     violation : ≥ 0, normalised, how far the layout is from feasible; constraint : which one (first found).
     """
 
     value: float
-    stats: dict | None = field(default=None, repr=False)
+    stats: Prediction | None = field(default=None, repr=False)
     violation: float = 0.0
     constraint: str = ""
 
@@ -80,7 +84,8 @@ class Found:
     """A layout of k sensors that a stage proposes, with its surrogate score.
 
     strategy : where it came from (greedy, joint, history, ICP polish, …); u : (6k,) in [0, 1];
-    poses : k 4×4 ``T_O_S``; score : deg (LayoutScore.objective); stats : the surrogate's Table 1.
+    poses : k 4×4 ``T_O_S``; score : deg (LayoutScore.objective); stats : the surrogate's Table 1
+    (:class:`optipose.search.surrogate.Prediction`), None when the stage has none (an ICP start).
     """
 
     k: int
@@ -88,7 +93,7 @@ class Found:
     u: np.ndarray = field(repr=False)
     poses: list[np.ndarray] = field(repr=False)
     score: float
-    stats: dict = field(repr=False, default_factory=dict)
+    stats: Prediction | None = field(default=None, repr=False)
 
     def sensor(self, i: int) -> np.ndarray:
         """The six numbers of sensor ``i``."""

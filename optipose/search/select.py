@@ -18,10 +18,12 @@ confirmation (:mod:`optipose.search.confirm`) decides on the full protocol; with
 every candidate and the polish are measured against is the hand layout on the full protocol. The full
 protocol with the held-out seed then reports the finalist (:mod:`optipose.search.validate`).
 
-Under a band of conditions the objective given here is the band's ends (``pipeline.search_objective``):
-every evaluation runs each of its conditions (:func:`optipose.evaluate.robust.make_evaluator`), scores the
-worst over them, and is compared with the hand layout noise level by noise level; the polish's evaluations
-are divided by the number of conditions, so it costs about what it does without a band.
+The objective given here is the search's; the selection and the polish score with its reduced protocol,
+the confirmation with its full one (:func:`optipose.search.objectives.stage_objective`). Under a band of
+conditions both take the band's ends: every evaluation runs each of its conditions
+(:func:`optipose.evaluate.robust.make_evaluator`), scores the worst over them, and is compared with the
+hand layout noise level by noise level; the polish's evaluations are divided by the number of conditions,
+so it costs about what it does without a band.
 """
 
 from __future__ import annotations
@@ -34,9 +36,9 @@ import numpy as np
 from optipose.evaluate.compare import excess, rank
 from optipose.evaluate.conditions import conditions
 from optipose.evaluate.robust import make_evaluator
-from optipose.evaluate.objective import reduced_objective
 from optipose.search.candidates import anchored, candidates, maxmin_anchored
 from optipose.search.confirm import Confirmer
+from optipose.search.objectives import stage_objective
 from optipose.search.polish import hand_start, polish
 from optipose.search.records import Found, IcpEvaluation, SearchOutcome
 from optipose.search.study import SurrogateStudy
@@ -60,8 +62,8 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
     config = study.problem.config
     band = not objective.conditions.trivial
     finalists, records = {}, []
-    confirmer = Confirmer(part, objective, selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
-    with make_evaluator(part, reduced_objective(objective), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
+    confirmer = Confirmer(part, stage_objective(objective, "confirmation"), selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
+    with make_evaluator(part, stage_objective(objective, "selection"), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
         hand = evaluator(baseline(part)) if baseline(part) is not None else None
         ks = sorted(outcome.found)
         for n, k in enumerate(ks):

@@ -54,17 +54,20 @@ It ranks layouts; the full ICP protocol (:mod:`optipose.evaluate.evaluator`) giv
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import norm
 
 from optipose.model.motion import ScanMotion
+from optipose.scan.pose import PartPose
 from optipose.scan.scanner import Scanner
 from optipose.search.mounting import mounting_maps, mounting_variance
 from optipose.transforms import part_motion
 
-__all__ = ["Surrogate", "SensorInfo", "protocol_turns", "bias_rotation", "MEDIAN_PER_SIGMA", "P75_PER_SIGMA", "predicted_stats"]
+__all__ = [
+    "Surrogate", "SensorInfo", "Prediction", "protocol_turns", "bias_rotation", "MEDIAN_PER_SIGMA", "P75_PER_SIGMA", "predicted_stats",
+]  # fmt: skip
 
 MEDIAN_PER_SIGMA = 0.6745  # median of |N(0, 1)|
 P75_PER_SIGMA = 1.1503  # 75th percentile of |N(0, 1)|
@@ -152,7 +155,7 @@ class Surrogate:
 
     def info(self, T_O_S: np.ndarray) -> SensorInfo:
         """Information matrix of one sensor pose from a noise-free nominal scan."""
-        scan = self.scanner.scan(T_O_S, self.motion, centre=self.centre, noise=False)
+        scan = self.scanner.scan(T_O_S, self.motion, PartPose(centre=self.centre), noise=False)
         if len(scan) == 0:
             return SensorInfo(np.zeros((6, 6)), 0, 0)
         normals = self.scanner.normals(scan)
@@ -193,7 +196,7 @@ class Surrogate:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
         centroids v (in the part's frame), their surface normals n, signed distances r to the CAD surface
         and point-to-plane rows J = [(v − c) × n, n] about the rotation centre c."""
-        from optipose.registration.kernels import voxel_centroids
+        from optipose.registration.voxels import voxel_centroids
 
         turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
         v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
@@ -267,13 +270,37 @@ def _axis_stats(sigma: np.ndarray, delta: np.ndarray | None) -> tuple[np.ndarray
     return np.median(e, axis=0), np.percentile(e, 75, axis=0)
 
 
+@dataclass(frozen=True)
+class Prediction:
+    """The surrogate's Table 1 for a layout of k sensors (:func:`predicted_stats`), the counterpart of
+    :class:`optipose.evaluate.assignment.Choice` for ICP; sensors by index in the layout, axes roll, pitch, yaw.
+
+    subsets : every non-empty subset of the k sensors (2ᵏ − 1 tuples of indices), by size then lexicographically.
+    median_deg, p75_deg : (subsets, 3) degrees, each subset's predicted median and 75th percentile of |error|
+        per axis, the worst over the noise levels.
+    best_subset : per axis (3), the subset with the lowest median, ties by the lower p75 (the paper's assignment).
+    axis_score : (3,) degrees, per axis ``median_weight · median + p75_weight · p75`` of its best subset.
+    level_axis_score : (levels, 3) degrees, the same for each noise level alone, on that level's own best subsets.
+    level_axis_stats : (levels, 3, 2) degrees, those subsets' median and 75th percentile per level and axis.
+    score : degrees, ``Σ weights · axis_score``.
+    """
+
+    subsets: tuple[tuple[int, ...], ...]
+    median_deg: np.ndarray = field(repr=False)
+    p75_deg: np.ndarray = field(repr=False)
+    best_subset: tuple[tuple[int, ...], ...]
+    axis_score: np.ndarray
+    level_axis_score: np.ndarray = field(repr=False)
+    level_axis_stats: np.ndarray = field(repr=False)
+    score: float
+
+
 def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_weight=1.0, p75_weight=1.0,
                     noise_scales: tuple[float, ...] = (1.0,), mounting: tuple[float, float] | None = None,
-                    memo: dict | None = None, keys: list | None = None) -> dict:  # fmt: skip
-    """The surrogate's Table 1 for a layout: every non-empty subset's predicted per-axis median and 75th
-    percentile (degrees), each axis's best subset, its per-axis score and the weighted score of the per-axis
-    best; ``level_axis_score`` (levels, 3) is each noise level's per-axis score on its own best subsets, and
-    ``level_axis_stats`` (levels, 3, 2) their median and 75th percentile (degrees).
+                    memo: dict | None = None, keys: list | None = None) -> Prediction:  # fmt: skip
+    """The surrogate's Table 1 for a layout (:class:`Prediction`): every non-empty subset's predicted
+    per-axis median and 75th percentile (degrees), each axis's best subset, its per-axis score and the
+    weighted score of the per-axis best, and the same per noise level.
 
     noise_scales : the sensor noise σ times each of these; each statistic is the worst over them. The
     information matrix scales with 1/σ² and the voxel bias not at all, so a band costs one more 6×6 inverse
@@ -318,16 +345,10 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     per_level = np.rad2deg(levels)
     level_stats = np.array([[lv[s, :, a] for a, s in enumerate(_best_subsets(lv[:, 0], lv[:, 1]))] for lv in per_level])
     level_axis = median_weight * level_stats[:, :, 0] + p75_weight * level_stats[:, :, 1]
-    return {
-        "subsets": subsets,
-        "median_deg": median,
-        "p75_deg": p75,
-        "best_subset": [subsets[s] for s in best],
-        "axis_score": axis,
-        "level_axis_score": level_axis,
-        "level_axis_stats": level_stats,
-        "score": float(np.dot(weights, axis)),
-    }
+    return Prediction(
+        subsets=tuple(subsets), median_deg=median, p75_deg=p75, best_subset=tuple(subsets[s] for s in best),
+        axis_score=axis, level_axis_score=level_axis, level_axis_stats=level_stats, score=float(np.dot(weights, axis)),
+    )
 
 
 def _best_subsets(median: np.ndarray, p75: np.ndarray) -> list[int]:

@@ -40,7 +40,7 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
     hand_u = [study.problem.space.from_pose(T) for T in hand_poses]
     ks = sorted(set(config.sensors))
     hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])
-    study.measure_against({k: f.stats["level_axis_score"] for k, f in hand.items()})
+    study.measure_against({k: f.stats.level_axis_score for k, f in hand.items()})
     study.start_clock(config.max_time)  # after the hand layout is scored: that first scan also compiles the kernels
     greedy, joint = {}, {}
     try:
@@ -103,7 +103,7 @@ def _scans(config: SearchConfig, k: int) -> int:
 
 def _found(study, k: int, stage: str, u: np.ndarray) -> Found:
     score = study.problem.score(u)
-    return Found(k, stage, u.copy(), study.problem.space.to_poses(u), score.objective, score.stats or {})
+    return Found(k, stage, u.copy(), study.problem.space.to_poses(u), score.objective, score.stats)
 
 
 def best_hand_subsets(problem: SurrogateProblem, hand_u: list[np.ndarray], ks) -> dict[int, Found]:
@@ -129,4 +129,4 @@ def _as_found(study: SurrogateStudy, k: int) -> Found | None:
         return None
     value, u = best
     stats = study.problem.score(u).stats
-    return Found(k, study.stage.split(":")[0] or "search", u, study.problem.space.to_poses(u), value, stats or {})
+    return Found(k, study.stage.split(":")[0] or "search", u, study.problem.space.to_poses(u), value, stats)

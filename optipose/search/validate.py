@@ -19,39 +19,17 @@ from optipose.evaluate.conditions import by_draw, conditions
 from optipose.evaluate.evaluator import Evaluator, log_failures
 from optipose.evaluate.robust import choice_of, make_evaluator, robust_result
 from optipose.errors import WorkerError
-from optipose.evaluate.objective import reduced_objective
 from optipose.model.layout import Layout
+from optipose.search.objectives import stage_objective
 from optipose.search.records import Validation
 from optipose.seeds import validation_seed
 from optipose.model.baseline import baseline
 
-__all__ = ["validate", "band_objective", "BaselineRun", "nested_groups", "indices_in"]
+__all__ = ["validate", "BaselineRun", "nested_groups", "indices_in"]
 
 log = logging.getLogger(__name__)
 _NICE = 10  # the hand layout's evaluation takes the cores the search leaves idle, and yields where it wants them
 _LAST = 19  # ... and its check under the band, which runs on through the selection, yields to everything
-
-
-def band_objective(objective, band: str):
-    """The objective the found layouts are checked under after the validation (``SearchConfig.band``): the
-    search's own, with the ``[conditions]`` of the objective ``band`` (a shipped name or a TOML path); None
-    when there is no check (``band`` empty, or the search's objective has a band of its own, under which it
-    validates already). A bad name is a ConfigError."""
-    from dataclasses import replace
-
-    from optipose.evaluate.objective import load_objective
-
-    if not band or not objective.conditions.trivial:
-        return None
-    given = load_objective(band)
-    if given.conditions.trivial:
-        return None
-    return replace(objective, name=f"{objective.name} under the band of {given.name}", conditions=given.conditions)
-
-
-def validation_objective(objective, protocol: str = "full"):
-    """The objective the validation evaluates with: the objective's own, or (``reduced``) its reduced protocol."""
-    return reduced_objective(objective) if protocol == "reduced" else objective
 
 
 class BaselineRun:
@@ -77,7 +55,7 @@ class BaselineRun:
         layout = baseline(part)
         if layout is None or multiprocessing.current_process().daemon:  # a daemonic worker (Dask) may not start one
             return
-        objective = validation_objective(objective, protocol)
+        objective = stage_objective(objective, "validation", protocol)
         self._objective, self._conditions = objective, conditions(objective.conditions)
         draws = by_draw(self._conditions)
         n = max(1, min(processes, len(draws)))
@@ -138,10 +116,10 @@ def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int =
     the hand layout's evaluation (the hand layout is evaluated here when it has none).
 
     The same function checks the found layouts under a band after a nominal search's validation
-    (:func:`band_objective`): ``objective`` is then the band's.
+    (:func:`optipose.search.objectives.band_objective`): ``objective`` is then the band's.
     """
     vseed = validation_seed(seed)
-    objective = validation_objective(objective, protocol)
+    objective = stage_objective(objective, "validation", protocol)
     done = on_evaluation or (lambda name, result: None)
     found, hand = {}, {}
     with make_evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:

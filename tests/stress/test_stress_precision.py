@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from optipose.model.motion import ScanMotion
-from optipose.scan.scanner import Scanner
+from optipose.scan.scanner import PartPose, Scanner
 from optipose.transforms import make_T
 
 DOWN = np.array([[0, 1, 0, 0], [1, 0, 0, 0], [0, 0, -1, 0.008], [0, 0, 0, 1.0]])  # looking down at z = 8 mm
@@ -39,7 +39,7 @@ def scan_against_float64(shift: np.ndarray, every: int = 5):
     T_O_S = make_T(t=shift) @ DOWN
     scanner = Scanner(mesh, "keyence-lj-x8080", "white-diffuse", threads=1)
     motion = ScanMotion(0.02, 0.5e-3)
-    scan = scanner.scan(T_O_S, motion, centre=shift, noise=False)
+    scan = scanner.scan(T_O_S, motion, PartPose(centre=shift), noise=False)
     o_S, d_S = scanner.sensor.laser_rays()
     pick = np.arange(0, len(scan), every)
     k, c = scan.profile[pick], scan.column[pick]

@@ -14,7 +14,7 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.registration import register, voxel_down
 from optipose.registration.reference import SurfaceReference
-from optipose.scan.scanner import part_scanner
+from optipose.scan.scanner import PartPose, part_scanner
 
 AXES = ["err_roll", "err_pitch", "err_yaw"]
 
@@ -73,7 +73,7 @@ def test_registrations_cut_short_are_counted_not_dropped(part_b):
 def s1_cloud(part_b):
     """Part B turned 2° in roll, seen by the hand layout's S1, down-sampled as the evaluator does."""
     cfg = load_objective("paper").registration
-    scan = part_scanner(part_b).scan(part_b.layouts["hand"].poses[0], part_b.motion, rpy=np.deg2rad([2, 0, 0]), centre=part_b.rotation_centre)
+    scan = part_scanner(part_b).scan(part_b.layouts["hand"].poses[0], part_b.motion, PartPose(np.deg2rad([2, 0, 0]), part_b.rotation_centre))
     return voxel_down(scan.points, cfg.voxel_size), cfg
 
 
