@@ -26,7 +26,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from optipose.io.folders import versions, write_config, write_csv
+from optipose.io.choices import choices_from_comparison
+from optipose.io.folders import read_config, versions, write_config, write_csv
 from optipose.io.tables import bracket_sensors_frame, brackets_frame, robustness_frame
 from optipose.model.layout import write_layout
 
@@ -97,8 +98,6 @@ class RobustnessResult:
 
 def read_robustness(folder: Path, config: dict | None = None) -> RobustnessResult:
     """The :class:`RobustnessResult` saved by :func:`write_robustness` (and :func:`write_brackets`)."""
-    from optipose.io.folders import read_config
-    from optipose.io.load import choices_from_comparison
     from optipose.model.layout import load_layout
 
     folder = Path(folder)
