@@ -10,9 +10,10 @@ from optipose.evaluate.assignment import AxisChoice, Choice
 from optipose.evaluate.compare import Verdict, dominates, excess, one_versus_many, rank
 from optipose.io import load_result
 from optipose.io.folders import write_config
+from optipose.io.results import SearchResult
 from optipose.io.search import SearchFolder
 from optipose.model.layout import Layout, SensorPose
-from optipose.search.records import SearchResult, Validation
+from optipose.search.records import Validation
 
 
 def _choice(sensors, names, per_axis_mdeg):

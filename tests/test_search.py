@@ -582,8 +582,9 @@ def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought(
 
 def test_an_answer_never_checked_under_a_band_is_not_a_buy():
     from optipose.evaluate.compare import Verdict
+    from optipose.io.results import SearchResult
     from optipose.report.verdict import verdict_table
-    from optipose.search.records import SearchResult, Validation
+    from optipose.search.records import Validation
 
     nominal = Verdict(1, _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)]))
     assert verdict_table([nominal], "hand").rows[0][-1] == "buy the found sensors"
@@ -651,7 +652,8 @@ def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, m
 
 
 def test_a_search_with_nothing_to_compare_with_misses_no_check_under_the_band():
-    from optipose.search.records import SearchResult, Validation
+    from optipose.io.results import SearchResult
+    from optipose.search.records import Validation
 
     found = {1: _choice([(1, 2), (1, 2), (1, 2)])}
     config = {"band": {"file": "robust"}}

@@ -1,9 +1,9 @@
 """Read a result folder back: :func:`load_result` gives the typed result a command wrote.
 
 ``optipose evaluate`` folders give an :class:`~optipose.evaluate.evaluator.EvaluationResult`, ``optipose
-search`` folders a :class:`~optipose.search.records.SearchResult` whose ``verdicts()`` say, per k, whether
+search`` folders a :class:`~optipose.io.results.SearchResult` whose ``verdicts()`` say, per k, whether
 the found layout beats the hand-placed one, ``optipose robustness`` folders a
-:class:`~optipose.io.robustness.RobustnessResult`. A search's trace comes back as records too:
+:class:`~optipose.io.results.RobustnessResult` (all three in :mod:`optipose.io.results`). A search's trace comes back as records too:
 :func:`load_history` (``Evaluation`` per surrogate call) and :func:`load_selection` (``IcpEvaluation`` per
 ICP look at a candidate). The CLI tables, ``scripts/search_table.py`` and reports read
 results through here, never by parsing CSV columns of their own.
@@ -44,9 +44,10 @@ def load_result(folder: str | Path):
 
 
 def load_search(folder: Path, config: dict | None = None):
-    """The :class:`~optipose.search.records.SearchResult` of a search folder."""
+    """The :class:`~optipose.io.results.SearchResult` of a search folder."""
+    from optipose.io.results import SearchResult
     from optipose.model.layout import load_layout
-    from optipose.search.records import SearchResult, Validation
+    from optipose.search.records import Validation
 
     folder = Path(folder)
     config = config or read_config(folder)

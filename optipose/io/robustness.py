@@ -21,7 +21,6 @@ the score and of the score when that sensor's bracket alone is off (worst over t
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
@@ -31,7 +30,7 @@ from optipose.io.folders import read_config, versions, write_config, write_csv
 from optipose.io.tables import bracket_sensors_frame, brackets_frame, robustness_frame
 from optipose.model.layout import write_layout
 
-__all__ = ["write_robustness", "write_brackets", "brackets_frame", "bracket_sensors_frame", "RobustnessResult", "read_robustness"]
+__all__ = ["write_robustness", "write_brackets", "brackets_frame", "bracket_sensors_frame", "read_robustness"]
 
 
 def write_robustness(folder: Path, part, objective, seed: int, results: dict, hand: str = "hand", sources=()) -> pd.DataFrame:
@@ -69,35 +68,10 @@ def write_brackets(folder: Path, sensitivities: dict) -> tuple[pd.DataFrame, pd.
     return axes, sensors
 
 
-@dataclass(frozen=True)
-class RobustnessResult:
-    """A robustness folder read back (:func:`optipose.io.load_result`).
-
-    layouts : name → Layout (the hand layout under ``hand``); choices : (name, k) → the layout's robust
-    choice of k sensors carrying its statistics per condition (``Choice.under``), the hand layout's under
-    ``("hand", k)``; brackets, bracket_sensors : the tables of ``brackets.csv`` and
-    ``bracket_sensors.csv`` (None without a bracket sensitivity).
-    """
-
-    folder: object
-    part: str
-    seed: int
-    config: dict = field(repr=False)
-    layouts: dict = field(default_factory=dict, repr=False)
-    choices: dict = field(default_factory=dict, repr=False)
-    brackets: pd.DataFrame | None = field(default=None, repr=False)
-    bracket_sensors: pd.DataFrame | None = field(default=None, repr=False)
-
-    def verdicts(self) -> dict:
-        """Layout name → Verdict of its robust choice against the hand layout's choice of as many."""
-        from optipose.evaluate.compare import Verdict
-
-        return {name: Verdict(k, choice, self.choices[("hand", k)])
-                for (name, k), choice in self.choices.items() if name != "hand" and ("hand", k) in self.choices}  # fmt: skip
-
-
-def read_robustness(folder: Path, config: dict | None = None) -> RobustnessResult:
-    """The :class:`RobustnessResult` saved by :func:`write_robustness` (and :func:`write_brackets`)."""
+def read_robustness(folder: Path, config: dict | None = None):
+    """The :class:`~optipose.io.results.RobustnessResult` saved by :func:`write_robustness` (and
+    :func:`write_brackets`)."""
+    from optipose.io.results import RobustnessResult
     from optipose.model.layout import load_layout
 
     folder = Path(folder)

@@ -38,9 +38,8 @@ def write_report(folder: str | Path, views: bool = True) -> tuple[Path, Path]:
 
 def build_blocks(folder: Path, views: bool = True) -> tuple[str, list[Block]]:
     """The report's title and blocks for the result in ``folder``."""
-    from optipose.evaluate.evaluator import EvaluationResult
     from optipose.io import load_result
-    from optipose.io.robustness import RobustnessResult
+    from optipose.io.results import EvaluationResult, RobustnessResult
 
     result = load_result(folder)
     if isinstance(result, EvaluationResult):
@@ -225,20 +224,20 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     title = f"{result.part}: layouts under every condition of the band (robustness, seed {result.seed})"
     blocks: list[Block] = [Heading("Verdict")]
     verdicts = result.verdicts()
-    for name, v in verdicts.items():
-        blocks.append(Paragraph(f"{name} (worst over the band): {v.line(label)}", verdict_css(v)))
+    for v in verdicts:
+        blocks.append(Paragraph(f"{v.layout} (worst over the band): {v.line(label)}", verdict_css(v)))
     if not verdicts:
         blocks.append(Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed"))
     blocks.append(Heading("Per axis (the paper's Table 1), the robust statistic over the band"))
-    for name, v in verdicts.items():
-        blocks.append(table1_side_by_side({v.k: v.found}, {v.k: v.reference}, label, f"Table 1, {name} vs. {label}: median / 75th percentile "
+    for v in verdicts:
+        blocks.append(table1_side_by_side({v.k: v.found}, {v.k: v.reference}, label, f"Table 1, {v.layout} vs. {label}: median / 75th percentile "
                                           "(mdeg) of the worst condition, and the subset each axis uses"))  # fmt: skip
     if not verdicts:
         hand = {k: c for (n, k), c in result.choices.items() if n == "hand"}
         blocks.append(table1_side_by_side({}, hand, label, "Table 1: median / 75th percentile (mdeg), robust over the band"))
     blocks.append(Heading("At every condition of the band"))
-    for name, v in verdicts.items():
-        blocks += band_blocks(name, v, label)
+    for v in verdicts:
+        blocks += band_blocks(v.layout, v, label)
     blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
     layouts = {(label if n == "hand" else n): replace(lay, name=label if n == "hand" else n) for n, lay in result.layouts.items()}
     blocks += _views(_part(result.config), layouts, views)
