@@ -3,7 +3,8 @@
 ``optipose evaluate`` folders give an :class:`~optipose.evaluate.evaluator.EvaluationResult`, ``optipose
 search`` folders a :class:`~optipose.io.results.SearchResult` whose ``verdicts()`` say, per k, whether
 the found layout beats the hand-placed one, ``optipose robustness`` folders a
-:class:`~optipose.io.results.RobustnessResult` (all three in :mod:`optipose.io.results`). A search's trace comes back as records too:
+:class:`~optipose.io.results.RobustnessResult` (all three in :mod:`optipose.io.results`); each reads the
+folder's ``config.toml`` once, as a :class:`~optipose.io.config.RunConfig`. A search's trace comes back as records too:
 :func:`load_history` (``Evaluation`` per surrogate call) and :func:`load_selection` (``IcpEvaluation`` per
 ICP look at a candidate). The CLI tables, ``scripts/search_table.py`` and reports read
 results through here, never by parsing CSV columns of their own.
@@ -20,6 +21,7 @@ from optipose.errors import ConfigError
 from optipose.evaluate.assignment import Choice
 from optipose.evaluate.objective import AXES
 from optipose.io.choices import axis_choice, choices_from_comparison
+from optipose.io.config import RunConfig
 from optipose.io.folders import read_config
 
 __all__ = ["load_result", "load_search", "load_history", "load_selection", "load_surrogate_scores"]
@@ -29,7 +31,7 @@ def load_result(folder: str | Path):
     """The result saved in ``folder``: an EvaluationResult or a SearchResult (ConfigError for anything else)."""
     folder = Path(folder)
     config = read_config(folder)
-    command = config.get("command")
+    command = config.command
     if command == "evaluate":
         from optipose.io.evaluation import read_evaluation
 
@@ -43,7 +45,7 @@ def load_result(folder: str | Path):
     raise ConfigError(f"{folder}: a '{command}' result, which optipose cannot read back")
 
 
-def load_search(folder: Path, config: dict | None = None):
+def load_search(folder: Path, config: RunConfig | None = None):
     """The :class:`~optipose.io.results.SearchResult` of a search folder."""
     from optipose.io.results import SearchResult
     from optipose.model.layout import load_layout
@@ -63,11 +65,16 @@ def load_search(folder: Path, config: dict | None = None):
         found = choices_from_comparison(rows[rows.layout == "found"], found_names)
         hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
         protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
-        return Validation(protocol, int(config.get("validation_seed", -1)), found, hand_choices)
+        return Validation(protocol, int(_or(config.validation_seed, -1)), found, hand_choices)
 
-    return SearchResult(folder, config["part"]["name"], int(config["seed"]), str(config.get("budget", "")), config,
+    return SearchResult(folder, config.part_name, int(config.seed), str(_or(config.budget, "")), config,
                         layouts, hand, validation(folder / "comparison.csv"),
-                        validation(folder / "band" / "comparison.csv") if "band" in config else None)  # fmt: skip
+                        validation(folder / "band" / "comparison.csv") if config.band is not None else None)  # fmt: skip
+
+
+def _or(value, default):
+    """A config value, or ``default`` where the file has none."""
+    return default if value is None else value
 
 
 def load_history(folder: str | Path) -> list:

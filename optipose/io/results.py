@@ -9,7 +9,7 @@
   :class:`~optipose.evaluate.robust.RobustResult` of each layout it evaluated.
 
 ``verdicts()`` is a ``list[Verdict]`` in each that has one (a robustness result's verdicts name their
-layout, ``Verdict.layout``); ``config`` is the folder's parsed ``config.toml``.
+layout, ``Verdict.layout``); ``config`` is the folder's :class:`~optipose.io.config.RunConfig`.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import pandas as pd
 
 from optipose.evaluate.compare import Verdict
 from optipose.evaluate.evaluator import EvaluationResult
+from optipose.io.config import RunConfig
 from optipose.model.layout import Layout
 from optipose.search.records import Validation
 
@@ -40,7 +41,7 @@ class SearchResult:
     part: str
     seed: int
     budget: str
-    config: dict = field(repr=False)
+    config: RunConfig = field(repr=False)
     layouts: dict[int, Layout] = field(default_factory=dict, repr=False)
     hand: Layout | None = field(default=None, repr=False)
     validation: Validation | None = None
@@ -59,18 +60,13 @@ class SearchResult:
     def band_pending(self) -> bool:
         """The search was to check its answer under a band but has no such check (it stopped before it; a
         search with nothing to compare its layouts with has no check to miss)."""
-        return "band" in self.config and self.band is None and self.validation is not None and bool(self.validation.hand)
+        return self.config.band is not None and self.band is None and self.validation is not None and bool(self.validation.hand)
 
     @property
     def unchecked(self) -> bool:
         """The answer holds for the ideal cell only: a nominal search (one noise level, exact brackets) that was
         not to check it under a band (``--budget quick``, or ``[search] band = ""``)."""
-        from optipose.evaluate.conditions import ConditionsConfig
-
-        c = self.config.get("objective", {}).get("conditions", {})
-        searched = ConditionsConfig(noise_scales=tuple(c.get("noise_scales", (1.0,))), mounting_translation=c.get("mounting_translation", 0.0),
-                                    mounting_rotation=c.get("mounting_rotation", 0.0))  # fmt: skip
-        return searched.trivial and "band" not in self.config and self.validation is not None
+        return self.config.searched_conditions().trivial and self.config.band is None and self.validation is not None
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""
@@ -95,7 +91,7 @@ class RobustnessResult:
     folder: Path
     part: str
     seed: int
-    config: dict = field(repr=False)
+    config: RunConfig = field(repr=False)
     layouts: dict[str, Layout] = field(default_factory=dict, repr=False)
     choices: dict = field(default_factory=dict, repr=False)
     brackets: pd.DataFrame | None = field(default=None, repr=False)

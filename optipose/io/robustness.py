@@ -26,6 +26,7 @@ from pathlib import Path
 import pandas as pd
 
 from optipose.io.choices import choices_from_comparison
+from optipose.io.config import RunConfig
 from optipose.io.folders import read_config, versions, write_config, write_csv
 from optipose.io.tables import bracket_sensors_frame, brackets_frame, robustness_frame
 from optipose.model.layout import write_layout
@@ -68,7 +69,7 @@ def write_brackets(folder: Path, sensitivities: dict) -> tuple[pd.DataFrame, pd.
     return axes, sensors
 
 
-def read_robustness(folder: Path, config: dict | None = None):
+def read_robustness(folder: Path, config: RunConfig | None = None):
     """The :class:`~optipose.io.results.RobustnessResult` saved by :func:`write_robustness` (and
     :func:`write_brackets`)."""
     from optipose.io.results import RobustnessResult
@@ -76,7 +77,7 @@ def read_robustness(folder: Path, config: dict | None = None):
 
     folder = Path(folder)
     config = config or read_config(folder)
-    layouts = {name: load_layout(folder / "layouts" / f"{name}.toml") for name in config.get("layouts", [])}
+    layouts = {name: load_layout(folder / "layouts" / f"{name}.toml") for name in config.layouts}
     rows = pd.read_csv(folder / "robustness.csv")
     robust = [c for c in dict.fromkeys(rows["condition"]) if c == "worst" or str(c).startswith("quantile")]
     rows = rows.assign(condition=rows["condition"].replace({robust[0]: "band"})) if robust else rows
@@ -85,4 +86,4 @@ def read_robustness(folder: Path, config: dict | None = None):
         for k, choice in choices_from_comparison(group, layouts[name].names).items():
             choices[(str(name), int(k))] = choice
     extra = {n: pd.read_csv(folder / f"{n}.csv") if (folder / f"{n}.csv").is_file() else None for n in ("brackets", "bracket_sensors")}
-    return RobustnessResult(folder, config["part"]["name"], int(config["seed"]), config, layouts, choices, **extra)
+    return RobustnessResult(folder, config.part_name, int(config.seed), config, layouts, choices, **extra)
