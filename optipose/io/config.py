@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["RunConfig", "BandCheck", "run_config"]
+__all__ = ["RunConfig", "BandCheck", "run_config", "given"]
 
 
 @dataclass(frozen=True)
@@ -108,6 +108,11 @@ def run_config(table: dict) -> RunConfig:
         timings=_table(table.get("timings_s")), failed_registrations=table.get("failed_registrations"),
         versions=_table(table.get("versions")), table=table,
     )  # fmt: skip
+
+
+def given(value, default):
+    """A field of a :class:`RunConfig`, or ``default`` where the file has no such key (None)."""
+    return default if value is None else value
 
 
 def _band(band: dict) -> BandCheck:

@@ -4,9 +4,9 @@
 search`` folders a :class:`~optipose.io.results.SearchResult` whose ``verdicts()`` say, per k, whether
 the found layout beats the hand-placed one, ``optipose robustness`` folders a
 :class:`~optipose.io.results.RobustnessResult` (all three in :mod:`optipose.io.results`); each reads the
-folder's ``config.toml`` once, as a :class:`~optipose.io.config.RunConfig`. A search's trace comes back as records too:
-:func:`load_history` (``Evaluation`` per surrogate call) and :func:`load_selection` (``IcpEvaluation`` per
-ICP look at a candidate). The CLI tables, ``scripts/search_table.py`` and reports read
+folder's ``config.toml`` once, as a :class:`~optipose.io.config.RunConfig`. A search's trace comes back as
+records too: :func:`load_history` (``Evaluation`` per surrogate call) and :func:`load_selection`
+(``IcpEvaluation`` per ICP look at a candidate). The CLI tables, ``scripts/search_table.py`` and reports read
 results through here, never by parsing CSV columns of their own.
 """
 
@@ -21,7 +21,7 @@ from optipose.errors import ConfigError
 from optipose.evaluate.assignment import Choice
 from optipose.evaluate.objective import AXES
 from optipose.io.choices import axis_choice, choices_from_comparison
-from optipose.io.config import RunConfig
+from optipose.io.config import RunConfig, given
 from optipose.io.folders import read_config
 
 __all__ = ["load_result", "load_search", "load_history", "load_selection", "load_surrogate_scores"]
@@ -65,16 +65,11 @@ def load_search(folder: Path, config: RunConfig | None = None):
         found = choices_from_comparison(rows[rows.layout == "found"], found_names)
         hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
         protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
-        return Validation(protocol, int(_or(config.validation_seed, -1)), found, hand_choices)
+        return Validation(protocol, int(given(config.validation_seed, -1)), found, hand_choices)
 
-    return SearchResult(folder, config.part_name, int(config.seed), str(_or(config.budget, "")), config,
+    return SearchResult(folder, config.part_name, int(config.seed), str(given(config.budget, "")), config,
                         layouts, hand, validation(folder / "comparison.csv"),
                         validation(folder / "band" / "comparison.csv") if config.band is not None else None)  # fmt: skip
-
-
-def _or(value, default):
-    """A config value, or ``default`` where the file has none."""
-    return default if value is None else value
 
 
 def load_history(folder: str | Path) -> list:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import shlex
 
-from optipose.io.config import RunConfig
+from optipose.io.config import RunConfig, given
 from optipose.report.document import Block, Code, Heading, Table
 
 __all__ = ["command_line", "provenance_blocks"]
@@ -12,14 +12,14 @@ __all__ = ["command_line", "provenance_blocks"]
 
 def command_line(config: RunConfig) -> str:
     """The optipose command that reproduces the result, rebuilt from its config (its ``--out`` left out)."""
-    command = _or(config.command, "?")
-    args = ["optipose", command, config.part_source or _or(config.part_name, "?")]
+    command = given(config.command, "?")
+    args = ["optipose", command, config.part_source or given(config.part_name, "?")]
     if command == "search":
-        args += ["--budget", str(_or(config.budget, "default"))]
+        args += ["--budget", str(given(config.budget, "default"))]
         if config.sensors:
             args += ["--sensors", ",".join(str(s) for s in config.sensors)]
     if command == "evaluate":
-        source = _or(config.layout_source, "")
+        source = given(config.layout_source, "")
         if source and not source.startswith("part:"):
             args += ["--layout", source]
     if command == "robustness":
@@ -27,19 +27,19 @@ def command_line(config: RunConfig) -> str:
             args += ["--layout", source]
     if config.objective_name:
         args += ["--objective", config.objective_name]
-    args += ["--seed", str(_or(config.seed, 0))]
+    args += ["--seed", str(given(config.seed, 0))]
     return shlex.join(args)
 
 
 def provenance_blocks(config: RunConfig) -> list[Block]:
     """The command, the seed(s), the versions and the search settings, then the objective file as run."""
-    rows = [("command", _or(config.command, "")), ("part", _or(config.part_name, "")),
-            ("part source", _or(config.part_source, "")), ("seed", str(_or(config.seed, "")))]  # fmt: skip
+    rows = [("command", given(config.command, "")), ("part", given(config.part_name, "")),
+            ("part source", given(config.part_source, "")), ("seed", str(given(config.seed, "")))]  # fmt: skip
     if config.validation_seed is not None:
         rows.append(("validation seed (held out)", str(config.validation_seed)))
     if config.budget is not None:
         rows.append(("budget", str(config.budget)))
-    rows.append(("objective", str(_or(config.objective_name, ""))))
+    rows.append(("objective", str(given(config.objective_name, ""))))
     rows += [(f"version: {name}", str(v)) for name, v in config.versions.items()]
     blocks: list[Block] = [Heading("How this was made"), Code(command_line(config), "command"),
                            Table(("what", "value"), tuple(rows), numeric=(False, False))]  # fmt: skip
@@ -49,8 +49,3 @@ def provenance_blocks(config: RunConfig) -> list[Block]:
     if config.objective_file:
         blocks.append(Code(config.objective_file.strip(), "objective file"))
     return blocks
-
-
-def _or(value, default):
-    """A config value, or ``default`` where the file has none."""
-    return default if value is None else value
