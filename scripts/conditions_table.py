@@ -42,7 +42,7 @@ def main() -> None:
     args.add_argument("--seed", type=int, default=11)
     a = args.parse_args()
     result = load_result(a.folder)
-    part = load_part(result.config["part"]["source"] or result.part)
+    part = load_part(result.config.part_source or result.part)
     ks = sorted(result.layouts)
     print(f"{result.part}: hand / found per k ({a.folder})\n")
     print("| condition | " + " | ".join(f"k = {k}" for k in ks) + " |")

@@ -95,6 +95,13 @@ def test_a_bare_stl_search_is_compared_with_the_conventional_placement(results):
     assert all("than conventional" in line for line in result.verdict_lines()[:2])
 
 
+def test_a_robustness_folder_gives_its_verdicts_as_a_search_does(results):
+    result = load_result(results["robustness"])
+    verdicts = result.verdicts()  # a list, as a search's; each names its layout
+    assert isinstance(verdicts, list) and [v.layout for v in verdicts] == [name for name in result.layouts if name != "hand"]
+    assert all(v.reference is result.choices[("hand", v.k)] and v.found is result.choices[(v.layout, v.k)] for v in verdicts)
+
+
 @pytest.mark.parametrize("spec", ["part_b", "bare part_a.stl"])
 def test_conventional_placement_clears_the_part_and_sees_it(spec, tmp_path):
     if spec.startswith("bare"):

@@ -10,9 +10,10 @@ from optipose.evaluate.assignment import AxisChoice, Choice
 from optipose.evaluate.compare import Verdict, dominates, excess, one_versus_many, rank
 from optipose.io import load_result
 from optipose.io.folders import write_config
+from optipose.io.results import SearchResult
 from optipose.io.search import SearchFolder
 from optipose.model.layout import Layout, SensorPose
-from optipose.search.records import SearchResult, Validation
+from optipose.search.records import Validation
 
 
 def _choice(sensors, names, per_axis_mdeg):
@@ -122,6 +123,25 @@ def test_an_evaluation_folder_reads_back_with_the_same_table(tmp_path):
     assert loaded.table == result.table  # the same choices, to the last bit
     assert loaded.per_scan.equals(result.per_scan) and loaded.layout.names == result.layout.names
     assert loaded.objective.protocol == objective.protocol and loaded.seed == 3
+
+
+def test_config_toml_reads_back_once_as_a_typed_record(tmp_path):
+    from optipose.io.config import BandCheck, RunConfig, run_config
+    from optipose.io.folders import RESULT_FORMAT, read_config
+
+    write_config(tmp_path, {"command": "search", "part": {"name": "part_x", "source": "p.toml"}, "seed": 7, "validation_seed": 9,
+                            "budget": "default", "search": {"sensors": (1, 2)}, "objective": {"name": "robust"},
+                            "band": {"file": "robust.toml", "conditions": {"noise_scales": (1.0, 5.0), "mounting_draws": 2}},
+                            "versions": {"optipose": "0.1.0"}})  # fmt: skip
+    config = read_config(tmp_path)
+    assert (config.command, config.format, config.part_name, config.part_source, config.seed, config.validation_seed, config.budget) == (
+        "search", RESULT_FORMAT, "part_x", "p.toml", 7, 9, "default")  # fmt: skip
+    assert config.sensors == (1, 2) and config.objective_name == "robust" and config.versions == {"optipose": "0.1.0"}
+    assert config.band == BandCheck("robust.toml", "worst", (1.0, 5.0), 0.0, 0.0, 2) and not config.band.brackets
+    assert config.table["search"] == {"sensors": [1, 2]}  # the file as written, for showing it
+    # a folder written before a key existed: its field is left empty, nothing fails
+    old = run_config({"command": "evaluate"})
+    assert old == RunConfig(command="evaluate") and old.format is None and old.band is None and old.layouts == () and old.sensors == ()
 
 
 def test_a_folder_that_is_not_a_result_is_refused_in_one_line(tmp_path):

@@ -552,7 +552,7 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
     assert (out / "band" / "comparison.csv").is_file() and (out / "band" / "hand" / "noise-x5" / "per_scan.csv").is_file()
     saved = load_result(out)
     assert {k: v.ratio for k, v in saved.band_verdicts().items()} == pytest.approx({v.k: v.ratio for v in report.band.verdicts()})
-    assert saved.config["band"]["conditions"]["noise_scales"] == [1.0, 5.0]
+    assert saved.config.band.noise_scales == (1.0, 5.0)
     from optipose.batch.results import trial_results
     from optipose.batch.spec import TrialSpec
 
@@ -607,8 +607,10 @@ def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought(
 
 def test_an_answer_never_checked_under_a_band_is_not_a_buy():
     from optipose.evaluate.compare import Verdict
+    from optipose.io.config import run_config
+    from optipose.io.results import SearchResult
     from optipose.report.verdict import verdict_table
-    from optipose.search.records import SearchResult, Validation
+    from optipose.search.records import Validation
 
     nominal = Verdict(1, _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)]))
     assert verdict_table([nominal], "hand").rows[0][-1] == "buy the found sensors"
@@ -618,7 +620,7 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
     validation = Validation("full", 1, {}, {})
 
     def result(config):
-        return SearchResult(None, "part_b", 0, "quick", config, validation=validation)
+        return SearchResult(None, "part_b", 0, "quick", run_config(config), validation=validation)
 
     assert result(ideal).unchecked  # quick: a nominal search with no check planned
     assert not result({**ideal, "band": {"file": "robust"}}).unchecked  # default: the check under the band
@@ -676,10 +678,12 @@ def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, m
 
 
 def test_a_search_with_nothing_to_compare_with_misses_no_check_under_the_band():
-    from optipose.search.records import SearchResult, Validation
+    from optipose.io.config import RunConfig, run_config
+    from optipose.io.results import SearchResult
+    from optipose.search.records import Validation
 
     found = {1: _choice([(1, 2), (1, 2), (1, 2)])}
-    config = {"band": {"file": "robust"}}
+    config = run_config({"band": {"file": "robust"}})
     assert not SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, {})).band_pending
     assert SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, dict(found))).band_pending
-    assert not SearchResult("f", "p", 0, "default", {}, validation=Validation("full", 1, found, dict(found))).band_pending
+    assert not SearchResult("f", "p", 0, "default", RunConfig(), validation=Validation("full", 1, found, dict(found))).band_pending

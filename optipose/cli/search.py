@@ -109,33 +109,39 @@ def _resumed_settings(resume: Path):
                           f"version: {why}; start a new search") from None  # fmt: skip
 
 
-def _written_by(saved: dict) -> str:
-    """Which optipose wrote a result folder, as its config.toml says."""
-    versions = saved.get("versions")
-    version = versions.get("optipose", "?") if isinstance(versions, dict) else "?"
-    return f"optipose {version}, result format {saved.get('format', 'none')}"
+def _written_by(saved) -> str:
+    """Which optipose wrote a result folder, as its config.toml (``saved``, a RunConfig) says."""
+    return f"optipose {saved.versions.get('optipose', '?')}, result format {'none' if saved.format is None else saved.format}"
 
 
-def _settings(saved: dict):
-    """The settings of a parsed config.toml; KeyError, TypeError, ValueError or ConfigError where this
-    version cannot take them."""
+def _settings(saved):
+    """The settings of a config.toml (``saved``, a RunConfig); KeyError, TypeError, ValueError or
+    ConfigError where this version cannot take them."""
     from optipose.evaluate.objective import objective_from_table
     from optipose.search.config import SearchConfig
 
-    part = saved["part"]["source"] or saved["part"]["name"]
-    cfg = dict(saved["search"])
+    part = _needed(saved.part_source, "part" if saved.part_name is None else "source") or _needed(saved.part_name, "name")
+    cfg = dict(_needed(saved.search, "search"))
     unknown = set(cfg) - set(SearchConfig.__dataclass_fields__)
     if unknown:  # a setting this version no longer has
         raise ConfigError(f"unknown search setting(s) {', '.join(sorted(unknown))}")
     cfg["sensors"] = tuple(cfg["sensors"])
     search_config = SearchConfig(**cfg)
-    budget, seed = str(saved["budget"]), int(saved["seed"])
-    text = saved["objective_file"]
+    budget, seed = str(_needed(saved.budget, "budget")), int(_needed(saved.seed, "seed"))
+    text = _needed(saved.objective_file, "objective_file")
     try:
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"its objective_file does not parse: {exc}") from None
     return part, search_config, budget, seed, objective_from_table(table, source_text=text)
+
+
+def _needed(value, key: str):
+    """A config value a resume cannot do without; KeyError naming its key where the file has none (the
+    message then says which)."""
+    if value is None:
+        raise KeyError(key)
+    return value
 
 
 def _parse_sensors(text: str) -> tuple[int, ...]:
@@ -167,8 +173,9 @@ def _overrides(path: Path | None) -> dict:
     return table
 
 
-def _resumed(resume: Path) -> dict:
-    """The config.toml of a search result folder (refusing any other folder, and one of another format)."""
+def _resumed(resume: Path):
+    """The config.toml of a search result folder as a RunConfig (refusing any other folder, and one of
+    another format)."""
     from optipose.io.folders import RESULT_FORMAT, read_config
 
     if not resume.is_dir():
@@ -176,16 +183,16 @@ def _resumed(resume: Path) -> dict:
     if not (resume / "config.toml").is_file():
         raise ConfigError(f"--resume {resume}: no config.toml there (not a search result folder)")
     try:
-        table = read_config(resume)
+        saved = read_config(resume)
     except ConfigError as exc:
         raise ConfigError(f"--resume {resume}: its config.toml is damaged ({str(exc).splitlines()[0]})") from None
-    if table.get("command") != "search":
-        raise ConfigError(f"--resume {resume}: that folder holds a '{table.get('command')}' result, not a search")
-    written = table.get("format")
+    if saved.command != "search":
+        raise ConfigError(f"--resume {resume}: that folder holds a '{saved.command}' result, not a search")
+    written = saved.format
     if written is not None and written != RESULT_FORMAT:
-        raise ConfigError(f"--resume {resume}: written by another optipose ({_written_by(table)}); this version "
+        raise ConfigError(f"--resume {resume}: written by another optipose ({_written_by(saved)}); this version "
                           f"reads result format {RESULT_FORMAT}: start a new search")  # fmt: skip
-    return table
+    return saved
 
 
 def _run_with_progress(console, part, objective, config, seed, folder, budget, jobs, resume):

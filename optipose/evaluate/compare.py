@@ -85,6 +85,7 @@ class Verdict:
     k: int
     found: Choice
     reference: Choice
+    layout: str = ""  # the found layout's name where several are compared (a robustness run), else ""
 
     @property
     def ratio(self) -> float:

@@ -1,6 +1,7 @@
 """Result folders: writing them as a run goes (:mod:`optipose.io.folders`, :mod:`optipose.io.evaluation`,
 :mod:`optipose.io.search`), the one place that turns records into tables (:mod:`optipose.io.tables`),
-and reading them back (:func:`load_result`)."""
+and reading them back (:func:`load_result`: the results of :mod:`optipose.io.results`, each folder's
+``config.toml`` read once as a :class:`~optipose.io.config.RunConfig`)."""
 
 
 def load_result(folder):

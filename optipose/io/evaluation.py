@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from optipose.files import atomic_path
-from optipose.io.folders import versions, write_config, write_csv
+from optipose.io.config import RunConfig
+from optipose.io.folders import read_config, versions, write_config, write_csv
 from optipose.io.tables import table1_frame
 
 __all__ = ["write_evaluation", "read_evaluation"]
@@ -36,7 +37,7 @@ def write_evaluation(result, folder: Path, part_source: str = "", layout_source:
     return folder
 
 
-def read_evaluation(folder: Path, config: dict | None = None):
+def read_evaluation(folder: Path, config: RunConfig | None = None):
     """The :class:`~optipose.evaluate.evaluator.EvaluationResult` saved in ``folder`` by
     :func:`write_evaluation`: the tables as written, Table 1 recomputed from the statistics (CSV floats
     round-trip exactly, so it is the table that was saved)."""
@@ -45,16 +46,15 @@ def read_evaluation(folder: Path, config: dict | None = None):
     from optipose.evaluate.assignment import best_choices
     from optipose.evaluate.evaluator import EvaluationResult
     from optipose.evaluate.objective import objective_from_dict
-    from optipose.io.folders import read_config
     from optipose.model.layout import layout_from_table
 
     folder = Path(folder)
     config = config or read_config(folder)
-    objective = objective_from_dict(config["objective"], source_text=config.get("objective_file", ""))
-    layout = layout_from_table(config["layout"], name=config["layout"]["name"], where=f"{folder}/config.toml")
+    objective = objective_from_dict(config.objective, source_text=config.objective_file or "")
+    layout = layout_from_table(config.layout, name=config.layout_name, where=f"{folder}/config.toml")
     per_scan = pd.read_parquet(folder / "per_scan.parquet")
     stats = pd.read_csv(folder / "stats.csv")
     table = best_choices(stats, layout.names, objective.statistic, per_scan["scan"].nunique())
     points = pd.read_csv(folder / "points.csv")
-    timings = {k: float(v) for k, v in config.get("timings_s", {}).items()}
-    return EvaluationResult(config["part"]["name"], layout, objective, int(config["seed"]), per_scan, points, stats, table, timings)
+    timings = {k: float(v) for k, v in config.timings.items()}
+    return EvaluationResult(config.part_name, layout, objective, int(config.seed), per_scan, points, stats, table, timings)

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from optipose.io.config import RunConfig, run_config
+
 __all__ = ["make_result_dir", "write_config", "read_config", "write_csv", "versions", "RESULTS_DIR", "RESULT_FORMAT"]
 
 log = logging.getLogger(__name__)
@@ -80,14 +82,15 @@ def write_csv(frame, path: Path) -> Path:
     return Path(path)
 
 
-def read_config(folder: Path) -> dict:
-    """The parsed ``config.toml`` of a result folder; ConfigError when there is none or it is broken."""
+def read_config(folder: Path) -> RunConfig:
+    """The ``config.toml`` of a result folder as a :class:`~optipose.io.config.RunConfig`; ConfigError when
+    there is none or it is broken."""
     from optipose.errors import ConfigError, read_toml
 
     path = Path(folder) / "config.toml"
     if not path.is_file():
         raise ConfigError(f"{folder}: no config.toml there (not an optipose result folder)")
-    return read_toml(path)[0]
+    return run_config(read_toml(path)[0])
 
 
 def _plain(value):

@@ -21,16 +21,17 @@ the score and of the score when that sensor's bracket alone is off (worst over t
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
 
-from optipose.io.folders import versions, write_config, write_csv
+from optipose.io.choices import choices_from_comparison
+from optipose.io.config import RunConfig
+from optipose.io.folders import read_config, versions, write_config, write_csv
 from optipose.io.tables import bracket_sensors_frame, brackets_frame, robustness_frame
 from optipose.model.layout import write_layout
 
-__all__ = ["write_robustness", "write_brackets", "brackets_frame", "bracket_sensors_frame", "RobustnessResult", "read_robustness"]
+__all__ = ["write_robustness", "write_brackets", "brackets_frame", "bracket_sensors_frame", "read_robustness"]
 
 
 def write_robustness(folder: Path, part, objective, seed: int, results: dict, hand: str = "hand", sources=()) -> pd.DataFrame:
@@ -68,42 +69,15 @@ def write_brackets(folder: Path, sensitivities: dict) -> tuple[pd.DataFrame, pd.
     return axes, sensors
 
 
-@dataclass(frozen=True)
-class RobustnessResult:
-    """A robustness folder read back (:func:`optipose.io.load_result`).
-
-    layouts : name → Layout (the hand layout under ``hand``); choices : (name, k) → the layout's robust
-    choice of k sensors carrying its statistics per condition (``Choice.under``), the hand layout's under
-    ``("hand", k)``; brackets, bracket_sensors : the tables of ``brackets.csv`` and
-    ``bracket_sensors.csv`` (None without a bracket sensitivity).
-    """
-
-    folder: object
-    part: str
-    seed: int
-    config: dict = field(repr=False)
-    layouts: dict = field(default_factory=dict, repr=False)
-    choices: dict = field(default_factory=dict, repr=False)
-    brackets: pd.DataFrame | None = field(default=None, repr=False)
-    bracket_sensors: pd.DataFrame | None = field(default=None, repr=False)
-
-    def verdicts(self) -> dict:
-        """Layout name → Verdict of its robust choice against the hand layout's choice of as many."""
-        from optipose.evaluate.compare import Verdict
-
-        return {name: Verdict(k, choice, self.choices[("hand", k)])
-                for (name, k), choice in self.choices.items() if name != "hand" and ("hand", k) in self.choices}  # fmt: skip
-
-
-def read_robustness(folder: Path, config: dict | None = None) -> RobustnessResult:
-    """The :class:`RobustnessResult` saved by :func:`write_robustness` (and :func:`write_brackets`)."""
-    from optipose.io.folders import read_config
-    from optipose.io.load import choices_from_comparison
+def read_robustness(folder: Path, config: RunConfig | None = None):
+    """The :class:`~optipose.io.results.RobustnessResult` saved by :func:`write_robustness` (and
+    :func:`write_brackets`)."""
+    from optipose.io.results import RobustnessResult
     from optipose.model.layout import load_layout
 
     folder = Path(folder)
     config = config or read_config(folder)
-    layouts = {name: load_layout(folder / "layouts" / f"{name}.toml") for name in config.get("layouts", [])}
+    layouts = {name: load_layout(folder / "layouts" / f"{name}.toml") for name in config.layouts}
     rows = pd.read_csv(folder / "robustness.csv")
     robust = [c for c in dict.fromkeys(rows["condition"]) if c == "worst" or str(c).startswith("quantile")]
     rows = rows.assign(condition=rows["condition"].replace({robust[0]: "band"})) if robust else rows
@@ -112,4 +86,4 @@ def read_robustness(folder: Path, config: dict | None = None) -> RobustnessResul
         for k, choice in choices_from_comparison(group, layouts[name].names).items():
             choices[(str(name), int(k))] = choice
     extra = {n: pd.read_csv(folder / f"{n}.csv") if (folder / f"{n}.csv").is_file() else None for n in ("brackets", "bracket_sensors")}
-    return RobustnessResult(folder, config["part"]["name"], int(config["seed"]), config, layouts, choices, **extra)
+    return RobustnessResult(folder, config.part_name, int(config.seed), config, layouts, choices, **extra)

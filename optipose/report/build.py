@@ -38,9 +38,8 @@ def write_report(folder: str | Path, views: bool = True) -> tuple[Path, Path]:
 
 def build_blocks(folder: Path, views: bool = True) -> tuple[str, list[Block]]:
     """The report's title and blocks for the result in ``folder``."""
-    from optipose.evaluate.evaluator import EvaluationResult
     from optipose.io import load_result
-    from optipose.io.robustness import RobustnessResult
+    from optipose.io.results import EvaluationResult, RobustnessResult
 
     result = load_result(folder)
     if isinstance(result, EvaluationResult):
@@ -50,12 +49,13 @@ def build_blocks(folder: Path, views: bool = True) -> tuple[str, list[Block]]:
     return _search(folder, result, views)
 
 
-def _part(config: dict):
-    """The part the result was made for, or None (with a log line) when it cannot be loaded any more."""
+def _part(config):
+    """The part the result was made for (``config``: its :class:`~optipose.io.config.RunConfig`), or None
+    (with a log line) when it cannot be loaded any more."""
     from optipose.errors import OptiposeError
     from optipose.model.part import load_part
 
-    source = config.get("part", {}).get("source") or config.get("part", {}).get("name")
+    source = config.part
     try:
         return load_part(source)
     except (OptiposeError, OSError) as exc:
@@ -122,18 +122,17 @@ def _band_check(result, label: str) -> list[Block]:
     verdicts = result.band_verdicts()
     if not verdicts:
         return []
-    band = result.config.get("band", {})
-    c = band.get("conditions", {})
-    how = c.get("aggregate", "worst")
+    band = result.config.band
+    how = band.aggregate
     over = "the worst" if how == "worst" else f"the {float(how):g} quantile"
-    what = f"sensor noise at {', '.join(f'x{s:g}' for s in c.get('noise_scales', []))} the preset's"
-    if c.get("mounting_translation") or c.get("mounting_rotation"):
-        what += (f", brackets off by up to {1e3 * c['mounting_translation']:.2g} mm and {np.rad2deg(c['mounting_rotation']):.2g}° "
-                 f"({c.get('mounting_draws', 1)} draw{'s' if c.get('mounting_draws', 1) > 1 else ''} per level, each statistic {over} "
+    what = f"sensor noise at {', '.join(f'x{s:g}' for s in band.noise_scales)} the preset's"
+    if band.brackets:
+        what += (f", brackets off by up to {1e3 * band.mounting_translation:.2g} mm and {np.rad2deg(band.mounting_rotation):.2g}° "
+                 f"({band.mounting_draws} draw{'s' if band.mounting_draws > 1 else ''} per level, each statistic {over} "
                  "over them), the cell zeroed on a master part")  # fmt: skip
     blocks: list[Block] = [Heading("Under the band of a real cell"), Paragraph(
         f"The search tuned its layouts at the preset's noise with every bracket where it was drawn. Checked again on the held-out seed "
-        f"under the band of objective '{band.get('file', '?')}': {what}. A found layout is bought only when it is no worse than the "
+        f"under the band of objective '{band.file}': {what}. A found layout is bought only when it is no worse than the "
         f"{label} one on every axis at every level too.", "note")]  # fmt: skip
     for _, v in sorted(verdicts.items()):
         blocks += band_blocks("found", v, label)
@@ -191,6 +190,7 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
 
 def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     from optipose.evaluate.compare import mdeg
+    from optipose.io.folders import read_config
     from optipose.report.layouts import layout_section
     from optipose.report.provenance import provenance_blocks
     from optipose.report.scans import scan_blocks
@@ -205,12 +205,13 @@ def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         + "; ".join(f"k={c.k}: {c.name} {mdeg(c.score):.3f} mdeg" for c in result.table), "verdict info")]  # fmt: skip
     blocks.append(Heading("Per axis (the paper's Table 1)"))
     blocks.append(table1_alone(result.table, name, "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses"))
-    blocks += _views(_part(_config(folder)), {name: result.layout}, views)
+    config = read_config(folder)
+    blocks += _views(_part(config), {name: result.layout}, views)
     blocks.append(Heading("Poses for the robot program"))
     blocks += layout_section(name, result.layout)
     blocks.append(Heading("Errors and points"))
     blocks += scan_blocks(result, name, "evaluation")
-    blocks += provenance_blocks(_config(folder))
+    blocks += provenance_blocks(config)
     return title, blocks
 
 
@@ -225,20 +226,20 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     title = f"{result.part}: layouts under every condition of the band (robustness, seed {result.seed})"
     blocks: list[Block] = [Heading("Verdict")]
     verdicts = result.verdicts()
-    for name, v in verdicts.items():
-        blocks.append(Paragraph(f"{name} (worst over the band): {v.line(label)}", verdict_css(v)))
+    for v in verdicts:
+        blocks.append(Paragraph(f"{v.layout} (worst over the band): {v.line(label)}", verdict_css(v)))
     if not verdicts:
         blocks.append(Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed"))
     blocks.append(Heading("Per axis (the paper's Table 1), the robust statistic over the band"))
-    for name, v in verdicts.items():
-        blocks.append(table1_side_by_side({v.k: v.found}, {v.k: v.reference}, label, f"Table 1, {name} vs. {label}: median / 75th percentile "
+    for v in verdicts:
+        blocks.append(table1_side_by_side({v.k: v.found}, {v.k: v.reference}, label, f"Table 1, {v.layout} vs. {label}: median / 75th percentile "
                                           "(mdeg) of the worst condition, and the subset each axis uses"))  # fmt: skip
     if not verdicts:
         hand = {k: c for (n, k), c in result.choices.items() if n == "hand"}
         blocks.append(table1_side_by_side({}, hand, label, "Table 1: median / 75th percentile (mdeg), robust over the band"))
     blocks.append(Heading("At every condition of the band"))
-    for name, v in verdicts.items():
-        blocks += band_blocks(name, v, label)
+    for v in verdicts:
+        blocks += band_blocks(v.layout, v, label)
     blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
     layouts = {(label if n == "hand" else n): replace(lay, name=label if n == "hand" else n) for n, lay in result.layouts.items()}
     blocks += _views(_part(result.config), layouts, views)
@@ -248,8 +249,3 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     blocks += provenance_blocks(result.config)
     return title, blocks
 
-
-def _config(folder: Path) -> dict:
-    from optipose.io.folders import read_config
-
-    return read_config(folder)

@@ -4,50 +4,48 @@ from __future__ import annotations
 
 import shlex
 
+from optipose.io.config import RunConfig, given
 from optipose.report.document import Block, Code, Heading, Table
 
 __all__ = ["command_line", "provenance_blocks"]
 
 
-def command_line(config: dict) -> str:
+def command_line(config: RunConfig) -> str:
     """The optipose command that reproduces the result, rebuilt from its config (its ``--out`` left out)."""
-    command = config.get("command", "?")
-    part = config.get("part", {})
-    args = ["optipose", command, part.get("source") or part.get("name", "?")]
-    objective = config.get("objective", {}).get("name")
+    command = given(config.command, "?")
+    args = ["optipose", command, config.part_source or given(config.part_name, "?")]
     if command == "search":
-        sensors = config.get("search", {}).get("sensors")
-        args += ["--budget", str(config.get("budget", "default"))]
-        if sensors:
-            args += ["--sensors", ",".join(str(s) for s in sensors)]
+        args += ["--budget", str(given(config.budget, "default"))]
+        if config.sensors:
+            args += ["--sensors", ",".join(str(s) for s in config.sensors)]
     if command == "evaluate":
-        source = config.get("layout", {}).get("source", "")
+        source = given(config.layout_source, "")
         if source and not source.startswith("part:"):
             args += ["--layout", source]
     if command == "robustness":
-        for source in config.get("layout_sources", []):
+        for source in config.layout_sources:
             args += ["--layout", source]
-    if objective:
-        args += ["--objective", objective]
-    args += ["--seed", str(config.get("seed", 0))]
+    if config.objective_name:
+        args += ["--objective", config.objective_name]
+    args += ["--seed", str(given(config.seed, 0))]
     return shlex.join(args)
 
 
-def provenance_blocks(config: dict) -> list[Block]:
+def provenance_blocks(config: RunConfig) -> list[Block]:
     """The command, the seed(s), the versions and the search settings, then the objective file as run."""
-    rows = [("command", config.get("command", "")), ("part", config.get("part", {}).get("name", "")),
-            ("part source", config.get("part", {}).get("source", "")), ("seed", str(config.get("seed", "")))]  # fmt: skip
-    if "validation_seed" in config:
-        rows.append(("validation seed (held out)", str(config["validation_seed"])))
-    if "budget" in config:
-        rows.append(("budget", str(config["budget"])))
-    rows.append(("objective", str(config.get("objective", {}).get("name", ""))))
-    rows += [(f"version: {name}", str(v)) for name, v in config.get("versions", {}).items()]
+    rows = [("command", given(config.command, "")), ("part", given(config.part_name, "")),
+            ("part source", given(config.part_source, "")), ("seed", str(given(config.seed, "")))]  # fmt: skip
+    if config.validation_seed is not None:
+        rows.append(("validation seed (held out)", str(config.validation_seed)))
+    if config.budget is not None:
+        rows.append(("budget", str(config.budget)))
+    rows.append(("objective", str(given(config.objective_name, ""))))
+    rows += [(f"version: {name}", str(v)) for name, v in config.versions.items()]
     blocks: list[Block] = [Heading("How this was made"), Code(command_line(config), "command"),
                            Table(("what", "value"), tuple(rows), numeric=(False, False))]  # fmt: skip
-    if config.get("search"):
-        settings = tuple((k, str(v)) for k, v in config["search"].items())
+    if config.search:
+        settings = tuple((k, str(v)) for k, v in config.search.items())
         blocks.append(Table(("search setting", "value"), settings, "search settings (SI units)", numeric=(False, False)))
-    if config.get("objective_file"):
-        blocks.append(Code(config["objective_file"].strip(), "objective file"))
+    if config.objective_file:
+        blocks.append(Code(config.objective_file.strip(), "objective file"))
     return blocks

@@ -3,8 +3,9 @@
 In the spirit of optuna's ``FrozenTrial`` / ``TrialState``: a :class:`LayoutScore` is the frozen answer of
 the surrogate for one layout, with its :class:`EvalState` (feasible, or infeasible with the constraint it
 violates and by how much); an :class:`Evaluation` is one row of the search's history; a :class:`Found` is a
-layout a stage proposes. Sensors are identified by their place in the layout (``u[6i:6i+6]``); names
-(F1, F2, …) are given only when a layout is written.
+layout a stage proposes; a :class:`Validation` is found vs. hand on the held-out seed (a search read back
+from its folder, :class:`optipose.io.results.SearchResult`, holds its validations). Sensors are identified by
+their place in the layout (``u[6i:6i+6]``); names (F1, F2, …) are given only when a layout is written.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from optipose.evaluate.compare import Verdict, one_versus_many, unmeasured_line
 if TYPE_CHECKING:  # importing the surrogate loads the scanner; the records only name its type
     from optipose.search.surrogate import Prediction
 
-__all__ = ["EvalState", "LayoutScore", "Evaluation", "Found", "IcpEvaluation", "SearchOutcome", "Validation", "SearchResult", "PENALTY"]
+__all__ = ["EvalState", "LayoutScore", "Evaluation", "Found", "IcpEvaluation", "SearchOutcome", "Validation", "PENALTY"]
 
 # what an optimiser sees for an infeasible layout: PENALTY + violation (the global NLopt algorithms worth
 # using here take no constraints, so infeasibility is a wall that slopes back toward feasibility)
@@ -172,55 +173,3 @@ class Validation:
         if 1 in self.found and top in self.hand and top > 1:
             lines.append(one_versus_many(self.found[1], self.hand[top], "hand-placed" if reference == "hand" else reference))
         return lines
-
-
-@dataclass(frozen=True)
-class SearchResult:
-    """A search as saved in its result folder (:func:`optipose.io.load_result`).
-
-    layouts : k → the found layout (sensors F1 … Fk); hand : the hand-placed layout, when the part has one;
-    validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
-    band : the same under the band of the check after a nominal search (``SearchConfig.band``), or None.
-    """
-
-    folder: object
-    part: str
-    seed: int
-    budget: str
-    config: dict = field(repr=False)
-    layouts: dict = field(default_factory=dict, repr=False)
-    hand: object = field(default=None, repr=False)
-    validation: Validation | None = None
-    band: Validation | None = None
-
-    def verdicts(self) -> list[Verdict]:
-        """Found vs. hand per k (empty when there is no hand layout or no validation)."""
-        return self.validation.verdicts() if self.validation is not None else []
-
-    def band_verdicts(self) -> dict[int, Verdict]:
-        """k → found vs. hand under the band of the check after a nominal search (empty without one); with
-        :meth:`verdicts`, what :func:`optipose.evaluate.compare.bought` decides on."""
-        return self.band.by_k() if self.band is not None else {}
-
-    @property
-    def band_pending(self) -> bool:
-        """The search was to check its answer under a band but has no such check (it stopped before it; a
-        search with nothing to compare its layouts with has no check to miss)."""
-        return "band" in self.config and self.band is None and self.validation is not None and bool(self.validation.hand)
-
-    @property
-    def unchecked(self) -> bool:
-        """The answer holds for the ideal cell only: a nominal search (one noise level, exact brackets) that was
-        not to check it under a band (``--budget quick``, or ``[search] band = ""``)."""
-        from optipose.evaluate.conditions import ConditionsConfig
-
-        c = self.config.get("objective", {}).get("conditions", {})
-        searched = ConditionsConfig(noise_scales=tuple(c.get("noise_scales", (1.0,))), mounting_translation=c.get("mounting_translation", 0.0),
-                                    mounting_rotation=c.get("mounting_rotation", 0.0))  # fmt: skip
-        return searched.trivial and "band" not in self.config and self.validation is not None
-
-    def verdict_lines(self) -> list[str]:
-        """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""
-        from optipose.model.baseline import baseline_label
-
-        return self.validation.verdict_lines(baseline_label(self.hand)) if self.validation is not None else []

@@ -1,0 +1,133 @@
+"""A result folder's ``config.toml`` read back once, as a frozen :class:`RunConfig`.
+
+:func:`optipose.io.folders.write_config` writes the file (its format is unchanged by this record); every
+reader — :func:`optipose.io.load_result`, the reports' provenance, ``search --resume`` — takes its values
+from the record's fields instead of the parsed table. A field is None (or empty) where the file has no such
+key: folders written before a key existed still load, and a caller that needs the key says so itself (the
+resume names a missing one, as it did when it read the table). The values are kept as TOML gave them (no
+conversion here), so a damaged file fails where its value is used, with the message it always had there.
+``table`` keeps the parsed file whole, for nothing but showing the config as written.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+__all__ = ["RunConfig", "BandCheck", "run_config", "given"]
+
+
+@dataclass(frozen=True)
+class BandCheck:
+    """``[band]`` of a nominal search's config: the objective file of its check under a band and that band's
+    conditions (SI, as :class:`~optipose.evaluate.conditions.ConditionsConfig` wrote them)."""
+
+    file: str = "?"
+    aggregate: str | float = "worst"
+    noise_scales: tuple[float, ...] = ()
+    mounting_translation: float = 0.0  # m
+    mounting_rotation: float = 0.0  # rad
+    mounting_draws: int = 1
+
+    @property
+    def brackets(self) -> bool:
+        """The band moves the brackets (a mounting tolerance in translation or rotation)."""
+        return bool(self.mounting_translation or self.mounting_rotation)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """What a result folder's ``config.toml`` says produced it (see the module doc).
+
+    command : evaluate | search | robustness | batch; format : the folder layout's version
+    (``RESULT_FORMAT``), None before it was recorded; part_name, part_source : the part and the file it was
+    loaded from; seed : the run's seed; validation_seed : a search's held-out seed; budget : a search's
+    budget; search : the search's settings as written (``SearchConfig``'s fields, in file order);
+    objective : the resolved objective's table (:func:`~optipose.evaluate.objective.objective_from_dict`
+    reads it), objective_name its name, objective_file the objective file as written; layout : an
+    evaluation's layout table (:func:`~optipose.model.layout.layout_from_table` reads it), layout_name and
+    layout_source its name and where it came from; layouts, layout_sources : a robustness run's layout
+    names and the files given; band : a nominal search's check under a band; timings : an evaluation's
+    seconds per phase; failed_registrations : an evaluation's count; versions : package → version.
+    """
+
+    command: str | None = None
+    format: int | None = None
+    part_name: str | None = None
+    part_source: str | None = None
+    seed: int | None = None
+    validation_seed: int | None = None
+    budget: str | None = None
+    search: dict | None = field(default=None, repr=False)
+    objective: dict = field(default_factory=dict, repr=False)
+    objective_name: str | None = None
+    objective_file: str | None = field(default=None, repr=False)
+    layout: dict | None = field(default=None, repr=False)
+    layout_name: str | None = None
+    layout_source: str | None = None
+    layouts: tuple[str, ...] = ()
+    layout_sources: tuple[str, ...] = ()
+    band: BandCheck | None = None
+    timings: dict = field(default_factory=dict, repr=False)
+    failed_registrations: int | None = None
+    versions: dict = field(default_factory=dict, repr=False)
+    table: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def sensors(self) -> tuple:
+        """A search's sensor counts (``[search] sensors``), () when not written."""
+        return tuple((self.search or {}).get("sensors") or ())
+
+    @property
+    def part(self) -> str | None:
+        """Where the part can be loaded from again: its source file, else its name."""
+        return self.part_source or self.part_name
+
+    def searched_conditions(self):
+        """The objective's band as the search ran it (noise scales and bracket tolerance; a folder without
+        them: the nominal cell) — a :class:`~optipose.evaluate.conditions.ConditionsConfig`."""
+        from optipose.evaluate.conditions import ConditionsConfig
+
+        c = self.objective.get("conditions", {})
+        return ConditionsConfig(noise_scales=tuple(c.get("noise_scales", (1.0,))), mounting_translation=c.get("mounting_translation", 0.0),
+                                mounting_rotation=c.get("mounting_rotation", 0.0))  # fmt: skip
+
+
+def run_config(table: dict) -> RunConfig:
+    """The :class:`RunConfig` of a parsed ``config.toml`` (keys it lacks left at their defaults)."""
+    part, layout, objective = _table(table.get("part")), _table(table.get("layout")), _table(table.get("objective"))
+    band = table.get("band")
+    return RunConfig(
+        command=table.get("command"), format=table.get("format"),
+        part_name=part.get("name"), part_source=part.get("source"),
+        seed=table.get("seed"), validation_seed=table.get("validation_seed"), budget=table.get("budget"),
+        search=table.get("search"), objective=objective, objective_name=objective.get("name"),
+        objective_file=table.get("objective_file"),
+        layout=table.get("layout"), layout_name=layout.get("name"), layout_source=layout.get("source"),
+        layouts=_names(table.get("layouts")), layout_sources=_names(table.get("layout_sources")),
+        band=None if band is None else _band(_table(band)),
+        timings=_table(table.get("timings_s")), failed_registrations=table.get("failed_registrations"),
+        versions=_table(table.get("versions")), table=table,
+    )  # fmt: skip
+
+
+def given(value, default):
+    """A field of a :class:`RunConfig`, or ``default`` where the file has no such key (None)."""
+    return default if value is None else value
+
+
+def _band(band: dict) -> BandCheck:
+    c = _table(band.get("conditions"))
+    defaults = BandCheck()
+    return BandCheck(band.get("file", defaults.file), c.get("aggregate", defaults.aggregate), _names(c.get("noise_scales")),
+                     c.get("mounting_translation", defaults.mounting_translation),
+                     c.get("mounting_rotation", defaults.mounting_rotation), c.get("mounting_draws", defaults.mounting_draws))  # fmt: skip
+
+
+def _table(value) -> dict:
+    """A sub-table of the file, {} where there is none (or the key holds something else)."""
+    return value if isinstance(value, dict) else {}
+
+
+def _names(value) -> tuple:
+    """A list of the file as a tuple, () where there is none."""
+    return tuple(value) if isinstance(value, list) else ()
