@@ -18,8 +18,8 @@ from optipose.errors import ConfigError
 
 __all__ = ["batch", "batch_command", "study", "study_command"]
 
-StudyFile = Annotated[Path, typer.Argument(help="The study file (TOML: a [grid] and/or [[trials]]; see studies/).")]
-StudyDir = Annotated[Path, typer.Argument(help="A study folder written by `optipose batch`.")]
+StudyFile = Annotated[Path, typer.Argument(metavar="STUDY_FILE", help="The study file (TOML: a [grid] and/or [[trials]]; see studies/).")]
+StudyDir = Annotated[Path, typer.Argument(metavar="FOLDER", help="A study folder written by `optipose batch`.")]
 
 
 @friendly_errors
@@ -34,8 +34,11 @@ def batch(
     summary: Annotated[bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")] = False,
     no_report: Annotated[bool, typer.Option("--no-report", help="Do not write the study report (study.html, study.md).")] = False,
 ) -> None:
-    """Run every trial of a study (parts × tasks × objectives × sensor counts × budgets × seeds), each into
-    its own result folder, with an index of all of them (index.parquet, index.csv)."""
+    """Run a study of many trials, each into its own result folder.
+
+    Every trial of the study (parts × tasks × objectives × sensor counts × budgets × seeds) runs into its
+    own result folder; an index lists all of them (index.parquet, index.csv), and the study report
+    (study.html, study.md) shows them."""
     if summary:
         from optipose.batch.spec import load_study
 
@@ -46,7 +49,10 @@ def batch(
 
 @friendly_errors
 def study(folder: StudyDir) -> None:
-    """Print a study's table: per part and setting, its trials over seeds (complete, failed, scores, axes)."""
+    """Print a study's table and write its report.
+
+    Per part and setting, its trials over seeds: complete and failed, the score and each axis in mdeg;
+    the same table and one row per trial are written to study.html and study.md."""
     study_command(folder)
 
 

@@ -28,7 +28,9 @@ def evaluate(
     seed: Seed = 0,
     no_report: NoReport = False,
 ) -> None:
-    """Scan a layout at every orientation of an objective's protocol, register every sensor subset with
+    """Table 1 of one layout: the best sensor subset per axis, by ICP.
+
+    Scan a layout at every orientation of an objective's protocol, register every sensor subset with
     ICP, and print the best subset per axis for 1, 2, 3 … sensors (the paper's Table 1)."""
     evaluate_command(part, units, layout, out, objective, jobs, seed, report=not no_report)
 

@@ -22,11 +22,13 @@ NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report
 
 @friendly_errors
 def report(
-    result_dir: Annotated[Path, typer.Argument(help="A result folder of optipose search, evaluate or robustness, or a study folder of optipose batch.")],
+    result_dir: Annotated[Path, typer.Argument(metavar="RESULT_DIR", help="A result folder of optipose search, evaluate or robustness, or a study folder of optipose batch.")],
     views: Annotated[bool, typer.Option("--views/--no-views", help="Draw the 3D views (they scan each layout once).")] = True,
 ) -> None:
-    """Write report.html (self-contained: opens offline) and report.md into a result folder: the verdict
-    first, Table 1, error box plots, point counts, 3D views, robustness, the search, the poses to paste."""
+    """Write report.html and report.md into a result folder.
+
+    report.html is self-contained (it opens offline): the verdict first, Table 1, error box plots, point
+    counts, 3D views, robustness, the search, the poses to paste. A study folder gets its study report."""
     report_command(result_dir, views)
 
 

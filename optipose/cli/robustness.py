@@ -48,7 +48,9 @@ def robustness(
     brackets: Brackets = None,
     no_report: NoReport = False,
 ) -> None:
-    """Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
+    """Compare layouts with the hand one under a band of conditions.
+
+    Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
     levels, bracket tolerances) and say, per layout, whether it stays no worse than the hand one."""
     robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report)
 

@@ -25,7 +25,7 @@ def search(
     part: Part = None,
     units: Units = "auto",
     sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
-    budget: Annotated[str, typer.Option(help="quick (a first look, ~25 s on part B), default (~5 min: the search, then its answer checked under the band of a real cell) or thorough; every budget validates on the full protocol.")] = "default",
+    budget: Annotated[str, typer.Option(help="quick (a first look), default (the search, then its answer checked under the band of a real cell) or thorough (more of every stage); every budget validates on the full protocol.")] = "default",
     objective: Objective = "paper",
     seed: Seed = 0,
     jobs: Jobs = None,
@@ -34,9 +34,11 @@ def search(
     config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with a search table overriding the budget (algorithms, evaluations, constraints).")] = None,
     no_report: NoReport = False,
 ) -> None:
-    """Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
-    the full ICP protocol with a held-out noise seed, and print found vs.
-    hand-placed per axis (the paper's Table 1 shape)."""
+    """Place 1, 2, 3 … sensors automatically and compare with the hand layout.
+
+    Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
+    the full ICP protocol with a held-out noise seed, and print found vs. hand-placed per axis (the paper's
+    Table 1 shape)."""
     search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report)
 
 
