@@ -14,6 +14,7 @@ from typing import Annotated, Optional
 import typer
 
 from optipose.cli.options import EXIT_INTERRUPTED, friendly_errors
+from optipose.cli.progress import make_console
 from optipose.errors import ConfigError
 
 __all__ = ["batch", "batch_command", "study", "study_command"]
@@ -59,8 +60,6 @@ def study(folder: StudyDir) -> None:
 def batch_command(study_file: Path, out: Path | None = None, resume: bool = False, jobs: int = 1, backend: str = "joblib",
                   scheduler: str | None = None, trial_jobs: int | None = None, report: bool = True) -> Path:  # fmt: skip
     """Run the study with a progress bar; print its table; returns the study folder."""
-    from rich.console import Console
-
     from optipose.batch.pools import make_pool
     from optipose.batch.spec import load_study
     from optipose.batch.study import prepare_folder, run_study
@@ -69,7 +68,7 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
     folder = Path(out) if out else Path("results") / spec.name
     prepare_folder(folder, resume)
     pool = make_pool(jobs, backend, scheduler, trial_jobs)
-    console = Console(stderr=True)
+    console = make_console(stderr=True)
     try:
         index = _run_with_progress(console, spec, folder, pool, resume, {"backend": backend, "scheduler": scheduler or ""})
     except KeyboardInterrupt:
@@ -90,24 +89,34 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
 
 
 def _run_with_progress(console, spec, folder: Path, pool, resume: bool, config: dict):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
+    """Run the study, its trials counted on ``console``: those already complete (``resume``) and each that
+    ends, out of all of the study's, with how many failed; one line per trial when not on a terminal."""
     from optipose.batch.records import TrialState
     from optipose.batch.study import run_study
+    from optipose.cli.progress import StageProgress
 
-    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("[red]{task.fields[failed]} failed"),
-               TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn()]  # fmt: skip
-    with Progress(*columns, console=console) as progress:
-        bar = progress.add_task(f"{spec.name} ({pool.workers} worker(s))", total=len(spec.trials), failed=0)
+    # every trial of the study counts once: the kept ones now, the others as they end
+    kept = _complete_trials(folder, spec) if resume else 0
+    with StageProgress(console, spec.name, "trials", every=0.0) as progress:
+        progress.stage(f"{pool.workers} worker(s)", len(spec.trials), detail="0 failed")
+        if kept:
+            progress.advance(kept, detail=f"{kept} kept")
         failed = 0
 
         def on_record(record):
             nonlocal failed
             failed += record.state == TrialState.FAILED
-            progress.update(bar, advance=1, failed=failed, description=f"{spec.name}: {record.key} {record.state.value}")
+            progress.advance(detail=f"{failed} failed, last {record.key} {record.state.value}")
 
-        index = run_study(spec, folder, pool, resume, on_record, config)
-        return index
+        return run_study(spec, folder, pool, resume, on_record, config)
+
+
+def _complete_trials(folder: Path, spec) -> int:
+    """How many of the study's trials ``--resume`` keeps: those whose folder a complete run left (as
+    :meth:`optipose.batch.index.StudyIndex.open` decides)."""
+    from optipose.batch.trial import TRIAL_FILE
+
+    return sum((Path(folder) / "trials" / t.key / TRIAL_FILE).is_file() for t in spec.trials)
 
 
 def study_command(folder: Path, report: bool = True) -> None:
@@ -122,7 +131,7 @@ def study_command(folder: Path, report: bool = True) -> None:
     Console().print(_summary_table(summary_frame(index), Path(folder).name))
     if report:
         html, _ = write_study_report(folder, index)
-        Console(stderr=True).print(f"study report: {html}")
+        make_console(stderr=True).print(f"study report: {html}")
 
 
 def write_study_report(folder: Path, index) -> tuple[Path, Path]:
