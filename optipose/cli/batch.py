@@ -135,41 +135,34 @@ def study_command(folder: Path, report: bool = True) -> None:
 
 
 def write_study_report(folder: Path, index) -> tuple[Path, Path]:
-    """``study.html`` and ``study.md`` in the study folder: one sortable row per trial, linking each trial's
+    """``study.html`` and ``study.md`` in the study folder: the table per part and setting this command
+    prints, then one sortable row per trial, each with all of its columns and a link to its
     ``report.html`` where it has one (``optipose report <trial folder>`` writes it)."""
-    from optipose.report.study import study_report
+    from optipose.batch.summary import summary_frame
+    from optipose.report.study import study_report, summary_table
 
     rows = index.drop(columns=[c for c in ("folder",) if c in index]).to_dict("records")
     folders = [Path(folder) / f if isinstance(f, str) and f else None for f in index.get("folder", [None] * len(index))]
-    return study_report(rows, folders, folder, title=f"study {Path(folder).name}")
+    return study_report(rows, folders, folder, title=f"study {Path(folder).name}", summary=summary_table(summary_frame(index)))
 
 
 def _summary_table(frame, name: str):
-    """Per part and setting: trials (complete/failed), seeds, score median/worst and per-axis medians
-    in millidegrees, and for searches hand/found and how many were no worse on every axis (and, checked under a
-    band, how many stayed so there: ``in band``)."""
-    import math
-
+    """The study's table per part and setting (:func:`optipose.report.study.summary_table`, which the
+    study report shows too) as a rich table of an 80-column terminal; failures (``2F``) in red."""
     from rich import box
     from rich.table import Table
+    from rich.text import Text
 
-    def mdeg(value) -> str:
-        return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{1e3 * value:.2f}"
+    from optipose.report.study import summary_table
 
-    searches = "ratio_median" in frame
-    banded = searches and "band_no_worse" in frame  # the searches checked their answer under a band
+    block = summary_table(frame)
     table = Table(title=f"study {name}: mdeg, median over seeds", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    for col in ("part", "task", "k", "ok/n", "score", "worst", "roll", "pitch", "yaw", *(("hand/f", "no worse") if searches else ()),
-                *(("in band",) if banded else ())):  # fmt: skip
-        table.add_column(col, justify="left" if col in ("part", "task") else "right", no_wrap=True)
-    for r in frame.to_dict("records"):
-        task = r["task"] + (f" {r['budget']}" if r["budget"] else "") + ("" if r["objective"] in ("paper", "robust") else f" {r['objective']}")
-        cells = [r["part"], task, str(r["sensors"]), f"{r['complete']}/{r['trials']}" + (f" [red]{r['failed']}F[/]" if r["failed"] else ""),
-                 mdeg(r["score_median_deg"]), mdeg(r["score_worst_deg"]), *(mdeg(r[f"{a}_median_deg"]) for a in ("roll", "pitch", "yaw"))]  # fmt: skip
-        if searches:
-            ratio = r.get("ratio_median")
-            cells += ["-" if ratio is None or math.isnan(ratio) else f"{ratio:.2f}", str(r.get("no_worse") or "-")]
-        if banded:
-            cells.append(r["band_no_worse"] if isinstance(r.get("band_no_worse"), str) else "-")
+    for column, numeric in zip(block.header, block.numeric):
+        # in a narrow terminal the names wrap, so that the numbers need not be cut
+        table.add_column(column, justify="right" if numeric else "left", no_wrap=numeric, overflow="fold")
+    for row in block.rows:
+        cells = [Text(cell) for cell in row]  # Text, not markup: a part's name may hold brackets
+        for cell in cells:
+            cell.highlight_regex(r"\d+F$", "red")
         table.add_row(*cells)
     return table
