@@ -118,12 +118,12 @@ def test_progress_off_a_terminal_is_whole_lines_per_stage_and_every_few_seconds(
     lines = out.getvalue().splitlines()
     assert lines == [
         "part_b: searching on the surrogate, 0 s",
-        "part_b: screen:k=1 (at most 1024 evaluations), 0 s",
+        "part_b: screen:k=1 0/1024 evaluations, 0 s",
         "part_b: screen:k=1 320/1024 evaluations, best k=1: 1.003 mdeg, 10 s",
         "part_b: screen:k=1 640/1024 evaluations, best k=1: 1.002 mdeg, 20 s",
         "part_b: screen:k=1 960/1024 evaluations, best k=1: 1.001 mdeg, 30 s",
         "part_b: screen:k=1 done, 1024 evaluations, best k=1: 1.001 mdeg, 32 s",
-        "part_b: greedy:k=1 (at most 70 evaluations), best k=1: 1.001 mdeg, 32 s",
+        "part_b: greedy:k=1 0/70 evaluations, best k=1: 1.001 mdeg, 32 s",
         "part_b: greedy:k=1 40/70 evaluations, best k=1: 1.001 mdeg, 42 s",
         "part_b: greedy:k=1 done, 75 evaluations, best k=1: 1.001 mdeg, 51 s",
         "part_b: validating on the full protocol (held-out noise seed), 51 s",

@@ -71,7 +71,7 @@ class StageProgress:
             self._bar.reset(self._task, completed=0, description=f"{self.title}: {name}", count=self._count(), detail=self.detail)
             self._set_total(total)
         else:
-            self._line(count=f"(at most {total} {self.unit})" if total else "")
+            self._line(count=self._count() if total else "")
 
     def advance(self, n: int = 1, detail: str | None = None) -> None:
         """``n`` more units of the stage done; ``detail`` (e.g. the best score so far) replaces the last."""
