@@ -166,3 +166,16 @@ def test_each_search_stage_budget_bounds_its_evaluations():
     assert stage_budget(quick, "greedy:k=3") == quick.global_evals
     assert stage_budget(quick, "screen-polish:k=1") == quick.screen_starts * quick.screen_evals
     assert stage_budget(quick, "selecting finalists") is None
+
+
+def test_progress_off_a_terminal_says_a_stage_without_counts_still_runs():
+    import time
+
+    from optipose.cli.progress import StageProgress
+
+    console, out = _plain_console()
+    with StageProgress(console, "part_b", "evaluations", every=0.2) as progress:
+        progress.stage("validating on the full protocol (held-out noise seed)", detail="")
+        time.sleep(1.0)  # an ICP stage: nothing is counted, the heartbeat prints
+    lines = out.getvalue().splitlines()
+    assert len(lines) >= 3 and all(line.startswith("part_b: validating on the full protocol (held-out noise seed), ") for line in lines)

@@ -97,7 +97,7 @@ def _run_with_progress(console, spec, folder: Path, pool, resume: bool, config: 
 
     # every trial of the study counts once: the kept ones now, the others as they end
     kept = _complete_trials(folder, spec) if resume else 0
-    with StageProgress(console, spec.name, "trials", every=0.0) as progress:
+    with StageProgress(console, spec.name, "trials", each=True) as progress:
         progress.stage(f"{pool.workers} worker(s)", len(spec.trials), detail="0 failed")
         if kept:
             progress.advance(kept, detail=f"{kept} kept")

@@ -6,11 +6,13 @@ that stage's own count: against its total when the total is known beforehand (an
 stage's evaluation budget, which the clock may cut short), as a bare count otherwise, never as ``N/M``
 with N past M. When its console is not a terminal (a pipe, a log file, a CI job) there is no live bar,
 whose last frame would be cut to the console's width: it prints one whole line when a stage starts, one
-when it ends, and one every ``every`` seconds in between (:func:`plain_line`).
+when it ends, and one every ``every`` seconds in between, also while a stage counts nothing (the search's
+ICP stages), so that a log shows the work is still going (:func:`plain_line`).
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import Callable
 
@@ -35,15 +37,20 @@ class StageProgress:
     """Shows work in stages on ``console`` (a context manager).
 
     title : what runs (a part's name, a study's); unit : what a stage counts (evaluations, trials);
-    every : seconds between two progress lines when the console is not a terminal; clock : for tests.
+    every : seconds between two progress lines when the console is not a terminal; each : a line for each
+    unit done too (a study's trials, which are few and slow); clock : for tests.
     """
 
-    def __init__(self, console, title: str, unit: str, every: float = 10.0, clock: Callable[[], float] = time.monotonic):
-        self.console, self.title, self.unit, self.every, self.clock = console, title, unit, every, clock
+    def __init__(self, console, title: str, unit: str, every: float = 10.0, each: bool = False,
+                 clock: Callable[[], float] = time.monotonic):  # fmt: skip
+        self.console, self.title, self.unit, self.every, self.each, self.clock = console, title, unit, every, each, clock
         self.live = console.is_terminal
         self.name, self.total, self.done, self.detail = "", None, 0, ""
         self._started = self._printed = clock()
         self._bar = self._task = None
+        self._lock = threading.RLock()  # the plain lines come from the work's thread and from the heartbeat
+        self._stop = threading.Event()
+        self._heartbeat = None
 
     def __enter__(self) -> StageProgress:
         if self.live:
@@ -54,38 +61,54 @@ class StageProgress:
             self._bar = Progress(*columns, console=self.console)
             self._bar.__enter__()
             self._task = self._bar.add_task(self.title, total=None, count="", detail="")
+        else:
+            self._heartbeat = threading.Thread(target=self._beat, name="progress-lines", daemon=True)
+            self._heartbeat.start()
         return self
 
     def __exit__(self, *exc) -> None:
         if self._bar is not None:
             self._bar.__exit__(*exc)
-        elif exc[0] is None:
-            self._end_stage()
+            return
+        self._stop.set()
+        self._heartbeat.join()
+        if exc[0] is None:
+            with self._lock:
+                self._end_stage()
+
+    def _beat(self) -> None:
+        """A line every ``every`` seconds in which nothing else printed one (a stage without units to count)."""
+        while not self._stop.wait(max(self.every, 0.1)):
+            with self._lock:
+                if self.name and self.clock() - self._printed >= self.every:
+                    self._line(count=self._count())
 
     def stage(self, name: str, total: int | None = None, detail: str | None = None) -> None:
         """A new stage begins: ``total`` of its units at most (None: not known beforehand, or it counts none)."""
-        self._end_stage()
-        self.name, self.total, self.done = name, total, 0
-        self.detail = self.detail if detail is None else detail
-        if self._bar is not None:
-            self._bar.reset(self._task, completed=0, description=f"{self.title}: {name}", count=self._count(), detail=self.detail)
-            self._set_total(total)
-        else:
-            self._line(count=self._count() if total else "")
+        with self._lock:
+            self._end_stage()
+            self.name, self.total, self.done = name, total, 0
+            self.detail = self.detail if detail is None else detail
+            if self._bar is not None:
+                self._bar.reset(self._task, completed=0, description=f"{self.title}: {name}", count=self._count(), detail=self.detail)
+                self._set_total(total)
+            else:
+                self._line(count=self._count() if total else "")
 
     def advance(self, n: int = 1, detail: str | None = None) -> None:
         """``n`` more units of the stage done; ``detail`` (e.g. the best score so far) replaces the last."""
-        self.done += n
-        if detail is not None:
-            self.detail = detail
-        if self.total is not None and self.done > self.total:  # past its bound: a count, no longer a fraction
-            self.total = None
+        with self._lock:
+            self.done += n
+            if detail is not None:
+                self.detail = detail
+            if self.total is not None and self.done > self.total:  # past its bound: a count, no longer a fraction
+                self.total = None
+                if self._bar is not None:
+                    self._set_total(None)
             if self._bar is not None:
-                self._set_total(None)
-        if self._bar is not None:
-            self._bar.update(self._task, completed=self.done, count=self._count(), detail=self.detail)
-        elif self.clock() - self._printed >= self.every:
-            self._line(count=self._count())
+                self._bar.update(self._task, completed=self.done, count=self._count(), detail=self.detail)
+            elif self.each or self.clock() - self._printed >= self.every:
+                self._line(count=self._count())
 
     def _set_total(self, total: int | None) -> None:
         """The bar's total; None makes it indeterminate (rich's update and reset read None as "unchanged")."""
