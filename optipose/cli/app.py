@@ -1,11 +1,13 @@
-"""The ``optipose`` Typer app: ``--verbose``, every command's registration and :func:`main`.
+"""The ``optipose`` Typer app: ``--verbose``, ``--version``, every command's registration and :func:`main`.
 
 Each command lives in its own module (:mod:`~optipose.cli.scan`, :mod:`~optipose.cli.parts`,
 :mod:`~optipose.cli.evaluate`, :mod:`~optipose.cli.search`, :mod:`~optipose.cli.robustness`,
 :mod:`~optipose.cli.batch`, :mod:`~optipose.cli.report`) and shares its options through
 :mod:`optipose.cli.options`; those modules never import this one. At import time they need only typer,
 so ``optipose --help`` is instant; the library is imported when a command runs. Every command turns an
-:class:`~optipose.errors.OptiposeError` into one line on stderr and a non-zero exit, never a traceback.
+:class:`~optipose.errors.OptiposeError` into one line on stderr and a non-zero exit, never a traceback, and
+:func:`main` does the same for what click finds wrong with the command line (an unknown option, a bad or
+missing value). The help is click's plain one, each text re-wrapped to the terminal (see ``app``).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import Annotated, Optional
 import typer
 
 from optipose.cli import batch, evaluate, parts, report, robustness, scan, search
+from optipose.cli.options import EXIT_INTERRUPTED, EXIT_USER_ERROR
 
 # rich_markup_mode=None: click's plain help, which re-wraps every paragraph to the terminal and never cuts
 # a word or a default, and in which the brackets of "[grid]" or "[[trials]]" stay text instead of markup
@@ -80,8 +83,6 @@ for _command in (scan.scan, parts.parts, parts.show, parts.counts, evaluate.eval
 def main(args: list[str] | None = None) -> None:
     """Run the command line; a usage error (an unknown option, a bad or missing value) is one line
     ``optipose: error: ...`` on stderr and exit code 2, as every error a command finds itself."""
-    from optipose.cli.options import EXIT_INTERRUPTED, EXIT_USER_ERROR
-
     errors = _click_exceptions()
     try:
         code = app(args, prog_name="optipose", standalone_mode=False)

@@ -40,7 +40,7 @@ def show(
 def counts(
     part: Part = None,
     layout: Annotated[str, typer.Option(help="Which of the part's layouts to scan.")] = "hand",
-    markdown: Annotated[bool, typer.Option(help="Print a Markdown table (for the README).")] = False,
+    markdown: Annotated[bool, typer.Option(help="Print a Markdown table (for the docs).")] = False,
 ) -> None:
     """Point counts of a nominal scan, per sensor.
 
@@ -119,7 +119,7 @@ def counts_command(part: str | None = None, layout: str = "hand", markdown: bool
     from optipose.model.part import list_parts
 
     rows = counts_table([part] if part else list_parts(), layout)
-    if markdown:  # for README tables
+    if markdown:  # for the docs' tables (docs/parts.md)
         print("| part | sensor | points | profiles | points per profile |")
         print("| --- | --- | ---: | ---: | ---: |")
         for r in rows:

@@ -26,7 +26,7 @@ def search(
     part: Part = None,
     units: Units = "auto",
     sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
-    budget: Annotated[str, typer.Option(help="quick (a first look), default (the search, then its answer checked under the band of a real cell) or thorough (more of every stage); every budget validates on the full protocol.")] = "default",
+    budget: Annotated[str, typer.Option(help="quick (a first look, not checked under the band), default (the search, then its answer checked under the band of a real cell) or thorough; every budget validates on the full protocol.")] = "default",
     objective: Objective = "paper",
     seed: Seed = 0,
     jobs: Jobs = None,
