@@ -23,8 +23,11 @@ def run(*args, cwd=None):
 
 
 def assert_one_line_error(result, fragment):
+    """Exit code 2 and the error in one line ``optipose: error: ...``, the last on stderr. Lines before it
+    are the command's progress (off a terminal, a line as each stage starts and ends), never part of it."""
     assert result.returncode == 2, result.stderr
     lines = [line for line in result.stderr.splitlines() if not line.startswith("WARNING")]
-    assert len(lines) == 1, result.stderr
-    assert lines[0].startswith("optipose: error:") and fragment in lines[0], lines[0]
-    assert "Traceback" not in result.stderr
+    errors = [line for line in lines if line.startswith("optipose: error:")]
+    assert len(errors) == 1 and lines[-1] == errors[0], result.stderr
+    assert fragment in errors[0], errors[0]
+    assert "Traceback" not in result.stderr and "╭" not in result.stderr

@@ -176,8 +176,12 @@ def test_the_study_command_prints_the_table_and_refuses_other_folders(serial, tm
     assert [(r[0], r[3], r[4]) for r in rows] == [("part_c", "1", "2/2"), ("part_c", "2", "2/2"), ("broken", "1", "0/2"), ("broken", "2", "0/2")]
     score = index[(index.part == "part_c") & (index.sensors == 1)].score_deg.median()
     assert rows[0][5] == f"{1e3 * score:.2f}"  # mdeg, the median over the seeds
-    page = (Path(folder) / "study.html").read_text()  # the study report: one row per trial
-    assert page.count("<tr") == len(index) + 1 and all(str(key) in page for key in index.key)
+    page = (Path(folder) / "study.html").read_text()  # the study report: the table above, then one row per trial
+    trials = page[page.index('id="trials"') :]
+    trials = trials[: trials.index("</table>")]
+    assert page.index("Per part and setting") < page.index('id="trials"') and f">{1e3 * score:.2f}<" in page
+    assert trials.count("<tr") == len(index) + 1 and all(f'href="#trial-{key}"' in trials for key in index.key)
+    assert all(f'<details id="trial-{key}">' in page for key in index.key)  # each with all of its columns
     other = subprocess.run([sys.executable, "-m", "optipose", "study", tmp_path], capture_output=True, text=True, timeout=120)
     assert other.returncode == 2 and other.stderr.startswith("optipose: error:") and "not an optipose study" in other.stderr
     # `optipose report` on a study folder writes the same study report

@@ -268,6 +268,80 @@ def test_a_study_table_sorts_in_the_browser(results, browser, tmp_path):
     page.close()
 
 
+def _index_rows() -> list[dict]:
+    """Rows as a study index has them (every column it writes): part C evaluated and part B searched, k = 1
+    and 2 over three seeds, and one trial that failed."""
+    rows = []
+    for task, k, seed in itertools.product(("evaluate", "search"), (1, 2), range(3)):
+        budget = "thorough" if task == "search" else ""
+        part = "part_b" if task == "search" else "/data/meshes/part_c.stl"
+        row = {"key": f"{Path(part).stem}-{task}-robust-k{k}-{budget}-s{seed}".replace("--", "-"), "part": part, "task": task,
+               "objective": "robust", "sensors": k, "budget": budget, "seed": seed, "state": "complete", "error": "",
+               "started": "2026-11-24T23:09:01.155+00:00", "finished": "2026-11-24T23:19:01.155+00:00", "seconds": 600.2,
+               "cpu_seconds": 1190.5, "worker": "node-17.cluster:123456", "sensors_used": "S1S2S3"[: 2 * k],
+               "score_deg": 0.00123 * (seed + 1) / k}  # fmt: skip
+        for axis in ("roll", "pitch", "yaw"):
+            row |= {f"{axis}_median_deg": 0.0002 * (seed + 1), f"{axis}_p75_deg": 0.0004, f"{axis}_subset": "S1"}
+        if task == "search":
+            row |= {"hand_score_deg": 0.002, "ratio": 1.5 + seed, "no_worse": seed != 1, "band_ratio": 1.2, "band_no_worse": True}
+        rows.append(row)
+    rows[1] = {**{c: None for c in rows[1]}, **{c: rows[1][c] for c in ("key", "part", "task", "objective", "sensors", "budget", "seed")},
+               "state": "failed", "error": "MeshError: part_c.stl: mesh has no triangles"}  # fmt: skip
+    return rows
+
+
+def _study_page(tmp_path, rows):
+    import pandas as pd
+
+    from optipose.batch.summary import summary_frame
+    from optipose.report.study import study_report, summary_table
+
+    (tmp_path / "t0").mkdir()
+    (tmp_path / "t0" / "report.html").write_text("<html></html>")
+    folders = [tmp_path / "t0"] + [None] * (len(rows) - 1)
+    return study_report(rows, folders, tmp_path, "study s", summary_table(summary_frame(pd.DataFrame(rows))))
+
+
+def test_a_study_page_shows_the_summary_first_then_one_short_row_per_trial_in_mdeg(tmp_path):
+    from optipose.report.study import TRIAL_COLUMNS
+
+    rows = _index_rows()
+    page, md = _study_page(tmp_path, rows)
+    text = page.read_text()
+    assert text.index("Per part and setting") < text.index('id="trials"')  # the table the terminal prints, first
+    summary = text[text.index("Per part and setting") : text.index('id="trials"')]
+    assert summary.count("<tr>") == 1 + 4 and ">1.23<" in summary and ">0/3 1F<" not in summary and ">2/3 1F<" in summary
+    trials = text[text.index('id="trials"') :]
+    trials = trials[: trials.index("</table>")]
+    assert re.findall(r"<th[^>]*>([^<]*)</th>", trials) == [h for h, _ in TRIAL_COLUMNS] + ["report"]
+    assert trials.count("<tr>") == len(rows) + 1 and trials.count("<td") == (len(rows)) * (len(TRIAL_COLUMNS) + 1)
+    assert f">{1e3 * rows[0]['score_deg']:.3g}<" in trials and ">part_c<" in trials  # mdeg; a mesh by its name
+    assert 'href="t0/report.html"' in trials
+    for row in rows:  # each trial's name unfolds all of its columns, angles in mdeg
+        assert f'href="#trial-{row["key"]}"' in trials and f'<details id="trial-{row["key"]}">' in text
+    details = text[text.index(f'<details id="trial-{rows[0]["key"]}">') :]
+    details = details[: details.index("</details>")]
+    assert all(f">{c.replace('_deg', '_mdeg')}<" in details for c in rows[0]) and f">{1e3 * rows[0]['score_deg']:.4g}<" in details
+    assert "MeshError: part_c.stl: mesh has no triangles" in text
+    assert f"[{rows[0]['key']}](#trial-{rows[0]['key']})" in md.read_text()
+
+
+def test_a_study_page_fits_1280_pixels_and_unfolds_a_trial(browser, tmp_path):
+    rows = _index_rows()
+    page_path, _ = _study_page(tmp_path, rows)
+    page, errors, requests = _open(browser, page_path)
+    assert requests == [page_path.as_uri()]
+    widths = page.evaluate("() => [document.documentElement.scrollWidth, document.querySelector('#trials').getBoundingClientRect().right]")
+    assert max(widths) <= 1280, widths  # no column out of sight
+    key = rows[4]["key"]
+    opened = f"() => document.getElementById('trial-{key}').open"
+    assert page.evaluate(opened) is False
+    page.click(f'#trials a[href="#trial-{key}"]')
+    assert page.evaluate(opened) is True
+    assert errors == []
+    page.close()
+
+
 def test_a_layouts_drawn_views_are_taken_only_when_no_older_than_its_file(tmp_path):
     import os
 

@@ -78,6 +78,26 @@ def test_search_writes_a_result_folder_that_explains_itself(searched):
     assert "found vs. hand" in result.stdout
 
 
+def test_search_progress_off_a_terminal_counts_each_stage_within_its_budget(searched):
+    import re
+
+    from optipose.cli.search import stage_budget
+    from optipose.search.config import SearchConfig
+
+    out, result = searched
+    config = tomllib.loads((out / "config.toml").read_text())["search"]
+    config = SearchConfig(**{**config, "sensors": tuple(config["sensors"])})
+    history = pd.read_csv(out / "history.csv")
+    for stage, n in history.groupby("stage").size().items():  # what each stage did, at most its budget
+        assert stage_budget(config, stage) is not None and n <= stage_budget(config, stage), stage
+    progress = [line for line in result.stderr.splitlines() if line.startswith("part_b: ")]
+    assert "part_b: searching on the surrogate, 0 s" in progress
+    for stage, n in history.groupby("stage", sort=False).size().items():  # one whole line as each stage ends
+        assert any(line.startswith(f"part_b: {stage} done, {n} evaluations, best k=") for line in progress), stage
+    for done, total in re.findall(r" (\d+)/(\d+) evaluations", result.stderr):
+        assert int(done) <= int(total)
+
+
 def test_resume_replays_from_the_cache_to_the_same_layout(searched):
     out, _ = searched
     before = (out / "layouts" / "found_k2.toml").read_text()

@@ -14,12 +14,13 @@ from typing import Annotated, Optional
 import typer
 
 from optipose.cli.options import EXIT_INTERRUPTED, friendly_errors
+from optipose.cli.progress import make_console
 from optipose.errors import ConfigError
 
 __all__ = ["batch", "batch_command", "study", "study_command"]
 
-StudyFile = Annotated[Path, typer.Argument(help="The study file (TOML: a [grid] and/or [[trials]]; see studies/).")]
-StudyDir = Annotated[Path, typer.Argument(help="A study folder written by `optipose batch`.")]
+StudyFile = Annotated[Path, typer.Argument(metavar="STUDY_FILE", help="The study file (TOML: a [grid] and/or [[trials]]; see studies/).")]
+StudyDir = Annotated[Path, typer.Argument(metavar="FOLDER", help="A study folder written by `optipose batch`.")]
 
 
 @friendly_errors
@@ -34,8 +35,11 @@ def batch(
     summary: Annotated[bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")] = False,
     no_report: Annotated[bool, typer.Option("--no-report", help="Do not write the study report (study.html, study.md).")] = False,
 ) -> None:
-    """Run every trial of a study (parts × tasks × objectives × sensor counts × budgets × seeds), each into
-    its own result folder, with an index of all of them (index.parquet, index.csv)."""
+    """Run a study of many trials, each into its own result folder.
+
+    Every trial of the study (parts × tasks × objectives × sensor counts × budgets × seeds) runs into its
+    own result folder; an index lists all of them (index.parquet, index.csv), and the study report
+    (study.html, study.md) shows them."""
     if summary:
         from optipose.batch.spec import load_study
 
@@ -46,15 +50,16 @@ def batch(
 
 @friendly_errors
 def study(folder: StudyDir) -> None:
-    """Print a study's table: per part and setting, its trials over seeds (complete, failed, scores, axes)."""
+    """Print a study's table and write its report.
+
+    Per part and setting, its trials over seeds: complete and failed, the score and each axis in mdeg;
+    the same table and one row per trial are written to study.html and study.md."""
     study_command(folder)
 
 
 def batch_command(study_file: Path, out: Path | None = None, resume: bool = False, jobs: int = 1, backend: str = "joblib",
                   scheduler: str | None = None, trial_jobs: int | None = None, report: bool = True) -> Path:  # fmt: skip
     """Run the study with a progress bar; print its table; returns the study folder."""
-    from rich.console import Console
-
     from optipose.batch.pools import make_pool
     from optipose.batch.spec import load_study
     from optipose.batch.study import prepare_folder, run_study
@@ -63,7 +68,7 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
     folder = Path(out) if out else Path("results") / spec.name
     prepare_folder(folder, resume)
     pool = make_pool(jobs, backend, scheduler, trial_jobs)
-    console = Console(stderr=True)
+    console = make_console(stderr=True)
     try:
         index = _run_with_progress(console, spec, folder, pool, resume, {"backend": backend, "scheduler": scheduler or ""})
     except KeyboardInterrupt:
@@ -84,24 +89,34 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
 
 
 def _run_with_progress(console, spec, folder: Path, pool, resume: bool, config: dict):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
+    """Run the study, its trials counted on ``console``: those already complete (``resume``) and each that
+    ends, out of all of the study's, with how many failed; one line per trial when not on a terminal."""
     from optipose.batch.records import TrialState
     from optipose.batch.study import run_study
+    from optipose.cli.progress import StageProgress
 
-    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("[red]{task.fields[failed]} failed"),
-               TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn()]  # fmt: skip
-    with Progress(*columns, console=console) as progress:
-        bar = progress.add_task(f"{spec.name} ({pool.workers} worker(s))", total=len(spec.trials), failed=0)
+    # every trial of the study counts once: the kept ones now, the others as they end
+    kept = _complete_trials(folder, spec) if resume else 0
+    with StageProgress(console, spec.name, "trials", each=True) as progress:
+        progress.stage(f"{pool.workers} worker(s)", len(spec.trials), detail="0 failed")
+        if kept:
+            progress.advance(kept, detail=f"{kept} kept")
         failed = 0
 
         def on_record(record):
             nonlocal failed
             failed += record.state == TrialState.FAILED
-            progress.update(bar, advance=1, failed=failed, description=f"{spec.name}: {record.key} {record.state.value}")
+            progress.advance(detail=f"{failed} failed, last {record.key} {record.state.value}")
 
-        index = run_study(spec, folder, pool, resume, on_record, config)
-        return index
+        return run_study(spec, folder, pool, resume, on_record, config)
+
+
+def _complete_trials(folder: Path, spec) -> int:
+    """How many of the study's trials ``--resume`` keeps: those whose folder a complete run left (as
+    :meth:`optipose.batch.index.StudyIndex.open` decides)."""
+    from optipose.batch.trial import TRIAL_FILE
+
+    return sum((Path(folder) / "trials" / t.key / TRIAL_FILE).is_file() for t in spec.trials)
 
 
 def study_command(folder: Path, report: bool = True) -> None:
@@ -116,45 +131,38 @@ def study_command(folder: Path, report: bool = True) -> None:
     Console().print(_summary_table(summary_frame(index), Path(folder).name))
     if report:
         html, _ = write_study_report(folder, index)
-        Console(stderr=True).print(f"study report: {html}")
+        make_console(stderr=True).print(f"study report: {html}")
 
 
 def write_study_report(folder: Path, index) -> tuple[Path, Path]:
-    """``study.html`` and ``study.md`` in the study folder: one sortable row per trial, linking each trial's
+    """``study.html`` and ``study.md`` in the study folder: the table per part and setting this command
+    prints, then one sortable row per trial, each with all of its columns and a link to its
     ``report.html`` where it has one (``optipose report <trial folder>`` writes it)."""
-    from optipose.report.study import study_report
+    from optipose.batch.summary import summary_frame
+    from optipose.report.study import study_report, summary_table
 
     rows = index.drop(columns=[c for c in ("folder",) if c in index]).to_dict("records")
     folders = [Path(folder) / f if isinstance(f, str) and f else None for f in index.get("folder", [None] * len(index))]
-    return study_report(rows, folders, folder, title=f"study {Path(folder).name}")
+    return study_report(rows, folders, folder, title=f"study {Path(folder).name}", summary=summary_table(summary_frame(index)))
 
 
 def _summary_table(frame, name: str):
-    """Per part and setting: trials (complete/failed), seeds, score median/worst and per-axis medians
-    in millidegrees, and for searches hand/found and how many were no worse on every axis (and, checked under a
-    band, how many stayed so there: ``in band``)."""
-    import math
-
+    """The study's table per part and setting (:func:`optipose.report.study.summary_table`, which the
+    study report shows too) as a rich table of an 80-column terminal; failures (``2F``) in red."""
     from rich import box
     from rich.table import Table
+    from rich.text import Text
 
-    def mdeg(value) -> str:
-        return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{1e3 * value:.2f}"
+    from optipose.report.study import summary_table
 
-    searches = "ratio_median" in frame
-    banded = searches and "band_no_worse" in frame  # the searches checked their answer under a band
+    block = summary_table(frame)
     table = Table(title=f"study {name}: mdeg, median over seeds", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    for col in ("part", "task", "k", "ok/n", "score", "worst", "roll", "pitch", "yaw", *(("hand/f", "no worse") if searches else ()),
-                *(("in band",) if banded else ())):  # fmt: skip
-        table.add_column(col, justify="left" if col in ("part", "task") else "right", no_wrap=True)
-    for r in frame.to_dict("records"):
-        task = r["task"] + (f" {r['budget']}" if r["budget"] else "") + ("" if r["objective"] in ("paper", "robust") else f" {r['objective']}")
-        cells = [r["part"], task, str(r["sensors"]), f"{r['complete']}/{r['trials']}" + (f" [red]{r['failed']}F[/]" if r["failed"] else ""),
-                 mdeg(r["score_median_deg"]), mdeg(r["score_worst_deg"]), *(mdeg(r[f"{a}_median_deg"]) for a in ("roll", "pitch", "yaw"))]  # fmt: skip
-        if searches:
-            ratio = r.get("ratio_median")
-            cells += ["-" if ratio is None or math.isnan(ratio) else f"{ratio:.2f}", str(r.get("no_worse") or "-")]
-        if banded:
-            cells.append(r["band_no_worse"] if isinstance(r.get("band_no_worse"), str) else "-")
+    for column, numeric in zip(block.header, block.numeric):
+        # in a narrow terminal the names wrap, so that the numbers need not be cut
+        table.add_column(column, justify="right" if numeric else "left", no_wrap=numeric, overflow="fold")
+    for row in block.rows:
+        cells = [Text(cell) for cell in row]  # Text, not markup: a part's name may hold brackets
+        for cell in cells:
+            cell.highlight_regex(r"\d+F$", "red")
         table.add_row(*cells)
     return table

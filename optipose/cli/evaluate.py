@@ -11,6 +11,7 @@ from pathlib import Path
 import typer
 
 from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, friendly_errors, warn_if_band
+from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
 
@@ -28,7 +29,9 @@ def evaluate(
     seed: Seed = 0,
     no_report: NoReport = False,
 ) -> None:
-    """Scan a layout at every orientation of an objective's protocol, register every sensor subset with
+    """Table 1 of one layout: the best sensor subset per axis, by ICP.
+
+    Scan a layout at every orientation of an objective's protocol, register every sensor subset with
     ICP, and print the best subset per axis for 1, 2, 3 … sensors (the paper's Table 1)."""
     evaluate_command(part, units, layout, out, objective, jobs, seed, report=not no_report)
 
@@ -64,8 +67,8 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give one with --layout")
     the_objective = load_objective(objective)
     warn_if_band(the_objective, "evaluate")
-    console = Console(stderr=True)
-    with console.status(f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"):
+    console = make_console(stderr=True)
+    with status(console, f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"):
         with Evaluator(the_part, the_objective, seed=seed, jobs=jobs) as evaluator:
             result = evaluator(the_layout)
     folder = make_result_dir(the_part.name, "evaluate", out)

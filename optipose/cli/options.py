@@ -72,7 +72,7 @@ def warn_if_band(objective, command: str) -> None:
 # a default it is required.
 Part = Annotated[
     Optional[str],
-    typer.Argument(help="A shipped part name (see `optipose parts`), a part TOML or a mesh file (STL, OBJ, PLY)."),
+    typer.Argument(metavar="PART", help="A shipped part name (see `optipose parts`), a part TOML or a mesh file (STL, OBJ, PLY)."),
 ]
 Units = Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 20 means mm, 2-20 is refused as mm-or-inches), m, mm or in.")]
 LayoutFile = Annotated[

@@ -19,7 +19,7 @@ __all__ = ["parts", "show", "counts", "parts_command", "show_command", "counts_c
 
 @friendly_errors
 def parts() -> None:
-    """List the shipped parts with their size, material, scanning length and layouts."""
+    """List the shipped parts: size, material, scanning length, layouts."""
     parts_command()
 
 
@@ -30,7 +30,9 @@ def show(
     layout: Annotated[str, typer.Option(help="Which of the part's layouts to draw, or a layout TOML.")] = "hand",
     units: Units = "auto",
 ) -> None:
-    """Draw a part with a layout's sensors (head boxes, laser fans, scanned points) to a PNG."""
+    """Draw a part with a layout's sensors to a PNG.
+
+    The picture shows the part, each sensor's head box and laser fan, and the points of a nominal scan."""
     show_command(part, out, units, layout)
 
 
@@ -40,7 +42,9 @@ def counts(
     layout: Annotated[str, typer.Option(help="Which of the part's layouts to scan.")] = "hand",
     markdown: Annotated[bool, typer.Option(help="Print a Markdown table (for the docs).")] = False,
 ) -> None:
-    """Point counts of a nominal scan per sensor for PART or every part (the paper's Figure 9 at zero offset)."""
+    """Point counts of a nominal scan, per sensor.
+
+    For PART, or for every shipped part without one (the paper's Figure 9 at zero offset)."""
     counts_command(part, layout, markdown)
 
 

@@ -13,6 +13,7 @@ from typing import Annotated
 import typer
 
 from optipose.cli.options import friendly_errors
+from optipose.cli.progress import make_console, status
 from optipose.errors import ConfigError
 
 __all__ = ["report", "report_command", "write_report_after", "NoReport"]
@@ -22,23 +23,23 @@ NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report
 
 @friendly_errors
 def report(
-    result_dir: Annotated[Path, typer.Argument(help="A result folder of optipose search, evaluate or robustness, or a study folder of optipose batch.")],
+    result_dir: Annotated[Path, typer.Argument(metavar="RESULT_DIR", help="A result folder of optipose search, evaluate or robustness, or a study folder of optipose batch.")],
     views: Annotated[bool, typer.Option("--views/--no-views", help="Draw the 3D views (they scan each layout once).")] = True,
 ) -> None:
-    """Write report.html (self-contained: opens offline) and report.md into a result folder: the verdict
-    first, Table 1, error box plots, point counts, 3D views, robustness, the search, the poses to paste."""
+    """Write report.html and report.md into a result folder.
+
+    report.html is self-contained (it opens offline): the verdict first, Table 1, error box plots, point
+    counts, 3D views, robustness, the search, the poses to paste. A study folder gets its study report."""
     report_command(result_dir, views)
 
 
 def report_command(result_dir: Path, views: bool = True) -> Path:
     """Write the report; returns the path of report.html."""
-    from rich.console import Console
-
     from optipose.report.build import write_report
 
     if not Path(result_dir).is_dir():
         raise ConfigError(f"{result_dir}: no such result folder")
-    console = Console(stderr=True)
+    console = make_console(stderr=True)
     if (Path(result_dir) / "index.parquet").is_file():  # a batch study: its table of trials, linking their reports
         from optipose.batch.summary import load_study
         from optipose.cli.batch import write_study_report
@@ -46,7 +47,7 @@ def report_command(result_dir: Path, views: bool = True) -> Path:
         html, md = write_study_report(Path(result_dir), load_study(result_dir))
         console.print(f"study report: {html} (and {md.name})")
         return html
-    with console.status(f"writing the report of {result_dir}"):
+    with status(console, f"writing the report of {result_dir}"):
         html, md = write_report(result_dir, views=views)
     console.print(f"report: {html} (and {md.name})")
     return html
@@ -59,7 +60,7 @@ def write_report_after(folder: Path, console) -> None:
     from optipose.report.build import write_report
 
     try:
-        with console.status("writing report.html"):
+        with status(console, "writing report.html"):
             html, _ = write_report(folder)
         console.print(f"report: {html}")
     except Exception as exc:  # a report must never cost the results

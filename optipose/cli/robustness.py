@@ -20,6 +20,7 @@ from typing import Annotated, Optional
 import typer
 
 from optipose.cli.options import Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
 
@@ -48,7 +49,9 @@ def robustness(
     brackets: Brackets = None,
     no_report: NoReport = False,
 ) -> None:
-    """Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
+    """Compare layouts with the hand one under a band of conditions.
+
+    Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
     levels, bracket tolerances) and say, per layout, whether it stays no worse than the hand one."""
     robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report)
 
@@ -81,11 +84,11 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     given = [load_layout(p) for p in layouts]
     for lay in given:
         check_sensors_outside(the_part, lay)
-    console = Console(stderr=True)
+    console = make_console(stderr=True)
     results = {}
     for i, lay in enumerate([reference, *given]):
         name = "hand" if i == 0 else (lay.name if lay.name not in results else f"{lay.name}-{len(results)}")  # two files of one name
-        with console.status(f"{the_part.name}: {name} under {len(_conditions(the_objective))} conditions"):
+        with status(console, f"{the_part.name}: {name} under {len(_conditions(the_objective))} conditions"):
             results[name] = evaluate_robust(the_part, lay, the_objective, seed=seed, jobs=jobs, quiet=True)
     folder = make_result_dir(the_part.name, "robustness", out)
     rows = write_robustness(folder, the_part, the_objective, seed, results, hand="hand", sources=[str(p) for p in layouts])
@@ -113,7 +116,7 @@ def _brackets(part, objective, seed: int, jobs: int, results: dict, folder: Path
     with BracketEvaluator(part, objective, seed=seed, jobs=jobs) as evaluator:
         for name, result in results.items():
             n = len(result.layout)
-            with console.status(f"{part.name}: {name}'s brackets ({1 + objective.conditions.mounting_draws * (3 + n)} evaluations)"):
+            with status(console, f"{part.name}: {name}'s brackets ({1 + objective.conditions.mounting_draws * (3 + n)} evaluations)"):
                 found[name] = evaluator(result.layout, result.table)
     write_brackets(folder, found)
     for renderable in _bracket_tables(found, part.name):

@@ -14,10 +14,11 @@ from typing import Annotated, Optional
 import typer
 
 from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.progress import make_console
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError, is_interrupt, read_toml
 
-__all__ = ["search", "search_command", "verdict_headline"]
+__all__ = ["search", "search_command", "verdict_headline", "stage_budget"]
 
 
 @friendly_errors
@@ -34,9 +35,11 @@ def search(
     config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with a search table overriding the budget (algorithms, evaluations, constraints).")] = None,
     no_report: NoReport = False,
 ) -> None:
-    """Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
-    the full ICP protocol with a held-out noise seed, and print found vs.
-    hand-placed per axis (the paper's Table 1 shape)."""
+    """Place 1, 2, 3 … sensors automatically and compare with the hand layout.
+
+    Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
+    the full ICP protocol with a held-out noise seed, and print found vs. hand-placed per axis (the paper's
+    Table 1 shape)."""
     search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report)
 
 
@@ -54,7 +57,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     from optipose.model.part import load_part
     from optipose.search.config import config_from_budget
 
-    console = Console(stderr=True)
+    console = make_console(stderr=True)
     jobs = jobs or os.cpu_count() or 1
     if part is None and resume is None:
         raise ConfigError("give a PART to search (a shipped part name or a mesh file), or --resume DIR")
@@ -196,28 +199,39 @@ def _resumed(resume: Path):
 
 
 def _run_with_progress(console, part, objective, config, seed, folder, budget, jobs, resume):
-    """Run the search pipeline with a progress bar on ``console`` over the surrogate's evaluations."""
+    """Run the search pipeline, its progress on ``console``: per stage of the surrogate search its
+    evaluations (against the stage's budget) and the best score so far, then the ICP stages by name."""
     import numpy as np
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from optipose.cli.progress import StageProgress
+    from optipose.io.search import SearchFolder
     from optipose.search.pipeline import run
 
-    n_k = max(config.sensors)
-    total = n_k * (config.global_evals + config.local_evals) + (n_k - 1) * config.joint_evals
-    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("best {task.fields[best]}"), TimeElapsedColumn()]
-    with Progress(*columns, console=console, transient=False) as progress:
-        task = progress.add_task(f"{part.name}: surrogate search", total=total, best="-")
+    with StageProgress(console, part.name, "evaluations") as progress:
 
         def on_eval(evaluation):
-            best = f"k={evaluation.k}: {evaluation.best:.4f} deg" if np.isfinite(evaluation.best) else "-"
-            progress.update(task, advance=1, best=best, description=f"{part.name}: {evaluation.stage}")
+            if evaluation.stage != progress.name:
+                progress.stage(evaluation.stage, stage_budget(config, evaluation.stage))
+            best = f"best k={evaluation.k}: {1e3 * evaluation.best:.3f} mdeg" if np.isfinite(evaluation.best) else None
+            progress.advance(detail=best)
 
         def on_stage(text):
-            progress.update(task, description=f"{part.name}: {text}")
-
-        from optipose.io.search import SearchFolder
+            progress.stage(text, detail="")  # an ICP stage: no surrogate evaluations, no surrogate score
 
         return run(part, objective, config, seed, SearchFolder(folder), budget, jobs, resume, on_eval, on_stage)
+
+
+def stage_budget(config, stage: str) -> int | None:
+    """At most how many surrogate evaluations a stage of the search (``screen:k=2``, ``greedy:k=1`` …)
+    makes, as its settings in ``config`` allow (its clock may end it sooner); None for another stage."""
+    budgets = {
+        "screen": config.screen_samples,
+        "screen-polish": config.screen_starts * config.screen_evals,  # a local polish per start picked
+        "greedy": config.global_evals,
+        "greedy-polish": config.local_evals + config.local_evals // 2,  # and the hand start's, when it led
+        "joint": config.joint_evals,  # shared between its starts
+    }
+    return budgets.get(stage.split(":")[0]) or None
 
 
 def _draw_layouts(folder: Path, part, layouts) -> None:

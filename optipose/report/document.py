@@ -16,7 +16,7 @@ from pathlib import Path
 
 from optipose.files import write_bytes
 
-__all__ = ["Block", "Heading", "Paragraph", "Table", "Figure", "Code", "render_html", "render_markdown"]
+__all__ = ["Block", "Heading", "Paragraph", "Table", "Figure", "Code", "Details", "render_html", "render_markdown"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +41,7 @@ class Table:
     sortable: bool = False
     links: dict = field(default_factory=dict)
     numeric: tuple[bool, ...] = ()  # right-aligned columns (default: every column but the first)
+    anchor: str = ""  # the table's id, for links to it and for scripts and tests to find it
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,17 @@ class Code:
     title: str = ""
 
 
-Block = Heading | Paragraph | Table | Figure | Code
+@dataclass(frozen=True)
+class Details:
+    """Blocks folded under a one-line summary (a study's trial, all of its columns); ``anchor``: its id, a
+    link to ``#anchor`` unfolds it."""
+
+    summary: str
+    blocks: tuple
+    anchor: str = ""
+
+
+Block = Heading | Paragraph | Table | Figure | Code | Details
 
 _CSS = """
 body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;background:#f4f5f7;color:#1d232b}
@@ -82,6 +93,8 @@ figcaption{font-size:13px;color:#59636e}
 .code pre{background:#1d232b;color:#e8eaed;padding:10px 64px 10px 12px;border-radius:6px;margin:0;font-size:12.5px;white-space:pre-wrap;word-break:break-all}
 .code .t{font-size:13px;font-weight:600;margin-bottom:2px}
 .code button{position:absolute;top:22px;right:6px;font-size:12px;padding:2px 8px;border:0;border-radius:4px;cursor:pointer}
+details{margin:2px 0;border-left:3px solid #e3e6ea;padding-left:10px}details[open]{border-color:#3b6fb6}
+details summary{cursor:pointer;font-size:13.5px}details table{margin-top:4px}
 """
 
 # Copy buttons and sortable tables; no library (the page must open offline and stay small).
@@ -97,6 +110,9 @@ function sortTable(th){var table=th.closest('table'),body=table.tBodies[0],i=Arr
  var rows=Array.prototype.slice.call(body.rows);rows.sort(function(a,b){var x=a.cells[i].dataset.v||a.cells[i].innerText,y=b.cells[i].dataset.v||b.cells[i].innerText;
  var nx=parseFloat(x),ny=parseFloat(y);var c=(!isNaN(nx)&&!isNaN(ny))?nx-ny:x.localeCompare(y);return asc?c:-c});
  rows.forEach(function(r){body.appendChild(r)})}
+function openTarget(){var d=document.getElementById(decodeURIComponent(location.hash.slice(1)));
+ if(d&&d.tagName==='DETAILS'){d.open=true;d.scrollIntoView()}}
+window.addEventListener('hashchange',openTarget);window.addEventListener('load',openTarget);
 """
 
 
@@ -144,6 +160,10 @@ def _html_block(b: Block) -> str:
     if isinstance(b, Code):
         title = f'<div class="t">{_e(b.title)}</div>' if b.title else ""
         return f'<div class="code">{title}<pre>{_e(b.text)}</pre><button type="button" onclick="copyText(this)">copy</button></div>'
+    if isinstance(b, Details):
+        anchor = f' id="{_e(b.anchor)}"' if b.anchor else ""
+        inner = "".join(_html_block(x) for x in b.blocks)
+        return f"<details{anchor}><summary>{_e(b.summary)}</summary>{inner}</details>"
     raise TypeError(f"not a report block: {b!r}")
 
 
@@ -163,6 +183,7 @@ def _html_table(t: Table) -> str:
         rows.append("<tr>" + "".join(cells) + "</tr>")
     caption = f"<caption>{_e(t.caption)}</caption>" if t.caption else ""
     sortable = ' class="sortable"' if t.sortable else ""
+    sortable += f' id="{_e(t.anchor)}"' if t.anchor else ""
     return f"<table{sortable}>{caption}<thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
 
 
@@ -184,4 +205,10 @@ def _md_block(b: Block, figure_dir: str) -> list[str]:
         return [f"![{b.caption}]({figure_dir}/{b.name})", "", f"*{b.caption}*"]
     if isinstance(b, Code):
         return ([f"{b.title}:", ""] if b.title else []) + ["```", b.text, "```"]
+    if isinstance(b, Details):  # a heading with an anchor the tables' links point to; Markdown cannot fold
+        anchor = f'<a id="{b.anchor}"></a>' if b.anchor else ""
+        lines = [f"#### {anchor}{b.summary}", ""]
+        for x in b.blocks:
+            lines += _md_block(x, figure_dir) + [""]
+        return lines[:-1]
     raise TypeError(f"not a report block: {b!r}")
