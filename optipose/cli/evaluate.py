@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, friendly_errors, warn_if_band
+from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors, warn_if_band
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
@@ -55,8 +55,9 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     from optipose.model.part import load_part
     from optipose.io import load_result
     from optipose.io.evaluation import write_evaluation
-    from optipose.io.folders import make_result_dir
+    from optipose.io.folders import RESULTS_DIR, make_result_dir
 
+    check_output(out or RESULTS_DIR)
     the_part = load_part(part, units=units)
     if layout is not None:
         the_layout = load_layout(layout)

@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
 from optipose.cli.progress import make_console
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError, is_interrupt, read_toml
@@ -53,7 +53,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     from rich.console import Console
 
     from optipose.evaluate.objective import load_objective
-    from optipose.io.folders import make_result_dir
+    from optipose.io.folders import RESULTS_DIR, make_result_dir
     from optipose.model.part import load_part
     from optipose.search.config import config_from_budget
 
@@ -63,9 +63,12 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         raise ConfigError("give a PART to search (a shipped part name or a mesh file), or --resume DIR")
     if resume:
         part, search_config, budget, seed, the_objective = _resumed_settings(resume)
+        check_output(resume, what="--resume")
     else:
         the_objective = load_objective(objective)
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
+    if not resume:
+        check_output(out or RESULTS_DIR)
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
 
