@@ -73,7 +73,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
         with Evaluator(the_part, the_objective, seed=seed, jobs=jobs) as evaluator:
             result = evaluator(the_layout)
     folder = make_result_dir(the_part.name, "evaluate", out)
-    write_evaluation(result, folder, part_source=str(part), layout_source=str(layout or "part:hand"))
+    write_evaluation(result, folder, part_source=str(part), layout_source=str(layout or "part:hand"), part_units=the_part.units)
     Console().print(table1(load_result(folder)))  # what the folder holds, as a report will read it
     n = len(result.per_scan)
     if result.n_failed:

@@ -64,6 +64,10 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     if resume:
         part, search_config, budget, seed, the_objective = _resumed_settings(resume)
         check_output(resume, what="--resume")
+        if units == "auto":  # the units the search was started with
+            from optipose.io.folders import read_config
+
+            units = read_config(resume).part_units or units
     else:
         the_objective = load_objective(objective)
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
