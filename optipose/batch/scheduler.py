@@ -54,10 +54,12 @@ def split_address(address: str) -> tuple[str, str, int]:
         raise ConfigError(f"--scheduler {address}: unknown scheme '{scheme}' ({hint})")
     host, sep, port = rest.rpartition(":")
     host = host.strip("[]")
-    if not sep or not host:
-        raise ConfigError(f"--scheduler {address}: no host ({hint})")
+    if not sep:
+        raise ConfigError(f"--scheduler {address}: no port ({hint})")
     if not port.isdigit() or not 0 < int(port) < 65536:
         raise ConfigError(f"--scheduler {address}: '{port}' is not a port number ({hint})")
+    if not host:
+        raise ConfigError(f"--scheduler {address}: no host ({hint})")
     return scheme, host, int(port)
 
 
