@@ -32,8 +32,8 @@ def batch(
     backend: Annotated[str, typer.Option("--backend", help="joblib (a process pool on this machine) or dask.")] = "joblib",
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="A Dask scheduler, tcp://HOST:8786 (default: a local cluster of --jobs workers).")] = None,
     trial_jobs: Annotated[Optional[int], typer.Option("--trial-jobs", min=1, help="Each trial's own processes and threads (default: the cores split between the workers).")] = None,
-    no_workers: Annotated[str, typer.Option("--no-workers", help="A Dask cluster without workers for --no-workers-after seconds: stop (finished trials kept) or wait.")] = "stop",
-    no_workers_after: Annotated[float, typer.Option("--no-workers-after", min=1, help="Seconds without a Dask worker before --no-workers applies.")] = 60.0,
+    no_workers: Annotated[str, typer.Option("--no-workers", help="When a Dask cluster has had no worker for a while: stop (finished trials kept) or wait.")] = "stop",
+    no_workers_after: Annotated[float, typer.Option("--no-workers-after", min=1, help="Seconds without a Dask worker before the study stops or waits.")] = 60.0,
     summary: Annotated[bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")] = False,
     no_report: Annotated[bool, typer.Option("--no-report", help="Do not write the study report (study.html, study.md).")] = False,
 ) -> None:
