@@ -204,8 +204,8 @@ class _DyingOnce:
     def submit(self, fn, *args):
         if not self.died:
             self.died = True
-            (self.folder / "trials" / ".tmp-dead-12345678").mkdir(parents=True)
-            (self.folder / "trials" / ".tmp-dead-12345678" / "per_scan.csv").write_text("scan\n0\n")
+            (self.folder / "trials" / ".tmp-dead-worker").mkdir(parents=True)
+            (self.folder / "trials" / ".tmp-dead-worker" / "per_scan.csv").write_text("scan\n0\n")
             return "dead"
         return self.serial.submit(fn, *args)
 
