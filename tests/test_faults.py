@@ -190,6 +190,34 @@ def test_a_cluster_without_workers_stops_the_study_in_one_line_and_keeps_what_fi
         assert (out / folder / "trial.toml").is_file() and (out / folder / "per_scan.parquet").is_file()
 
 
+def test_no_workers_for_a_while_stops_or_waits_as_the_user_chose():
+    from optipose.batch.scheduler import NoWorkers, WorkerWatch
+    from optipose.errors import ConfigError
+
+    now, said = [0.0], []
+    clock = lambda: now[0]  # noqa: E731
+    for policy in ("stop", "wait"):
+        watch = WorkerWatch("tcp://h:1", policy, 60, said.append, clock)
+        watch.check(2)
+        for t in (100.0, 159.0):  # the first count without a worker starts the minute
+            now[0] = t
+            watch.check(0)
+        assert said == []
+        now[0] = 160.0
+        if policy == "stop":
+            with pytest.raises(NoWorkers, match=r"^no Dask worker at tcp://h:1 for 60 s: the study stopped$"):
+                watch.check(0)
+            continue
+        watch.check(0)
+        now[0] = 500.0
+        watch.check(0)  # said once, not at every count
+        watch.check(1)
+        assert said == ["no Dask worker at tcp://h:1 for 60 s: waiting for workers (--no-workers wait; Ctrl-C stops, --resume continues)",
+                        "the Dask cluster at tcp://h:1 has 1 worker(s) again: the study goes on"]  # fmt: skip
+    with pytest.raises(ConfigError, match="--no-workers maybe: use stop or wait"):
+        WorkerWatch("", "maybe")
+
+
 class _DyingOnce:
     """A serial pool whose first trial's worker 'dies' after writing half of its temporary folder."""
 

@@ -129,13 +129,14 @@ def _shown(data: bytes) -> str:
 class WorkerWatch:
     """Call :meth:`check` with the number of workers now, as often as convenient (see the module doc)."""
 
-    def __init__(self, where: str, policy: str = "stop", after: float = 60.0, notify: Callable[[str], None] | None = None):
+    def __init__(self, where: str, policy: str = "stop", after: float = 60.0, notify: Callable[[str], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic):  # fmt: skip
         if policy not in NO_WORKER_POLICIES:
             raise ConfigError(f"--no-workers {policy}: use {' or '.join(NO_WORKER_POLICIES)}")
         if not after > 0:
             raise ConfigError(f"--no-workers-after {after:g}: expected a number of seconds above 0")
         self.where, self.policy, self.after = where, policy, float(after)
-        self.notify = notify or (lambda line: None)
+        self.notify, self.clock = notify or (lambda line: None), clock
         self._since: float | None = None
         self._said = False
 
@@ -145,7 +146,7 @@ class WorkerWatch:
                 self.notify(f"the Dask cluster at {self.where} has {n_workers} worker(s) again: the study goes on")
             self._since, self._said = None, False
             return
-        now = time.monotonic()
+        now = self.clock()
         self._since = now if self._since is None else self._since
         if now - self._since < self.after or self._said:
             return

@@ -57,7 +57,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     from optipose.io.evaluation import write_evaluation
     from optipose.io.folders import RESULTS_DIR, make_result_dir
 
-    check_output(out or RESULTS_DIR)
+    check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     if layout is not None:
         the_layout = load_layout(layout)

@@ -71,7 +71,7 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     from optipose.model.baseline import baseline
     from optipose.model.part import load_part
 
-    check_output(out or RESULTS_DIR)
+    check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     reference = baseline(the_part)  # the hand-placed layout, else the conventional placement
     if reference is None:

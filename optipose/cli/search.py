@@ -72,7 +72,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         the_objective = load_objective(objective)
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
     if not resume:
-        check_output(out or RESULTS_DIR)
+        check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
 
