@@ -156,9 +156,17 @@ def _stop(process: subprocess.Popen) -> None:
     process.wait(timeout=30)
 
 
+def _complete(study: Path) -> bool:
+    """Whether the study's index has a complete trial (the index is replaced whole: never read half-written)."""
+    try:
+        return (pd.read_csv(study / "index.csv").state == "complete").any()
+    except (FileNotFoundError, pd.errors.EmptyDataError):
+        return False
+
+
 def test_a_cluster_without_workers_stops_the_study_in_one_line_and_keeps_what_finished(files, tmp_path):
-    # a scheduler and one single-threaded worker; the worker is killed once the first trial's folder is
-    # there, and the study (--no-workers-after 4) ends in one line with that trial complete in the index
+    # a scheduler and one single-threaded worker; the worker is killed once the index has a complete trial,
+    # and the study (--no-workers-after 4) ends in one line with that trial still complete, its folder there
     port = _closed_port()
     scheduler = _dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard", log=tmp_path / "scheduler.log")
     worker = None
@@ -170,7 +178,7 @@ def test_a_cluster_without_workers_stops_the_study_in_one_line_and_keeps_what_fi
                                   "--scheduler", address, "--out", str(out), "--no-workers-after", "4", "--no-report"],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, **FAST_CHECK})  # fmt: skip
         deadline = time.monotonic() + 120
-        while not list(out.glob("trials/*/trial.toml")) and batch.poll() is None and time.monotonic() < deadline:
+        while not _complete(out) and batch.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
         _stop(worker)
         killed = time.monotonic()
@@ -185,9 +193,20 @@ def test_a_cluster_without_workers_stops_the_study_in_one_line_and_keeps_what_fi
     assert seconds < 4 + 30
     index = pd.read_parquet(out / "index.parquet")
     done = index[index.state == "complete"]
-    assert len(done) >= 1 and set(index.state) <= {"complete", "pending"}  # none left "running"
+    assert len(done) >= 1 and set(index.state) <= {"complete", "pending"}, index.state  # none left "running"
     for folder in done.folder:
         assert (out / folder / "trial.toml").is_file() and (out / folder / "per_scan.parquet").is_file()
+
+
+def test_a_scheduler_without_workers_is_one_line_before_the_study_folder(files):
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=None) as cluster:
+        out = files / "no-workers"
+        result = run("batch", str(files / "study.toml"), "--backend", "dask", "--scheduler", cluster.scheduler_address,
+                     "--out", str(out), "--no-workers-after", "2")  # fmt: skip
+    assert_one_line_error(result, f"no Dask worker at {cluster.scheduler_address} for 2 s: the study stopped (start workers with")
+    assert not out.exists()
 
 
 def test_no_workers_for_a_while_stops_or_waits_as_the_user_chose():
@@ -205,7 +224,7 @@ def test_no_workers_for_a_while_stops_or_waits_as_the_user_chose():
         assert said == []
         now[0] = 160.0
         if policy == "stop":
-            with pytest.raises(NoWorkers, match=r"^no Dask worker at tcp://h:1 for 60 s: the study stopped$"):
+            with pytest.raises(NoWorkers, match=r"^no Dask worker at tcp://h:1 for 60 s: the study stopped \(start workers with `dask worker tcp://h:1`\)$"):
                 watch.check(0)
             continue
         watch.check(0)

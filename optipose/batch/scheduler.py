@@ -152,6 +152,6 @@ class WorkerWatch:
             return
         line = f"no Dask worker at {self.where} for {self.after:g} s"
         if self.policy == "stop":
-            raise NoWorkers(f"{line}: the study stopped")
+            raise NoWorkers(f"{line}: the study stopped (start workers with `dask worker {self.where}`)")
         self._said = True
         self.notify(f"{line}: waiting for workers (--no-workers wait; Ctrl-C stops, --resume continues)")

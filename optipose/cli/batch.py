@@ -89,7 +89,7 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
         console.print(f"[yellow]interrupted[/]: finished trials are in {folder}; continue with {resume_hint}")
         raise typer.Exit(EXIT_INTERRUPTED) from None
     except NoWorkers as exc:
-        fail(f"{exc}; finished trials are in {folder}: start workers and continue with {resume_hint}")
+        fail(f"{exc}; finished trials are in {folder}: continue with {resume_hint}")
     finally:
         pool.close()
     study_command(folder, report)
