@@ -131,7 +131,7 @@ def test_the_check_accepts_a_real_scheduler_and_says_what_a_dashboard_is():
     from optipose.batch.scheduler import check_scheduler, split_address
     from optipose.errors import ConfigError
 
-    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=":0") as cluster:
         address = cluster.scheduler_address
         assert check_scheduler(address, timeout=5) == address
         assert check_scheduler(address.removeprefix("tcp://"), timeout=5) == address  # HOST:PORT is tcp://
@@ -201,7 +201,7 @@ def test_a_cluster_without_workers_stops_the_study_in_one_line_and_keeps_what_fi
 def test_a_scheduler_without_workers_is_one_line_before_the_study_folder(files):
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=":0") as cluster:
         out = files / "no-workers"
         result = run("batch", str(files / "study.toml"), "--backend", "dask", "--scheduler", cluster.scheduler_address,
                      "--out", str(out), "--no-workers-after", "2")  # fmt: skip
