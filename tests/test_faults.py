@@ -108,11 +108,14 @@ def _closed_port() -> int:
         ("silent", "said nothing in 2 s"),
         ("http", "said nothing in 2 s"),
         ("banner", "it answered 'SSH-2.0-'"),
+        ("tls", "cannot reach the Dask scheduler at tls://127.0.0.1:"),  # no TLS settings in Dask's config here
     ],
 )  # fmt: skip
 def test_a_scheduler_that_is_not_one_is_one_line_before_the_study_folder(files, request, address, fragment):
     ports = {"silent": "silent_port", "http": "http_port", "banner": "banner_port"}
-    if address in ports:
+    if address == "tls":
+        address = f"tls://127.0.0.1:{request.getfixturevalue('silent_port')}"
+    elif address in ports:
         address = f"tcp://127.0.0.1:{request.getfixturevalue(ports[address])}"
     elif address == "closed":
         address = f"tcp://127.0.0.1:{_closed_port()}"
@@ -342,6 +345,19 @@ def test_a_damaged_study_index_and_search_cache_are_one_line(files, tmp_path):
     (tmp_path / "cache.npz").write_bytes(b"PK\x03\x04" + bytes(50))
     with pytest.raises(ConfigError, match="cache.npz: damaged"):
         load_cache(tmp_path, 2)
+
+
+def test_search_resume_with_a_damaged_cache_is_one_line_and_keeps_it(tmp_path):
+    from optipose.evaluate.objective import load_objective
+    from optipose.io.search import SearchFolder
+    from optipose.model.part import load_part
+    from optipose.search.config import config_from_budget
+
+    SearchFolder(tmp_path).start(load_part("part_b"), load_objective("paper"), config_from_budget("quick", (1,)), "quick", 0, 1)
+    garbage = b"PK\x03\x04" + np.random.default_rng(4).bytes(200)
+    (tmp_path / "cache.npz").write_bytes(garbage)
+    assert_one_line_error(run("search", "--resume", str(tmp_path), "--no-report"), f"{tmp_path}/cache.npz: damaged")
+    assert (tmp_path / "cache.npz").read_bytes() == garbage  # left as it was, for the user to look at
 
 
 # -- a mesh in inches, a mesh that is not a solid -------------------------------------------------------------

@@ -129,7 +129,7 @@ class DaskPool:
             self._watch = WorkerWatch(address, no_workers, after, notify)
             try:
                 self._client = Client(address, timeout=timeout)
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, TypeError, ValueError) as exc:  # TypeError: tls:// without Dask's TLS settings
                 raise ConfigError(f"cannot reach the Dask scheduler at {address} ({_first_line(exc)})") from None
             try:
                 self._wait_for_workers()
