@@ -395,6 +395,10 @@ def test_a_verdict_on_failed_registrations_says_so_instead_of_ranking():
     hand_failed = Verdict(1, choice("F1"), choice("S1", ("yaw",)))
     assert "those of hand S1 on yaw" in hand_failed.line() and "keep" not in hand_failed.line()
     assert Verdict(1, choice("F1"), choice("S1")).failed_line() == ""  # nothing failed: ranked as before
+    from optipose.cli.search import verdict_headline
+
+    assert verdict_headline(found_failed) == "k=1: NO VERDICT: registrations of found F1 failed (roll, pitch)"
+    assert verdict_headline(hand_failed) == "k=1: NO VERDICT: registrations of hand S1 failed (yaw)"
 
 
 def test_a_mesh_that_is_not_a_solid_is_warned_in_one_line(tmp_path, caplog):

@@ -312,10 +312,14 @@ def verdict_headline(verdict, label: str = "hand", band=None, checked: bool = Tr
     layout no worse at the preset's noise but worse somewhere in the band is not bought
     (:func:`optipose.evaluate.compare.bought`). ``checked=False``: the answer was never checked under a
     band (a nominal search without the check), so a layout no worse in the ideal cell is better there, not
-    yet bought."""
+    yet bought. Where registrations failed on some axis of either layout: no verdict, and whose."""
     from optipose.evaluate.compare import bought
 
     ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
+    mine, theirs = verdict.failed  # registrations failed on some axis: nothing to rank (Verdict.failed_line says more)
+    if mine or theirs:
+        who = f"found {found}" if mine else f"{label} {ref}"
+        return f"k={verdict.k}: NO VERDICT: registrations of {who} failed ({', '.join(mine or theirs)})"
     if verdict.tie:
         return f"k={verdict.k}: KEEP {label} {ref}: found {found} ties it on every axis"
     if verdict.no_worse and not bought(verdict, band):
