@@ -15,7 +15,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_text", "write_bytes", "is_temporary"]
+__all__ = ["atomic_path", "write_text", "write_bytes", "is_temporary", "reading"]
 
 
 @contextlib.contextmanager
@@ -34,6 +34,28 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
+
+
+@contextlib.contextmanager
+def reading(path: str | Path) -> Iterator[Path]:
+    """Read (and parse) ``path`` in the block; a file that is missing or cannot be parsed — truncated,
+    overwritten, another format: whatever the CSV, Parquet, NPZ or TOML reader raises — is one
+    :class:`~optipose.errors.ConfigError` naming it, ``<path>: damaged (<the reader's first line>)``.
+    A file the system will not let us read stays an ``OSError`` (permission denied is not damage)."""
+    from optipose.errors import ConfigError, OptiposeError
+
+    path = Path(path)
+    try:
+        yield path
+    except (OptiposeError, PermissionError, IsADirectoryError, MemoryError):
+        raise
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: missing (the folder is incomplete)") from None
+    except Exception as exc:  # pyarrow's ArrowInvalid and OSError, pandas' ParserError, zipfile's BadZipFile, KeyError, ...
+        text = str(exc).strip().splitlines()
+        reason = text[0][:120] if text else type(exc).__name__
+        reason = f"no {reason}" if isinstance(exc, KeyError) else reason  # a column or key it should have
+        raise ConfigError(f"{path}: damaged ({reason})") from None
 
 
 def write_text(path: str | Path, text: str) -> Path:

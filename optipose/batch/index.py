@@ -22,7 +22,7 @@ from optipose.batch.results import RESULT_COLUMNS, VERDICT_COLUMNS, trial_result
 from optipose.batch.spec import TrialSpec
 from optipose.batch.trial import TMP_PREFIX, TRIAL_FILE
 from optipose.errors import ConfigError
-from optipose.files import atomic_path
+from optipose.files import atomic_path, reading
 
 __all__ = ["StudyIndex", "read_index", "INDEX_FILE", "INDEX_CSV"]
 
@@ -85,7 +85,8 @@ def read_index(folder: str | Path) -> pd.DataFrame:
         raise ConfigError(f"{folder}: no {INDEX_FILE} there (not an optipose study folder)")
     # One open, one read: pyarrow's dataset reader takes the file's size from a stat and reads the footer
     # through a second open, so a study replacing the file in between gave it the new file at the old size.
-    return pd.read_parquet(io.BytesIO(path.read_bytes()))
+    with reading(path):
+        return pd.read_parquet(io.BytesIO(path.read_bytes()))
 
 
 def _from_folder(folder: Path, trial: TrialSpec) -> TrialRecord | None:
@@ -93,8 +94,8 @@ def _from_folder(folder: Path, trial: TrialSpec) -> TrialRecord | None:
     path = folder / "trials" / trial.key
     if not (path / TRIAL_FILE).is_file():
         return None
-    saved = tomllib.loads((path / TRIAL_FILE).read_text())
     try:
+        saved = tomllib.loads((path / TRIAL_FILE).read_text())
         results = trial_results(path, trial)
     except Exception as exc:  # a folder that cannot be read back is not a complete trial: run it again
         log.warning("trial %s: its folder cannot be read back (%s); running it again", trial.key, exc)
@@ -111,12 +112,13 @@ def _old_records(folder: Path) -> dict[str, TrialRecord]:
         return {}
     params = ("part", "task", "objective", "sensors", "budget", "seed")
     out = {}
-    for row in read_index(folder).to_dict("records"):
-        trial = TrialSpec(*(int(row[p]) if p in ("sensors", "seed") else str(row[p]) for p in params))
-        fields = {k: ("" if pd.isna(row[k]) else row[k]) for k in ("error", "started", "finished", "worker", "folder")}
-        results = {k: row[k] for k in RESULT_COLUMNS + VERDICT_COLUMNS if k in row and not _missing(row[k])}
-        seconds = {k: float(row.get(k, float("nan"))) for k in ("seconds", "cpu_seconds")}
-        out[row["key"]] = TrialRecord(trial, TrialState(row["state"]), results=results, **seconds, **fields)
+    with reading(folder / INDEX_FILE):  # a row it cannot take is damage too, said in one line
+        for row in read_index(folder).to_dict("records"):
+            trial = TrialSpec(*(int(row[p]) if p in ("sensors", "seed") else str(row[p]) for p in params))
+            fields = {k: ("" if pd.isna(row[k]) else row[k]) for k in ("error", "started", "finished", "worker", "folder")}
+            results = {k: row[k] for k in RESULT_COLUMNS + VERDICT_COLUMNS if k in row and not _missing(row[k])}
+            seconds = {k: float(row.get(k, float("nan"))) for k in ("seconds", "cpu_seconds")}
+            out[row["key"]] = TrialRecord(trial, TrialState(row["state"]), results=results, **seconds, **fields)
     return out
 
 

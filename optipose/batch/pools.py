@@ -17,9 +17,11 @@ pools capped (:func:`optipose.batch.threads.thread_env`).
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from typing import Protocol
 
+from optipose.batch.scheduler import WorkerWatch, check_scheduler
 from optipose.batch.threads import Plan, plan, thread_env
 from optipose.errors import ConfigError
 
@@ -27,6 +29,7 @@ __all__ = ["TrialPool", "SerialPool", "LokyPool", "DaskPool", "make_pool", "BACK
 
 log = logging.getLogger(__name__)
 BACKENDS = ("joblib", "dask")
+POLL_S = 2.0  # how often a Dask pool waiting for a trial counts the cluster's workers
 
 
 class TrialPool(Protocol):
@@ -112,22 +115,27 @@ class LokyPool:
 
 class DaskPool:
     """Trials as Dask tasks on a distributed cluster: the one at ``scheduler`` (``tcp://host:8786``), or a
-    local cluster of ``jobs`` single-threaded worker processes on 127.0.0.1 when none is given."""
+    local cluster of ``jobs`` single-threaded worker processes on 127.0.0.1 when none is given. The
+    address is checked first (:func:`optipose.batch.scheduler.check_scheduler`); a cluster without a
+    worker is watched by a :class:`~optipose.batch.scheduler.WorkerWatch` (``no_workers``, ``after``)."""
 
-    def __init__(self, jobs: int, scheduler: str | None = None, trial_jobs: int | None = None, timeout: float = 5.0):
+    def __init__(self, jobs: int, scheduler: str | None = None, trial_jobs: int | None = None, timeout: float = 5.0,
+                 no_workers: str = "stop", after: float = 60.0, notify: Callable[[str], None] | None = None):  # fmt: skip
         from distributed import Client, LocalCluster
 
         self._cluster = None
         if scheduler:
+            address = check_scheduler(scheduler)
+            self._watch = WorkerWatch(address, no_workers, after, notify)
             try:
-                self._client = Client(scheduler, timeout=timeout)
-            except (OSError, TimeoutError) as exc:
-                raise ConfigError(f"cannot reach the Dask scheduler at {scheduler} ({_first_line(exc)})") from None
+                self._client = Client(address, timeout=timeout)
+            except (OSError, TimeoutError, TypeError, ValueError) as exc:  # TypeError: tls:// without Dask's TLS settings
+                raise ConfigError(f"cannot reach the Dask scheduler at {address} ({_first_line(exc)})") from None
             try:
-                self._client.wait_for_workers(1, timeout=6 * timeout)
-            except (OSError, TimeoutError):
+                self._wait_for_workers()
+            except BaseException:
                 self._client.close()
-                raise ConfigError(f"the Dask scheduler at {scheduler} has no workers (start some with `dask worker {scheduler}`)") from None
+                raise
             # every worker thread runs one trial (remote workers are started with --nthreads 1: docs/batch.md, "On several machines"); as
             # many trials are kept in flight as there are worker threads now
             self.workers = sum(w["nthreads"] for w in self._client.scheduler_info()["workers"].values())
@@ -138,15 +146,32 @@ class DaskPool:
             self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                          dashboard_address=None, env=thread_env(self.plan.threads))  # fmt: skip
             self._client = Client(self._cluster)
+            self._watch = WorkerWatch(self._client.scheduler.address, no_workers, after, notify)
         self.address = self._client.scheduler.address
+
+    def _n_workers(self) -> int:
+        return len(self._client.scheduler_info().get("workers", {}))
+
+    def _wait_for_workers(self) -> None:
+        while True:
+            self._watch.check(self._n_workers())
+            if self._n_workers():
+                return
+            time.sleep(POLL_S)
 
     def submit(self, fn, *args):
         return self._client.submit(fn, *args, pure=False)
 
     def wait_any(self, futures) -> set:
+        """The futures done; every ``POLL_S`` without one, the workers are counted (NoWorkers when the
+        watch says stop)."""
         from distributed import wait
 
-        return set(wait(list(futures), return_when="FIRST_COMPLETED").done)
+        while True:
+            try:
+                return set(wait(list(futures), timeout=POLL_S, return_when="FIRST_COMPLETED").done)
+            except TimeoutError:
+                self._watch.check(self._n_workers())
 
     def result(self, future):
         return future.result()
@@ -157,14 +182,16 @@ class DaskPool:
             self._cluster.close()
 
 
-def make_pool(jobs: int = 1, backend: str = "joblib", scheduler: str | None = None, trial_jobs: int | None = None) -> TrialPool:
-    """The pool for ``--jobs``, ``--backend`` and ``--scheduler`` (see the module doc)."""
+def make_pool(jobs: int = 1, backend: str = "joblib", scheduler: str | None = None, trial_jobs: int | None = None,
+              **watch) -> TrialPool:  # fmt: skip
+    """The pool for ``--jobs``, ``--backend`` and ``--scheduler`` (see the module doc); ``watch``: a Dask
+    pool's ``no_workers``, ``after`` and ``notify`` (:class:`DaskPool`)."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown back-end '{backend}' (use {', '.join(BACKENDS)})")
     if scheduler and backend != "dask":
         raise ConfigError("--scheduler needs --backend dask")
     if backend == "dask":
-        return DaskPool(jobs, scheduler, trial_jobs)
+        return DaskPool(jobs, scheduler, trial_jobs, **watch)
     return SerialPool(trial_jobs) if int(jobs) == 1 else LokyPool(jobs, trial_jobs)
 
 

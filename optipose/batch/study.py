@@ -4,7 +4,9 @@
 worker has it, then ``complete`` (its results read back from its folder) or ``failed`` (its error), and
 the study goes on. A worker that dies costs its trial one retry; a second death marks it failed. On
 Ctrl-C the trials in flight go back to ``pending`` and the index is written before the interrupt goes
-on, so the folder stays consistent and ``--resume`` runs exactly what is missing.
+on, so the folder stays consistent and ``--resume`` runs exactly what is missing; so too when a Dask
+cluster has had no worker for longer than the user allows (:class:`optipose.batch.scheduler.NoWorkers`).
+A study that ends removes the temporary folders its dead workers left.
 
 The study folder::
 
@@ -17,6 +19,7 @@ The study folder::
 from __future__ import annotations
 
 import logging
+import shutil
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -25,11 +28,11 @@ from optipose.batch.index import INDEX_FILE, StudyIndex
 from optipose.batch.records import TrialRecord, TrialState
 from optipose.batch.results import trial_results
 from optipose.batch.spec import StudySpec
-from optipose.batch.trial import error_line, now, run_trial
-from optipose.errors import ConfigError
+from optipose.batch.trial import TMP_PREFIX, error_line, now, run_trial
+from optipose.errors import ConfigError, WorkerError
 from optipose.files import write_text
 
-__all__ = ["run_study", "prepare_folder", "MAX_RETRIES"]
+__all__ = ["run_study", "prepare_folder", "remove_leftovers", "MAX_RETRIES"]
 
 log = logging.getLogger(__name__)
 MAX_RETRIES = 1  # re-runs of a trial whose worker died
@@ -73,14 +76,22 @@ def run_study(spec: StudySpec, folder: Path, pool, resume: bool = False,
                         on_record(record)
                 index.write()
             _fill(queue, in_flight, index, pool, folder)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, WorkerError):  # Ctrl-C, or a cluster without workers the user would not wait for
         for record in list(index.records.values()):  # in flight, or handed to a serial pool when it came
             if record.state == TrialState.RUNNING:
                 index.set(TrialRecord(record.trial))
         index.write()
         pool.close(cancel=True)
         raise
+    remove_leftovers(folder)
     return index
+
+
+def remove_leftovers(folder: Path) -> None:
+    """The temporary folders of trials whose worker died (``trials/.tmp-*``): once no trial is in flight,
+    nothing will rename them, and the trial ran again elsewhere."""
+    for tmp in (Path(folder) / "trials").glob(f"{TMP_PREFIX}*"):
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _fill(queue: list, in_flight: dict, index: StudyIndex, pool, folder: Path) -> None:

@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import EXIT_INTERRUPTED, friendly_errors
+from optipose.cli.options import EXIT_INTERRUPTED, check_output, fail, friendly_errors
 from optipose.cli.progress import make_console
 from optipose.errors import ConfigError
 
@@ -32,6 +32,8 @@ def batch(
     backend: Annotated[str, typer.Option("--backend", help="joblib (a process pool on this machine) or dask.")] = "joblib",
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="A Dask scheduler, tcp://HOST:8786 (default: a local cluster of --jobs workers).")] = None,
     trial_jobs: Annotated[Optional[int], typer.Option("--trial-jobs", min=1, help="Each trial's own processes and threads (default: the cores split between the workers).")] = None,
+    no_workers: Annotated[str, typer.Option("--no-workers", help="When a Dask cluster has had no worker for a while: stop (finished trials kept) or wait.")] = "stop",
+    no_workers_after: Annotated[float, typer.Option("--no-workers-after", min=1, help="Seconds without a Dask worker before the study stops or waits.")] = 60.0,
     summary: Annotated[bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")] = False,
     no_report: Annotated[bool, typer.Option("--no-report", help="Do not write the study report (study.html, study.md).")] = False,
 ) -> None:
@@ -45,7 +47,8 @@ def batch(
 
         study_command(out or Path("results") / load_study(study_file).name, report=not no_report)
         return
-    batch_command(study_file, out, resume, jobs, backend, scheduler, trial_jobs, report=not no_report)
+    batch_command(study_file, out, resume, jobs, backend, scheduler, trial_jobs, report=not no_report,
+                  no_workers=no_workers, no_workers_after=no_workers_after)  # fmt: skip
 
 
 @friendly_errors
@@ -58,23 +61,35 @@ def study(folder: StudyDir) -> None:
 
 
 def batch_command(study_file: Path, out: Path | None = None, resume: bool = False, jobs: int = 1, backend: str = "joblib",
-                  scheduler: str | None = None, trial_jobs: int | None = None, report: bool = True) -> Path:  # fmt: skip
-    """Run the study with a progress bar; print its table; returns the study folder."""
+                  scheduler: str | None = None, trial_jobs: int | None = None, report: bool = True,
+                  no_workers: str = "stop", no_workers_after: float = 60.0) -> Path:  # fmt: skip
+    """Run the study with a progress bar; print its table; returns the study folder. A Dask cluster
+    without workers for ``no_workers_after`` seconds stops the study (``no_workers="stop"``: one line,
+    exit 2, the finished trials kept) or is waited for (``"wait"``: one line)."""
     from optipose.batch.pools import make_pool
+    from optipose.batch.scheduler import NoWorkers, WorkerWatch
     from optipose.batch.spec import load_study
-    from optipose.batch.study import prepare_folder, run_study
+    from optipose.batch.study import prepare_folder
 
+    WorkerWatch("", no_workers, no_workers_after)  # its options checked before anything starts
     spec = load_study(study_file)
     folder = Path(out) if out else Path("results") / spec.name
+    check_output(folder)
     prepare_folder(folder, resume)
-    pool = make_pool(jobs, backend, scheduler, trial_jobs)
     console = make_console(stderr=True)
+
+    def notify(line: str) -> None:
+        console.print(f"optipose: warning: {line}", markup=False, highlight=False)
+
+    pool = make_pool(jobs, backend, scheduler, trial_jobs, no_workers=no_workers, after=no_workers_after, notify=notify)
+    resume_hint = f"`optipose batch {study_file} --out {folder} --resume`"
     try:
         index = _run_with_progress(console, spec, folder, pool, resume, {"backend": backend, "scheduler": scheduler or ""})
     except KeyboardInterrupt:
-        console.print(f"[yellow]interrupted[/]: finished trials are in {folder}; continue with "
-                      f"`optipose batch {study_file} --out {folder} --resume`")  # fmt: skip
+        console.print(f"[yellow]interrupted[/]: finished trials are in {folder}; continue with {resume_hint}")
         raise typer.Exit(EXIT_INTERRUPTED) from None
+    except NoWorkers as exc:
+        fail(f"{exc}; finished trials are in {folder}: continue with {resume_hint}")
     finally:
         pool.close()
     study_command(folder, report)

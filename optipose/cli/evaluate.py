@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, friendly_errors, warn_if_band
+from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors, warn_if_band
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
@@ -55,8 +55,9 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     from optipose.model.part import load_part
     from optipose.io import load_result
     from optipose.io.evaluation import write_evaluation
-    from optipose.io.folders import make_result_dir
+    from optipose.io.folders import RESULTS_DIR, make_result_dir
 
+    check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     if layout is not None:
         the_layout = load_layout(layout)
@@ -72,7 +73,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
         with Evaluator(the_part, the_objective, seed=seed, jobs=jobs) as evaluator:
             result = evaluator(the_layout)
     folder = make_result_dir(the_part.name, "evaluate", out)
-    write_evaluation(result, folder, part_source=str(part), layout_source=str(layout or "part:hand"))
+    write_evaluation(result, folder, part_source=str(part), layout_source=str(layout or "part:hand"), part_units=the_part.units)
     Console().print(table1(load_result(folder)))  # what the folder holds, as a report will read it
     n = len(result.per_scan)
     if result.n_failed:

@@ -16,7 +16,7 @@ import typer
 from optipose.errors import ConfigError, OptiposeError
 
 __all__ = [
-    "EXIT_USER_ERROR", "EXIT_INTERRUPTED", "fail", "friendly_errors", "parse_floats",
+    "EXIT_USER_ERROR", "EXIT_INTERRUPTED", "fail", "friendly_errors", "parse_floats", "check_output",
     "Part", "Units", "LayoutFile", "Objective", "Seed", "Jobs", "ResultFolder",
 ]  # fmt: skip
 
@@ -58,6 +58,32 @@ def parse_floats(text: str, n: int, what: str) -> list[float]:
     if len(values) != n:
         raise ConfigError(f"{what}: expected {n} numbers, got {len(values)}")
     return values
+
+
+def check_output(path: Path | None, file: bool = False, what: str = "--out") -> None:
+    """Refuse an output that cannot be written before the work, not after it: ``path`` a folder (or, with
+    ``file``, a file whose folder is checked). A probe file is written and removed in the folder, or in
+    its nearest existing parent when the command will create it (nothing is created here). A permission
+    test would not do: root passes every one, and a read-only file system stops root too."""
+    import tempfile
+
+    if path is None:
+        return
+    path = Path(path)
+    folder = path.parent if file else path
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ConfigError(f"{what} {path}: {existing} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(dir=existing, prefix=".optipose-probe-")
+    except OSError as exc:
+        raise ConfigError(f"{what} {path}: cannot write in {existing} ({exc.strerror or exc})") from None
+    import os
+
+    os.close(fd)
+    os.unlink(probe)
 
 
 def warn_if_band(objective, command: str) -> None:

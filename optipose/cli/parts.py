@@ -11,7 +11,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import Part, Units, friendly_errors
+from optipose.cli.options import Part, Units, check_output, friendly_errors
 from optipose.errors import ConfigError
 
 __all__ = ["parts", "show", "counts", "parts_command", "show_command", "counts_command", "counts_table"]
@@ -77,6 +77,7 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
     from optipose.model.part import load_part
     from optipose.report.views import render_part
 
+    check_output(out, file=True)
     loaded = load_part(part, units)
     if layout.endswith(".toml"):  # a layout file, e.g. results/<run>/layouts/found_k2.toml
         from dataclasses import replace

@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from optipose.cli.options import friendly_errors
+from optipose.cli.options import check_output, friendly_errors
 from optipose.cli.progress import make_console, status
 from optipose.errors import ConfigError
 
@@ -39,6 +39,7 @@ def report_command(result_dir: Path, views: bool = True) -> Path:
 
     if not Path(result_dir).is_dir():
         raise ConfigError(f"{result_dir}: no such result folder")
+    check_output(Path(result_dir), what="report into")
     console = make_console(stderr=True)
     if (Path(result_dir) / "index.parquet").is_file():  # a batch study: its table of trials, linking their reports
         from optipose.batch.summary import load_study

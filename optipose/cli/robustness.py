@@ -19,7 +19,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.options import Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
@@ -64,13 +64,14 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
 
     from optipose.evaluate.objective import load_objective
     from optipose.evaluate.robust import evaluate_robust
-    from optipose.io.folders import make_result_dir
+    from optipose.io.folders import RESULTS_DIR, make_result_dir
     from optipose.io.robustness import write_robustness
     from optipose.model.collision import check_sensors_outside
     from optipose.model.layout import load_layout
     from optipose.model.baseline import baseline
     from optipose.model.part import load_part
 
+    check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     reference = baseline(the_part)  # the hand-placed layout, else the conventional placement
     if reference is None:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Optional, Sequence
 
 import typer
 
-from optipose.cli.options import LayoutFile, Part, Seed, Units, friendly_errors, parse_floats
+from optipose.cli.options import LayoutFile, Part, Seed, Units, check_output, friendly_errors, parse_floats
 from optipose.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -61,6 +61,8 @@ def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path |
 
     if out and out.suffix.lower() not in CLOUD_SUFFIXES:  # refuse before the work, not after
         raise ConfigError(f"--out {out}: unsupported cloud format (use {', '.join(CLOUD_SUFFIXES)})")
+    check_output(out, file=True)
+    check_output(raw_dir, what="--raw")
     the_part = load_part(part, units=units)
     the_layout = poses_from_cli(sensor_pose, layout, the_part)
     check_sensors_outside(the_part, the_layout)

@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, friendly_errors
+from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
 from optipose.cli.progress import make_console
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError, is_interrupt, read_toml
@@ -53,7 +53,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     from rich.console import Console
 
     from optipose.evaluate.objective import load_objective
-    from optipose.io.folders import make_result_dir
+    from optipose.io.folders import RESULTS_DIR, make_result_dir
     from optipose.model.part import load_part
     from optipose.search.config import config_from_budget
 
@@ -63,9 +63,16 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         raise ConfigError("give a PART to search (a shipped part name or a mesh file), or --resume DIR")
     if resume:
         part, search_config, budget, seed, the_objective = _resumed_settings(resume)
+        check_output(resume, what="--resume")
+        if units == "auto":  # the units the search was started with
+            from optipose.io.folders import read_config
+
+            units = read_config(resume).part_units or units
     else:
         the_objective = load_objective(objective)
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
+    if not resume:
+        check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
 
@@ -305,10 +312,14 @@ def verdict_headline(verdict, label: str = "hand", band=None, checked: bool = Tr
     layout no worse at the preset's noise but worse somewhere in the band is not bought
     (:func:`optipose.evaluate.compare.bought`). ``checked=False``: the answer was never checked under a
     band (a nominal search without the check), so a layout no worse in the ideal cell is better there, not
-    yet bought."""
+    yet bought. Where registrations failed on some axis of either layout: no verdict, and whose."""
     from optipose.evaluate.compare import bought
 
     ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
+    mine, theirs = verdict.failed  # registrations failed on some axis: nothing to rank (Verdict.failed_line says more)
+    if mine or theirs:
+        who = f"found {found}" if mine else f"{label} {ref}"
+        return f"k={verdict.k}: NO VERDICT: registrations of {who} failed ({', '.join(mine or theirs)})"
     if verdict.tie:
         return f"k={verdict.k}: KEEP {label} {ref}: found {found} ties it on every axis"
     if verdict.no_worse and not bought(verdict, band):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
+from optipose.evaluate.assignment import FAILED, UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 
 __all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "bought", "UNCHECKED", "one_versus_many", "unmeasured_line", "mdeg"]
 
@@ -159,9 +159,31 @@ class Verdict:
         when the choice measures every axis on hand sensors a found layout keeps in their places."""
         return self.no_worse and dominates(self.reference, self.found)
 
+    @property
+    def failed(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The axes of the found and of the reference choice whose registrations failed too often
+        (``AxisChoice.reason`` ``FAILED``): there the comparison is of two unknowns, not of errors."""
+        return tuple(tuple(a.axis for a in c.axes if a.reason == FAILED) for c in (self.found, self.reference))
+
+    def failed_line(self, reference: str = "hand") -> str:
+        """The verdict when registrations failed on some axis of either choice ("" when none did): no
+        ranking, what failed and where to look (the mesh of a part that is not a closed solid, most often)."""
+        mine, theirs = self.failed
+        if not mine and not theirs:
+            return ""
+        name, ref = self.found.name, self.reference.name
+        what = [f"the registrations of found {name} failed on {', '.join(mine)}"] if mine else []
+        what += [f"those of {reference} {ref} on {', '.join(theirs)}"] if theirs else []
+        then = f"keep {ref} until they succeed" if mine else f"found {name} is not shown better there"
+        return (f"k={self.k}: no verdict: {' and '.join(what)} in over a tenth of the scans (see per_scan.csv's failure "
+                f"column; is the part's mesh a closed solid?): {then}")  # fmt: skip
+
     def line(self, reference: str = "hand") -> str:
         """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace;
-        ``reference`` names the baseline (``hand``, ``conventional``)."""
+        ``reference`` names the baseline (``hand``, ``conventional``). Where registrations failed, no
+        ranking: :meth:`failed_line`."""
+        if failed := self.failed_line(reference):
+            return failed
         ratio, name, ref = self.ratio, self.found.name, self.reference.name
         gaps = sorted(self.worse, key=lambda g: g.reference / g.found)  # the widest first
         worse = [f"{g.axis} {g.statistic} {_mdeg_or_none(g.found)} vs {_mdeg_or_none(g.reference)}"
@@ -188,8 +210,9 @@ UNCHECKED = ("checked in the ideal cell only (the preset's noise, every bracket 
 def bought(verdict: Verdict, band: Verdict | None = None) -> bool:
     """Whether to buy the found layout of ``verdict``: no worse than the reference on every axis and better on
     some (a tie gains nothing), and, when the search checked it under a band afterwards (``band``: the same
-    k's verdict there), no worse at every level too."""
-    return verdict.no_worse and not verdict.tie and (band is None or band.no_worse)
+    k's verdict there), no worse at every level too; never when the found choice's registrations failed on
+    some axis."""
+    return verdict.no_worse and not verdict.tie and not verdict.failed[0] and (band is None or band.no_worse)
 
 
 def _mdeg_or_none(rad: float) -> str:

@@ -40,7 +40,7 @@ class RunConfig:
 
     command : evaluate | search | robustness | batch; format : the folder layout's version
     (``RESULT_FORMAT``), None before it was recorded; part_name, part_source : the part and the file it was
-    loaded from; seed : the run's seed; validation_seed : a search's held-out seed; budget : a search's
+    loaded from, part_units the ``--units`` it was loaded with (None: auto); seed : the run's seed; validation_seed : a search's held-out seed; budget : a search's
     budget; search : the search's settings as written (``SearchConfig``'s fields, in file order);
     objective : the resolved objective's table (:func:`~optipose.evaluate.objective.objective_from_dict`
     reads it), objective_name its name, objective_file the objective file as written; layout : an
@@ -54,6 +54,7 @@ class RunConfig:
     format: int | None = None
     part_name: str | None = None
     part_source: str | None = None
+    part_units: str | None = None
     seed: int | None = None
     validation_seed: int | None = None
     budget: str | None = None
@@ -98,7 +99,7 @@ def run_config(table: dict) -> RunConfig:
     band = table.get("band")
     return RunConfig(
         command=table.get("command"), format=table.get("format"),
-        part_name=part.get("name"), part_source=part.get("source"),
+        part_name=part.get("name"), part_source=part.get("source"), part_units=part.get("units"),
         seed=table.get("seed"), validation_seed=table.get("validation_seed"), budget=table.get("budget"),
         search=table.get("search"), objective=objective, objective_name=objective.get("name"),
         objective_file=table.get("objective_file"),

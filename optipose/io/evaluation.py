@@ -4,15 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from optipose.files import atomic_path
+from optipose.files import atomic_path, reading
 from optipose.io.config import RunConfig
-from optipose.io.folders import read_config, versions, write_config, write_csv
+from optipose.io.folders import part_table, read_config, versions, write_config, write_csv
 from optipose.io.tables import table1_frame
 
 __all__ = ["write_evaluation", "read_evaluation"]
 
 
-def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "") -> Path:
+def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "", part_units: str = "auto") -> Path:
     """Save an :class:`optipose.evaluate.evaluator.EvaluationResult`: per-scan errors (CSV and Parquet),
     point counts, statistics, Table 1 and, last, the config (a folder without ``config.toml`` is one whose
     writing was cut short). Each file is written whole or not at all. Returns the folder."""
@@ -25,7 +25,7 @@ def write_evaluation(result, folder: Path, part_source: str = "", layout_source:
     write_csv(table1_frame(result.table), folder / "table1.csv")
     write_config(folder, {
         "command": "evaluate",
-        "part": {"name": result.part, "source": part_source},
+        "part": part_table(result.part, part_source, part_units),
         "layout": {"name": result.layout.name, "source": layout_source, **result.layout.to_table()},
         "seed": result.seed,
         "objective": result.objective.to_dict(),
@@ -52,9 +52,13 @@ def read_evaluation(folder: Path, config: RunConfig | None = None):
     config = config or read_config(folder)
     objective = objective_from_dict(config.objective, source_text=config.objective_file or "")
     layout = layout_from_table(config.layout, name=config.layout_name, where=f"{folder}/config.toml")
-    per_scan = pd.read_parquet(folder / "per_scan.parquet")
-    stats = pd.read_csv(folder / "stats.csv")
-    table = best_choices(stats, layout.names, objective.statistic, per_scan["scan"].nunique())
-    points = pd.read_csv(folder / "points.csv")
+    with reading(folder / "per_scan.parquet") as path:
+        per_scan = pd.read_parquet(path)
+        n_scans = per_scan["scan"].nunique()
+    with reading(folder / "stats.csv") as path:
+        stats = pd.read_csv(path)
+        table = best_choices(stats, layout.names, objective.statistic, n_scans)
+    with reading(folder / "points.csv") as path:
+        points = pd.read_csv(path)
     timings = {k: float(v) for k, v in config.timings.items()}
     return EvaluationResult(config.part_name, layout, objective, int(config.seed), per_scan, points, stats, table, timings)

@@ -19,7 +19,7 @@ import numpy as np
 
 from optipose.io.config import RunConfig, run_config
 
-__all__ = ["make_result_dir", "write_config", "read_config", "write_csv", "versions", "RESULTS_DIR", "RESULT_FORMAT"]
+__all__ = ["make_result_dir", "write_config", "part_table", "read_config", "write_csv", "versions", "RESULTS_DIR", "RESULT_FORMAT"]
 
 log = logging.getLogger(__name__)
 RESULTS_DIR = Path("results")
@@ -71,6 +71,12 @@ def write_config(folder: Path, table: dict) -> Path:
     from optipose.files import write_text
 
     return write_text(Path(folder) / "config.toml", tomli_w.dumps(_plain({"format": RESULT_FORMAT, **table})))
+
+
+def part_table(name: str, source: str, units: str = "auto") -> dict:
+    """``[part]`` of a config: its name, the file it was loaded from and, when given, its units (``--units``
+    that the part must be loaded with again)."""
+    return {"name": name, "source": source, **({"units": units} if units and units != "auto" else {})}
 
 
 def write_csv(frame, path: Path) -> Path:

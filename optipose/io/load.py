@@ -20,6 +20,7 @@ import pandas as pd
 from optipose.errors import ConfigError
 from optipose.evaluate.assignment import Choice
 from optipose.evaluate.objective import AXES
+from optipose.files import reading
 from optipose.io.choices import axis_choice, choices_from_comparison
 from optipose.io.config import RunConfig, given
 from optipose.io.folders import read_config
@@ -61,10 +62,11 @@ def load_search(folder: Path, config: RunConfig | None = None):
     def validation(path: Path):
         if not path.is_file():
             return None
-        rows = pd.read_csv(path)
-        found = choices_from_comparison(rows[rows.layout == "found"], found_names)
-        hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
-        protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
+        with reading(path):
+            rows = pd.read_csv(path)
+            found = choices_from_comparison(rows[rows.layout == "found"], found_names)
+            hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
+            protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
         return Validation(protocol, int(given(config.validation_seed, -1)), found, hand_choices)
 
     return SearchResult(folder, config.part_name, int(config.seed), str(given(config.budget, "")), config,
@@ -82,12 +84,13 @@ def load_history(folder: str | Path) -> list:
     path = Path(folder) / "history.csv"
     if not path.is_file():
         return []
-    rows = pd.read_csv(path, keep_default_na=False, na_values={"value": ["nan"], "best": ["nan", ""]})
-    return [
-        Evaluation(int(r.eval), str(r.stage), int(r.k), tuple(ast.literal_eval(r.u)), EvalState(r.state), float(r.value),
-                   float(r.best), str(r.constraint))
-        for r in rows.itertuples(index=False)
-    ]  # fmt: skip
+    with reading(path):
+        rows = pd.read_csv(path, keep_default_na=False, na_values={"value": ["nan"], "best": ["nan", ""]})
+        return [
+            Evaluation(int(r.eval), str(r.stage), int(r.k), tuple(ast.literal_eval(r.u)), EvalState(r.state), float(r.value),
+                       float(r.best), str(r.constraint))
+            for r in rows.itertuples(index=False)
+        ]  # fmt: skip
 
 
 def load_selection(folder: str | Path, names: list[str] | None = None) -> list:
@@ -100,14 +103,15 @@ def load_selection(folder: str | Path, names: list[str] | None = None) -> list:
     path = Path(folder) / "selection.csv"
     if not path.is_file():
         return []
-    rows = pd.read_csv(path, keep_default_na=False, na_values={"surrogate_deg": ["nan", ""]})
     names = names or [f"F{i}" for i in range(1, 10)] + [f"S{i}" for i in range(1, 10)]
     out = []
-    for r in rows.to_dict("records"):
-        axes = tuple(axis_choice(axis, r[f"{axis}_subset"], r[f"{axis}_median_deg"], r[f"{axis}_p75_deg"], names) for axis in AXES)
-        choice = Choice(int(r["k"]), (), "", axes, float(np.deg2rad(r["score_deg"])))
-        dominates = str(r["dominates_hand"]).strip().lower() == "true"
-        out.append(IcpEvaluation(int(r["k"]), str(r["origin"]), float(r["surrogate_deg"]), str(r["protocol"]), choice, dominates))
+    with reading(path):
+        rows = pd.read_csv(path, keep_default_na=False, na_values={"surrogate_deg": ["nan", ""]})
+        for r in rows.to_dict("records"):
+            axes = tuple(axis_choice(axis, r[f"{axis}_subset"], r[f"{axis}_median_deg"], r[f"{axis}_p75_deg"], names) for axis in AXES)
+            choice = Choice(int(r["k"]), (), "", axes, float(np.deg2rad(r["score_deg"])))
+            dominates = str(r["dominates_hand"]).strip().lower() == "true"
+            out.append(IcpEvaluation(int(r["k"]), str(r["origin"]), float(r["surrogate_deg"]), str(r["protocol"]), choice, dominates))
     return out
 
 
@@ -117,5 +121,6 @@ def load_surrogate_scores(folder: str | Path) -> dict[tuple[str, int], float]:
     path = Path(folder) / "surrogate_scores.csv"
     if not path.is_file():
         return {}
-    rows = pd.read_csv(path)
-    return {(str(r.layout), int(r.k)): float(r.score_deg) for r in rows.itertuples(index=False)}
+    with reading(path):
+        rows = pd.read_csv(path)
+        return {(str(r.layout), int(r.k)): float(r.score_deg) for r in rows.itertuples(index=False)}

@@ -25,9 +25,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from optipose.files import reading
 from optipose.io.choices import choices_from_comparison
 from optipose.io.config import RunConfig
-from optipose.io.folders import read_config, versions, write_config, write_csv
+from optipose.io.folders import part_table, read_config, versions, write_config, write_csv
 from optipose.io.tables import bracket_sensors_frame, brackets_frame, robustness_frame
 from optipose.model.layout import write_layout
 
@@ -44,7 +45,7 @@ def write_robustness(folder: Path, part, objective, seed: int, results: dict, ha
     for name, result in results.items():
         write_layout(result.layout, folder / "layouts" / f"{name}.toml")
     write_config(folder, {
-        "command": "robustness", "part": {"name": part.name, "source": str(getattr(part, "source", ""))},
+        "command": "robustness", "part": part_table(part.name, str(getattr(part, "source", "")), getattr(part, "units", "auto")),
         "seed": seed, "layouts": list(results), "layout_sources": list(sources),
         "objective": objective.to_dict(), "objective_file": objective.source_text, "versions": versions(),
     })  # fmt: skip
@@ -78,12 +79,20 @@ def read_robustness(folder: Path, config: RunConfig | None = None):
     folder = Path(folder)
     config = config or read_config(folder)
     layouts = {name: load_layout(folder / "layouts" / f"{name}.toml") for name in config.layouts}
-    rows = pd.read_csv(folder / "robustness.csv")
-    robust = [c for c in dict.fromkeys(rows["condition"]) if c == "worst" or str(c).startswith("quantile")]
-    rows = rows.assign(condition=rows["condition"].replace({robust[0]: "band"})) if robust else rows
-    choices = {}
-    for name, group in rows.groupby("layout", sort=False):
-        for k, choice in choices_from_comparison(group, layouts[name].names).items():
-            choices[(str(name), int(k))] = choice
-    extra = {n: pd.read_csv(folder / f"{n}.csv") if (folder / f"{n}.csv").is_file() else None for n in ("brackets", "bracket_sensors")}
+    with reading(folder / "robustness.csv") as path:
+        rows = pd.read_csv(path)
+        robust = [c for c in dict.fromkeys(rows["condition"]) if c == "worst" or str(c).startswith("quantile")]
+        rows = rows.assign(condition=rows["condition"].replace({robust[0]: "band"})) if robust else rows
+        choices = {}
+        for name, group in rows.groupby("layout", sort=False):
+            for k, choice in choices_from_comparison(group, layouts[name].names).items():
+                choices[(str(name), int(k))] = choice
+    extra = {n: _optional_csv(folder / f"{n}.csv") for n in ("brackets", "bracket_sensors")}
     return RobustnessResult(folder, config.part_name, int(config.seed), config, layouts, choices, **extra)
+
+
+def _optional_csv(path: Path):
+    if not path.is_file():
+        return None
+    with reading(path):
+        return pd.read_csv(path)

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from optipose.io.evaluation import write_evaluation
-from optipose.files import atomic_path
-from optipose.io.folders import versions, write_config, write_csv
+from optipose.files import atomic_path, reading
+from optipose.io.folders import part_table, versions, write_config, write_csv
 from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame, table1_frame
 from optipose.model.layout import Layout, write_layout
 
@@ -96,7 +96,7 @@ def _write_search_config(folder: Path, part, objective, config, budget: str, see
     extra = {} if band is None else {"band": {"file": config.band, "conditions": asdict(band.conditions)}}
     return write_config(folder, {
         "command": "search",
-        "part": {"name": part.name, "source": str(getattr(part, "source", ""))},
+        "part": part_table(part.name, str(getattr(part, "source", "")), getattr(part, "units", "auto")),
         "seed": seed,
         "validation_seed": validation_seed,
         "budget": budget,
@@ -149,14 +149,18 @@ def _or_nan(info, name: str, shape: tuple) -> np.ndarray:
 
 def load_cache(folder: Path, space_version: int) -> dict:
     """The cache saved by :func:`save_cache`; empty when there is none or it was made under another pose
-    map or surrogate (its keys or scores would mean something else)."""
-    from optipose.search.problem import Violation
-    from optipose.search.surrogate import SensorInfo
-
+    map or surrogate (its keys or scores would mean something else); a damaged file is a ConfigError."""
     path = folder / "cache.npz"
     if not path.is_file():
         return {}
-    data = np.load(path)
+    with reading(path):
+        return _cache_entries(np.load(path), space_version)
+
+
+def _cache_entries(data, space_version: int) -> dict:
+    from optipose.search.problem import Violation
+    from optipose.search.surrogate import SensorInfo
+
     if "G" not in data or "N_turns" not in data or "G_noise" not in data:  # from before the voxel bias, the mounting or the noise bias term: start over
         return {}
     if (int(data["space"]) if "space" in data else 1) != space_version:  # its u keys name other poses: start over

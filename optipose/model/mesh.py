@@ -75,7 +75,13 @@ def check_mesh(mesh, name: str = "mesh", watertight: bool = True) -> None:
         raise MeshError(f"{name}: mesh has {int(bad.sum())} vertices with NaN or infinite coordinates")
     if not float(mesh.area) > 0:
         raise MeshError(f"{name}: mesh has zero surface area")
-    if watertight and not mesh.is_watertight:
-        log.warning("%s: mesh is not watertight; shadows and inside/outside tests may be wrong", name)
+    # warned, not refused: an open surface (a sheet, a scanned face) is scanned and registered as any other;
+    # a soup of loose triangles is too, but its registrations may fail, and every verdict then says so
+    # (evaluate.compare.Verdict.failed_line)
+    problems = [] if not watertight else [w for w, bad in (("open: some edges have one face", not mesh.is_watertight),
+                                                           ("faces not consistently oriented", not mesh.is_winding_consistent)) if bad]  # fmt: skip
+    if problems:
+        log.warning("%s: mesh is not a closed solid (%s); shadows and inside/outside tests may be wrong and registrations "
+                    "may fail: export the part as a closed solid", name, "; ".join(problems))  # fmt: skip
     if watertight and mesh.body_count > 1:  # legal (a part and its fixture move as one), but often an assembly exported by mistake
         log.warning("%s: mesh has %d separate bodies; they are scanned and registered as one rigid part", name, mesh.body_count)

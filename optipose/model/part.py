@@ -84,6 +84,8 @@ class Part:
     layouts : named sensor layouts, e.g. ``layouts["hand"]`` (the paper-style baseline) or, without one,
         ``layouts["conventional"]`` (:func:`optipose.model.baseline.baseline` picks).
     source : the part file, or the mesh file when there was none.
+    units : the units given to :func:`load_part` (``auto`` when none were); a result folder keeps them so
+        that the part is loaded again as it was (the report's views, ``search --resume``).
     """
 
     name: str
@@ -96,6 +98,7 @@ class Part:
     layouts: dict[str, Layout] = field(default_factory=dict)
     source: Path | None = None
     description: str = ""
+    units: str = "auto"
 
     @property
     def size(self) -> np.ndarray:
@@ -124,13 +127,18 @@ def load_part(spec: str | Path, units: str = "auto") -> Part:
     text = str(spec)
     path = Path(spec)
     if text in list_parts():
-        return _with_baseline(_from_part_file(PARTS_DIR / text / "part.toml", units))
-    if path.suffix.lower() == ".toml":
+        part = _from_part_file(PARTS_DIR / text / "part.toml", units)
+    elif path.suffix.lower() == ".toml":
         if not path.is_file():
             raise ConfigError(f"part file not found: {path}")
-        return _with_baseline(_from_part_file(path, units))
-    if path.suffix.lower() in _MESH_SUFFIXES:
-        return _with_baseline(_from_mesh(path, units))
+        part = _from_part_file(path, units)
+    elif path.suffix.lower() in _MESH_SUFFIXES:
+        part = _from_mesh(path, units)
+    else:
+        part = None
+    if part is not None:
+        part.units = units
+        return _with_baseline(part)
     shipped = ", ".join(list_parts()) or "none found"
     raise ConfigError(f"unknown part '{text}' (shipped parts: {shipped}; or a part .toml or a mesh file)")
 

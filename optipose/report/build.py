@@ -57,7 +57,7 @@ def _part(config):
 
     source = config.part
     try:
-        return load_part(source)
+        return load_part(source, units=config.part_units or "auto")
     except (OptiposeError, OSError) as exc:
         log.warning("report: no 3D views, the part '%s' does not load: %s", source, exc)
         return None

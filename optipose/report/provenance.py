@@ -14,6 +14,8 @@ def command_line(config: RunConfig) -> str:
     """The optipose command that reproduces the result, rebuilt from its config (its ``--out`` left out)."""
     command = given(config.command, "?")
     args = ["optipose", command, config.part_source or given(config.part_name, "?")]
+    if config.part_units:
+        args += ["--units", config.part_units]
     if command == "search":
         args += ["--budget", str(given(config.budget, "default"))]
         if config.sensors:
