@@ -26,6 +26,7 @@ from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import (
     NORMAL_QUANTILES, block_rays, fill_columns, measure_hits, shadow_rays, split_at_anchors, unsure_between_anchors, write_points,
 )  # fmt: skip
+from optipose.scan.hull import supporting_faces
 from optipose.scan.pose import NOMINAL, PartPose
 from optipose.scan.profiles import EMPTY, ray_lines
 from optipose.scan.raycast import default_threads, make_caster, shared_planes
@@ -118,7 +119,7 @@ class Scanner:
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._block = _BLOCK_PROFILES if self._pool else _SERIAL_BLOCK_PROFILES
         self._plane, self._normals, self._offsets, self._edge_n, self._edge_c = shared_planes(self.vertices, self.faces)
-        self._on_hull = _supporting_faces(mesh, self._normals, self._offsets)
+        self._on_hull = supporting_faces(mesh, self._normals, self._offsets)
         self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
         self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()
         self._ray_lines = ray_lines(self._ray_o_S, self._ray_d_S)
@@ -394,17 +395,3 @@ class _SensorView:
             b=n @ step_P,
             a=n @ receiver_P - off,
         )
-
-
-def _supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """(f,) bool: the face's plane has the whole part behind it (the face lies on the convex hull)."""
-    try:
-        hull = np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
-    except Exception:  # qhull fails on flat or degenerate meshes: then test every hit
-        return np.zeros(len(normals), dtype=bool)
-    out = np.zeros(len(normals), dtype=bool)
-    for a in range(0, len(normals), 4096):  # bounded memory: (chunk, hull vertices)
-        b = min(a + 4096, len(normals))
-        height = hull @ normals[a:b].T - offsets[a:b]
-        out[a:b] = height.max(axis=0) <= tol
-    return out & (np.linalg.norm(normals, axis=1) > 0.5)
