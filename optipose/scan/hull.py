@@ -33,9 +33,11 @@ def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float 
     if len(points) == 0 or len(tris) == 0:
         return np.zeros(len(normals), dtype=bool)
     edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    edges = np.unique(np.concatenate([edges, edges[:, ::-1]]), axis=0)  # sorted by source: a CSR graph
-    indptr = np.r_[0, np.cumsum(np.bincount(edges[:, 0], minlength=len(points)))].astype(np.int64)
-    neighbours = np.ascontiguousarray(edges[:, 1])
+    n = len(points)
+    key = np.sort(np.concatenate([edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]]))
+    key = key[np.r_[True, key[1:] != key[:-1]]]  # each edge once each way, sorted by source: a CSR graph
+    indptr = np.r_[0, np.cumsum(np.bincount(key // n, minlength=n))].astype(np.int64)
+    neighbours = np.ascontiguousarray(key % n)
     starts = _cell_starts(points, indptr, neighbours, _cell_centres(_CELLS))
     normals = np.ascontiguousarray(normals, dtype=np.float64)
     return _supporting(points, indptr, neighbours, starts, normals, np.asarray(offsets, dtype=np.float64), tol, _CELLS)
