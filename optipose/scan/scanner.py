@@ -33,12 +33,15 @@ from optipose.scan.raycast import default_threads, make_caster, shared_planes
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
-__all__ = ["Scan", "Scanner", "PartPose", "part_scanner", "nominal_scans", "rebuilt_with"]
+__all__ = ["Scan", "Scanner", "PartPose", "part_scanner", "nominal_scans", "rebuilt_with", "SCAN_PROFILES", "registered_motion"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work on a thread pool (each point's noise draw is keyed by its ray, not its block)
 _SERIAL_BLOCK_PROFILES = 32  # ... and on one thread, where smaller blocks only add per-block overhead
 COLUMN_STRIDE = 16  # cast every this many columns, and the columns between only where their anchors disagree
+# Profiles of a registered scan at most (:func:`registered_motion`): 64 mm at the default 0.5 mm step; the
+# shipped parts' scans (12-60 mm of travel) take 24-120.
+SCAN_PROFILES = 128
 
 
 @dataclass
@@ -309,6 +312,17 @@ def rebuilt_with(scan: Scan, T_O_S: np.ndarray, shifts: np.ndarray) -> Scan:
     points = p_S @ T_O_S[:3, :3].T + T_O_S[:3, 3]
     points[:, 0] -= s
     return replace(scan, points=points, T_O_S=T_O_S)
+
+
+def registered_motion(motion: ScanMotion) -> ScanMotion:
+    """The motion a scan that is registered (an evaluation's) takes: ``motion`` itself up to
+    :data:`SCAN_PROFILES` profiles, else the same travel in the least whole multiple of its step that
+    brings it under. A registration's cost grows with the voxels a scan fills, that is with its profiles:
+    a metre-long part at 0.5 mm would fill a thousand times a shipped part's, most of them along the same
+    few faces; in longer steps its scans cost what a 64 mm part's do (each voxel as a shipped part's:
+    every column of its profile)."""
+    k = -(-motion.n_profiles // SCAN_PROFILES)
+    return motion if k <= 1 else ScanMotion(motion.length, motion.step * k)
 
 
 def part_scanner(part, sensor=None, material=None, **kwargs) -> Scanner:
