@@ -13,7 +13,7 @@ import numpy as np
 
 from optipose.model.layout import Layout
 from optipose.model.sensor import load_sensor
-from optipose.scan.scanner import part_scanner
+from optipose.scan.scanner import part_scanner, registered_motion
 from optipose.transforms import transform_points
 
 __all__ = ["render_part", "drawn_mesh"]
@@ -72,8 +72,8 @@ def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict 
 
 def _nominal_points(part, layout: Layout) -> dict[str, np.ndarray]:
 
-    scanner = part_scanner(part)
-    scans = scanner.scan_many(layout.poses, part.motion, noise=False)
+    scanner = part_scanner(part)  # a long part in the evaluation's longer steps: the picture draws a few thousand points
+    scans = scanner.scan_many(layout.poses, registered_motion(part.motion), noise=False)
     return {s.name: scan.points for s, scan in zip(layout.sensors, scans)}
 
 
