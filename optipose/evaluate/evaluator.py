@@ -32,6 +32,7 @@ from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
 from optipose.evaluate.worker import WorkerSetup, run_levels
 from optipose.model.layout import Layout, SensorPose
+from optipose.scan.scanner import registered_motion
 
 __all__ = ["Evaluator", "EvaluatorWrapper", "EvaluationResult", "evaluate", "log_failures"]
 
@@ -127,7 +128,7 @@ class Evaluator:
             faces=np.asarray(part.mesh.faces, dtype=np.int64),
             sensor=part.sensor,
             material=part.material,
-            motion=part.motion,
+            motion=registered_motion(part.motion),  # a long part in longer steps (SCAN_PROFILES)
             centre=np.asarray(part.rotation_centre, dtype=float),
             registration=self.objective.registration,
             observability_tolerance=self.objective.statistic.observability_tolerance,

@@ -13,11 +13,20 @@ normals, the box's three axes and the cross products of their edge directions �
 polytopes. The test is **conservative on the convex hull**: a head that dips into a concavity of the part
 (inside a U bracket, over a pocket) counts as a collision even when it would miss the real surface.
 
+A part whose hull has more than :data:`EXACT_HULL_VERTICES` vertices (a round CAD export: most of its
+vertices are on the hull) is bounded instead by a polytope of fixed size that contains its swept hull: the
+planes of a fixed set of directions (:func:`bounding_directions`: evenly spread ones, the axes and the
+normals of the part's large flat faces) each moved out to the swept part's extent along it. Its clearances
+are the same test on that polytope, lower than the hull's by at most how far the polytope stands out of the
+hull (:data:`BOUND_LOOSENESS` of the part's radius for a sphere), and cost memory and time linear in the
+mesh; a hull that small is the part's own (the shipped parts).
+
 The signed clearance is the largest gap found along any tested axis: positive means separated by at least
 that much (a lower bound on the true distance), negative is minus the smallest overlap (the depth to push
 the head out along the best axis). A head *collides* when its clearance is below ``margin`` (default
 :data:`DEFAULT_MARGIN`, 2 mm: a ±2° orientation offset moves points 57 mm from the rotation centre by
-2 mm). A call costs well under a millisecond once the obstacles of a part are built (cached per part).
+2 mm). Once the obstacles of a part are built (cached per part) a call's work is their vertices times their
+edge directions: a few hundred each for a bounding polytope, fewer for the shipped parts' hulls.
 """
 
 from __future__ import annotations
@@ -31,12 +40,21 @@ import numpy as np
 from optipose.model.sensor import SensorModel, load_sensor
 
 __all__ = [
-    "DEFAULT_MARGIN", "Clearance", "ConvexSet", "CollisionModel",
+    "DEFAULT_MARGIN", "EXACT_HULL_VERTICES", "BOUND_LOOSENESS", "Clearance", "ConvexSet", "CollisionModel", "bounding_directions",
     "collision_model", "clearance", "collides", "heads_clearance", "check_sensors_outside",
 ]  # fmt: skip
 
 DEFAULT_MARGIN = 2e-3  # m
 _DEDUP_DECIMALS = 9
+# A hull of at most this many vertices is tested itself: the SAT's per-call work is its vertices times its
+# edge directions, a hull this size keeps that small (the shipped parts' hulls have 8 to 140 vertices).
+EXACT_HULL_VERTICES = 256
+_EVEN_DIRECTIONS = 320  # the bounding polytope's evenly spread planes
+_FLAT_DIRECTIONS = 64  # ... and at most this many of the part's own large flat faces' planes
+_FLAT_SHARE = 0.005  # a flat face counts as large from this share of the mesh's area
+_THICKEN = 1e-6  # m, every bounding plane moved out this much more: a flat part still bounds a solid
+BOUND_LOOSENESS = 0.01  # how far the bounding polytope may stand out of a sphere, in its radius (see the tests)
+_CHUNK = 1 << 20  # floats per block of a streamed product: memory stays linear in the mesh
 
 
 class Clearance(NamedTuple):
@@ -74,6 +92,22 @@ class ConvexSet:
         return cls._build(vertices, normals, _unique_directions(edges))
 
     @classmethod
+    def bounding(cls, points: np.ndarray, directions: np.ndarray, travel: np.ndarray) -> "ConvexSet":
+        """The polytope of the planes ``d·x <= h(d)`` over unit ``directions`` (k, 3), ``h`` the extent of
+        ``points`` (n, 3) m swept by ``travel`` (2, 3) along ``d`` (plus :data:`_THICKEN`): it contains
+        the swept points' hull. Memory linear in the points (streamed in blocks)."""
+        from scipy.spatial import HalfspaceIntersection
+
+        extent = np.full(len(directions), -np.inf)
+        rows = max(1, _CHUNK // len(directions))
+        for a in range(0, len(points), rows):
+            np.maximum(extent, (points[a : a + rows] @ directions.T).max(axis=0), out=extent)
+        extent += np.maximum(directions @ travel[0], directions @ travel[1]) + _THICKEN
+        inside = points.mean(axis=0) + travel.mean(axis=0)  # strictly inside: every plane is _THICKEN beyond it
+        corners = HalfspaceIntersection(np.c_[directions, -extent], inside).intersections
+        return cls.hull_of(corners)
+
+    @classmethod
     def box(cls, lo: np.ndarray, hi: np.ndarray) -> "ConvexSet":
         """An axis-aligned box, corners ``lo``, ``hi`` (3,) m."""
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
@@ -107,8 +141,12 @@ class CollisionModel:
             hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
         except Exception:  # trimesh's hull of a flat mesh fails (qhull, or its winding fix): the vertices span the same hull
             hull = np.asarray(part.mesh.vertices, dtype=float)
-        swept = np.concatenate([hull + travel[0], hull + travel[1]])
-        self.obstacles: list[tuple[str, ConvexSet]] = [("part", ConvexSet.hull_of(swept))]
+        self.exact = len(hull) <= EXACT_HULL_VERTICES  # else the hull's bounding polytope (module doc)
+        if self.exact:
+            swept = ConvexSet.hull_of(np.concatenate([hull + travel[0], hull + travel[1]]))
+        else:
+            swept = ConvexSet.bounding(hull, bounding_directions(part.mesh), travel)
+        self.obstacles: list[tuple[str, ConvexSet]] = [("part", swept)]
         for keepout in part.keepouts:
             lo, hi = np.asarray(keepout.lo, float) + travel[0], np.asarray(keepout.hi, float) + travel[1]
             self.obstacles.append((keepout.name, ConvexSet.box(lo, hi)))
@@ -184,6 +222,25 @@ def heads_clearance(
     centre_S, half = 0.5 * (corners.min(axis=0) + corners.max(axis=0)), 0.5 * np.ptp(corners, axis=0)
     axes = np.asarray(T_O_Sb, float)[:3, :3]
     return _sat_gap(ConvexSet.head_of(load_sensor(sensor_a), T_O_Sa), axes @ centre_S + T_O_Sb[:3, 3], axes, half)
+
+
+def bounding_directions(mesh) -> np.ndarray:
+    """Unit directions (k, 3) of a bounding polytope's planes: :data:`_EVEN_DIRECTIONS` spread evenly over
+    the sphere (a Fibonacci lattice), the six axes, and the normals of the mesh's largest flat faces (at
+    most :data:`_FLAT_DIRECTIONS`, each at least :data:`_FLAT_SHARE` of the area; triangles of one plane
+    summed), so that a part's big planar sides bound it exactly."""
+    k = np.arange(_EVEN_DIRECTIONS) + 0.5
+    z, phi = 1.0 - 2.0 * k / _EVEN_DIRECTIONS, np.pi * (1.0 + 5**0.5) * k
+    rho = np.sqrt(1.0 - z * z)
+    even = np.c_[rho * np.cos(phi), rho * np.sin(phi), z]
+    normals, area = np.asarray(mesh.face_normals, float), np.asarray(mesh.area_faces, float)
+    key = np.round(normals, 6)
+    planes, which = np.unique(key, axis=0, return_inverse=True)
+    total = np.bincount(which.ravel(), weights=area, minlength=len(planes))
+    big = np.argsort(-total)[:_FLAT_DIRECTIONS]
+    big = big[total[big] >= _FLAT_SHARE * max(area.sum(), 1e-300)]
+    flat = planes[big] / np.maximum(np.linalg.norm(planes[big], axis=1, keepdims=True), 1e-300)
+    return np.concatenate([even, np.eye(3), -np.eye(3), flat[np.linalg.norm(planes[big], axis=1) > 0.5]])
 
 
 def _sat_gap(convex: ConvexSet, centre: np.ndarray, axes: np.ndarray, half: np.ndarray) -> float:

@@ -13,10 +13,10 @@ import numpy as np
 
 from optipose.model.layout import Layout
 from optipose.model.sensor import load_sensor
-from optipose.scan.scanner import part_scanner
+from optipose.scan.scanner import part_scanner, registered_motion
 from optipose.transforms import transform_points
 
-__all__ = ["render_part"]
+__all__ = ["render_part", "drawn_mesh"]
 
 # (title, elevation, azimuth, zoomed on the part): whole scene for the heads, close-ups for the points.
 _VIEWS = (
@@ -29,6 +29,7 @@ _ZOOM_MARGIN_MM = 8.0
 _BOX_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)]
 _MAX_POINTS = 4000  # per sensor in the picture; matplotlib 3D gets slow and muddy beyond that
 _SHARP_DEG = 30.0
+_MAX_TRIANGLES = 50_000  # drawn at most: a dense CAD export is simplified to this many for the picture
 
 
 def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict | None = None) -> Path:
@@ -71,15 +72,15 @@ def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict 
 
 def _nominal_points(part, layout: Layout) -> dict[str, np.ndarray]:
 
-    scanner = part_scanner(part)
-    scans = scanner.scan_many(layout.poses, part.motion, noise=False)
+    scanner = part_scanner(part)  # a long part in the evaluation's longer steps: the picture draws a few thousand points
+    scans = scanner.scan_many(layout.poses, registered_motion(part.motion), noise=False)
     return {s.name: scan.points for s, scan in zip(layout.sensors, scans)}
 
 
 def _draw_part(ax, part) -> None:
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-    mesh = part.mesh
+    mesh = drawn_mesh(part.mesh)
     mm = mesh.vertices * 1e3
     ax.add_collection3d(Poly3DCollection(mm[mesh.faces], facecolor=(0.80, 0.82, 0.86, 0.30), edgecolor="none",
                                          axlim_clip=True, zorder=1))  # fmt: skip
@@ -90,6 +91,26 @@ def _draw_part(ax, part) -> None:
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         ax.add_collection3d(Line3DCollection(corners[_BOX_EDGES], colors="0.55", linewidths=0.8, linestyles=":",
                                               axlim_clip=True, zorder=2))  # fmt: skip
+
+
+def drawn_mesh(mesh, max_triangles: int = _MAX_TRIANGLES):
+    """The mesh the views draw: ``mesh`` itself up to ``max_triangles`` triangles, else a vertex-clustering
+    simplification (Open3D; linear in the mesh) with at most that many, its cells sized from the surface
+    area, grown until it fits. matplotlib draws every triangle one by one: a million-triangle CAD export
+    would take minutes, for a picture no finer than its pixels."""
+    if len(mesh.faces) <= max_triangles:
+        return mesh
+    import open3d as o3d
+    import trimesh
+
+    full = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(mesh.vertices, dtype=np.float64)),
+                                     o3d.utility.Vector3iVector(np.asarray(mesh.faces, dtype=np.int32)))  # fmt: skip
+    cell = np.sqrt(2.0 * float(mesh.area) / max_triangles)  # about two triangles per cell of the surface
+    while True:
+        few = full.simplify_vertex_clustering(voxel_size=cell)
+        if len(few.triangles) <= max_triangles:
+            return trimesh.Trimesh(np.asarray(few.vertices), np.asarray(few.triangles), process=False)
+        cell *= 1.25
 
 
 def _draw_sensors(ax, part, layout: Layout, scans: dict, colours) -> None:

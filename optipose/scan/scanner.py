@@ -26,18 +26,22 @@ from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import (
     NORMAL_QUANTILES, block_rays, fill_columns, measure_hits, shadow_rays, split_at_anchors, unsure_between_anchors, write_points,
 )  # fmt: skip
+from optipose.scan.hull import supporting_faces
 from optipose.scan.pose import NOMINAL, PartPose
 from optipose.scan.profiles import EMPTY, ray_lines
 from optipose.scan.raycast import default_threads, make_caster, shared_planes
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
-__all__ = ["Scan", "Scanner", "PartPose", "part_scanner", "nominal_scans", "rebuilt_with"]
+__all__ = ["Scan", "Scanner", "PartPose", "part_scanner", "nominal_scans", "rebuilt_with", "SCAN_PROFILES", "registered_motion"]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
 _BLOCK_PROFILES = 8  # profiles per unit of work on a thread pool (each point's noise draw is keyed by its ray, not its block)
 _SERIAL_BLOCK_PROFILES = 32  # ... and on one thread, where smaller blocks only add per-block overhead
 COLUMN_STRIDE = 16  # cast every this many columns, and the columns between only where their anchors disagree
+# Profiles of a registered scan at most (:func:`registered_motion`): 64 mm at the default 0.5 mm step; the
+# shipped parts' scans (12-60 mm of travel) take 24-120.
+SCAN_PROFILES = 128
 
 
 @dataclass
@@ -118,7 +122,7 @@ class Scanner:
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._block = _BLOCK_PROFILES if self._pool else _SERIAL_BLOCK_PROFILES
         self._plane, self._normals, self._offsets, self._edge_n, self._edge_c = shared_planes(self.vertices, self.faces)
-        self._on_hull = _supporting_faces(mesh, self._normals, self._offsets)
+        self._on_hull = supporting_faces(mesh, self._normals, self._offsets)
         self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
         self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()
         self._ray_lines = ray_lines(self._ray_o_S, self._ray_d_S)
@@ -310,6 +314,17 @@ def rebuilt_with(scan: Scan, T_O_S: np.ndarray, shifts: np.ndarray) -> Scan:
     return replace(scan, points=points, T_O_S=T_O_S)
 
 
+def registered_motion(motion: ScanMotion) -> ScanMotion:
+    """The motion a scan that is registered (an evaluation's) takes: ``motion`` itself up to
+    :data:`SCAN_PROFILES` profiles, else the same travel in the least whole multiple of its step that
+    brings it under. A registration's cost grows with the voxels a scan fills, that is with its profiles:
+    a metre-long part at 0.5 mm would fill a thousand times a shipped part's, most of them along the same
+    few faces; in longer steps its scans cost what a 64 mm part's do (each voxel as a shipped part's:
+    every column of its profile)."""
+    k = -(-motion.n_profiles // SCAN_PROFILES)
+    return motion if k <= 1 else ScanMotion(motion.length, motion.step * k)
+
+
 def part_scanner(part, sensor=None, material=None, **kwargs) -> Scanner:
     """The :class:`Scanner` of a :class:`~optipose.model.part.Part` (its sensor and material unless given),
     its keep-outs as occluders (the flange hides what it covers)."""
@@ -394,17 +409,3 @@ class _SensorView:
             b=n @ step_P,
             a=n @ receiver_P - off,
         )
-
-
-def _supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """(f,) bool: the face's plane has the whole part behind it (the face lies on the convex hull)."""
-    try:
-        hull = np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
-    except Exception:  # qhull fails on flat or degenerate meshes: then test every hit
-        return np.zeros(len(normals), dtype=bool)
-    out = np.zeros(len(normals), dtype=bool)
-    for a in range(0, len(normals), 4096):  # bounded memory: (chunk, hull vertices)
-        b = min(a + 4096, len(normals))
-        height = hull @ normals[a:b].T - offsets[a:b]
-        out[a:b] = height.max(axis=0) <= tol
-    return out & (np.linalg.norm(normals, axis=1) > 0.5)

@@ -70,6 +70,10 @@ __all__ = [
 ]  # fmt: skip
 
 MEDIAN_PER_SIGMA = 0.6745  # median of |N(0, 1)|
+# Rays of one reduced scan at most: a part longer than about 300 mm (at the default 400 columns and twice
+# the part's step) is scanned in longer steps instead, so a pose costs what a 300 mm part's does; the
+# shipped parts' reduced scans cast a fifth of it.
+SURROGATE_RAYS = 1 << 17
 P75_PER_SIGMA = 1.1503  # 75th percentile of |N(0, 1)|
 _PRIOR_ROTATION = np.deg2rad(5.0)
 _PRIOR_TRANSLATION = 5e-3
@@ -129,7 +133,11 @@ class Surrogate:
         self.full_sensor = load_sensor(part.sensor)
         sensor = replace(self.full_sensor, points_per_profile=min(columns, self.full_sensor.points_per_profile))
         self.scanner = Scanner(part.mesh, sensor, part.material, threads=threads, occluders=getattr(part, "occluders", None))
-        self.motion = ScanMotion(part.motion.length, part.motion.step * step_factor)
+        step = part.motion.step * step_factor
+        profiles = max(1, SURROGATE_RAYS // sensor.points_per_profile)
+        if ScanMotion(part.motion.length, step).n_profiles > profiles:  # a long part: as many rays as a 300 mm one
+            step = part.motion.length / profiles
+        self.motion = ScanMotion(part.motion.length, step)
         self.voxel = voxel
         self.extra_variance = extra_variance  # m², e.g. a sampled reference's spacing²/12
         # a reduced scan sees 1/scale of the points of a full-fidelity one

@@ -1,0 +1,114 @@
+"""Which faces of a mesh lie in a supporting plane of the part (the whole part behind the face's plane), in
+time and memory linear in the mesh.
+
+A face's plane supports the part when no vertex of the convex hull lies more than ``tol`` in front of it:
+the largest height of the hull's vertices over the plane. A linear function's largest value over a convex
+polytope is found by climbing the hull's vertex graph (a vertex none of whose neighbours is higher is the
+highest of all, as in the simplex method), and a climb stops as soon as it is above the plane. Each face's
+climb starts at the highest vertex for the centre of a cell of a cube map of directions holding its
+normal, so it takes a few steps: the whole test is linear in the faces, where the heights of every hull
+vertex over every face's plane would be the hull's vertices times the faces (a round part's hull holds most
+of its vertices).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["supporting_faces"]
+
+_CELLS = 8  # cells per side of each of the cube map's six faces
+
+
+def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """(f,) bool: face f's plane (unit ``normals`` (f, 3), ``offsets`` (f,): ``n·x = offset``) has every vertex
+    of ``mesh``'s convex hull at most ``tol`` in front of it. Degenerate faces (zero normals) are not."""
+    try:
+        hull = mesh.convex_hull
+        points = np.ascontiguousarray(hull.vertices, dtype=np.float64)
+        tris = np.asarray(hull.faces, dtype=np.int64)
+    except Exception:  # qhull fails on flat or degenerate meshes: then no face is known to support the part
+        return np.zeros(len(normals), dtype=bool)
+    if len(points) == 0 or len(tris) == 0:
+        return np.zeros(len(normals), dtype=bool)
+    edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    n = len(points)
+    key = np.sort(np.concatenate([edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]]))
+    key = key[np.r_[True, key[1:] != key[:-1]]]  # each edge once each way, sorted by source: a CSR graph
+    indptr = np.r_[0, np.cumsum(np.bincount(key // n, minlength=n))].astype(np.int64)
+    neighbours = np.ascontiguousarray(key % n)
+    starts = _cell_starts(points, indptr, neighbours, _cell_centres(_CELLS))
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
+    return _supporting(points, indptr, neighbours, starts, normals, np.asarray(offsets, dtype=np.float64), tol, _CELLS)
+
+
+def _cell_centres(cells: int) -> np.ndarray:
+    """Unit directions (6 · cells², 3) at the centres of the cube map's cells, in :func:`_cell` order."""
+    out = np.empty((6 * cells * cells, 3))
+    centres = (np.arange(cells) + 0.5) / cells * 2.0 - 1.0
+    for axis in range(3):
+        for side, sign in enumerate((1.0, -1.0)):
+            for i, u in enumerate(centres):
+                for j, v in enumerate(centres):
+                    d = np.empty(3)
+                    d[axis], d[(axis + 1) % 3], d[(axis + 2) % 3] = sign, u, v
+                    out[((axis * 2 + side) * cells + i) * cells + j] = d / np.linalg.norm(d)
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cell(n0, n1, n2, cells):
+    """The cube-map cell of direction (n0, n1, n2): its largest component picks the face."""
+    a0, a1, a2 = abs(n0), abs(n1), abs(n2)
+    if a0 >= a1 and a0 >= a2:
+        axis, m, u, v = 0, n0, n1, n2
+    elif a1 >= a2:
+        axis, m, u, v = 1, n1, n2, n0
+    else:
+        axis, m, u, v = 2, n2, n0, n1
+    side = 0 if m >= 0 else 1
+    i = min(int((u / abs(m) + 1.0) * 0.5 * cells), cells - 1)
+    j = min(int((v / abs(m) + 1.0) * 0.5 * cells), cells - 1)
+    return ((axis * 2 + side) * cells + i) * cells + j
+
+
+@njit(cache=True, nogil=True)
+def _climb(points, indptr, neighbours, n0, n1, n2, u, stop):
+    """From vertex u, the steepest climb of ``n·x`` over the hull's vertex graph until no neighbour is higher
+    or the height exceeds ``stop``: returns the vertex and its height."""
+    h = n0 * points[u, 0] + n1 * points[u, 1] + n2 * points[u, 2]
+    while h <= stop:
+        best, best_h = -1, h
+        for k in range(indptr[u], indptr[u + 1]):
+            w = neighbours[k]
+            hw = n0 * points[w, 0] + n1 * points[w, 1] + n2 * points[w, 2]
+            if hw > best_h:
+                best, best_h = w, hw
+        if best < 0:
+            break
+        u, h = best, best_h
+    return u, h
+
+
+@njit(cache=True, nogil=True)
+def _cell_starts(points, indptr, neighbours, centres):
+    """Per cube-map cell, the hull vertex highest along the cell's centre direction."""
+    out = np.empty(centres.shape[0], np.int64)
+    u = 0
+    for c in range(centres.shape[0]):
+        u, _ = _climb(points, indptr, neighbours, centres[c, 0], centres[c, 1], centres[c, 2], u, np.inf)
+        out[c] = u
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _supporting(points, indptr, neighbours, starts, normals, offsets, tol, cells):
+    out = np.zeros(normals.shape[0], np.bool_)
+    for f in range(normals.shape[0]):
+        n0, n1, n2 = normals[f, 0], normals[f, 1], normals[f, 2]
+        if n0 * n0 + n1 * n1 + n2 * n2 <= 0.25:  # a degenerate face has no plane
+            continue
+        _, h = _climb(points, indptr, neighbours, n0, n1, n2, starts[_cell(n0, n1, n2, cells)], offsets[f] + tol)
+        out[f] = h - offsets[f] <= tol
+    return out
