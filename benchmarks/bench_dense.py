@@ -110,7 +110,7 @@ def main() -> None:
     if args.measure:
         return measure(args.measure, args.timeout)
     args.work.mkdir(parents=True, exist_ok=True)
-    patterns = [p.replace("_", "") for p in args.rows.split(",") if p]  # 1_310_720 reads as the row 1310720
+    patterns = [p.replace("_", "") for p in args.rows.split(",") if p]  # digits may be grouped with _, as the docs write them
     parts = [("round", round_faces(s), s) for s in SUBDIVISIONS] + [("flat", None, e) for e in EDGES_MM]
     print(f"$ {' '.join(sys.argv)}  (cores: {os.cpu_count()}, load: {os.getloadavg()[0]:.1f})")
     table = []
