@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "nearest_into"]
+__all__ = ["face_grid", "nearest_into", "edge_normal"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 
@@ -177,8 +177,9 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     (faces whose bounding box (lo, hi) is farther than the best so far are skipped; the guessed face
     starts the search, which prunes more). A point inside the face found by more than 2|d| gets its
     projection on the face's plane, like a followed point; a point closest to an edge or a corner gets
-    the closest point of that face, in float64 (where faces tie exactly, at their common edge, the lowest
-    face id takes the point, whatever the guess: the point is the same, the normal the face's). Points left
+    the closest point of that face, in float64, and the direction from it to the point as its normal
+    (:func:`edge_normal`; where faces tie exactly, at their common edge, the lowest face id takes the
+    point, whatever the guess: the point and the normal are the same whichever face it is). Points left
     to the global search (outside the grid or farther than ``margin`` from the surface) are marked in
     ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer its face than any
     face not adjacent to it (true near a part's surface; not for a point past the middle of a thin sheet,
@@ -247,6 +248,24 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
             continue
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
-        if not _project(p, i, g_best, planes, plane_c, q)[0]:  # on or near an edge: the face's closest point
+        well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
+        if not well_inside:  # on or near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
+            if not inside:
+                edge_normal(p, i, q, nrm)
     return n_open
+
+
+@njit(cache=True, nogil=True, inline="always")
+def edge_normal(p, i, q, nrm):
+    """Where p[i]'s closest point q[i] lies on an edge or a corner, the surface's own normal there: the
+    direction from q[i] to p[i] (the distance's gradient), signed like the face normal in ``nrm[i]``.
+    The faces that meet at that edge tie, and which of them answers depends on the triangulation; this
+    direction does not. A point on the edge itself (no direction) keeps the face normal."""
+    dx, dy, dz = p[i, 0] - q[i, 0], p[i, 1] - q[i, 1], p[i, 2] - q[i, 2]
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if d <= 1e-9:  # within a nanometre of the edge: the direction is rounding, and the point as good as on it
+        return
+    if dx * nrm[i, 0] + dy * nrm[i, 1] + dz * nrm[i, 2] < 0.0:
+        d = -d
+    nrm[i, 0], nrm[i, 1], nrm[i, 2] = dx / d, dy / d, dz / d

@@ -102,7 +102,16 @@ class SurfaceReference:
         # the BVH answers in float32 (~4 nm here); on the face's interior the float64 projection is exact
         q_exact, _, inside = self.follow(points, ids)
         q[inside] = q_exact[inside]
-        return q, self.normals[ids], ids
+        n = self.normals[ids]
+        # off the faces' interiors, the surface's own normal (closest_surface.edge_normal): not the tied face's
+        off = np.flatnonzero(~inside)
+        if len(off):
+            q_off = np.ascontiguousarray(q[off])
+            n_off = np.ascontiguousarray(n[off])
+            _edge_normals(np.ascontiguousarray(points[off], dtype=np.float64), q_off, n_off, self._plane_c[ids[off], 1:],
+                          np.einsum("ikj,ij->ik", self.edge_n[ids[off]], points[off]))
+            n[off] = n_off
+        return q, n, ids
 
     def follow(self, points: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Project points (n, 3) onto the faces ``ids`` they were matched to.
@@ -164,6 +173,15 @@ class SurfaceReference:
     def sample(self, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """A uniform sample of the surface, about one point per ``spacing``² (m); points and normals."""
         return sample_surface(self.vertices, self.faces, spacing, seed)
+
+
+def _edge_normals(points, q, n, edge_c, edge_h) -> None:
+    """:func:`optipose.registration.closest_surface.edge_normal` in place for the points (m, 3) whose
+    projection falls outside their face (``edge_h - edge_c`` (m, 3), the edge planes' values, has one < 0)."""
+    from optipose.registration.closest_surface import edge_normal
+
+    for i in np.flatnonzero((edge_h - edge_c).min(axis=1) < 0.0):
+        edge_normal(points, i, q, n)
 
 
 def _adjacent_faces(faces: np.ndarray) -> np.ndarray:
