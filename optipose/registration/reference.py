@@ -29,6 +29,7 @@ __all__ = ["SurfaceReference", "SampledReference", "sample_surface"]
 
 _CELL = 0.5e-3  # m: grid cells of nearest(), larger if the part would need more than _MAX_CELLS
 _MAX_CELLS = 4_000_000
+_SURFACE_REACH = 2  # rings of cells around a point that the surface's search looks at: exact within 2 cells
 _NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
 _REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
 
@@ -68,20 +69,21 @@ class SurfaceReference:
         self._face_grid = None
 
     def _grid(self) -> tuple:
-        """The faces near each cell of a ``_CELL`` grid over the part (see :func:`optipose.registration.closest_surface.face_grid`),
-        with the faces' bounding boxes; built on first use."""
+        """The faces that cross each cell of a ``_CELL`` grid over the part (see
+        :func:`optipose.registration.closest_surface.face_grid`), with the faces' bounding boxes and the
+        search's reach in cells; built on first use."""
         if self._face_grid is None:
             from optipose.registration.closest_surface import face_grid
 
             lo, hi = self._tri.min(axis=1), self._tri.max(axis=1)
             extent = hi.max(axis=0) - lo.min(axis=0)
             cell = max(_CELL, float(np.prod(extent + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
-            margin = 2 * cell  # exact for points within a millimetre of the surface at the default cell
+            margin = _SURFACE_REACH * cell  # exact for points within a millimetre of the surface at the default cell
             origin = lo.min(axis=0) - margin
             shape = np.floor((hi.max(axis=0) + margin - origin) / cell).astype(np.int64) + 1
             lo, hi = np.ascontiguousarray(lo), np.ascontiguousarray(hi)
-            start, faces, bound = face_grid(self._tri, self.normals, self.offsets, lo, hi, origin, cell, shape, margin)
-            self._face_grid = (lo, hi, origin, cell, shape, margin, start, faces, bound)
+            start, faces = face_grid(self._tri, self.normals, self.offsets, origin, cell, shape)
+            self._face_grid = (lo, hi, origin, cell, shape, _SURFACE_REACH, start, faces)
         return self._face_grid
 
     def __repr__(self) -> str:
