@@ -143,7 +143,7 @@ def _walk(p, i, f, planes, plane_c, adjacent, q):
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, lo, hi, origin, cell, shape, reach, start, faces):
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, origin, cell, shape, reach, start, faces):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
@@ -154,7 +154,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     (:func:`face_grid`) around the point's are searched exactly, ring after ring of cells out to ``reach``
     rings: after each ring, every face nearer than the ring block's walls has been seen, so the search
     stops once its best is nearer than those, and is certain for an answer within ``reach`` × ``cell``
-    (faces whose bounding box (lo, hi) is farther than the best so far are skipped; the guessed face
+    (faces whose bounding box is farther than the best so far are skipped; the guessed face
     starts the search, which prunes more). A point inside the face found by more than 2|d| gets its
     projection on the face's plane, like a followed point; a point closest to an edge or a corner gets
     the closest point of that face, in float64, and the direction from it to the point as its normal
@@ -222,7 +222,9 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
                                     continue  # in the plane of the best face, which p projects well inside of: farther by at least that inset
                                 box = 0.0
                                 for j in range(3):
-                                    gap = max(lo[g, j] - p[i, j], p[i, j] - hi[g, j], 0.0)
+                                    lo_j = min(tri[g, 0, j], tri[g, 1, j], tri[g, 2, j])
+                                    hi_j = max(tri[g, 0, j], tri[g, 1, j], tri[g, 2, j])
+                                    gap = max(lo_j - p[i, j], p[i, j] - hi_j, 0.0)
                                     box += gap * gap
                                 if box > best:
                                     continue
