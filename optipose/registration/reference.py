@@ -4,10 +4,13 @@ Every reference answers ``closest(points) -> (q, n, ids)``: the closest referenc
 and an id. Two kinds:
 
 - :class:`SurfaceReference` — the CAD triangles themselves (``cad-surface``): exact (float64) closest
-  points on the surface, normals of the faces. This is a dense CAD sample in the limit of zero spacing,
-  so the reference adds no sampling error. A point within a millimetre of the part is answered by an
-  exact search of the faces listed in its cell of a grid (built once); the rest, far from the part,
-  by Open3D's ``RaycastingScene`` (a float32 BVH built once). Between ICP steps, a point that still
+  points on the surface, normals of the faces (off an edge or a corner, the direction to the closest
+  point, whatever the triangles). This is a dense CAD sample in the limit of zero spacing, so the
+  reference adds no sampling error. A point within a millimetre of the part is answered by an exact
+  search of the faces listed in the grid cells around it (each face listed in the cells it crosses, so
+  the grid is linear in the faces); the rest, far from the part, by Open3D's ``RaycastingScene`` (a
+  float32 BVH built on first use). Its arrays can be written and mapped back read-only
+  (:func:`save_reference`, :func:`load_reference`), one copy for the processes of a machine. Between ICP steps, a point that still
   projects well inside the face it was matched to keeps that face (:meth:`SurfaceReference.follow`),
   which makes an iteration near convergence cost a projection rather than a search.
 - :class:`SampledReference` — a point cloud with normals and a KD-tree: a CAD sample at a given spacing
@@ -135,9 +138,9 @@ class SurfaceReference:
 
         ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
         inside its face by more than twice its distance keeps it (:meth:`follow`). Any other point is searched exactly among
-        the faces listed for its cell of a grid over the part (every face within two cells of the cell,
-        :func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
-        or, closest to an edge or a corner, that face's closest point. Points outside the grid or
+        the faces listed in the grid cells around it, out to two cells
+        (:func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
+        or, closest to an edge or a corner, that face's closest point and the direction to it. Points outside the grid or
         farther than two cells from the surface get Open3D's answer (float32 off the faces' interiors).
         """
         points = np.ascontiguousarray(points, dtype=np.float64)
