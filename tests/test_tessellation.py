@@ -45,3 +45,38 @@ def test_far_from_the_surface_the_normal_off_an_edge_is_the_direction_to_it_too(
     expected = (points - corner * np.array([[1, 1, 1], [1, 1, 1]])) / np.linalg.norm(points - corner, axis=1)[:, None]
     np.testing.assert_allclose(q, np.broadcast_to(corner, (2, 3)), rtol=0, atol=1e-8)  # float32 BVH
     np.testing.assert_allclose(n, expected, rtol=0, atol=1e-5)
+
+
+def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
+    """save_reference / load_reference: the same closest points, normals and faces, from read-only maps."""
+    import os
+
+    from optipose.evaluate import shared
+    from optipose.model.part import load_part
+    from optipose.registration.reference import load_reference
+
+    mesh = load_part("part_b").mesh
+    built = SurfaceReference(mesh.vertices, mesh.faces)
+    key, folder = shared.acquire(mesh.vertices, mesh.faces)
+    again, same = shared.acquire(mesh.vertices, mesh.faces)  # a second evaluator of the mesh: the same folder
+    assert (again, same) == (key, folder)
+    mapped = load_reference(folder)
+    assert not mapped._tri.flags.writeable
+    points = trimesh.sample.sample_surface(mesh, 500, seed=1)[0] + np.random.default_rng(1).normal(size=(500, 3)) * 4e-4
+    for a, b in zip(built.nearest(points), mapped.nearest(points)):
+        np.testing.assert_array_equal(a, b)
+    shared.release(key)
+    assert os.path.isdir(folder)  # one user left
+    shared.release(key)
+    assert not os.path.exists(folder)
+
+
+def test_the_grid_lists_each_face_a_few_times_whatever_the_density():
+    """Part B at 2 mm edges (the grid's cells are 0.5 mm): a face is listed only in the cells it crosses."""
+    from optipose.model.part import load_part
+
+    mesh = load_part("part_b").mesh
+    v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=2e-3)
+    reference = SurfaceReference(v, f)
+    assert len(reference._grid_faces) < 10 * len(f)
+    assert reference._grid_faces.dtype == np.int32 and reference._adjacent.dtype == np.int32

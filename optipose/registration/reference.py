@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from optipose.scan.raycast import edge_planes, shared_planes
+from optipose.scan.raycast import edge_planes
 
 __all__ = ["SurfaceReference", "SampledReference", "sample_surface", "save_reference", "load_reference"]
 
@@ -196,7 +196,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     planes[:, 0], plane_c[:, 0] = normal, np.einsum("ij,ij->i", normal, tri[:, 0])
     planes[:, 1:], plane_c[:, 1:] = edge_planes(tri, normal)
     del normal
-    plane_id = shared_planes(vertices, faces)[0].astype(np.int32)  # faces in one plane share a number
+    plane_id = _plane_numbers(planes[:, 0], plane_c[:, 0])
     lo, hi = tri.min(axis=1).min(axis=0), tri.max(axis=1).max(axis=0)
     cell = max(_CELL, float(np.prod(hi - lo + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
     margin = _SURFACE_REACH * cell  # exact for points within a millimetre of the surface at the default cell
@@ -207,6 +207,20 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
             "adjacent": _adjacent_faces(faces), "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
             "meta": meta}  # fmt: skip
+
+
+def _plane_numbers(normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """(f,) int32: faces in one plane share a number, a degenerate face has one of its own — the partition of
+    :func:`optipose.scan.raycast.shared_planes` (the same keys), sorted in linear memory."""
+    key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
+    order = np.lexsort(key.T[::-1])
+    new = np.ones(len(key), dtype=bool)
+    new[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
+    plane = np.empty(len(key), dtype=np.int64)
+    plane[order] = np.cumsum(new) - 1
+    degenerate = np.flatnonzero(np.linalg.norm(normals, axis=1) < 0.5)
+    plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(len(degenerate))
+    return plane.astype(np.int32)
 
 
 def save_reference(reference: SurfaceReference, folder) -> None:
