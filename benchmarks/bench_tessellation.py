@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_tessellation.py [--part part_b] [--meshes shipped centroid midpoint 0.5]
         [--jobs 2]
+    .venv/bin/python benchmarks/bench_tessellation.py --reference 0.5 [--part part_b]
 
 Each mesh of the part (``shipped``; ``centroid``: every triangle split in three at its centroid;
 ``midpoint``: split in four at its edges' midpoints; a number: trimesh's ``subdivide_to_size`` to that
@@ -10,6 +11,9 @@ while this one samples that process tree's memory every 0.5 s: the summed RSS (a
 processes counted in each) and the summed PSS (each shared page shared out). It prints per mesh the
 faces, the wall time, both peaks, Table 1 (median / p75 per axis, mdeg) and, against the first mesh, the
 registrations that moved by more than 0.01 mdeg and the largest relative change of a Table 1 statistic.
+
+``--reference MM``: only the CAD-surface reference of the part subdivided to MM edges, in this process:
+its build time, the peak RSS it adds (ru_maxrss), what stays resident, and the grid's entries per face.
 """
 
 from __future__ import annotations
@@ -73,12 +77,46 @@ def run(part: str, mesh: str, jobs: int, out: Path) -> dict:
     return pickle.load(open(out, "rb")) | {"rss": rss, "pss": pss}
 
 
+def reference_only(part: str, edge_mm: float) -> None:
+    import psutil
+    import trimesh
+
+    from optipose.model.part import load_part
+    from optipose.registration.reference import SurfaceReference
+
+    mesh = load_part(part).mesh
+    v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=edge_mm * 1e-3)
+    import threading
+
+    me = psutil.Process()
+    resident, peak, done = me.memory_info().rss, [0], threading.Event()
+
+    def sample() -> None:  # the build's peak above what was resident before it, every 20 ms
+        while not done.wait(0.02):
+            peak[0] = max(peak[0], me.memory_info().rss - resident)
+
+    sampler = threading.Thread(target=sample)
+    sampler.start()
+    t = time.perf_counter()
+    reference = SurfaceReference(v, f)
+    wall = time.perf_counter() - t
+    done.set()
+    sampler.join()
+    kept = me.memory_info().rss - resident
+    print(f"{part} at {edge_mm} mm edges, {len(f)} faces: built in {wall:.1f} s, peak +{peak[0] / 2**20:.0f} MB "
+          f"({peak[0] / len(f):.0f} B a face), resident +{kept / 2**20:.0f} MB ({kept / len(f):.0f} B a face), "
+          f"grid {len(reference._grid_faces) / len(f):.1f} entries a face")  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reference", type=float, default=None, help="only the reference, at this edge (mm)")
     ap.add_argument("--part", default="part_b")
     ap.add_argument("--meshes", nargs="+", default=["shipped", "centroid", "midpoint"])
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
+    if args.reference is not None:
+        return reference_only(args.part, args.reference)
     print(" ".join(sys.argv), "| load", " ".join(f"{x:.1f}" for x in __import__("os").getloadavg()))
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
