@@ -10,9 +10,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "nearest_into", "edge_normal"]
+__all__ = ["face_grid", "nearest_into", "edge_normal", "CREASE_DEG"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
+CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
+_CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -249,9 +251,28 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
         well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
         if not well_inside:  # on or near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
-            if not inside:
+            if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
                 edge_normal(p, i, q, nrm)
     return n_open
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _crease(p, i, f, planes, plane_c, adjacent):
+    """Whether p[i], outside face f, is closest to a crease: every edge of f it lies outside of has a face
+    across it, and one of those faces turns by more than ``CREASE_DEG`` from f. There the faces tie and the
+    normal must be the surface's own. On the mesh's rim (an open sheet's) only f is there, and its plane
+    answers, as if the sheet went on; across a fainter fold (a finely tessellated curve) the faces'
+    normals differ by less than the fold, and f's stands, as before."""
+    sharp = False
+    for k in range(3):
+        hk = planes[f, k + 1, 0] * p[i, 0] + planes[f, k + 1, 1] * p[i, 1] + planes[f, k + 1, 2] * p[i, 2] - plane_c[f, k + 1]
+        if hk < 0.0:
+            g = adjacent[f, k]
+            if g < 0:
+                return False
+            cos = planes[f, 0, 0] * planes[g, 0, 0] + planes[f, 0, 1] * planes[g, 0, 1] + planes[f, 0, 2] * planes[g, 0, 2]
+            sharp = sharp or cos < _CREASE_COS
+    return sharp
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -112,7 +112,7 @@ class SurfaceReference:
             q_off = np.ascontiguousarray(q[off])
             n_off = np.ascontiguousarray(n[off])
             _edge_normals(np.ascontiguousarray(points[off], dtype=np.float64), q_off, n_off, self._plane_c[ids[off], 1:],
-                          np.einsum("ikj,ij->ik", self.edge_n[ids[off]], points[off]))
+                          np.einsum("ikj,ij->ik", self.edge_n[ids[off]], points[off]), self._adjacent[ids[off]], self.normals)
             n[off] = n_off
         return q, n, ids
 
@@ -240,12 +240,18 @@ def load_reference(folder) -> SurfaceReference:
     return SurfaceReference(None, None, {name: np.load(Path(folder) / f"{name}.npy", mmap_mode="r") for name in names})
 
 
-def _edge_normals(points, q, n, edge_c, edge_h) -> None:
+def _edge_normals(points, q, n, edge_c, edge_h, adjacent, normals) -> None:
     """:func:`optipose.registration.closest_surface.edge_normal` in place for the points (m, 3) whose
-    projection falls outside their face (``edge_h - edge_c`` (m, 3), the edge planes' values, has one < 0)."""
-    from optipose.registration.closest_surface import edge_normal
+    projection falls outside their face (``edge_h - edge_c`` (m, 3), the edge planes' values, has one < 0)
+    on a crease, as the compiled search decides (``closest_surface._crease``: every edge it is outside of
+    has a face across, ``adjacent`` (m, 3), and one of those turns by more than a degree)."""
+    from optipose.registration.closest_surface import CREASE_DEG, edge_normal
 
-    for i in np.flatnonzero((edge_h - edge_c).min(axis=1) < 0.0):
+    outside = edge_h - edge_c < 0.0
+    across = normals[np.maximum(adjacent, 0)]  # (m, 3, 3)
+    turned = np.einsum("ij,ikj->ik", n, across) < np.cos(np.deg2rad(CREASE_DEG))
+    crease = outside.any(axis=1) & ~(outside & (adjacent < 0)).any(axis=1) & (outside & turned).any(axis=1)
+    for i in np.flatnonzero(crease):
         edge_normal(points, i, q, n)
 
 
