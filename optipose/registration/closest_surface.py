@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "nearest_into", "edge_normal", "CREASE_DEG"]
+__all__ = ["face_grid", "nearest_into", "edge_normal", "adjacent_faces", "plane_numbers", "CREASE_DEG"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
@@ -288,3 +288,32 @@ def edge_normal(p, i, q, nrm):
     if dx * nrm[i, 0] + dy * nrm[i, 1] + dz * nrm[i, 2] < 0.0:
         d = -d
     nrm[i, 0], nrm[i, 1], nrm[i, 2] = dx / d, dy / d, dz / d
+
+
+def adjacent_faces(faces: np.ndarray) -> np.ndarray:
+    """(f, 3) int32: the face across each face's edge k (corner k to corner k + 1), -1 on a boundary;
+    where more than two faces share an edge, one of the others."""
+    f = len(faces)
+    following = np.roll(faces, -1, axis=1)
+    # each half-edge as one int64 key (its lower vertex, then its higher), row 3·face + k: sorted in linear memory
+    key = (np.minimum(faces, following) * (int(faces.max(initial=0)) + 1) + np.maximum(faces, following)).ravel()
+    order = np.argsort(key, kind="stable")
+    adjacent = np.full(3 * f, -1, dtype=np.int32)
+    same = key[order[1:]] == key[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
+    a, b = order[:-1][same], order[1:][same]
+    adjacent[a], adjacent[b] = b // 3, a // 3
+    return adjacent.reshape(f, 3)
+
+
+def plane_numbers(normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """(f,) int32: faces in one plane share a number, a degenerate face has one of its own — the partition of
+    :func:`optipose.scan.raycast.shared_planes` (the same keys), sorted in linear memory."""
+    key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
+    order = np.lexsort(key.T[::-1])
+    new = np.ones(len(key), dtype=bool)
+    new[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
+    plane = np.empty(len(key), dtype=np.int64)
+    plane[order] = np.cumsum(new) - 1
+    degenerate = np.flatnonzero(np.linalg.norm(normals, axis=1) < 0.5)
+    plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(len(degenerate))
+    return plane.astype(np.int32)

@@ -183,7 +183,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     """The arrays of :class:`SurfaceReference` (see :meth:`SurfaceReference.arrays`), about 400 bytes a face:
     the mesh, its triangles (f, 3, 3), each face's plane and inward edge planes packed (f, 4, 3) and (f, 4)
     for one gather per point, the face across each edge (int32), a number per plane (int32), and the grid."""
-    from optipose.registration.closest_surface import face_grid
+    from optipose.registration.closest_surface import adjacent_faces, face_grid, plane_numbers
 
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
@@ -196,7 +196,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     planes[:, 0], plane_c[:, 0] = normal, np.einsum("ij,ij->i", normal, tri[:, 0])
     planes[:, 1:], plane_c[:, 1:] = edge_planes(tri, normal)
     del normal
-    plane_id = _plane_numbers(planes[:, 0], plane_c[:, 0])
+    plane_id = plane_numbers(planes[:, 0], plane_c[:, 0])
     lo, hi = tri.min(axis=1).min(axis=0), tri.max(axis=1).max(axis=0)
     cell = max(_CELL, float(np.prod(hi - lo + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
     margin = _SURFACE_REACH * cell  # exact for points within a millimetre of the surface at the default cell
@@ -205,22 +205,8 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     start, listed = face_grid(tri, planes[:, 0], plane_c[:, 0], origin, cell, shape)
     meta = np.concatenate([[0.5 * float(area2.sum())], origin, [cell], shape.astype(np.float64)])
     return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
-            "adjacent": _adjacent_faces(faces), "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
+            "adjacent": adjacent_faces(faces), "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
             "meta": meta}  # fmt: skip
-
-
-def _plane_numbers(normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """(f,) int32: faces in one plane share a number, a degenerate face has one of its own — the partition of
-    :func:`optipose.scan.raycast.shared_planes` (the same keys), sorted in linear memory."""
-    key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
-    order = np.lexsort(key.T[::-1])
-    new = np.ones(len(key), dtype=bool)
-    new[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
-    plane = np.empty(len(key), dtype=np.int64)
-    plane[order] = np.cumsum(new) - 1
-    degenerate = np.flatnonzero(np.linalg.norm(normals, axis=1) < 0.5)
-    plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(len(degenerate))
-    return plane.astype(np.int32)
 
 
 def save_reference(reference: SurfaceReference, folder) -> None:
@@ -253,21 +239,6 @@ def _edge_normals(points, q, n, edge_c, edge_h, adjacent, normals) -> None:
     crease = outside.any(axis=1) & ~(outside & (adjacent < 0)).any(axis=1) & (outside & turned).any(axis=1)
     for i in np.flatnonzero(crease):
         edge_normal(points, i, q, n)
-
-
-def _adjacent_faces(faces: np.ndarray) -> np.ndarray:
-    """(f, 3) int32: the face across each face's edge k (corner k to corner k + 1), -1 on a boundary;
-    where more than two faces share an edge, one of the others."""
-    f = len(faces)
-    following = np.roll(faces, -1, axis=1)
-    # each half-edge as one int64 key (its lower vertex, then its higher), row 3·face + k: sorted in linear memory
-    key = (np.minimum(faces, following) * (int(faces.max(initial=0)) + 1) + np.maximum(faces, following)).ravel()
-    order = np.argsort(key, kind="stable")
-    adjacent = np.full(3 * f, -1, dtype=np.int32)
-    same = key[order[1:]] == key[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
-    a, b = order[:-1][same], order[1:][same]
-    adjacent[a], adjacent[b] = b // 3, a // 3
-    return adjacent.reshape(f, 3)
 
 
 def _face_hints(ids: np.ndarray | None, n_points: int, n_faces: int) -> np.ndarray:
