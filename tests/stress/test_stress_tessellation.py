@@ -4,9 +4,9 @@ Parts A, B and C re-tessellated without moving their surface — every triangle 
 centroid (other triangles and other edges, the old ones kept) and split in four at its edges' midpoints
 (trimesh's ``subdivide``) — are evaluated with their hand layouts: each k's choice takes the same sensors
 and, per axis, the same subset, each statistic within 1 % of the shipped mesh's (or the axis
-unobservable in both). The scans are the same points up to the scanner's column fill, and the
-registrations the same up to the order in which tied faces are met; the whole protocol is slow (marked
-``slow``), a short one on part B runs by default.
+unobservable in both). The scans are the same points up to the scanner's column fill, and a point off a
+crease gets the same normal whichever face answers for it; the whole protocol is slow (marked ``slow``),
+a short one on part B runs by default.
 """
 
 import numpy as np
