@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
+from optipose.evaluate import shared
 from optipose.evaluate.conditions import Condition, by_draw
 from optipose.evaluate.assignment import Choice, best_choices
 from optipose.evaluate.executors import Executor, make_executor
@@ -138,6 +139,10 @@ class Evaluator:
             condition=condition or Condition(),
             column_stride=self.objective.scan.column_stride,
         )
+        self._shared = None  # with workers in other processes, the CAD-surface reference is built here once
+        if self.jobs > 1 and self.objective.registration.reference != "cad-sample":
+            self._shared, folder = shared.acquire(self.setup.vertices, self.setup.faces)
+            self.setup = replace(self.setup, reference_dir=folder)
 
     def __enter__(self):
         return self
@@ -149,6 +154,9 @@ class Evaluator:
         """Release the workers of an executor this evaluator made."""
         if self._owns_executor:
             self.executor.close()
+        if self._shared is not None:
+            shared.release(self._shared)
+            self._shared = None
 
     def tasks(self) -> list[tuple]:
         """The protocol's orientations as worker tasks: (scan index, rpy (3,) rad, offset (3,) m, noise seed, label)."""

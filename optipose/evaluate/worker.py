@@ -19,6 +19,7 @@ orientation: what the brackets add to each subset's estimate there is taken off 
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass, field, replace
 
@@ -51,6 +52,8 @@ class WorkerSetup:
     occluders : the part's keep-outs, (lo, hi) boxes in m that hide what they cover.
     condition : the noise scale and bracket errors the layouts are scanned under (default: nominal).
     column_stride : the scanners' anchor columns (:class:`optipose.scan.scanner.Scanner`).
+    reference_dir : where the evaluator wrote the CAD-surface reference for its workers to map
+        (:mod:`optipose.evaluate.shared`); ``None`` or absent on this machine: each worker builds its own.
     """
 
     token: str
@@ -67,6 +70,7 @@ class WorkerSetup:
     occluders: tuple = ()
     condition: Condition = field(default_factory=Condition)
     column_stride: int = ScanConfig.column_stride
+    reference_dir: str | None = None  # the CAD-surface reference's arrays, shared by this machine's workers (evaluate.shared)
 
 
 def sensor_groups(models: list, default) -> list[tuple[object, list[int]]]:
@@ -91,7 +95,7 @@ class _Worker:
     def __init__(self, setup: WorkerSetup):
         import trimesh
 
-        from optipose.registration.reference import SampledReference, SurfaceReference, sample_surface
+        from optipose.registration.reference import SampledReference, SurfaceReference, load_reference, sample_surface
 
         self.setup = setup
         self.condition = setup.condition  # the condition of the chunk being run (run_chunk sets it)
@@ -100,6 +104,8 @@ class _Worker:
         cfg = setup.registration
         if cfg.reference == "cad-sample":
             self.reference = SampledReference(*sample_surface(setup.vertices, setup.faces, cfg.reference_spacing), kind="cad-sample")
+        elif setup.reference_dir and os.path.isdir(setup.reference_dir):  # built once on this machine, mapped
+            self.reference = load_reference(setup.reference_dir)
         else:  # the CAD surface; also answers the observability normals for nominal-scan references
             self.reference = SurfaceReference(setup.vertices, setup.faces)
         self._nominal: dict = {}

@@ -1,5 +1,5 @@
-"""Compiled closest points on a planar-faced mesh (numba, ``nogil``): the faces near each cell of a grid over
-the part, and each point's closest point on them, starting from the face it had at the last step (walking
+"""Compiled closest points on a planar-faced mesh (numba, ``nogil``): the faces that cross each cell of a grid
+over the part, and each point's closest point on them, starting from the face it had at the last step (walking
 across the edge it left by) before its grid cell's faces are searched. The arithmetic is documented in
 :mod:`optipose.registration.reference` (:class:`~optipose.registration.reference.SurfaceReference`);
 compiled once per machine and cached next to this file (``cache=True``).
@@ -10,9 +10,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "nearest_into"]
+__all__ = ["face_grid", "nearest_into", "edge_normal", "adjacent_faces", "plane_numbers", "CREASE_DEG"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
+CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
+_CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -67,54 +69,34 @@ def _project(p, i, f, planes, plane_c, q):
 
 
 @njit(cache=True, nogil=True)
-def face_grid(tri, normals, offsets, lo, hi, origin, cell, shape, margin):
+def face_grid(tri, normals, offsets, origin, cell, shape):
     """Faces listed per cell of a grid (origin (3,), cube side ``cell``, ``shape`` (3,) cells): every face
-    within ``margin`` of the cell (bounding box and plane within margin of the cell's box, a superset).
-    Returns CSR start (cells + 1,), the face list and each listed face's ``bound`` (m): no point of the
-    cell is nearer the face than that (the gap between the cell's box and the face's bounding box
-    ``lo``/``hi`` (f, 3), or its plane's distance from the cell's centre less the half-diagonal). Each
-    cell's faces are in ascending order of bound (ties by face id), so a search can stop at the first face
-    bound farther than its best."""
+    whose bounding box overlaps the cell and whose plane passes within the cell's half-diagonal of its
+    centre (a superset of the faces that meet the cell). Returns the CSR start (cells + 1,) int64 and the
+    face list (int32). A face is listed in the few cells it crosses, whatever the mesh's density: the
+    search (:func:`nearest_into`) looks at the cells around a point, ring by ring."""
     n_cells = shape[0] * shape[1] * shape[2]
     start = np.zeros(n_cells + 1, np.int64)
-    _grid_pass(tri, normals, offsets, origin, cell, shape, margin, start[1:], np.empty(0, np.int64))
+    _grid_pass(tri, normals, offsets, origin, cell, shape, start[1:], np.empty(0, np.int32))
     for c in range(n_cells):
         start[c + 1] += start[c]
-    faces = np.empty(start[n_cells], np.int64)
-    _grid_pass(tri, normals, offsets, origin, cell, shape, margin, start[:-1].copy(), faces)
-    bound = np.empty(faces.shape[0], np.float64)
-    half_diag = 0.5 * np.sqrt(3.0) * cell
-    for c in range(n_cells):
-        if start[c + 1] == start[c]:
-            continue
-        i, rest = c // (shape[1] * shape[2]), c % (shape[1] * shape[2])
-        j, k = rest // shape[2], rest % shape[2]
-        box_lo = (origin[0] + i * cell, origin[1] + j * cell, origin[2] + k * cell)
-        for e in range(start[c], start[c + 1]):
-            g = faces[e]
-            gap2 = 0.0
-            for a in range(3):
-                gap = max(lo[g, a] - (box_lo[a] + cell), box_lo[a] - hi[g, a], 0.0)
-                gap2 += gap * gap
-            centre = normals[g, 0] * (box_lo[0] + 0.5 * cell) + normals[g, 1] * (box_lo[1] + 0.5 * cell) + normals[g, 2] * (box_lo[2] + 0.5 * cell)
-            bound[e] = max(max(np.sqrt(gap2), abs(centre - offsets[g]) - half_diag) * (1.0 - 1e-9) - 1e-15, 0.0)  # a hair under, for rounding
-        order = np.argsort(bound[start[c] : start[c + 1]], kind="mergesort")
-        faces[start[c] : start[c + 1]] = faces[start[c] : start[c + 1]][order]
-        bound[start[c] : start[c + 1]] = bound[start[c] : start[c + 1]][order]
-    return start, faces, bound
+    faces = np.empty(start[n_cells], np.int32)
+    _grid_pass(tri, normals, offsets, origin, cell, shape, start[:-1].copy(), faces)
+    return start, faces
 
 
 @njit(cache=True, nogil=True)
-def _grid_pass(tri, normals, offsets, origin, cell, shape, margin, slot, faces):
+def _grid_pass(tri, normals, offsets, origin, cell, shape, slot, faces):
     """Count faces per cell into ``slot`` (faces empty), or write them at ``slot`` (advanced)."""
     write = faces.shape[0] > 0
-    half_diag = 0.5 * np.sqrt(3.0) * cell
+    half_diag = 0.5 * np.sqrt(3.0) * cell * (1.0 + 1e-9)
+    pad = 1e-9 * cell
     lo_c = np.empty(3, np.int64)
     hi_c = np.empty(3, np.int64)
     for f in range(tri.shape[0]):
         for j in range(3):
-            lo_v = min(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) - margin
-            hi_v = max(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) + margin
+            lo_v = min(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) - pad  # a hair over: no cell lost to rounding
+            hi_v = max(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) + pad
             lo_c[j] = max(0, np.int64(np.floor((lo_v - origin[j]) / cell)))
             hi_c[j] = min(shape[j] - 1, np.int64(np.floor((hi_v - origin[j]) / cell)))
         for i in range(lo_c[0], hi_c[0] + 1):
@@ -123,7 +105,7 @@ def _grid_pass(tri, normals, offsets, origin, cell, shape, margin, slot, faces):
                     cx = origin[0] + (i + 0.5) * cell
                     cy = origin[1] + (j + 0.5) * cell
                     cz = origin[2] + (k + 0.5) * cell
-                    if abs(normals[f, 0] * cx + normals[f, 1] * cy + normals[f, 2] * cz - offsets[f]) > half_diag + margin:
+                    if abs(normals[f, 0] * cx + normals[f, 1] * cy + normals[f, 2] * cz - offsets[f]) > half_diag:
                         continue
                     c = (i * shape[1] + j) * shape[2] + k
                     if write:
@@ -163,30 +145,33 @@ def _walk(p, i, f, planes, plane_c, adjacent, q):
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, lo, hi, origin, cell, shape, margin, start, faces,
-                 bound):  # fmt: skip
-    """Closest points of p (n, 3) on a mesh into q (n, 3), their face normals into ``nrm`` (n, 3); ``ids``
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, origin, cell, shape, reach, start, faces):
+    """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
 
     A point inside its guessed face by more than 2|d| keeps it (as ``follow``); one that left it walks
     across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face it lies inside of
-    by more than 2|d| — the test that keeps a guess. Otherwise the faces
-    listed for its grid cell (:func:`face_grid`) are searched exactly: they hold every face within
-    ``margin`` of the cell, so the answer is certain when the closest point found is within ``margin``
-    (faces whose bounding box (lo, hi) is farther than the best so far are skipped; the guessed face
+    by more than 2|d| — the test that keeps a guess. Otherwise the faces listed in the grid's cells
+    (:func:`face_grid`) around the point's are searched exactly, ring after ring of cells out to ``reach``
+    rings: after each ring, every face nearer than the ring block's walls has been seen, so the search
+    stops once its best is nearer than those, and is certain for an answer within ``reach`` × ``cell``
+    (faces whose bounding box is farther than the best so far are skipped; the guessed face
     starts the search, which prunes more). A point inside the face found by more than 2|d| gets its
     projection on the face's plane, like a followed point; a point closest to an edge or a corner gets
-    the closest point of that face, in float64 (where faces tie exactly, at their common edge, the lowest
-    face id takes the point, whatever the guess: the point is the same, the normal the face's). Points left
-    to the global search (outside the grid or farther than ``margin`` from the surface) are marked in
+    the closest point of that face, in float64, and the direction from it to the point as its normal
+    (:func:`edge_normal`; where faces tie exactly, at their common edge, the lowest face id takes the
+    point, whatever the guess: the point and the normal are the same whichever face it is). Points left
+    to the global search (outside the grid or farther than the reach from the surface) are marked in
     ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer its face than any
     face not adjacent to it (true near a part's surface; not for a point past the middle of a thin sheet,
     or in a slot narrower than twice its distance): the search's answer otherwise.
     """
     n = p.shape[0]
+    margin = reach * cell
     m2 = margin * margin
     n_open = 0
+    cc = np.empty(3, np.int64)
     for i in range(n):
         f = ids[i]
         if f >= 0:
@@ -195,13 +180,11 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
                 continue
-        c = 0
         outside = False
         for j in range(3):
-            cj = np.int64(np.floor((p[i, j] - origin[j]) / cell))
-            if cj < 0 or cj >= shape[j]:
+            cc[j] = np.int64(np.floor((p[i, j] - origin[j]) / cell))
+            if cc[j] < 0 or cc[j] >= shape[j]:
                 outside = True
-            c = c * shape[j] + cj
         if outside:
             open_[i] = True
             n_open += 1
@@ -213,40 +196,124 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
         if f < 0 and i > 0:  # no guess: the last point's face (a neighbour in a voxel-ordered cloud) seeds the search
             f = ids[i - 1]
         inset2 = -1.0  # squared: how far inside the best face p projects (-1: not inside)
-        if f >= 0:  # a seed only prunes: every listed face is still searched, ties go to the lowest id
+        if f >= 0:  # a seed only prunes: every face near enough is still searched, ties go to the lowest id
             gx, gy, gz = _closest_on_triangle(px, py, pz, tri[f, 0], tri[f, 1], tri[f, 2])
             d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
             if d2 <= best:
                 best, g_best, bx, by, bz = d2, f, gx, gy, gz
                 inset2 = _inset2(p, i, f, planes, plane_c)
-        for k in range(start[c], start[c + 1]):
-            if bound[k] * bound[k] > best:  # this face and every one after it are farther than the best
+        # how far the point lies inside its own cell from each wall: the ring blocks' walls are that plus r cells
+        wall = np.inf
+        for j in range(3):
+            below = p[i, j] - (origin[j] + cc[j] * cell)
+            wall = min(wall, below, cell - below)
+        for r in range(reach + 1):
+            for a in range(max(cc[0] - r, 0), min(cc[0] + r, shape[0] - 1) + 1):
+                for b in range(max(cc[1] - r, 0), min(cc[1] + r, shape[1] - 1) + 1):
+                    shell = abs(a - cc[0]) == r or abs(b - cc[1]) == r
+                    step = 1 if shell else 2 * r
+                    c = cc[2] - r
+                    while c <= cc[2] + r:
+                        if 0 <= c < shape[2]:
+                            cell_id = (a * shape[1] + b) * shape[2] + c
+                            for e in range(start[cell_id], start[cell_id + 1]):
+                                g = np.int64(faces[e])
+                                if g == g_best or (planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0):
+                                    continue  # the best again; or a zero-area face (no normal), on its neighbours' edges: they answer for it
+                                if plane_id[g] == plane_id[g_best] and inset2 > best * 1e-6 + 1e-18:
+                                    continue  # in the plane of the best face, which p projects well inside of: farther by at least that inset
+                                box = 0.0
+                                for j in range(3):
+                                    lo_j = min(tri[g, 0, j], tri[g, 1, j], tri[g, 2, j])
+                                    hi_j = max(tri[g, 0, j], tri[g, 1, j], tri[g, 2, j])
+                                    gap = max(lo_j - p[i, j], p[i, j] - hi_j, 0.0)
+                                    box += gap * gap
+                                if box > best:
+                                    continue
+                                h = planes[g, 0, 0] * px + planes[g, 0, 1] * py + planes[g, 0, 2] * pz - plane_c[g, 0]
+                                if h * h > best * (1.0 + 1e-6) + 1e-22:  # its plane alone is farther (with room for rounding: no tie is lost)
+                                    continue
+                                gx, gy, gz = _closest_on_triangle(px, py, pz, tri[g, 0], tri[g, 1], tri[g, 2])
+                                d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
+                                if d2 < best or (d2 == best and (g_best < 0 or g < g_best)):
+                                    best, g_best, bx, by, bz = d2, g, gx, gy, gz
+                                    inset2 = _inset2(p, i, g, planes, plane_c)
+                        c += step if step > 0 else 1
+            reached = wall + r * cell  # every face nearer than this has been seen
+            if g_best >= 0 and best < reached * reached:
                 break
-            g = faces[k]
-            if g == g_best or (planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0):
-                continue  # the seed again; or a zero-area face (no normal), on its neighbours' edges: they answer for it
-            if plane_id[g] == plane_id[g_best] and inset2 > best * 1e-6 + 1e-18:
-                continue  # in the plane of the best face, which p projects well inside of: farther by at least that inset
-            box = 0.0
-            for j in range(3):
-                gap = max(lo[g, j] - p[i, j], p[i, j] - hi[g, j], 0.0)
-                box += gap * gap
-            if box > best:
-                continue
-            h = planes[g, 0, 0] * px + planes[g, 0, 1] * py + planes[g, 0, 2] * pz - plane_c[g, 0]
-            if h * h > best * (1.0 + 1e-6) + 1e-22:  # its plane alone is farther (with room for rounding: no tie is lost)
-                continue
-            gx, gy, gz = _closest_on_triangle(px, py, pz, tri[g, 0], tri[g, 1], tri[g, 2])
-            d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
-            if d2 < best or (d2 == best and (g_best < 0 or g < g_best)):
-                best, g_best, bx, by, bz = d2, g, gx, gy, gz
-                inset2 = _inset2(p, i, g, planes, plane_c)
         if g_best < 0:
             open_[i] = True
             n_open += 1
             continue
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
-        if not _project(p, i, g_best, planes, plane_c, q)[0]:  # on or near an edge: the face's closest point
+        well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
+        if not well_inside:  # on or near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
+            if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
+                edge_normal(p, i, q, nrm)
     return n_open
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _crease(p, i, f, planes, plane_c, adjacent):
+    """Whether p[i], outside face f, is closest to a crease: every edge of f it lies outside of has a face
+    across it, and one of those faces turns by more than ``CREASE_DEG`` from f. There the faces tie and the
+    normal must be the surface's own. On the mesh's rim (an open sheet's) only f is there, and its plane
+    answers, as if the sheet went on; across a fainter fold (a finely tessellated curve) the faces'
+    normals differ by less than the fold, and f's stands, as before."""
+    sharp = False
+    for k in range(3):
+        hk = planes[f, k + 1, 0] * p[i, 0] + planes[f, k + 1, 1] * p[i, 1] + planes[f, k + 1, 2] * p[i, 2] - plane_c[f, k + 1]
+        if hk < 0.0:
+            g = adjacent[f, k]
+            if g < 0:
+                return False
+            cos = planes[f, 0, 0] * planes[g, 0, 0] + planes[f, 0, 1] * planes[g, 0, 1] + planes[f, 0, 2] * planes[g, 0, 2]
+            sharp = sharp or cos < _CREASE_COS
+    return sharp
+
+
+@njit(cache=True, nogil=True, inline="always")
+def edge_normal(p, i, q, nrm):
+    """Where p[i]'s closest point q[i] lies on an edge or a corner, the surface's own normal there: the
+    direction from q[i] to p[i] (the distance's gradient), signed like the face normal in ``nrm[i]``.
+    The faces that meet at that edge tie, and which of them answers depends on the triangulation; this
+    direction does not. A point on the edge itself (no direction) keeps the face normal."""
+    dx, dy, dz = p[i, 0] - q[i, 0], p[i, 1] - q[i, 1], p[i, 2] - q[i, 2]
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if d <= 1e-9:  # within a nanometre of the edge: the direction is rounding, and the point as good as on it
+        return
+    if dx * nrm[i, 0] + dy * nrm[i, 1] + dz * nrm[i, 2] < 0.0:
+        d = -d
+    nrm[i, 0], nrm[i, 1], nrm[i, 2] = dx / d, dy / d, dz / d
+
+
+def adjacent_faces(faces: np.ndarray) -> np.ndarray:
+    """(f, 3) int32: the face across each face's edge k (corner k to corner k + 1), -1 on a boundary;
+    where more than two faces share an edge, one of the others."""
+    f = len(faces)
+    following = np.roll(faces, -1, axis=1)
+    # each half-edge as one int64 key (its lower vertex, then its higher), row 3·face + k: sorted in linear memory
+    key = (np.minimum(faces, following) * (int(faces.max(initial=0)) + 1) + np.maximum(faces, following)).ravel()
+    order = np.argsort(key, kind="stable")
+    adjacent = np.full(3 * f, -1, dtype=np.int32)
+    same = key[order[1:]] == key[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
+    a, b = order[:-1][same], order[1:][same]
+    adjacent[a], adjacent[b] = b // 3, a // 3
+    return adjacent.reshape(f, 3)
+
+
+def plane_numbers(normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """(f,) int32: faces in one plane share a number, a degenerate face has one of its own — the partition of
+    :func:`optipose.scan.raycast.shared_planes` (the same keys), sorted in linear memory."""
+    key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
+    order = np.lexsort(key.T[::-1])
+    new = np.ones(len(key), dtype=bool)
+    new[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
+    plane = np.empty(len(key), dtype=np.int64)
+    plane[order] = np.cumsum(new) - 1
+    degenerate = np.flatnonzero(np.linalg.norm(normals, axis=1) < 0.5)
+    plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(len(degenerate))
+    return plane.astype(np.int32)

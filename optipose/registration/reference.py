@@ -4,10 +4,13 @@ Every reference answers ``closest(points) -> (q, n, ids)``: the closest referenc
 and an id. Two kinds:
 
 - :class:`SurfaceReference` — the CAD triangles themselves (``cad-surface``): exact (float64) closest
-  points on the surface, normals of the faces. This is a dense CAD sample in the limit of zero spacing,
-  so the reference adds no sampling error. A point within a millimetre of the part is answered by an
-  exact search of the faces listed in its cell of a grid (built once); the rest, far from the part,
-  by Open3D's ``RaycastingScene`` (a float32 BVH built once). Between ICP steps, a point that still
+  points on the surface, normals of the faces (off an edge or a corner, the direction to the closest
+  point, whatever the triangles). This is a dense CAD sample in the limit of zero spacing, so the
+  reference adds no sampling error. A point within a millimetre of the part is answered by an exact
+  search of the faces listed in the grid cells around it (each face listed in the cells it crosses, so
+  the grid is linear in the faces); the rest, far from the part, by Open3D's ``RaycastingScene`` (a
+  float32 BVH built on first use). Its arrays can be written and mapped back read-only
+  (:func:`save_reference`, :func:`load_reference`), one copy for the processes of a machine. Between ICP steps, a point that still
   projects well inside the face it was matched to keeps that face (:meth:`SurfaceReference.follow`),
   which makes an iteration near convergence cost a projection rather than a search.
 - :class:`SampledReference` — a point cloud with normals and a KD-tree: a CAD sample at a given spacing
@@ -23,12 +26,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from optipose.scan.raycast import edge_planes, shared_planes
+from optipose.scan.raycast import edge_planes
 
-__all__ = ["SurfaceReference", "SampledReference", "sample_surface"]
+__all__ = ["SurfaceReference", "SampledReference", "sample_surface", "save_reference", "load_reference"]
 
 _CELL = 0.5e-3  # m: grid cells of nearest(), larger if the part would need more than _MAX_CELLS
 _MAX_CELLS = 4_000_000
+_SURFACE_REACH = 2  # rings of cells around a point that the surface's search looks at: exact within 2 cells
 _NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
 _REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
 
@@ -38,51 +42,49 @@ class SurfaceReference:
 
     kind = "cad-surface"
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
-        import open3d as o3d
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, arrays: dict | None = None):
+        if arrays is None:
+            arrays = _surface_arrays(vertices, faces)
+        self.vertices, self.faces = arrays["vertices"], arrays["faces"]
+        self._tri, self._planes, self._plane_c = arrays["tri"], arrays["planes"], arrays["plane_c"]
+        self._adjacent, self._plane_id = arrays["adjacent"], arrays["plane_id"]
+        self._grid_start, self._grid_faces = arrays["grid_start"], arrays["grid_faces"]
+        self._meta = arrays["meta"]  # area, the grid's origin (3), cell, shape (3)
+        self.area = float(self._meta[0])
+        # views of the packed planes: the face plane (row 0) and its inward edge planes (rows 1-3); a point
+        # projects inside face f iff edge_n[f, k]·x - edge_c[f, k] >= 0 for k = 0..2
+        self.normals, self.offsets = self._planes[:, 0], self._plane_c[:, 0]
+        self.edge_n, self.edge_c = self._planes[:, 1:], self._plane_c[:, 1:]
+        self._scene = None  # Open3D's BVH, for points far from the surface: built on first use
 
-        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
-        tri = self.vertices[self.faces]  # (f, 3, 3)
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        area2 = np.linalg.norm(normal, axis=1)
-        self.normals = normal / np.maximum(area2, 1e-300)[:, None]
-        self.offsets = np.einsum("ij,ij->i", self.normals, tri[:, 0])
-        # inward edge planes: a point projects inside face f iff edge_n[f, k]·x - edge_c[f, k] >= 0 for k = 0..2
-        self.edge_n, self.edge_c = edge_planes(tri, self.normals)
-        # face plane and edge planes packed: one gather and one product per point in follow()
-        self._planes = np.ascontiguousarray(np.concatenate([self.normals[:, None], self.edge_n], axis=1))  # (f, 4, 3)
-        self._plane_c = np.ascontiguousarray(np.concatenate([self.offsets[:, None], self.edge_c], axis=1))  # (f, 4)
-        # the BVH is float32: built about the part's own centre, so a part far from O (a cell's frame
-        # metres away) keeps float32's resolution at the part's size rather than at its distance
-        self._origin = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
-        mesh = o3d.t.geometry.TriangleMesh()
-        mesh.vertex.positions = o3d.core.Tensor((self.vertices - self._origin).astype(np.float32))
-        mesh.triangle.indices = o3d.core.Tensor(self.faces.astype(np.int32))
-        self._scene = o3d.t.geometry.RaycastingScene()
-        self._scene.add_triangles(mesh)
-        self.area = 0.5 * float(area2.sum())
-        self._tri = np.ascontiguousarray(tri)
-        self._adjacent = _adjacent_faces(self.faces)
-        self._plane_id = np.ascontiguousarray(shared_planes(self.vertices, self.faces)[0])  # faces in one plane share a number
-        self._face_grid = None
+    def arrays(self) -> dict:
+        """Everything the reference is built from, as arrays: ``SurfaceReference(None, None, arrays)`` is
+        the same reference (:func:`save_reference` writes them, :func:`load_reference` maps them back)."""
+        names = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "plane_id", "grid_start", "grid_faces", "meta")
+        values = (self.vertices, self.faces, self._tri, self._planes, self._plane_c, self._adjacent, self._plane_id,
+                  self._grid_start, self._grid_faces, self._meta)  # fmt: skip
+        return dict(zip(names, values))
 
     def _grid(self) -> tuple:
-        """The faces near each cell of a ``_CELL`` grid over the part (see :func:`optipose.registration.closest_surface.face_grid`),
-        with the faces' bounding boxes; built on first use."""
-        if self._face_grid is None:
-            from optipose.registration.closest_surface import face_grid
+        """The grid's origin (3,), cell (m), shape (3,), the search's reach in cells, and the CSR start and
+        face list of the faces that cross each cell (:func:`optipose.registration.closest_surface.face_grid`)."""
+        meta = self._meta
+        return meta[1:4], float(meta[4]), meta[5:8].astype(np.int64), _SURFACE_REACH, self._grid_start, self._grid_faces
 
-            lo, hi = self._tri.min(axis=1), self._tri.max(axis=1)
-            extent = hi.max(axis=0) - lo.min(axis=0)
-            cell = max(_CELL, float(np.prod(extent + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
-            margin = 2 * cell  # exact for points within a millimetre of the surface at the default cell
-            origin = lo.min(axis=0) - margin
-            shape = np.floor((hi.max(axis=0) + margin - origin) / cell).astype(np.int64) + 1
-            lo, hi = np.ascontiguousarray(lo), np.ascontiguousarray(hi)
-            start, faces, bound = face_grid(self._tri, self.normals, self.offsets, lo, hi, origin, cell, shape, margin)
-            self._face_grid = (lo, hi, origin, cell, shape, margin, start, faces, bound)
-        return self._face_grid
+    def _bvh(self):
+        """Open3D's ``RaycastingScene`` of the mesh, built on first use. The BVH is float32: built about the
+        part's own centre, so a part far from O (a cell's frame metres away) keeps float32's resolution at
+        the part's size rather than at its distance."""
+        if self._scene is None:
+            import open3d as o3d
+
+            self._origin = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+            mesh = o3d.t.geometry.TriangleMesh()
+            mesh.vertex.positions = o3d.core.Tensor((self.vertices - self._origin).astype(np.float32))
+            mesh.triangle.indices = o3d.core.Tensor(np.asarray(self.faces, dtype=np.int32))
+            self._scene = o3d.t.geometry.RaycastingScene()
+            self._scene.add_triangles(mesh)
+        return self._scene
 
     def __repr__(self) -> str:
         return f"SurfaceReference({len(self.faces)} faces, {self.area * 1e6:.0f} mm^2)"
@@ -96,13 +98,23 @@ class SurfaceReference:
         """Open3D's closest points, for points the grid does not answer (far from the surface)."""
         import open3d as o3d
 
-        ans = self._scene.compute_closest_points(o3d.core.Tensor((np.asarray(points) - self._origin).astype(np.float32)))
+        scene = self._bvh()
+        ans = scene.compute_closest_points(o3d.core.Tensor((np.asarray(points) - self._origin).astype(np.float32)))
         ids = ans["primitive_ids"].numpy().astype(np.int64)
         q = ans["points"].numpy().astype(np.float64) + self._origin
         # the BVH answers in float32 (~4 nm here); on the face's interior the float64 projection is exact
         q_exact, _, inside = self.follow(points, ids)
         q[inside] = q_exact[inside]
-        return q, self.normals[ids], ids
+        n = self.normals[ids]
+        # off the faces' interiors, the surface's own normal (closest_surface.edge_normal): not the tied face's
+        off = np.flatnonzero(~inside)
+        if len(off):
+            q_off = np.ascontiguousarray(q[off])
+            n_off = np.ascontiguousarray(n[off])
+            _edge_normals(np.ascontiguousarray(points[off], dtype=np.float64), q_off, n_off, self._plane_c[ids[off], 1:],
+                          np.einsum("ikj,ij->ik", self.edge_n[ids[off]], points[off]), self._adjacent[ids[off]], self.normals)
+            n[off] = n_off
+        return q, n, ids
 
     def follow(self, points: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Project points (n, 3) onto the faces ``ids`` they were matched to.
@@ -126,9 +138,9 @@ class SurfaceReference:
 
         ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
         inside its face by more than twice its distance keeps it (:meth:`follow`). Any other point is searched exactly among
-        the faces listed for its cell of a grid over the part (every face within two cells of the cell,
-        :func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
-        or, closest to an edge or a corner, that face's closest point. Points outside the grid or
+        the faces listed in the grid cells around it, out to two cells
+        (:func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
+        or, closest to an edge or a corner, that face's closest point and the direction to it. Points outside the grid or
         farther than two cells from the surface get Open3D's answer (float32 off the faces' interiors).
         """
         points = np.ascontiguousarray(points, dtype=np.float64)
@@ -143,7 +155,8 @@ class SurfaceReference:
         again on return)."""
         from optipose.registration.closest_surface import nearest_into
 
-        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id, *self._grid()):
+        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id,
+                        *self._grid()):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
@@ -166,19 +179,66 @@ class SurfaceReference:
         return sample_surface(self.vertices, self.faces, spacing, seed)
 
 
-def _adjacent_faces(faces: np.ndarray) -> np.ndarray:
-    """(f, 3) int64: the face across each face's edge k (corner k to corner k + 1), -1 on a boundary;
-    where more than two faces share an edge, one of the others."""
-    f = len(faces)
-    edges = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)  # (3f, 2), row 3·face + k
-    _, group = np.unique(edges, axis=0, return_inverse=True)
-    group = group.ravel()
-    order = np.argsort(group, kind="stable")
-    adjacent = np.full(3 * f, -1, dtype=np.int64)
-    same = group[order[1:]] == group[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
-    a, b = order[:-1][same], order[1:][same]
-    adjacent[a], adjacent[b] = b // 3, a // 3
-    return adjacent.reshape(f, 3)
+def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
+    """The arrays of :class:`SurfaceReference` (see :meth:`SurfaceReference.arrays`), about 400 bytes a face:
+    the mesh, its triangles (f, 3, 3), each face's plane and inward edge planes packed (f, 4, 3) and (f, 4)
+    for one gather per point, the face across each edge (int32), a number per plane (int32), and the grid."""
+    from optipose.registration.closest_surface import adjacent_faces, face_grid, plane_numbers
+
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    tri = vertices[faces]  # (f, 3, 3)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area2 = np.linalg.norm(normal, axis=1)
+    normal /= np.maximum(area2, 1e-300)[:, None]
+    planes = np.empty((len(faces), 4, 3))
+    plane_c = np.empty((len(faces), 4))
+    planes[:, 0], plane_c[:, 0] = normal, np.einsum("ij,ij->i", normal, tri[:, 0])
+    planes[:, 1:], plane_c[:, 1:] = edge_planes(tri, normal)
+    del normal
+    plane_id = plane_numbers(planes[:, 0], plane_c[:, 0])
+    lo, hi = tri.min(axis=1).min(axis=0), tri.max(axis=1).max(axis=0)
+    cell = max(_CELL, float(np.prod(hi - lo + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
+    margin = _SURFACE_REACH * cell  # exact for points within a millimetre of the surface at the default cell
+    origin = lo - margin
+    shape = np.floor((hi + margin - origin) / cell).astype(np.int64) + 1
+    start, listed = face_grid(tri, planes[:, 0], plane_c[:, 0], origin, cell, shape)
+    meta = np.concatenate([[0.5 * float(area2.sum())], origin, [cell], shape.astype(np.float64)])
+    return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
+            "adjacent": adjacent_faces(faces), "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
+            "meta": meta}  # fmt: skip
+
+
+def save_reference(reference: SurfaceReference, folder) -> None:
+    """Write a surface reference's arrays into ``folder`` (one ``.npy`` each), for :func:`load_reference`."""
+    from pathlib import Path
+
+    for name, array in reference.arrays().items():
+        np.save(Path(folder) / f"{name}.npy", np.ascontiguousarray(array))
+
+
+def load_reference(folder) -> SurfaceReference:
+    """The surface reference :func:`save_reference` wrote, its arrays mapped read-only from the files: the
+    processes of one machine that load it share one copy in the page cache."""
+    from pathlib import Path
+
+    names = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "plane_id", "grid_start", "grid_faces", "meta")
+    return SurfaceReference(None, None, {name: np.load(Path(folder) / f"{name}.npy", mmap_mode="r") for name in names})
+
+
+def _edge_normals(points, q, n, edge_c, edge_h, adjacent, normals) -> None:
+    """:func:`optipose.registration.closest_surface.edge_normal` in place for the points (m, 3) whose
+    projection falls outside their face (``edge_h - edge_c`` (m, 3), the edge planes' values, has one < 0)
+    on a crease, as the compiled search decides (``closest_surface._crease``: every edge it is outside of
+    has a face across, ``adjacent`` (m, 3), and one of those turns by more than a degree)."""
+    from optipose.registration.closest_surface import CREASE_DEG, edge_normal
+
+    outside = edge_h - edge_c < 0.0
+    across = normals[np.maximum(adjacent, 0)]  # (m, 3, 3)
+    turned = np.einsum("ij,ikj->ik", n, across) < np.cos(np.deg2rad(CREASE_DEG))
+    crease = outside.any(axis=1) & ~(outside & (adjacent < 0)).any(axis=1) & (outside & turned).any(axis=1)
+    for i in np.flatnonzero(crease):
+        edge_normal(points, i, q, n)
 
 
 def _face_hints(ids: np.ndarray | None, n_points: int, n_faces: int) -> np.ndarray:

@@ -1,0 +1,68 @@
+"""One CAD-surface reference per machine, shared by the evaluator's worker processes.
+
+Without it, every worker process builds its own :class:`~optipose.registration.reference.SurfaceReference`
+(about 400 bytes a face): n workers hold n copies. Here the evaluator's process builds it once, writes its
+arrays into a temporary folder (:func:`~optipose.registration.reference.save_reference`), and the workers
+map them read-only (:func:`~optipose.registration.reference.load_reference`): one copy in the page cache
+for every process of the machine. A worker that does not find the folder (a Dask worker on another
+machine) builds its own. Evaluators of one mesh in one process share one folder, removed when the last of
+them closes (or, at the latest, when the process exits).
+"""
+
+from __future__ import annotations
+
+import atexit
+import hashlib
+import shutil
+import tempfile
+import threading
+
+import numpy as np
+
+__all__ = ["acquire", "release"]
+
+_LOCK = threading.Lock()
+_FOLDERS: dict[str, list] = {}  # mesh key -> [folder, users]
+
+
+@atexit.register
+def _remove_all() -> None:
+    """The folders of evaluators never closed, at the process's exit."""
+    for folder, _ in _FOLDERS.values():
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _key(vertices: np.ndarray, faces: np.ndarray) -> str:
+    digest = hashlib.sha1(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
+    digest.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
+    return digest.hexdigest()
+
+
+def acquire(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, str]:
+    """The folder holding the surface reference of this mesh, built and written on first use: (key, folder)."""
+    from optipose.registration.reference import SurfaceReference, save_reference
+
+    key = _key(vertices, faces)
+    with _LOCK:
+        if key not in _FOLDERS:
+            folder = tempfile.mkdtemp(prefix="optipose-reference-")
+            try:
+                save_reference(SurfaceReference(vertices, faces), folder)
+            except BaseException:
+                shutil.rmtree(folder, ignore_errors=True)
+                raise
+            _FOLDERS[key] = [folder, 0]
+        _FOLDERS[key][1] += 1
+        return key, _FOLDERS[key][0]
+
+
+def release(key: str) -> None:
+    """One user fewer of the folder of ``key``; the last one removes it."""
+    with _LOCK:
+        entry = _FOLDERS.get(key)
+        if entry is None:
+            return
+        entry[1] -= 1
+        if entry[1] <= 0:
+            del _FOLDERS[key]
+            shutil.rmtree(entry[0], ignore_errors=True)
