@@ -62,12 +62,10 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     if part is None and resume is None:
         raise ConfigError("give a PART to search (a shipped part name or a mesh file), or --resume DIR")
     if resume:
-        part, search_config, budget, seed, the_objective = _resumed_settings(resume)
+        part, search_config, budget, seed, the_objective, saved_units = _resumed_settings(resume)
         check_output(resume, what="--resume")
         if units == "auto":  # the units the search was started with
-            from optipose.io.folders import read_config
-
-            units = read_config(resume).part_units or units
+            units = saved_units or units
     else:
         the_objective = load_objective(objective)
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
@@ -108,11 +106,12 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
 
 
 def _resumed_settings(resume: Path):
-    """(part, search config, budget, seed, objective) as saved in a search result folder's config.toml; a
-    folder whose settings this version cannot take (an older optipose's) is one ConfigError."""
+    """(part, search config, budget, seed, objective, the part's --units or None) as saved in a search result
+    folder's config.toml, read once; a folder whose settings this version cannot take (an older optipose's)
+    is one ConfigError."""
     saved = _resumed(resume)
     try:
-        return _settings(saved)
+        return (*_settings(saved), saved.part_units)
     except (KeyError, TypeError, ValueError, AttributeError, ConfigError) as exc:
         why = f"no '{exc.args[0]}' in it" if isinstance(exc, KeyError) else (str(exc).splitlines() or [type(exc).__name__])[0]
         raise ConfigError(f"--resume {resume}: its config.toml ({_written_by(saved)}) cannot be resumed by this "

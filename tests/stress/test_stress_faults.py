@@ -181,8 +181,9 @@ def test_a_search_folder_of_this_version_is_resumable(search_config, tmp_path):
     from optipose.io.folders import RESULT_FORMAT
 
     assert search_config["format"] == RESULT_FORMAT and search_config["command"] == "search"
-    part, config, budget, seed, objective = _resumed_settings(_search_folder(tmp_path, "ok", search_config))
+    part, config, budget, seed, objective, units = _resumed_settings(_search_folder(tmp_path, "ok", search_config))
     assert part.endswith("part_b/part.toml") and (config.sensors, budget, seed, objective.name) == ((1,), "quick", 0, "paper")
+    assert units is None  # loaded without --units
 
 
 def _older(table: dict, **changes) -> dict:
