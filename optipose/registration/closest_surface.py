@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "nearest_into", "edge_normal", "adjacent_faces", "plane_numbers", "CREASE_DEG"]
+__all__ = ["face_grid", "nearest_into", "edge_normal", "adjacent_faces", "CREASE_DEG"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
@@ -303,17 +303,3 @@ def adjacent_faces(faces: np.ndarray) -> np.ndarray:
     a, b = order[:-1][same], order[1:][same]
     adjacent[a], adjacent[b] = b // 3, a // 3
     return adjacent.reshape(f, 3)
-
-
-def plane_numbers(normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """(f,) int32: faces in one plane share a number, a degenerate face has one of its own — the partition of
-    :func:`optipose.scan.raycast.shared_planes` (the same keys), sorted in linear memory."""
-    key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
-    order = np.lexsort(key.T[::-1])
-    new = np.ones(len(key), dtype=bool)
-    new[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
-    plane = np.empty(len(key), dtype=np.int64)
-    plane[order] = np.cumsum(new) - 1
-    degenerate = np.flatnonzero(np.linalg.norm(normals, axis=1) < 0.5)
-    plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(len(degenerate))
-    return plane.astype(np.int32)

@@ -183,7 +183,8 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     """The arrays of :class:`SurfaceReference` (see :meth:`SurfaceReference.arrays`), about 400 bytes a face:
     the mesh, its triangles (f, 3, 3), each face's plane and inward edge planes packed (f, 4, 3) and (f, 4)
     for one gather per point, the face across each edge (int32), a number per plane (int32), and the grid."""
-    from optipose.registration.closest_surface import adjacent_faces, face_grid, plane_numbers
+    from optipose.registration.closest_surface import adjacent_faces, face_grid
+    from optipose.scan.raycast import plane_numbers
 
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
@@ -196,7 +197,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     planes[:, 0], plane_c[:, 0] = normal, np.einsum("ij,ij->i", normal, tri[:, 0])
     planes[:, 1:], plane_c[:, 1:] = edge_planes(tri, normal)
     del normal
-    plane_id = plane_numbers(planes[:, 0], plane_c[:, 0])
+    plane_id = plane_numbers(planes[:, 0], plane_c[:, 0]).astype(np.int32)
     lo, hi = tri.min(axis=1).min(axis=0), tri.max(axis=1).max(axis=0)
     cell = max(_CELL, float(np.prod(hi - lo + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
     margin = _SURFACE_REACH * cell  # exact for points within a millimetre of the surface at the default cell

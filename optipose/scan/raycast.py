@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "edge_planes", "shared_planes", "BACKENDS"]
+__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "edge_planes", "plane_numbers", "shared_planes", "BACKENDS"]
 
 
 class RayCaster(Protocol):
@@ -167,6 +167,21 @@ def edge_planes(tris: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.n
     return edge_n, np.einsum("fkj,fkj->fk", edge_n, tris)
 
 
+def plane_numbers(normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """(f,) int64: faces whose planes (unit ``normals`` (f, 3), ``offsets`` (f,) m) agree to ``tol`` and
+    ``tol`` × 0.01 m share a number, numbered in the order of their sorted keys; a degenerate face (normal
+    of length < 0.5) has one of its own, after them. Sorted in memory linear in the faces."""
+    key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
+    order = np.lexsort(key.T[::-1])
+    new = np.ones(len(key), dtype=bool)
+    new[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
+    plane = np.empty(len(key), dtype=np.int64)
+    plane[order] = np.cumsum(new) - 1
+    degenerate = np.flatnonzero(np.linalg.norm(normals, axis=1) < 0.5)
+    plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(len(degenerate))
+    return plane
+
+
 def shared_planes(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9):
     """Faces that lie in one plane, given one plane: returns ``plane`` (f,) int64 (faces in one plane share a
     number; a degenerate face has one of its own), the normals (f, 3) and offsets (f,) of
@@ -178,13 +193,9 @@ def shared_planes(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9):
     one plane makes a hit's float64 position the same whichever of them Embree names.
     """
     normals, offsets = face_planes(vertices, faces)
-    key = np.rint(np.c_[normals / tol, offsets / (0.01 * tol)]).astype(np.int64)
-    _, first, plane = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    plane = plane.ravel().astype(np.int64)
-    degenerate = np.linalg.norm(normals, axis=1) < 0.5
-    plane[degenerate] = plane.max(initial=-1) + 1 + np.arange(int(degenerate.sum()))
-    rep = first[np.minimum(plane, len(first) - 1)]
-    rep[degenerate] = np.flatnonzero(degenerate)
+    plane = plane_numbers(normals, offsets, tol)
+    numbers, first = np.unique(plane, return_index=True)  # each plane's first face (a degenerate face: itself)
+    rep = first[np.searchsorted(numbers, plane)]
     normals, offsets = np.ascontiguousarray(normals[rep]), offsets[rep]
     edge_n, edge_c = edge_planes(np.asarray(vertices, dtype=np.float64)[faces], normals)
     return plane, normals, offsets, np.ascontiguousarray(edge_n), np.ascontiguousarray(edge_c)
