@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from optipose.cli.options import Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors, warn_if_band
+from optipose.cli.options import CellOption, Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors, warn_if_band
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
@@ -25,6 +25,7 @@ def evaluate(
     layout: LayoutFile = None,
     out: ResultFolder = None,
     objective: Objective = "paper",
+    cell: CellOption = None,
     jobs: Jobs = 1,
     seed: Seed = 0,
     no_report: NoReport = False,
@@ -33,7 +34,7 @@ def evaluate(
 
     Scan a layout at every orientation of an objective's protocol, register every sensor subset with
     ICP, and print the best subset per axis for 1, 2, 3 … sensors (the paper's Table 1)."""
-    evaluate_command(part, units, layout, out, objective, jobs, seed, report=not no_report)
+    evaluate_command(part, units, layout, out, objective, jobs, seed, report=not no_report, cell=cell)
 
 
 def register(app: typer.Typer) -> None:
@@ -43,7 +44,7 @@ def register(app: typer.Typer) -> None:
 
 
 def evaluate_command(part: str, units: str = "auto", layout: Path | None = None, out: Path | None = None,
-                     objective: str = "paper", jobs: int = 1, seed: int = 0, report: bool = True) -> Path:  # fmt: skip
+                     objective: str = "paper", jobs: int = 1, seed: int = 0, report: bool = True, cell: str | None = None) -> Path:  # fmt: skip
     """Run the evaluation, print Table 1, save the result folder; returns the folder."""
     from rich.console import Console
 
@@ -66,7 +67,7 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
         the_layout = baseline(the_part)
     else:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give one with --layout")
-    the_objective = load_objective(objective)
+    the_objective = load_objective(objective).in_cell(cell)
     warn_if_band(the_objective, "evaluate")
     console = make_console(stderr=True)
     with status(console, f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"):

@@ -106,6 +106,10 @@ LayoutFile = Annotated[
     typer.Option("--layout", help="Layout TOML, a name and T_O_S per sensor; default: the part's hand-placed one."),
 ]
 Objective = Annotated[str, typer.Option("--objective", help="Objective name in objectives/ or a TOML path.")]
+CellOption = Annotated[
+    Optional[str],
+    typer.Option("--cell", help="The cell the layouts are evaluated in: a name in cells/ (ideal, ur10e) or a TOML path; default: the objective's."),
+]
 Seed = Annotated[
     int, typer.Option("--seed", help="Seed of the sensor noise and random protocols; a search validates with a seed derived from it.")
 ]

@@ -19,7 +19,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
+from optipose.cli.options import CellOption, Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
@@ -42,6 +42,7 @@ def robustness(
     part: Part,
     layout: Layouts = None,
     objective: Objective = "robust",
+    cell: CellOption = None,
     units: Units = "auto",
     out: ResultFolder = None,
     jobs: Jobs = 1,
@@ -53,12 +54,12 @@ def robustness(
 
     Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
     levels, bracket tolerances) and say, per layout, whether it stays no worse than the hand one."""
-    robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report)
+    robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report, cell=cell)
 
 
 def robustness_command(part: str, layouts: list[Path], objective: str = "robust", units: str = "auto",
                        out: Path | None = None, jobs: int = 1, seed: int = 0, brackets: bool | None = None,
-                       report: bool = True) -> Path:  # fmt: skip
+                       report: bool = True, cell: str | None = None) -> Path:  # fmt: skip
     """Run the evaluations, print the table and the verdicts, save the result folder; returns the folder."""
     from rich.console import Console
 
@@ -76,7 +77,7 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     reference = baseline(the_part)  # the hand-placed layout, else the conventional placement
     if reference is None:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout to compare with")
-    the_objective = load_objective(objective)
+    the_objective = load_objective(objective).in_cell(cell)
     if brackets is None:
         brackets = the_objective.conditions.mounted
     elif brackets and not the_objective.conditions.mounted:

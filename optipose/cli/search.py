@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import EXIT_INTERRUPTED, Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
+from optipose.cli.options import EXIT_INTERRUPTED, CellOption, Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
 from optipose.cli.progress import make_console
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError, is_interrupt, read_toml
@@ -28,6 +28,7 @@ def search(
     sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
     budget: Annotated[str, typer.Option(help="quick (a first look, not checked under the band), default (the search, then its answer checked under the band of a real cell) or thorough; every budget validates on the full protocol.")] = "default",
     objective: Objective = "paper",
+    cell: CellOption = None,
     seed: Seed = 0,
     jobs: Jobs = None,
     out: ResultFolder = None,
@@ -40,12 +41,12 @@ def search(
     Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
     the full ICP protocol with a held-out noise seed, and print found vs. hand-placed per axis (the paper's
     Table 1 shape)."""
-    search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report)
+    search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report, cell=cell)
 
 
 def search_command(part: str | None = None, units: str = "auto", sensors: str = "1,2,3", budget: str = "default",
                    objective: str = "paper", seed: int = 0, jobs: int | None = None, out: Path | None = None,
-                   resume: Path | None = None, config: Path | None = None, report: bool = True) -> Path:  # fmt: skip
+                   resume: Path | None = None, config: Path | None = None, report: bool = True, cell: str | None = None) -> Path:  # fmt: skip
     """Run the search, print found vs. hand-placed, keep everything in the result folder; returns the folder.
 
     With ``resume`` the part, budget, seed, objective and search settings come from that folder's config.toml.
@@ -67,7 +68,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         if units == "auto":  # the units the search was started with
             units = saved_units or units
     else:
-        the_objective = load_objective(objective)
+        the_objective = load_objective(objective).in_cell(cell)
         search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
     if not resume:
         check_output(out or RESULTS_DIR, what="--out" if out else "result folder")

@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from optipose.evaluate import shared
+from optipose.cell.scans import CellSetup
 from optipose.evaluate.conditions import Condition, by_draw
 from optipose.evaluate.assignment import Choice, best_choices
 from optipose.evaluate.executors import Executor, make_executor
@@ -138,6 +139,7 @@ class Evaluator:
             occluders=tuple(getattr(part, "occluders", ())),
             condition=condition or Condition(),
             column_stride=self.objective.scan.column_stride,
+            cell=None if self.objective.cell.ideal else CellSetup.of(self.objective.cell, part),
         )
         self._shared = None  # with workers in other processes, the CAD-surface reference is built here once
         if self.jobs > 1 and self.objective.registration.reference != "cad-sample":

@@ -15,6 +15,8 @@ import numpy as np
 
 from optipose.errors import ConfigError, read_toml
 from optipose.registration.backends import BACKENDS as REGISTRATION_BACKENDS
+from optipose.cell.config import IDEAL, Cell, load_cell
+from optipose.cell.robot import CalibrationErrors, RobotErrors
 from optipose.evaluate.conditions import ConditionsConfig, conditions_from_table
 from optipose.registration.config import RegistrationConfig
 
@@ -87,13 +89,19 @@ class Objective:
     statistic: StatisticConfig = field(default_factory=StatisticConfig)
     conditions: ConditionsConfig = field(default_factory=ConditionsConfig)
     scan: ScanConfig = field(default_factory=ScanConfig)
+    cell: Cell = IDEAL  # the real cell's error sources the layouts are evaluated in (optipose.cell; docs/cell.md)
     source_text: str = field(default="", repr=False, compare=False)  # the file as written, saved with results
 
     def to_dict(self) -> dict:
         """The resolved config in SI units (radians, metres), for saving beside results."""
         out = asdict(self)
         out.pop("source_text")
+        out["cell"].pop("source_text")
         return out
+
+    def in_cell(self, cell) -> "Objective":
+        """This objective in ``cell`` (a :class:`Cell`, a shipped name or a path; ``None``: unchanged)."""
+        return self if cell is None else replace(self, cell=load_cell(cell))
 
 
 def load_objective(spec: str | Path) -> Objective:
@@ -125,8 +133,17 @@ def objective_from_dict(table: dict, source_text: str = "") -> Objective:
         registration=section(RegistrationConfig, table.get("registration", {})),
         statistic=section(StatisticConfig, table.get("statistic", {})),
         conditions=section(ConditionsConfig, table.get("conditions", {})),
-        scan=section(ScanConfig, table.get("scan", {})), source_text=source_text,
+        scan=section(ScanConfig, table.get("scan", {})), cell=_saved_cell(table.get("cell")), source_text=source_text,
     )  # fmt: skip
+
+
+def _saved_cell(t: dict | None) -> Cell:
+    """A cell as :meth:`Objective.to_dict` saved it (absent in folders written before cells: the ideal one)."""
+    if not t:
+        return IDEAL
+    t = dict(t)
+    robot, calibration = RobotErrors(**t.pop("robot", {})), CalibrationErrors(**t.pop("calibration", {}))
+    return Cell(robot=robot, calibration=calibration, **{k: v for k, v in t.items() if k in Cell.__dataclass_fields__})
 
 
 def reduced_objective(objective: Objective) -> Objective:
@@ -140,7 +157,12 @@ def reduced_objective(objective: Objective) -> Objective:
 
 def objective_from_table(table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective") -> Objective:
     """Validate a parsed objective table; every problem is a :class:`ConfigError` naming the key."""
-    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "conditions", "scan"}, where)
+    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "conditions", "scan", "cell"}, where)
+    cell = table.get("cell", "ideal")
+    if not isinstance(cell, str):
+        raise ConfigError(f"{where}: cell must be a cell's name or a path to its file, got {cell!r}")
+    if cell and not Path(cell).is_absolute() and Path(cell).suffix and where != "objective":
+        cell = str(Path(where).parent / cell)  # a cell file beside the objective file
     return Objective(
         name=str(table.get("name", default_name)),
         description=str(table.get("description", "")),
@@ -149,6 +171,7 @@ def objective_from_table(table: dict, where: str = "objective", source_text: str
         statistic=_statistic(table.get("statistic", {}), f"{where} [statistic]"),
         conditions=conditions_from_table(table.get("conditions", {}), f"{where} [conditions]"),
         scan=_scan(table.get("scan", {}), f"{where} [scan]"),
+        cell=load_cell(cell),
         source_text=source_text,
     )
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from optipose.cell.scans import CellSetup, LiveCell
 from optipose.evaluate.assignment import all_subsets, subset_name
 from optipose.evaluate.conditions import Condition, mounting_error
 from optipose.evaluate.objective import AXES, RegistrationConfig, ScanConfig
@@ -71,6 +72,7 @@ class WorkerSetup:
     condition: Condition = field(default_factory=Condition)
     column_stride: int = ScanConfig.column_stride
     reference_dir: str | None = None  # the CAD-surface reference's arrays, shared by this machine's workers (evaluate.shared)
+    cell: CellSetup | None = None  # a real cell's error sources (optipose.cell); None or an ideal one: none
 
 
 def sensor_groups(models: list, default) -> list[tuple[object, list[int]]]:
@@ -108,6 +110,7 @@ class _Worker:
             self.reference = load_reference(setup.reference_dir)
         else:  # the CAD surface; also answers the observability normals for nominal-scan references
             self.reference = SurfaceReference(setup.vertices, setup.faces)
+        self.cell = None if setup.cell is None or setup.cell.ideal else LiveCell(setup.cell, setup.vertices, setup.faces, setup.centre, setup.seed)
         self._nominal: dict = {}
         self._zero: dict = {}
         self._exact_master: dict = {}
@@ -136,10 +139,12 @@ class _Worker:
         """:meth:`scan` at each noise scale of ``levels`` (the condition's brackets, its noise scale
         replaced): one list of scans per level, from one ray cast (:meth:`Scanner.scan_levels`)."""
         groups = sensor_groups(models, self.setup.sensor)
-        condition, nominal = self.condition, poses
+        condition, nominal, cell = self.condition, poses, self.cell
         mounted = condition.draw is not None and not exact
         if mounted:  # each sensor stands at its true pose
             poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
+        if cell is not None:  # ... where the calibration left it, and the part where the robot really turned it
+            poses, mounted, rpy = cell.poses(poses), True, cell.rpy(rpy, seed)
         scans = [[None] * len(poses) for _ in levels]
         for g, (model, idx) in enumerate(groups):
             if not idx:
@@ -151,7 +156,17 @@ class _Worker:
             for level, level_out in zip(scans, out):
                 for j, scan in zip(idx, level_out):
                     level[j] = scan
+        if cell is not None:
+            scans = self._in_cell(models, scans, seed)
         return scans
+
+    def _in_cell(self, models: list, scans: list[list], seed: int) -> list[list]:
+        """The scans with what the cell adds along each ray (:meth:`optipose.cell.scans.LiveCell.perturb`)."""
+        scanners = [self._scanner(None if m is None or m == self.setup.sensor else m) for m in models]
+        normals = [sc.normals(scan) for sc, scan in zip(scanners, scans[0])]
+        apex = [sc.sensor.apex_z for sc in scanners]
+        motion = self.setup.motion
+        return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed)
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
         """Per subset, the constant bias Z (4, 4) the brackets give a cell, so that a later estimate T is

@@ -18,7 +18,34 @@ import numpy as np
 
 from optipose.errors import ConfigError, read_toml
 
-__all__ = ["Material", "load_material", "material_presets"]
+__all__ = ["Material", "MaterialEffects", "load_material", "material_presets"]
+
+
+@dataclass(frozen=True)
+class MaterialEffects:
+    """What the sensor's physics adds on this material in a real cell (docs/cell.md, "The sensor on the
+    material"), SI; zero: the ideal sensor. Lengths are along the laser ray.
+
+    speckle : σ (m) of the speckle noise added to every point (metals: coherent light on a rough surface).
+    subsurface_bias, subsurface_sigma : how far below the surface the spot's centroid lies (m; plastics:
+        the light scatters inside before it comes back), and its point-to-point spread (m).
+    spurious_fraction, spurious_range : the fraction of points that are spurious returns anywhere, moved
+        along their ray by up to ± ``spurious_range`` (m).
+    concave_fraction, concave_distance : the fraction of points within ``concave_distance`` (m) of a concave
+        edge that are multipath returns (the line's reflection off the other face), moved the same way.
+    """
+
+    speckle: float = 0.0
+    subsurface_bias: float = 0.0
+    subsurface_sigma: float = 0.0
+    spurious_fraction: float = 0.0
+    spurious_range: float = 0.0
+    concave_fraction: float = 0.0
+    concave_distance: float = 0.0
+
+    @property
+    def none(self) -> bool:
+        return not any((self.speckle, self.subsurface_bias, self.subsurface_sigma, self.spurious_fraction, self.concave_fraction))
 
 
 @dataclass(frozen=True)
@@ -37,6 +64,7 @@ class Material:
     table_aoi: tuple[float, ...] = field(default=())
     table_intensity: tuple[float, ...] = field(default=())
     description: str = ""
+    effects: MaterialEffects = field(default_factory=MaterialEffects)  # a real cell's (``[<name>.cell]``)
 
     def intensity(self, aoi: np.ndarray) -> np.ndarray:
         """Relative intensity (n,) at angles of incidence ``aoi`` (n,) radians; 0 at or past 90°."""
@@ -56,7 +84,7 @@ class Material:
 
 
 def _from_table(name: str, table: dict) -> Material:
-    known = {"diffuse", "diffuse_exponent", "specular", "lobe_deg", "description", "csv"}
+    known = {"diffuse", "diffuse_exponent", "specular", "lobe_deg", "description", "csv", "cell"}
     unknown = set(table) - known
     if unknown:
         raise ConfigError(f"material '{name}': unknown key(s) {', '.join(sorted(unknown))}")
@@ -70,12 +98,37 @@ def _from_table(name: str, table: dict) -> Material:
             specular=float(table.get("specular", 0.0)),
             lobe=np.deg2rad(float(table.get("lobe_deg", 10.0))),
             description=str(table.get("description", "")),
+            effects=_effects(table.get("cell", {}), name),
         )
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"material '{name}': {exc}") from None
     if m.diffuse < 0 or m.specular < 0 or m.lobe <= 0:
         raise ConfigError(f"material '{name}': diffuse, specular must be >= 0 and lobe_deg > 0")
     return m
+
+
+_EFFECT_KEYS = {"speckle_mm": "speckle", "subsurface_bias_mm": "subsurface_bias", "subsurface_sigma_mm": "subsurface_sigma",
+                "spurious_fraction": "spurious_fraction", "spurious_range_mm": "spurious_range",
+                "concave_fraction": "concave_fraction", "concave_distance_mm": "concave_distance"}  # fmt: skip
+
+
+def _effects(table, name: str) -> MaterialEffects:
+    """A material's ``cell`` table (mm, fractions) as :class:`MaterialEffects` (m); ``source`` keys name
+    where each value comes from and are kept out of the record."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"material '{name}': cell must be a table")
+    unknown = {k for k in set(table) - set(_EFFECT_KEYS) if not k.endswith("source")}
+    if unknown:
+        raise ConfigError(f"material '{name}': unknown key(s) in cell: {', '.join(sorted(unknown))}")
+    values = {}
+    for key, attr in _EFFECT_KEYS.items():
+        v = table.get(key, 0.0)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+            raise ConfigError(f"material '{name}': cell.{key} must be a number >= 0, got {v!r}")
+        values[attr] = float(v) * (1e-3 if key.endswith("_mm") else 1.0)
+    if values["spurious_fraction"] > 1 or values["concave_fraction"] > 1:
+        raise ConfigError(f"material '{name}': cell fractions must be in [0, 1]")
+    return MaterialEffects(**values)
 
 
 def _from_csv(path: Path, name: str | None = None) -> Material:

@@ -60,7 +60,7 @@ _MM = 1e-3
 _MESH_SUFFIXES = {".stl", ".ply", ".obj", ".off", ".glb", ".gltf"}
 _PART_KEYS = {
     "name", "description", "mesh", "units", "material", "sensor",
-    "scan_length_mm", "scan_step_mm", "rotation_centre_mm",
+    "scan_length_mm", "scan_step_mm", "rotation_centre_mm", "process",
 }  # fmt: skip
 
 
@@ -99,6 +99,7 @@ class Part:
     source: Path | None = None
     description: str = ""
     units: str = "auto"
+    process: str = ""  # how it is made (optipose/data/processes.toml); a real cell scans it as made (docs/cell.md)
 
     @property
     def size(self) -> np.ndarray:
@@ -220,6 +221,7 @@ def _assemble(table: dict, mesh, source: Path, name: str, where: str) -> Part:
         rotation_centre=0.5 * (lo + hi) if centre is None else centre * _MM,
         source=source,
         description=str(table.get("description", "")),
+        process=str(table.get("process", "")),
     )
 
 

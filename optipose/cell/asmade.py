@@ -1,0 +1,124 @@
+"""The part as made: the CAD surface displaced along its normal by a field drawn per seed (docs/cell.md).
+
+A manufacturing process leaves each face off its drawing in a few ways, each a term of the field:
+
+- ``form``: a smooth random deviation (waviness, flatness), RMS ``form_rms`` over the surface, in
+  wavelengths between ``form_wavelengths`` (a sum of random plane waves: directions uniform on the sphere,
+  wavelengths log-uniform in the band, phases uniform; its RMS over space is ``form_rms``);
+- ``face``: each plane face of the part off its drawing as a whole, by an offset (σ ``face_offset``) and a
+  tilt about its centroid (σ ``face_tilt`` about each of two axes in the face): the size and angle
+  tolerances of a milled face, or a bend angle of a sheet;
+- ``scale``: a size error per axis of the part's frame (σ ``scale``, relative), about the part's centre:
+  the residual shrinkage of a print;
+- ``warp``: a bow of the part along z (its print's build direction), σ ``warp`` at the ends of its longest
+  side, zero on average;
+- ``layers``: the layer lines of a print on its side walls, a triangle wave of period ``layer_height``
+  along z and peak-to-valley ``layer_amplitude`` (faces turning less than 60° from vertical).
+
+Only the normal component of a displacement moves what a sensor measures (to first order in the
+displacement over the surface's curvature radius), so the field is a normal offset ``d(x)`` (m, outward
+positive) at part-frame points ``x`` on faces with outward normals ``n``. A part instance is a
+deterministic function of its seed: every sensor and every orientation of a run sees the same part.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+__all__ = ["Process", "AsMade", "FORM_MODES"]
+
+FORM_MODES = 256  # plane waves in the form field; the RMS of one draw over a surface is within a few % of form_rms
+_LAYER_WALL = 0.5  # |n_z| below this: a side wall, where a print's layer lines show
+
+
+@dataclass(frozen=True)
+class Process:
+    """A manufacturing process's deviations from the CAD (SI: m, rad, relative). Zero everywhere: the CAD."""
+
+    name: str = "cad"
+    form_rms: float = 0.0
+    form_wavelengths: tuple[float, float] = (0.01, 0.04)
+    face_offset: float = 0.0
+    face_tilt: float = 0.0
+    scale: float = 0.0
+    warp: float = 0.0
+    layer_height: float = 0.0
+    layer_amplitude: float = 0.0
+
+    @property
+    def exact(self) -> bool:
+        """Whether this process makes the CAD exactly."""
+        return all(getattr(self, f.name) == 0 for f in fields(self) if f.name not in ("name", "form_wavelengths"))
+
+    def scaled(self, factor: float) -> "Process":
+        """Every magnitude times ``factor`` (a better or a worse shop); wavelengths and layer height kept."""
+        keep = ("name", "form_wavelengths", "layer_height")
+        return Process(**{f.name: getattr(self, f.name) if f.name in keep else getattr(self, f.name) * factor for f in fields(self)})
+
+
+class AsMade:
+    """One instance of a part as made by ``process``, drawn from ``seed``.
+
+    vertices (v, 3) m, faces (f, 3): the CAD mesh in its own frame. ``plane`` (f,): each face's plane number
+    (:func:`optipose.scan.raycast.plane_numbers`); faces of one plane are one face of the part and move
+    together.
+    """
+
+    def __init__(self, process: Process, vertices: np.ndarray, faces: np.ndarray, plane: np.ndarray, seed: int):
+        self.process = process
+        rng = np.random.default_rng([int(seed), 0xA5AADE])
+        p = process
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        self.centre, self.extent = 0.5 * (lo + hi), np.maximum(hi - lo, 1e-9)
+        # form: random plane waves (drawn whatever the process, so a process's terms do not shift each other's draws)
+        direction = rng.normal(size=(FORM_MODES, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        lam = np.exp(rng.uniform(*np.log(p.form_wavelengths), FORM_MODES))
+        self.k = direction * (2 * np.pi / lam)[:, None]
+        self.phase = rng.uniform(0, 2 * np.pi, FORM_MODES)
+        self.form_amplitude = p.form_rms * np.sqrt(2.0 / FORM_MODES)
+        # faces: offset and tilt of each plane about its centroid
+        tri = vertices[faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        n_planes = int(plane.max(initial=-1)) + 1
+        weight = np.bincount(plane, area, n_planes)
+        centroid = np.stack([np.bincount(plane, area * tri[:, :, a].mean(axis=1), n_planes) for a in range(3)], axis=1)
+        self.plane = plane
+        self.plane_centroid = centroid / np.maximum(weight, 1e-300)[:, None]
+        self.plane_offset = rng.normal(0.0, 1.0, n_planes) * p.face_offset
+        self.plane_tilt = rng.normal(0.0, 1.0, (n_planes, 3)) * p.face_tilt  # a rotation vector; its part along n does nothing
+        self.scale = rng.normal(0.0, 1.0, 3) * p.scale
+        self.warp = rng.normal() * p.warp
+        self.layer_phase = rng.uniform(0.0, 1.0)
+
+    def offset(self, x: np.ndarray, n: np.ndarray, face: np.ndarray) -> np.ndarray:
+        """The surface's normal offset (m, outward positive) at part-frame points ``x`` (m, 3) on faces
+        ``face`` (m,) whose outward unit normals are ``n`` (m, 3)."""
+        p = self.process
+        d = np.zeros(len(x))
+        if p.form_rms:
+            d += self.form(x)
+        if p.face_offset or p.face_tilt:
+            pl = self.plane[face]
+            arm = x - self.plane_centroid[pl]
+            d += self.plane_offset[pl] + np.einsum("ij,ij->i", np.cross(self.plane_tilt[pl], arm), n)
+        if p.scale:
+            d += np.einsum("ij,ij->i", (x - self.centre) * self.scale, n)
+        if p.warp:
+            long = int(np.argmax(self.extent[:2]))
+            s = 2.0 * (x[:, long] - self.centre[long]) / self.extent[long]  # -1..1 along the longest side
+            d += self.warp * (s**2 - 1.0 / 3.0) * n[:, 2]
+        if p.layer_amplitude and p.layer_height:
+            t = (x[:, 2] / p.layer_height + self.layer_phase) % 1.0
+            wall = np.abs(n[:, 2]) < _LAYER_WALL
+            d += np.where(wall, p.layer_amplitude * (np.abs(2.0 * t - 1.0) - 0.5), 0.0)
+        return d
+
+    def form(self, x: np.ndarray) -> np.ndarray:
+        """The smooth form deviation (m) at points ``x`` (m, 3), in blocks to bound the memory."""
+        out = np.empty(len(x))
+        for i in range(0, len(x), 65536):
+            out[i:i + 65536] = np.cos(x[i:i + 65536] @ self.k.T + self.phase) @ np.full(FORM_MODES, self.form_amplitude)
+        return out

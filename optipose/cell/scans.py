@@ -1,0 +1,165 @@
+"""A cell's error sources applied to the scanner's clouds, in a worker (docs/cell.md).
+
+The scanner casts the CAD at the orientation the robot really set, from the poses where the sensors
+really stand, and builds each cloud with the poses the cell believes (:meth:`LiveCell.rpy`,
+:meth:`LiveCell.poses`). What moves a measured point off that CAD hit is then added along its laser ray:
+
+- a surface that lies ``d`` off the CAD along its outward normal ``n`` (the part as made, or the part
+  moved by the robot's path error at that profile) is hit ``d / (n·r)`` further along the ray ``r``
+  (to first order in ``d`` over the surface's curvature radius; the factor is capped at grazing
+  incidence, where the point would drop out);
+- the material puts the spot's centroid below the surface (sub-surface scattering), spreads it (speckle,
+  the sub-surface spread), and returns spurious points (anywhere, and more near concave edges: the
+  line's reflection off the other face), each along the ray.
+
+Per run seed one cell instance (the part as made, the calibration); per scan (the orientation's noise
+seed) one robot path and the material's draws — the same at every noise level of the scan, so the
+levels differ by the sensor's noise alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from optipose.cell.asmade import AsMade, Process
+from optipose.cell.config import Cell
+from optipose.cell.robot import calibrated_poses, orientation_error, path_draw
+from optipose.model.material import MaterialEffects
+from optipose.seeds import derived_seed
+
+__all__ = ["CellSetup", "LiveCell", "GRAZING"]
+
+GRAZING = 0.2  # |cos| of the angle between ray and normal below which a displacement's factor is capped
+_CELL, _INSTANCE, _SCAN, _CALIBRATION = 0xCE11, 1, 2, 3
+_EDGE_SAMPLE = 1e-4  # m between the samples of a concave edge that the multipath test measures to
+_CONCAVE_DEG = 20.0  # faces meeting at an inside angle this far below 180° form a concave edge
+
+
+@dataclass(frozen=True)
+class CellSetup:
+    """What a worker needs of the cell (picklable): the cell, the part's process as the cell scales it,
+    and the part material's effects when the cell has them on."""
+
+    cell: Cell
+    process: Process
+    effects: MaterialEffects
+
+    @property
+    def ideal(self) -> bool:
+        return self.cell.ideal or (
+            not (self.cell.robot.moves or self.cell.robot.orientation or self.cell.calibration.off)
+            and self.process.exact and self.effects.none
+        )
+
+    @classmethod
+    def of(cls, cell: Cell, part) -> "CellSetup":
+        from optipose.model.material import load_material
+
+        effects = load_material(part.material).effects if cell.material else MaterialEffects()
+        return cls(cell, cell.process(getattr(part, "process", "") or None), effects)
+
+
+class LiveCell:
+    """One cell instance in a worker: the part as made and the calibration drawn from the run's ``seed``."""
+
+    def __init__(self, setup: CellSetup, vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray, seed: int):
+        self.setup, self.centre, self.seed = setup, np.asarray(centre, float), int(seed)
+        self.as_made = None
+        if not setup.process.exact:
+            from optipose.scan.raycast import face_planes, plane_numbers
+
+            plane = plane_numbers(*face_planes(vertices, faces))
+            self.as_made = AsMade(setup.process, vertices, faces, plane, derived_seed(seed, _CELL + _INSTANCE))
+        self.edges = _concave_edge_samples(vertices, faces) if setup.effects.concave_fraction else None
+
+    def rpy(self, rpy: np.ndarray, scan_seed: int) -> np.ndarray:
+        """The orientation the robot sets when the protocol commands ``rpy`` (rad) in the scan of ``scan_seed``."""
+        rng = np.random.default_rng([int(scan_seed), _CELL, _SCAN, 0])
+        return np.asarray(rpy, float) + orientation_error(self.setup.cell.robot, rng)
+
+    def poses(self, poses: list[np.ndarray]) -> list[np.ndarray]:
+        """Where the sensors the cell believes at ``poses`` truly stand (one calibration per run)."""
+        if not self.setup.cell.calibration.off:
+            return [np.asarray(T, float) for T in poses]
+        rng = np.random.default_rng([self.seed, _CELL, _CALIBRATION])
+        return calibrated_poses(self.setup.cell.calibration, poses, self.centre, rng)
+
+    def perturb(self, levels: list[list], normals: list[np.ndarray], apex_z: list[float], shifts: np.ndarray,
+                T_O_P: np.ndarray, step: float, scan_seed: int) -> list[list]:  # fmt: skip
+        """Each scan of ``levels`` (per noise level, per sensor) with the cell's displacements added along
+        its rays. ``normals``: per sensor its points' outward unit normals in O; ``apex_z``: the sensor's
+        laser apex on its z axis (m; inf: parallel rays); ``shifts``: the motion's offsets; ``T_O_P``: the
+        part's pose as the robot set it."""
+        cell, effects = self.setup.cell, self.setup.effects
+        path = None
+        if cell.robot.moves:
+            path = path_draw(cell.robot, shifts, step, np.random.default_rng([int(scan_seed), _CELL, _SCAN, 1]))
+        out = [list(level) for level in levels]
+        for j, scan in enumerate(levels[0]):
+            if not len(scan.points):
+                continue
+            rng = np.random.default_rng([int(scan_seed), _CELL, _SCAN, 2, j])
+            p, n = scan.points, normals[j]
+            ray = _rays(p, scan.T_O_S, apex_z[j], shifts[scan.profile])
+            cos = np.einsum("ij,ij->i", n, ray)
+            cos = np.where(cos < 0, np.minimum(cos, -GRAZING), np.maximum(cos, GRAZING))
+            x_P = (p - T_O_P[:3, 3]) @ T_O_P[:3, :3]  # where on the part each point lies
+            d = np.zeros(len(p))  # the surface's normal offset at each point
+            if self.as_made is not None:
+                d += self.as_made.offset(x_P, n @ T_O_P[:3, :3], scan.face)
+            if path is not None:
+                t, w = path[0][scan.profile], path[1][scan.profile]
+                centre = T_O_P[:3, :3] @ self.centre + T_O_P[:3, 3]  # the rotation centre in O
+                d += np.einsum("ij,ij->i", t + np.cross(w, p - centre), n)
+            s = d / cos + self._material(effects, x_P, rng)
+            moved = p + ray * s[:, None]
+            for level in out:
+                lp = level[j].points
+                level[j] = replace(level[j], points=lp + (moved - p))
+        return out
+
+    def _material(self, e: MaterialEffects, p: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The material's shift of each point along its ray (m, positive: deeper); ``p`` (m, 3) in the part's frame."""
+        m = len(p)
+        s = np.full(m, e.subsurface_bias)
+        sigma = np.hypot(e.speckle, e.subsurface_sigma)
+        s += rng.normal(size=m) * sigma  # drawn whatever sigma, so the terms after it do not depend on it
+        spurious = rng.random(m) < e.spurious_fraction
+        if self.edges is not None:
+            from scipy.spatial import cKDTree
+
+            near = cKDTree(self.edges).query(p, distance_upper_bound=e.concave_distance)[0] < e.concave_distance
+            spurious |= near & (rng.random(m) < e.concave_fraction)
+        s[spurious] += rng.uniform(-1.0, 1.0, int(spurious.sum())) * e.spurious_range
+        return s
+
+
+def _rays(points: np.ndarray, T_O_S: np.ndarray, apex_z: float, shift: np.ndarray) -> np.ndarray:
+    """Unit laser-ray directions (n, 3) in O to ``points`` (motion undone) from a sensor at ``T_O_S``
+    whose laser apex is at ``apex_z`` on its z axis, for profiles taken at ``shift`` (n,) m."""
+    if not np.isfinite(apex_z):
+        return np.broadcast_to(T_O_S[:3, 2], points.shape).copy()
+    apex = T_O_S[:3, :3] @ np.array([0.0, 0.0, apex_z]) + T_O_S[:3, 3]
+    origin = np.repeat(apex[None], len(points), axis=0)
+    origin[:, 0] -= shift
+    ray = points - origin
+    return ray / np.linalg.norm(ray, axis=1, keepdims=True)
+
+
+def _concave_edge_samples(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
+    """Points every :data:`_EDGE_SAMPLE` along the mesh's concave edges (faces meeting at an inside angle
+    under 180° − :data:`_CONCAVE_DEG`), (m, 3) m; ``None`` when it has none."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    concave = (~mesh.face_adjacency_convex) & (mesh.face_adjacency_angles > np.deg2rad(_CONCAVE_DEG))
+    edges = vertices[mesh.face_adjacency_edges[concave]]
+    if not len(edges):
+        return None
+    out = []
+    for a, b in edges:
+        k = max(2, int(np.ceil(np.linalg.norm(b - a) / _EDGE_SAMPLE)) + 1)
+        out.append(a + np.linspace(0.0, 1.0, k)[:, None] * (b - a))
+    return np.vstack(out)
