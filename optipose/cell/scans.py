@@ -126,13 +126,14 @@ class LiveCell:
         s = np.full(m, e.subsurface_bias)
         sigma = np.hypot(e.speckle, e.subsurface_sigma)
         s += rng.normal(size=m) * sigma  # drawn whatever sigma, so the terms after it do not depend on it
-        spurious = rng.random(m) < e.spurious_fraction
-        if self.edges is not None:
+        spurious = rng.random(m) < e.spurious_fraction  # anywhere: in front of the surface or behind it
+        s[spurious] += rng.uniform(-1.0, 1.0, int(spurious.sum())) * e.spurious_range
+        if self.edges is not None:  # multipath: the reflected light's path is longer, the ghost lies behind
             from scipy.spatial import cKDTree
 
             near = cKDTree(self.edges).query(p, distance_upper_bound=e.concave_distance)[0] < e.concave_distance
-            spurious |= near & (rng.random(m) < e.concave_fraction)
-        s[spurious] += rng.uniform(-1.0, 1.0, int(spurious.sum())) * e.spurious_range
+            ghost = near & ~spurious & (rng.random(m) < e.concave_fraction)
+            s[ghost] += rng.uniform(0.0, 1.0, int(ghost.sum())) * e.spurious_range
         return s
 
 
