@@ -30,6 +30,7 @@ import numpy as np
 __all__ = ["Process", "AsMade", "FORM_MODES"]
 
 FORM_MODES = 256  # plane waves in the form field; the RMS of one draw over a surface is within a few % of form_rms
+_GRID_NODES = 2_000_000  # the form grid's nodes at most (a metre-long part gets a coarser grid)
 _LAYER_WALL = 0.5  # |n_z| below this: a side wall, where a print's layer lines show
 
 
@@ -49,8 +50,8 @@ class Process:
 
     @property
     def exact(self) -> bool:
-        """Whether this process makes the CAD exactly."""
-        return all(getattr(self, f.name) == 0 for f in fields(self) if f.name not in ("name", "form_wavelengths"))
+        """Whether this process makes the CAD exactly (the band and the layers' period are no magnitudes)."""
+        return all(getattr(self, f.name) == 0 for f in fields(self) if f.name not in ("name", "form_wavelengths", "layer_height"))
 
     def scaled(self, factor: float) -> "Process":
         """Every magnitude times ``factor`` (a better or a worse shop); wavelengths and layer height kept."""
@@ -79,6 +80,8 @@ class AsMade:
         self.k = direction * (2 * np.pi / lam)[:, None]
         self.phase = rng.uniform(0, 2 * np.pi, FORM_MODES)
         self.form_amplitude = p.form_rms * np.sqrt(2.0 / FORM_MODES)
+        pad = 1e-3 + 0.01 * np.max(hi - lo)  # the grid covers the part and a margin: an as-made point lies near its face
+        self._lo, self._hi, self._grid = lo - pad, hi + pad, None
         # faces: offset and tilt of each plane about its centroid
         tri = vertices[faces]
         area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
@@ -95,11 +98,12 @@ class AsMade:
 
     def offset(self, x: np.ndarray, n: np.ndarray, face: np.ndarray) -> np.ndarray:
         """The surface's normal offset (m, outward positive) at part-frame points ``x`` (m, 3) on faces
-        ``face`` (m,) whose outward unit normals are ``n`` (m, 3)."""
+        ``face`` (m,) whose outward unit normals are ``n`` (m, 3). (The scans take it from the compiled
+        :func:`optipose.cell.kernels.along_rays`, the form term from its grid.)"""
         p = self.process
         d = np.zeros(len(x))
         if p.form_rms:
-            d += self.form(x)
+            d += self.form_exact(x)  # the scans' kernel interpolates it on form_grid
         if p.face_offset or p.face_tilt:
             pl = self.plane[face]
             arm = x - self.plane_centroid[pl]
@@ -116,9 +120,34 @@ class AsMade:
             d += np.where(wall, p.layer_amplitude * (np.abs(2.0 * t - 1.0) - 0.5), 0.0)
         return d
 
-    def form(self, x: np.ndarray) -> np.ndarray:
-        """The smooth form deviation (m) at points ``x`` (m, 3), in blocks to bound the memory."""
+    def form_exact(self, x: np.ndarray) -> np.ndarray:
+        """The smooth form deviation (m) at points ``x`` (m, 3), summed over every plane wave, in blocks."""
         out = np.empty(len(x))
         for i in range(0, len(x), 65536):
             out[i:i + 65536] = np.cos(x[i:i + 65536] @ self.k.T + self.phase) @ np.full(FORM_MODES, self.form_amplitude)
         return out
+
+    def form_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The form field on a grid over the part and a margin, (nx, ny, nz) m, with its first node (3,) and
+        spacing (3,) m: at most a tenth of the shortest wavelength apart (trilinear between them is within
+        2 % of the field), coarser only past :data:`_GRID_NODES` nodes; (0, 0, 0) when there is no form term."""
+        if self._grid is None:
+            if not self.process.form_rms:
+                self._grid = (np.zeros((0, 0, 0)), np.zeros(3), np.ones(3))
+            else:
+                h = max(self.process.form_wavelengths[0] / 10.0, float(np.prod(self._hi - self._lo) / _GRID_NODES) ** (1 / 3))
+                counts = [max(2, int(np.ceil((hi - lo) / h)) + 1) for lo, hi in zip(self._lo, self._hi)]
+                axes = [np.linspace(lo, hi, c) for lo, hi, c in zip(self._lo, self._hi, counts)]
+                nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+                step = np.array([a[1] - a[0] for a in axes])
+                self._grid = (np.ascontiguousarray(self.form_exact(nodes).reshape(counts)), self._lo.copy(), step)
+        return self._grid
+
+    def kernel_args(self) -> tuple:
+        """The instance as :func:`optipose.cell.kernels.along_rays` takes it (from ``form`` to ``wall``)."""
+        p = self.process
+        faces = bool(p.face_offset or p.face_tilt)
+        long = int(np.argmax(self.extent[:2]))
+        return (*self.form_grid(), self.plane if faces else np.zeros(0, np.int64), self.plane_centroid, self.plane_offset,
+                self.plane_tilt, self.scale, self.centre, float(self.warp), long, float(self.extent[long] / 2),
+                float(p.layer_height or 1.0), float(p.layer_amplitude), float(self.layer_phase), _LAYER_WALL)  # fmt: skip

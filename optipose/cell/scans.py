@@ -34,7 +34,10 @@ __all__ = ["CellSetup", "LiveCell", "GRAZING"]
 GRAZING = 0.2  # |cos| of the angle between ray and normal below which a displacement's factor is capped
 _CELL, _INSTANCE, _SCAN, _CALIBRATION = 0xCE11, 1, 2, 3
 _EDGE_SAMPLE = 1e-4  # m between the samples of a concave edge that the multipath test measures to
-_CONCAVE_DEG = 20.0  # faces meeting at an inside angle this far below 180° form a concave edge
+_CONCAVE_DEG = 20.0
+# the kernel's part-as-made arguments when the part is its CAD: no form grid, no planes, no scale, warp or layers
+_NO_PART = (np.zeros((0, 0, 0)), np.zeros(3), np.ones(3), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
+            np.zeros(3), np.zeros(3), 0.0, 0, 1.0, 1.0, 0.0, 0.0, 0.5)  # fmt: skip  # faces meeting at an inside angle this far below 180° form a concave edge
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,12 @@ class LiveCell:
 
             plane = plane_numbers(*face_planes(vertices, faces))
             self.as_made = AsMade(setup.process, vertices, faces, plane, derived_seed(seed, _CELL + _INSTANCE))
-        self.edges = _concave_edge_samples(vertices, faces) if setup.effects.concave_fraction else None
+        self.edges = None
+        if setup.effects.concave_fraction:
+            from scipy.spatial import cKDTree
+
+            samples = _concave_edge_samples(vertices, faces)
+            self.edges = None if samples is None else cKDTree(samples)
 
     def rpy(self, rpy: np.ndarray, scan_seed: int) -> np.ndarray:
         """The orientation the robot sets when the protocol commands ``rpy`` (rad) in the scan of ``scan_seed``."""
@@ -86,54 +94,52 @@ class LiveCell:
         rng = np.random.default_rng([self.seed, _CELL, _CALIBRATION])
         return calibrated_poses(self.setup.cell.calibration, poses, self.centre, rng)
 
-    def perturb(self, levels: list[list], normals: list[np.ndarray], apex_z: list[float], shifts: np.ndarray,
+    def perturb(self, levels: list[list], normals_P: list[np.ndarray], apex_z: list[float], shifts: np.ndarray,
                 T_O_P: np.ndarray, step: float, scan_seed: int) -> list[list]:  # fmt: skip
         """Each scan of ``levels`` (per noise level, per sensor) with the cell's displacements added along
-        its rays. ``normals``: per sensor its points' outward unit normals in O; ``apex_z``: the sensor's
-        laser apex on its z axis (m; inf: parallel rays); ``shifts``: the motion's offsets; ``T_O_P``: the
-        part's pose as the robot set it."""
+        its rays. ``normals_P``: per sensor, its scanner's outward unit face normals in the part's frame;
+        ``apex_z``: the sensor's laser apex on its z axis (m; inf: parallel rays); ``shifts``: the motion's
+        offsets; ``T_O_P``: the part's pose as the robot set it."""
+        from optipose.cell.kernels import along_rays
+
         cell, effects = self.setup.cell, self.setup.effects
-        path = None
+        path = (np.zeros((0, 3)), np.zeros((0, 3)))
         if cell.robot.moves:
             path = path_draw(cell.robot, shifts, step, np.random.default_rng([int(scan_seed), _CELL, _SCAN, 1]))
+        R, t = np.ascontiguousarray(T_O_P[:3, :3]), np.ascontiguousarray(T_O_P[:3, 3])
+        centre_O = R @ self.centre + t  # the rotation centre, about which the robot's rotations are
+        part = self.as_made.kernel_args() if self.as_made is not None else _NO_PART
+        shifts = np.ascontiguousarray(shifts, dtype=float)
         out = [list(level) for level in levels]
         for j, scan in enumerate(levels[0]):
             if not len(scan.points):
                 continue
-            rng = np.random.default_rng([int(scan_seed), _CELL, _SCAN, 2, j])
-            p, n = scan.points, normals[j]
-            ray = _rays(p, scan.T_O_S, apex_z[j], shifts[scan.profile])
-            cos = np.einsum("ij,ij->i", n, ray)
-            cos = np.where(cos < 0, np.minimum(cos, -GRAZING), np.maximum(cos, GRAZING))
-            x_P = (p - T_O_P[:3, 3]) @ T_O_P[:3, :3]  # where on the part each point lies
-            d = np.zeros(len(p))  # the surface's normal offset at each point
-            if self.as_made is not None:
-                d += self.as_made.offset(x_P, n @ T_O_P[:3, :3], scan.face)
-            if path is not None:
-                t, w = path[0][scan.profile], path[1][scan.profile]
-                centre = T_O_P[:3, :3] @ self.centre + T_O_P[:3, 3]  # the rotation centre in O
-                d += np.einsum("ij,ij->i", t + np.cross(w, p - centre), n)
-            s = d / cos + self._material(effects, x_P, rng)
-            moved = p + ray * s[:, None]
+            T = scan.T_O_S
+            apex = T[:3, :3] @ np.array([0.0, 0.0, apex_z[j]]) + T[:3, 3] if np.isfinite(apex_z[j]) else np.full(3, np.nan)
+            extra = self._material(effects, scan, R, t, np.random.default_rng([int(scan_seed), _CELL, _SCAN, 2, j]))
+            moved = np.empty_like(scan.points)
+            along_rays(scan.points, scan.face, scan.profile, shifts, normals_P[j], R, t, apex, np.ascontiguousarray(T[:3, 2]),
+                       GRAZING, *part, *path, centre_O, extra, moved)  # fmt: skip
+            delta = moved - scan.points
             for level in out:
-                lp = level[j].points
-                level[j] = replace(level[j], points=lp + (moved - p))
+                level[j] = replace(level[j], points=level[j].points + delta)
         return out
 
-    def _material(self, e: MaterialEffects, p: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """The material's shift of each point along its ray (m, positive: deeper); ``p`` (m, 3) in the part's frame."""
-        m = len(p)
+    def _material(self, e: MaterialEffects, scan, R: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The material's shift of each point of ``scan`` along its ray (m, positive: deeper)."""
+        m = len(scan.points)
         s = np.full(m, e.subsurface_bias)
         sigma = np.hypot(e.speckle, e.subsurface_sigma)
-        s += rng.normal(size=m) * sigma  # drawn whatever sigma, so the terms after it do not depend on it
-        spurious = rng.random(m) < e.spurious_fraction  # anywhere: in front of the surface or behind it
-        s[spurious] += rng.uniform(-1.0, 1.0, int(spurious.sum())) * e.spurious_range
+        if sigma:
+            s += rng.normal(size=m) * sigma
+        if e.spurious_fraction:  # anywhere: in front of the surface or behind it
+            spurious = rng.random(m) < e.spurious_fraction
+            s[spurious] += rng.uniform(-1.0, 1.0, int(spurious.sum())) * e.spurious_range
         if self.edges is not None:  # multipath: the reflected light's path is longer, the ghost lies behind
-            from scipy.spatial import cKDTree
-
-            near = cKDTree(self.edges).query(p, distance_upper_bound=e.concave_distance)[0] < e.concave_distance
-            ghost = near & ~spurious & (rng.random(m) < e.concave_fraction)
-            s[ghost] += rng.uniform(0.0, 1.0, int(ghost.sum())) * e.spurious_range
+            drawn = np.flatnonzero(rng.random(m) < e.concave_fraction)  # drawn first: only these are looked up
+            x_P = (scan.points[drawn] - t) @ R
+            ghost = drawn[self.edges.query(x_P, distance_upper_bound=e.concave_distance)[0] < e.concave_distance]
+            s[ghost] += rng.uniform(0.0, 1.0, len(ghost)) * e.spurious_range
         return s
 
 

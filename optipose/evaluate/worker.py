@@ -163,7 +163,7 @@ class _Worker:
     def _in_cell(self, models: list, scans: list[list], seed: int) -> list[list]:
         """The scans with what the cell adds along each ray (:meth:`optipose.cell.scans.LiveCell.perturb`)."""
         scanners = [self._scanner(None if m is None or m == self.setup.sensor else m) for m in models]
-        normals = [sc.normals(scan) for sc, scan in zip(scanners, scans[0])]
+        normals = [sc.face_normals for sc in scanners]
         apex = [sc.sensor.apex_z for sc in scanners]
         motion = self.setup.motion
         return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed)

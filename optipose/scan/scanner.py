@@ -229,6 +229,11 @@ class Scanner:
         shifts = motion.offsets()
         return view.rays(np.arange(len(shifts) * self.sensor.points_per_profile), shifts, self._t_max)
 
+    @property
+    def face_normals(self) -> np.ndarray:
+        """(f, 3): each face's outward unit normal in the part's frame (a plane's faces share one), keep-outs' faces after the part's."""
+        return self._normals
+
     def normals(self, scan: Scan) -> np.ndarray:
         """Unit surface normals (n, 3) in O at a scan's points (outward, of the rotated part)."""
         return self._normals[scan.face] @ scan.T_O_P[:3, :3].T
