@@ -12,6 +12,7 @@ A part is described by a TOML part file (``parts/<name>/part.toml`` for the ship
     scan_length_mm = 60.0           # optional, default: the mesh's extent along x
     scan_step_mm = 0.5              # optional, default 0.5
     rotation_centre_mm = [30.0, 0.0, 8.8]   # in O; optional, default: the bounding-box centre
+    process = "fdm"                 # optional: how it is made, a preset of optipose/data/processes.toml or "cad"
 
     [[keepout]]                     # any number; axis-aligned boxes in O, mm
     name = "flange"
@@ -38,6 +39,7 @@ without a ``hand`` layout gets so that a search always has a baseline.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import NamedTuple
 
@@ -212,6 +214,7 @@ def _assemble(table: dict, mesh, source: Path, name: str, where: str) -> Part:
     if not (length_mm > 0 and step_mm > 0):
         raise ConfigError(f"{where}: scan_length_mm and scan_step_mm must be positive")
     centre = _vector(table, "rotation_centre_mm", where)
+    process = _process(table, where)
     return Part(
         name=name,
         mesh=mesh,
@@ -221,8 +224,20 @@ def _assemble(table: dict, mesh, source: Path, name: str, where: str) -> Part:
         rotation_centre=0.5 * (lo + hi) if centre is None else centre * _MM,
         source=source,
         description=str(table.get("description", "")),
-        process=str(table.get("process", "")),
+        process=process,
     )
+
+
+def _process(table: dict, where: str) -> str:
+    """The part's manufacturing process: empty (the cell's default), ``cad`` or a preset of
+    optipose/data/processes.toml (read here, not through :mod:`optipose.cell`, which builds on ``model``)."""
+    process = table.get("process", "")
+    if not isinstance(process, str):
+        raise ConfigError(f"{where}: process must be a process's name, got {process!r}")
+    presets = read_toml(resources.files("optipose.data").joinpath("processes.toml"), "process presets")[0]
+    if process and process != "cad" and process not in presets:
+        raise ConfigError(f"{where}: unknown manufacturing process '{process}' (presets: cad, {', '.join(sorted(presets))})")
+    return process
 
 
 def _resolve(value, source: Path) -> str:
