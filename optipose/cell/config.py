@@ -15,6 +15,7 @@ names its source in the file::
     sensor_rotation_deg = 0.02
     frame_translation_mm = 0.1     # σ per axis, every sensor together
     frame_rotation_deg = 0.01
+    zeroed = false                 # true: the cell is zeroed on a master part (what it adds there is taken off)
     [part]
     as_made = true                 # scan the part as made by its process (the part file's `process`)
     default_process = "milled"     # for a part that names none (optipose/data/processes.toml)
@@ -106,7 +107,11 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
     robot = RobotErrors(**_numbers(table.get("robot", {}), _ROBOT, f"{where} [robot]"))
     if robot.path_correlation <= 0:
         raise ConfigError(f"{where} [robot]: path_correlation_mm must be > 0")
-    calibration = CalibrationErrors(**_numbers(table.get("calibration", {}), _CALIBRATION, f"{where} [calibration]"))
+    calibration_table = dict(_table(table.get("calibration", {}), f"{where} [calibration]"))
+    zeroed = calibration_table.pop("zeroed", False)
+    if not isinstance(zeroed, bool):
+        raise ConfigError(f"{where} [calibration]: zeroed must be true or false, got {zeroed!r}")
+    calibration = CalibrationErrors(**_numbers(calibration_table, _CALIBRATION, f"{where} [calibration]"), zeroed=zeroed)
     part = _table(table.get("part", {}), f"{where} [part]")
     _keys(part, {"as_made", "default_process", "process_scale"}, f"{where} [part]")
     material = _table(table.get("material", {}), f"{where} [material]")

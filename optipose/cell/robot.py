@@ -14,7 +14,9 @@ Per scan the robot adds three errors to what the protocol asks of it:
 The calibration leaves each sensor's pose off by a rigid error of its own (σ ``sensor_translation``,
 ``sensor_rotation`` per axis, in the sensor's frame) and every sensor off together by the error of the
 frame they are measured in (σ ``frame_translation``, ``frame_rotation``, about the part's rotation centre):
-one draw per cell instance (seed), the same for every scan of a run.
+one draw per cell instance (seed), the same for every scan of a run. A cell whose procedure zeroes it
+(``zeroed``) takes off what one master scan at the nominal orientation says the cell adds there, as the
+bracket conditions do (:meth:`optipose.evaluate.worker._Worker.zero`).
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ class CalibrationErrors:
     sensor_rotation: float = 0.0
     frame_translation: float = 0.0
     frame_rotation: float = 0.0
+    zeroed: bool = False  # the user's procedure zeroes the cell on a master part at the nominal orientation
 
     @property
     def off(self) -> bool:

@@ -130,7 +130,7 @@ class _Worker:
              noise=True) -> list:  # fmt: skip
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m) under the condition; ``seed`` is the orientation's
-        noise seed; ``exact``: as if the brackets were exact, whatever the condition; ``noise=False``: exact
+        noise seed; ``exact``: as if the brackets were exact and the cell ideal, whatever the condition; ``noise=False``: exact
         surface points."""
         return self.scan_levels(models, poses, seed, (self.condition.noise_scale,), rpy, offset, exact, noise)[0]
 
@@ -143,7 +143,7 @@ class _Worker:
         mounted = condition.draw is not None and not exact
         if mounted:  # each sensor stands at its true pose
             poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
-        if cell is not None:  # ... where the calibration left it, and the part where the robot really turned it
+        if cell is not None and not exact:  # ... where the calibration left it, and the part where the robot really turned it
             poses, mounted, rpy = cell.poses(poses), True, cell.rpy(rpy, seed)
         scans = [[None] * len(poses) for _ in levels]
         for g, (model, idx) in enumerate(groups):
@@ -156,7 +156,7 @@ class _Worker:
             for level, level_out in zip(scans, out):
                 for j, scan in zip(idx, level_out):
                     level[j] = scan
-        if cell is not None:
+        if cell is not None and not exact:
             scans = self._in_cell(models, scans, seed)
         return scans
 
@@ -180,7 +180,8 @@ class _Worker:
         millidegrees on part B that no other orientation shares) is not the brackets', and would shift
         every later measurement of the condition by one draw of it."""
         condition = self.condition
-        if condition.draw is None or not condition.zeroed:
+        cell_zeroed = self.cell is not None and self.setup.cell.cell.calibration.zeroed  # the cell's procedure zeroes it
+        if not cell_zeroed and (condition.draw is None or not condition.zeroed):
             return [np.eye(4)] * len(subsets)
         layout = (np.asarray(poses).tobytes(), tuple(map(str, models)))
         if any(r is not self.reference for r in references):  # nominal-scan references: each condition its own
@@ -195,8 +196,9 @@ class _Worker:
 
     def _master(self, models, poses, subsets, references, exact: bool) -> list[np.ndarray]:
         """Per subset, ``T_target_source`` of a noise-free master scan at the nominal orientation, by the
-        mounted cell of this condition's draw or (``exact``) by a cell with exact brackets."""
-        seed = zeroing_seed(self.setup.seed, self.condition.draw)
+        mounted cell of this condition's draw (and the real cell's sources, one master scan's draw of them) or
+        (``exact``) by a cell with exact brackets and no source."""
+        seed = zeroing_seed(self.setup.seed, self.condition.draw or 0)
         scans = self.scan(models, poses, seed, exact=exact, noise=False)
         clouds, out = _clouds(self.setup.registration, scans, seed), []
         for subset, reference in zip(subsets, references):

@@ -1,0 +1,207 @@
+"""The virtual cell against the paper's real one (docs/cell.md): the hand layouts of parts A, B and C under
+a cell, on the paper's rows of Table 1, and what each error source does.
+
+    .venv/bin/python benchmarks/bench_cell.py table   [--cell ur10e] [--objective paper-literal] [--seeds 0,1,2] [--jobs 2]
+    .venv/bin/python benchmarks/bench_cell.py sources [--objective paper] [--seeds 0,1] [--jobs 2]
+    .venv/bin/python benchmarks/bench_cell.py fit     [--paths 0.014,0.05] [--factors 0.03,0.1,0.3] [--seeds 0,1] [--jobs 2]
+    .venv/bin/python benchmarks/bench_cell.py speed   [--objective paper-literal] [--jobs 2]
+
+``table``: per real row of the paper's Table 1 (part, k, axis, the paper's sensor subset) the paper's simulated
+and real median / 75th percentile, ours (|error| of that subset over every scan of every seed: one cell
+instance per seed), ours / real, and how many of the 34 real figures lie within 2× and 3×; then how often our
+own per-axis assignment picks the paper's subset (per seed). ``sources``: the same rows under each source of
+the cell alone (robot, calibration, part as made, material) and all together. ``fit``: part A only, the
+robot's path σ and the calibration's magnitudes times each factor: the mean |log(ours / real)| over A's figures. ``speed``: B's
+three hand sensors, full protocol, without and with the cell in the same run: their wall times and ratio.
+Evaluations are cached per (part, objective, cell, seed) in --cache, so a table and its sources share runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+# The paper's Table 1 (Heczko et al. 2022; docs/paper.md): (part, k, axis, subset) -> (simulated median, p75, real median, p75), degrees.
+# A row the paper gives for several k (A yaw S1 for k = 1, 2, 3) is one row; A k = 3 pitch S3 repeats A k = 2's real figures.
+PAPER = {
+    ("part_a", "1", "roll", "S1"): (0.016, 0.033, 0.045, 0.066),
+    ("part_a", "1", "pitch", "S1"): (0.061, 0.154, 0.130, 0.243),
+    ("part_a", "1, 2, 3", "yaw", "S1"): (0.067, 0.120, 0.075, 0.138),
+    ("part_a", "2, 3", "pitch", "S3"): (0.004, 0.009, 0.065, 0.099),
+    ("part_a", "3", "roll", "S1S2S3"): (0.011, 0.020, 0.012, 0.025),
+    ("part_b", "1, 2, 3", "yaw", "S1"): (0.035, 0.113, 0.051, 0.091),
+    ("part_b", "1", "roll", "S1"): (0.024, 0.035, 0.039, 0.091),
+    ("part_b", "1", "pitch", "S1"): (0.024, 0.069, 0.042, 0.140),
+    ("part_b", "2", "roll", "S1S2"): (0.008, 0.013, 0.032, 0.062),
+    ("part_b", "2", "pitch", "S1S2"): (0.023, 0.052, 0.036, 0.083),
+    ("part_b", "3", "roll", "S1S2S3"): (0.005, 0.014, 0.010, 0.026),
+    ("part_b", "3", "pitch", "S2S3"): (0.017, 0.073, 0.021, 0.039),
+    ("part_c", "1, 2", "roll", "S2"): (0.032, 0.080, 0.067, 0.094),
+    ("part_c", "1", "pitch", "S2"): (0.312, 1.113, 0.304, 0.756),
+    ("part_c", "1", "yaw", "S2"): (0.073, 0.116, 0.061, 0.099),
+    ("part_c", "2", "pitch", "S3"): (0.050, 0.097, 0.428, 0.852),
+    ("part_c", "2", "yaw", "S3"): (0.024, 0.048, 0.067, 0.143),
+}
+PARTS = ("part_a", "part_b", "part_c")
+PENALTY_DEG = 10.0  # a failed registration, as the evaluator's statistics count it
+
+
+def evaluate(part_name: str, objective, seed: int, jobs: int, cache: Path) -> tuple[pd.DataFrame, list]:
+    """The per-scan table and Table 1 of the part's hand layout (cached)."""
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.model.baseline import baseline
+    from optipose.model.part import load_part
+
+    key = hashlib.sha1(json.dumps([part_name, objective.to_dict(), seed], sort_keys=True, default=str).encode()).hexdigest()[:16]
+    path = cache / f"{part_name}-{key}.parquet"
+    choices = cache / f"{part_name}-{key}.json"
+    if path.is_file() and choices.is_file():
+        return pd.read_parquet(path), json.loads(choices.read_text())
+    part = load_part(part_name)
+    with Evaluator(part, objective, seed=seed, jobs=jobs, quiet=True) as evaluator:
+        result = evaluator(baseline(part))
+    cache.mkdir(parents=True, exist_ok=True)
+    result.per_scan.to_parquet(path)
+    table = [{a.axis: a.label for a in c.axes} for c in result.table]
+    choices.write_text(json.dumps(table))
+    return result.per_scan, table
+
+
+def figures(per_scan: pd.DataFrame, axis: str, subset: str) -> tuple[float, float]:
+    """Median and 75th percentile (degrees) of |error| of ``subset`` on ``axis``; nan when it never saw the axis."""
+    rows = per_scan[per_scan.subset == subset]
+    if rows[f"unobservable_{axis}"].all():
+        return float("nan"), float("nan")
+    err = np.where(rows.ok, np.abs(np.rad2deg(rows[f"err_{axis}"])), PENALTY_DEG)
+    return float(np.median(err)), float(np.quantile(err, 0.75))
+
+
+def rows_for(objective, seeds: list[int], jobs: int, cache: Path, parts=PARTS) -> tuple[pd.DataFrame, dict]:
+    """The paper's rows with ours beside them (pooled over ``seeds``), and per part the seeds' Table 1 choices."""
+    out, assigned = [], {}
+    for part in parts:
+        runs = [evaluate(part, objective, s, jobs, cache) for s in seeds]
+        pooled = pd.concat([r[0] for r in runs], ignore_index=True)
+        assigned[part] = [r[1] for r in runs]
+        for (p, k, axis, subset), (sim_m, sim_q, real_m, real_q) in PAPER.items():
+            if p != part:
+                continue
+            m, q = figures(pooled, axis, subset)
+            out.append({"part": part[-1].upper(), "k": k, "axis": axis, "subset": subset, "paper_sim": f"{sim_m:g} / {sim_q:g}",
+                        "real_median": real_m, "real_p75": real_q, "ours_median": m, "ours_p75": q,
+                        "ratio_median": m / real_m, "ratio_p75": q / real_q})  # fmt: skip
+    return pd.DataFrame(out), assigned
+
+
+def within(table: pd.DataFrame, factor: float) -> int:
+    r = np.r_[table.ratio_median, table.ratio_p75]
+    return int(np.sum((r <= factor) & (r >= 1 / factor)))
+
+
+def print_table(table: pd.DataFrame, title: str) -> None:
+    print(f"\n{title}\n")
+    print("| part | k | axis: subset | paper simulated | paper real | ours | ours / real |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for r in table.itertuples():
+        ours = "unobservable" if np.isnan(r.ours_median) else f"{r.ours_median:.3f} / {r.ours_p75:.3f}"
+        ratio = "-" if np.isnan(r.ours_median) else f"{r.ratio_median:.2f} / {r.ratio_p75:.2f}"
+        print(f"| {r.part} | {r.k} | {r.axis}: {r.subset} | {r.paper_sim} | {r.real_median:g} / {r.real_p75:g} | {ours} | {ratio} |")
+    n = 2 * len(table)
+    print(f"\nwithin 2x: {within(table, 2)} of {n} real figures; within 3x: {within(table, 3)} of {n}")
+
+
+def print_assignment(assigned: dict) -> None:
+    print("\nour per-axis assignment on the hand layouts: the paper's subset picked in how many seeds")
+    for (p, k, axis, subset) in PAPER:
+        ks = [int(x) for x in k.split(", ")]
+        hits = [sum(t[kk - 1].get(axis) == subset for t in assigned[p]) for kk in ks if kk <= len(assigned[p][0])]
+        picks = sorted({t[kk - 1].get(axis) for t in assigned[p] for kk in ks if kk <= len(t)})
+        print(f"  {p[-1].upper()} k={k} {axis}: {subset}  {sum(hits)} of {len(hits) * len(assigned[p])} (ours: {', '.join(picks)})")
+
+
+def source_cells(cell) -> dict:
+    """The cell's sources one at a time, and all of them."""
+    from optipose.cell.config import Cell
+
+    return {
+        "robot": Cell(name="robot only", robot=cell.robot),
+        "calibration": Cell(name="calibration only", calibration=cell.calibration),
+        "part as made": Cell(name="part as made only", as_made=True, default_process=cell.default_process, process_scale=cell.process_scale),
+        "material": Cell(name="material only", material=True),
+        "all": cell,
+    }
+
+
+def main() -> None:
+    from optipose.cell.config import load_cell
+    from optipose.evaluate.objective import load_objective
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("what", choices=["table", "sources", "fit", "speed"])
+    ap.add_argument("--cell", default="ur10e")
+    ap.add_argument("--objective", default=None, help="default: paper-literal (table, fit, speed), paper (sources)")
+    ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument("--parts", default=",".join(PARTS))
+    ap.add_argument("--factors", default="0.03,0.1,0.3", help="fit: the calibration's magnitudes times each")
+    ap.add_argument("--paths", default=None, help="fit: the robot's path sigma (mm), each; default the cell's")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/optipose-bench-cell"))
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "cell")
+    a = ap.parse_args()
+    seeds = [int(s) for s in a.seeds.split(",")]
+    parts = tuple(a.parts.split(","))
+    cell = load_cell(a.cell)
+    objective = load_objective(a.objective or ("paper" if a.what == "sources" else "paper-literal"))
+    a.out.mkdir(parents=True, exist_ok=True)
+    if a.what == "table":
+        table, assigned = rows_for(objective.in_cell(cell), seeds, a.jobs, a.cache, parts)
+        print_table(table, f"cell '{cell.name}', objective '{objective.name}', seeds {a.seeds} (pooled), degrees")
+        print_assignment(assigned)
+        table.to_csv(a.out / f"table-{cell.name}-{objective.name}.csv", index=False)
+    elif a.what == "sources":
+        out = []
+        for label, c in source_cells(cell).items():
+            table, _ = rows_for(objective.in_cell(c), seeds, a.jobs, a.cache, parts)
+            out.append(table.assign(source=label))
+            print(f"{label}: within 2x {within(table, 2)}, within 3x {within(table, 3)} of {2 * len(table)}")
+        both = pd.concat(out, ignore_index=True)
+        both.to_csv(a.out / f"sources-{cell.name}-{objective.name}.csv", index=False)
+        wide = both.pivot_table(index=["part", "k", "axis", "subset", "real_median"], columns="source", values="ours_median", sort=False)
+        print("\nmedian |error|, degrees, per source alone and all together\n")
+        print(wide[[c for c in source_cells(cell)]].round(4).to_string())
+    elif a.what == "fit":
+        c = cell.calibration
+        for path in [float(x) for x in (a.paths or str(cell.robot.path * 1e3)).split(",")]:
+            for f in [float(x) for x in a.factors.split(",")]:
+                scaled = replace(cell, robot=replace(cell.robot, path=path * 1e-3),
+                                 calibration=replace(c, **{k: v * f for k, v in asdict(c).items() if k != "zeroed"}))  # fmt: skip
+                table, _ = rows_for(objective.in_cell(scaled), seeds, a.jobs, a.cache, ("part_a",))
+                r = np.r_[table.ratio_median, table.ratio_p75]
+                print(f"path {path:g} mm, calibration x{f:g}: mean |log ratio| {np.mean(np.abs(np.log(r))):.3f}, "
+                      f"within 2x {within(table, 2)} of {len(r)}, ratios {np.round(r, 2).tolist()}", flush=True)  # fmt: skip
+    else:
+        from optipose.evaluate.evaluator import Evaluator
+        from optipose.model.baseline import baseline
+        from optipose.model.part import load_part
+
+        part = load_part("part_b")
+        times = {}
+        for label, c in (("ideal", None), (cell.name, cell), ("ideal again", None)):
+            with Evaluator(part, objective.in_cell(c), seed=0, jobs=a.jobs, quiet=True) as ev:
+                t0 = time.perf_counter()
+                ev(baseline(part))
+                times[label] = time.perf_counter() - t0
+        base = (times["ideal"] + times["ideal again"]) / 2
+        print(f"B hand, {objective.name}, --jobs {a.jobs}: ideal {times['ideal']:.1f} s and {times['ideal again']:.1f} s, "
+              f"'{cell.name}' {times[cell.name]:.1f} s: {times[cell.name] / base:.2f}x")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
