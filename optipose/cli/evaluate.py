@@ -94,7 +94,8 @@ def table1(result):
     from rich.table import Table
 
     n_scans = result.per_scan["scan"].nunique()
-    table = Table(title=f"{result.part}: {result.layout.name} layout, objective '{result.objective.name}', "
+    cell = "" if result.objective.cell.ideal else f" in cell '{result.objective.cell.name}'"
+    table = Table(title=f"{result.part}: {result.layout.name} layout, objective '{result.objective.name}'{cell}, "
                         f"{n_scans} scans, seed {result.seed} — median / 75th pct, degrees (subset)")  # fmt: skip
     table.add_column("sensors", justify="right")
     table.add_column("choice")

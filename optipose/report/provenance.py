@@ -7,7 +7,7 @@ import shlex
 from optipose.io.config import RunConfig, given
 from optipose.report.document import Block, Code, Heading, Table
 
-__all__ = ["command_line", "provenance_blocks"]
+__all__ = ["command_line", "cell_name", "provenance_blocks"]
 
 
 def command_line(config: RunConfig) -> str:
@@ -29,8 +29,15 @@ def command_line(config: RunConfig) -> str:
             args += ["--layout", source]
     if config.objective_name:
         args += ["--objective", config.objective_name]
+    if cell_name(config) != "ideal":
+        args += ["--cell", cell_name(config)]
     args += ["--seed", str(given(config.seed, 0))]
     return shlex.join(args)
+
+
+def cell_name(config: RunConfig) -> str:
+    """The name of the cell the run was evaluated in (its sources are in config.toml's ``[objective.cell]``)."""
+    return str((config.objective or {}).get("cell", {}).get("name", "ideal"))
 
 
 def provenance_blocks(config: RunConfig) -> list[Block]:
@@ -42,6 +49,7 @@ def provenance_blocks(config: RunConfig) -> list[Block]:
     if config.budget is not None:
         rows.append(("budget", str(config.budget)))
     rows.append(("objective", str(given(config.objective_name, ""))))
+    rows.append(("cell", cell_name(config)))
     rows += [(f"version: {name}", str(v)) for name, v in config.versions.items()]
     blocks: list[Block] = [Heading("How this was made"), Code(command_line(config), "command"),
                            Table(("what", "value"), tuple(rows), numeric=(False, False))]  # fmt: skip
