@@ -270,8 +270,8 @@ def test_the_orientation_error_has_its_sigma():
 
 def test_the_calibration_spreads_each_sensor_and_the_frame_by_their_sigmas():
     st, sr = 0.15e-3, 0.1 * DEG
-    T = np.array([[0, 1, 0, 0.03], [0.7071067811865476, 0, 0.7071067811865476, -0.023],
-                  [0.7071067811865476, 0, -0.7071067811865476, 0.015], [0, 0, 0, 1.0]])  # fmt: skip
+    T = np.array([[0, 1, 0, 0.03], [np.sqrt(0.5), 0, np.sqrt(0.5), -0.023],
+                  [np.sqrt(0.5), 0, -np.sqrt(0.5), 0.015], [0, 0, 0, 1.0]])  # fmt: skip
     own = calibrated_poses(CalibrationErrors(sensor_translation=st, sensor_rotation=sr), [T] * 4000, np.zeros(3),
                            np.random.default_rng(7))  # fmt: skip
     errors = [invert_T(T) @ P for P in own]  # in the sensor's frame
