@@ -537,7 +537,8 @@ def test_the_shipped_processes_and_cells_load():
     assert load_process("cad").exact and load_cell(None) is IDEAL
     ur10e = load_cell("ur10e")
     assert ur10e.as_made and ur10e.material and ur10e.robot.moves and ur10e.calibration.off
-    assert ur10e.robot.path == pytest.approx(0.014e-3) and ur10e.robot.orientation == pytest.approx(0.005 * DEG)
+    # the fitted path error stays inside its published bracket: the UR10e's repeatability to a small arm's path error
+    assert 0.014e-3 <= ur10e.robot.path <= 0.14e-3 and ur10e.robot.orientation == pytest.approx(0.005 * DEG)
     for part in ("part_a", "part_b", "part_c"):
         assert load_part(part).process in process_names()
 
