@@ -4,7 +4,7 @@ a cell, on the paper's rows of Table 1, and what each error source does.
     .venv/bin/python benchmarks/bench_cell.py table   [--cell ur10e] [--objective paper-literal] [--seeds 0,1,2] [--jobs 2]
     .venv/bin/python benchmarks/bench_cell.py sources [--objective paper] [--seeds 0,1] [--jobs 2]
     .venv/bin/python benchmarks/bench_cell.py fit     [--paths 0.014,0.05] [--factors 0.03,0.1,0.3] [--seeds 0,1] [--jobs 2]
-    .venv/bin/python benchmarks/bench_cell.py speed   [--objective paper-literal] [--jobs 2]
+    .venv/bin/python benchmarks/bench_cell.py speed   [--objective paper-literal] [--jobs 2] [--repeats 3]
 
 ``table``: per real row of the paper's Table 1 (part, k, axis, the paper's sensor subset) the paper's simulated
 and real median / 75th percentile, ours (|error| of that subset over every scan of every seed: one cell
@@ -12,7 +12,8 @@ instance per seed), ours / real, and how many of the 34 real figures lie within 
 own per-axis assignment picks the paper's subset (per seed). ``sources``: the same rows under each source of
 the cell alone (robot, calibration, part as made, material) and all together. ``fit``: part A only, the
 robot's path σ and the calibration's magnitudes times each factor: the mean |log(ours / real)| over A's figures. ``speed``: B's
-three hand sensors, full protocol, without and with the cell in the same run: their wall times and ratio.
+three hand sensors, full protocol, without and with the cell in the same run, after a warm-up of each, in
+interleaved rounds: the median wall times and their ratio.
 Evaluations are cached per (part, objective, cell, seed) in --cache, so a table and its sources share runs.
 """
 
@@ -152,6 +153,7 @@ def main() -> None:
     ap.add_argument("--factors", default="0.03,0.1,0.3", help="fit: the calibration's magnitudes times each")
     ap.add_argument("--paths", default=None, help="fit: the robot's path sigma (mm), each; default the cell's")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=3, help="speed: interleaved rounds")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/optipose-bench-cell"))
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "cell")
     a = ap.parse_args()
@@ -192,15 +194,22 @@ def main() -> None:
         from optipose.model.part import load_part
 
         part = load_part("part_b")
-        times = {}
-        for label, c in (("ideal", None), (cell.name, cell), ("ideal again", None)):
-            with Evaluator(part, objective.in_cell(c), seed=0, jobs=a.jobs, quiet=True) as ev:
+        times: dict = {"ideal": [], cell.name: []}
+        evaluators = {label: Evaluator(part, objective.in_cell(c), seed=0, jobs=a.jobs, quiet=True)
+                      for label, c in (("ideal", None), (cell.name, cell))}  # fmt: skip
+        for label, ev in evaluators.items():  # warm: workers, compiled kernels, the reference, the part instance
+            ev(baseline(part))
+        for _ in range(a.repeats):  # interleaved rounds: a load that comes and goes hits both
+            for label, ev in evaluators.items():
                 t0 = time.perf_counter()
                 ev(baseline(part))
-                times[label] = time.perf_counter() - t0
-        base = (times["ideal"] + times["ideal again"]) / 2
-        print(f"B hand, {objective.name}, --jobs {a.jobs}: ideal {times['ideal']:.1f} s and {times['ideal again']:.1f} s, "
-              f"'{cell.name}' {times[cell.name]:.1f} s: {times[cell.name] / base:.2f}x")  # fmt: skip
+                times[label].append(time.perf_counter() - t0)
+        for ev in evaluators.values():
+            ev.close()
+        base, mine = np.median(times["ideal"]), np.median(times[cell.name])
+        print(f"B hand, {objective.name}, --jobs {a.jobs}, median of {a.repeats} after a warm-up: ideal {base:.1f} s, "
+              f"'{cell.name}' {mine:.1f} s: {mine / base:.2f}x (rounds: ideal {np.round(times['ideal'], 1).tolist()}, "
+              f"{cell.name} {np.round(times[cell.name], 1).tolist()})")  # fmt: skip
 
 
 if __name__ == "__main__":

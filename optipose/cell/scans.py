@@ -120,9 +120,11 @@ class LiveCell:
             moved = np.empty_like(scan.points)
             along_rays(scan.points, scan.face, scan.profile, shifts, normals_P[j], R, t, apex, np.ascontiguousarray(T[:3, 2]),
                        GRAZING, *part, *path, centre_O, extra, moved)  # fmt: skip
-            delta = moved - scan.points
-            for level in out:
-                level[j] = replace(level[j], points=level[j].points + delta)
+            out[0][j] = replace(scan, points=moved)
+            if len(out) > 1:  # the other noise levels: the same rays, the same moves
+                delta = moved - scan.points
+                for level in out[1:]:
+                    level[j] = replace(level[j], points=level[j].points + delta)
         return out
 
     def _material(self, e: MaterialEffects, scan, R: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
