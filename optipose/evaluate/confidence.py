@@ -1,0 +1,389 @@
+"""A verdict with confidence (issue #33): a found layout against the hand one on the same draws, with intervals.
+
+Both layouts are evaluated on the same draws (common random numbers: one seed gives both the same part
+instance, calibration, robot paths and scan noise, scan by scan; docs/cell.md). Per draw and layout, each
+axis's per-scan |error| is that of the subset the layout's :class:`Choice` uses for it (a failed
+registration as ``FAILED_ERROR``, an axis the choice does not measure as ``UNOBSERVABLE_PENALTY`` on every
+scan): a :class:`PairedDraw`. The statistic is the objective's (docs/method.md, "The score"): per axis the
+median and 75th percentile over a draw's scans, averaged over draws (the expected error in the cell), and
+the score Σ weight · (median_weight · median + p75_weight · p75).
+
+The intervals come from a bootstrap over scans nested in one over draws, both paired: a replicate resamples
+the draws (with replacement) and, inside each, the scan indices, the same for both layouts. Resampling at
+both levels would count the scans' noise twice (the draws' spread already holds it), so each draw's
+statistics are shrunk towards their mean until their spread is the cells' alone (Davison & Hinkley 1997,
+§3.8). A percentile bootstrap over a handful of draws is too narrow (it knows no Student t), so each
+interval's deviations from the estimate (in logs) are then scaled to the variance of a mean of D draws — the
+draws' spread over D, or the scans' own where that is larger — times Student's quantile over the normal
+one, on D − 1 degrees of freedom where the cells vary (the draws' spread exceeds the scans'), else on all
+the scans'. With one draw the interval is the scans' alone: the cell held fixed. Intervals are two-sided at
+``confidence``: of the ratio hand / found (above 1: found is better) of the score, of each axis's share of
+it and of each axis's median and p75. The decision (:data:`DECISIONS`):
+
+- KEEP: the score's interval lies below 1 (the hand layout is better), or some axis's interval lies below
+  1 / (1 + tolerance) (found is worse there by more than the tolerance);
+- BUY: the score's interval lies above 1 and no axis's reaches below 1 / (1 + tolerance);
+- TIE: the score's and every axis's intervals lie within [1 / (1 + tolerance), 1 + tolerance];
+- UNDECIDED: none of these, with how many more draws would settle it (the interval's width ∝ 1/√draws).
+
+Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is one-sided at 97.5 %; the
+axes' shares (weight · (median + p75) per axis) carry the tolerance, their medians and p75s are reported.
+
+:func:`race` adds draws from a callable until the decision is not UNDECIDED or a budget ends, deciding only
+at a few :func:`looks`, each at a share of the error rate. Everything is
+seeded: the same draws and :class:`Rules` give the same verdict.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.stats import norm as stats_norm
+from scipy.stats import t as stats_t
+
+from optipose.evaluate.assignment import UNOBSERVABLE_PENALTY, Choice
+from optipose.evaluate.objective import AXES, StatisticConfig
+from optipose.evaluate.statistics import FAILED_ERROR
+
+__all__ = [
+    "BUY", "KEEP", "TIE", "UNDECIDED", "DECISIONS", "Rules", "PairedDraw", "Interval", "AxisError", "AxisRatio",
+    "ConfidentVerdict", "scan_errors", "paired_draw", "paired_draws", "compare_draws", "looks", "race",
+]  # fmt: skip
+
+BUY, KEEP, TIE, UNDECIDED = "BUY", "KEEP", "TIE", "UNDECIDED"
+DECISIONS = (BUY, KEEP, TIE, UNDECIDED)
+_QUANTILES = (0.5, 0.75)  # median and p75, np.median's and np.percentile(75)'s linear interpolation
+
+
+@dataclass(frozen=True)
+class Rules:
+    """How a verdict is reached: the tolerance an axis may be worse by (0.1: 10 %), the intervals'
+    two-sided confidence, the bootstrap's replicates and seed, and the objective's statistic (its weights)."""
+
+    tolerance: float = 0.10
+    confidence: float = 0.95
+    replicates: int = 2000
+    seed: int = 0
+    statistic: StatisticConfig = field(default_factory=StatisticConfig)
+
+
+@dataclass(frozen=True)
+class PairedDraw:
+    """One draw (a seed) of both layouts: (n_scans, 3) |error| rad per scan and axis, the rows the same scans."""
+
+    seed: int
+    found: np.ndarray
+    hand: np.ndarray
+
+    def __post_init__(self):
+        if self.found.shape != self.hand.shape or self.found.ndim != 2 or self.found.shape[1] != len(AXES):
+            raise ValueError(f"a paired draw needs two (n_scans, 3) arrays, got {self.found.shape} and {self.hand.shape}")
+
+
+def scan_errors(result, choice: Choice) -> np.ndarray:
+    """(n_scans, 3) rad: per scan (in scan order) and axis the |error| of the subset ``choice`` uses for the
+    axis in ``result`` (an :class:`~optipose.evaluate.evaluator.EvaluationResult`); a failed registration
+    counts ``FAILED_ERROR``, an axis the choice does not measure ``UNOBSERVABLE_PENALTY``."""
+    per_scan = result.per_scan
+    scans = np.sort(per_scan["scan"].unique())
+    out = np.full((len(scans), len(AXES)), UNOBSERVABLE_PENALTY)
+    for j, axis in enumerate(choice.axes):
+        if not axis.observable:
+            continue
+        rows = per_scan[per_scan["subset"] == axis.name].sort_values("scan")
+        if not np.array_equal(rows["scan"].to_numpy(), scans):
+            raise ValueError(f"subset {axis.name} lacks some scans of the evaluation")
+        ok = rows["ok"].to_numpy(bool)
+        out[:, j] = np.where(ok, np.abs(rows[f"err_{axis.axis}"].to_numpy(float)), FAILED_ERROR)
+    return out
+
+
+def paired_draw(found, found_choice: Choice, hand, hand_choice: Choice) -> PairedDraw:
+    """The paired draw of two evaluations on the same seed (common random numbers); a ValueError if they
+    were not (another seed, other scans)."""
+    if found.seed != hand.seed or found.n_scans != hand.n_scans:
+        raise ValueError(f"not a paired draw: seed {found.seed} ({found.n_scans} scans) vs {hand.seed} ({hand.n_scans} scans)")
+    return PairedDraw(int(found.seed), scan_errors(found, found_choice), scan_errors(hand, hand_choice))
+
+
+def paired_draws(found: Sequence, found_choice: Choice, hand: Sequence, hand_choice: Choice) -> list[PairedDraw]:
+    """The paired draws of two lists of evaluations, matched by seed (in the found list's order)."""
+    by_seed = {r.seed: r for r in hand}
+    missing = [r.seed for r in found if r.seed not in by_seed]
+    if missing:
+        raise ValueError(f"no hand evaluation on seed(s) {missing}")
+    return [paired_draw(r, found_choice, by_seed[r.seed], hand_choice) for r in found]
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A point estimate and its two-sided interval."""
+
+    estimate: float
+    low: float
+    high: float
+
+    def within(self, low: float, high: float) -> bool:
+        return low <= self.low and self.high <= high
+
+
+@dataclass(frozen=True)
+class AxisError:
+    """A layout's predicted error on one axis in the cell (degrees): the median and p75 over a draw's scans,
+    expected over draws, with intervals."""
+
+    axis: str
+    median_deg: Interval
+    p75_deg: Interval
+
+
+@dataclass(frozen=True)
+class AxisRatio:
+    """Hand / found on one axis: its share of the score, its median and its p75."""
+
+    axis: str
+    ratio: Interval
+    median: Interval
+    p75: Interval
+
+
+@dataclass(frozen=True)
+class ConfidentVerdict:
+    """Found vs. hand for one k, with confidence. ``found_name`` and ``hand_name`` name the choices as
+    their layouts name sensors (e.g. "F1F3", "S1S2"); ``reference`` says what the hand side is ("hand",
+    "conventional"). ``more_draws``: under UNDECIDED, the draws to add that would settle it at the present
+    estimates (None when no number would); ``seconds_per_draw`` (NaN unknown) turns it into minutes."""
+
+    k: int
+    decision: str
+    found_name: str
+    hand_name: str
+    score: Interval  # hand / found
+    axes: tuple[AxisRatio, ...]
+    found: tuple[AxisError, ...]
+    hand: tuple[AxisError, ...]
+    found_score_deg: Interval
+    hand_score_deg: Interval
+    n_draws: int
+    n_scans: int
+    tolerance: float
+    confidence: float
+    more_draws: int | None = None
+    seconds_per_draw: float = float("nan")
+    reference: str = "hand"
+
+    @property
+    def more_minutes(self) -> float:
+        """Minutes the ``more_draws`` would take (NaN when unknown)."""
+        return float("nan") if self.more_draws is None else self.more_draws * self.seconds_per_draw / 60.0
+
+    def line(self) -> str:
+        """One line of at most 80 columns: the decision, hand / found in sum with its interval, the draws (and
+        under UNDECIDED how many more would settle it), e.g.
+        ``k=2: BUY F1F3 1.42x [1.21, 1.66] better than hand S1S2 (12 draws)``."""
+        s, ref = self.score, f"{self.reference} {self.hand_name}"
+        ratio = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]"
+        head = f"k={self.k}: {self.decision}"
+        if self.decision == KEEP:
+            worse = [a.axis for a in self.axes if a.ratio.high < 1.0 / (1.0 + self.tolerance)]
+            text = f"{head} {ref}; {self.found_name} {ratio}" + (f", worse on {'/'.join(worse)}" if worse else "")
+        elif self.decision == BUY:
+            text = f"{head} {self.found_name} {ratio} better than {ref}"
+        elif self.decision == TIE:
+            text = f"{head} {self.found_name} {ratio} vs {ref}: keep {self.hand_name}"
+        else:
+            text = f"{head} {self.found_name} {ratio} vs {ref}"
+        tail = f"{self.n_draws} draw{'s' if self.n_draws != 1 else ''}"
+        if self.decision == UNDECIDED and self.more_draws is not None:
+            minutes = self.more_minutes
+            tail += f"; +{self.more_draws}" + (f", {minutes:.0f} min" if math.isfinite(minutes) else "")
+        line = f"{text} ({tail})"
+        return line if len(line) <= 80 else text[:80]
+
+    def axis_lines(self) -> list[str]:
+        """Per axis, found's and hand's predicted median / p75 (mdeg) with intervals, each ≤ 80 columns."""
+        out = []
+        for f, h in zip(self.found, self.hand):
+            cells = [f"{_mdeg(i.estimate)} [{_mdeg(i.low)}, {_mdeg(i.high)}]" for i in (f.median_deg, h.median_deg, f.p75_deg, h.p75_deg)]
+            out.append(f"  {f.axis:5} median found {cells[0]} hand {cells[1]} mdeg")
+            out.append(f"  {'':5} p75    found {cells[2]} hand {cells[3]} mdeg")
+        return out
+
+
+def _mdeg(deg: float) -> str:
+    return f"{1e3 * deg:.3g}"
+
+
+def _quantiles(x: np.ndarray) -> np.ndarray:
+    """(2, …) the median and p75 over the last axis of an array sorted along it (np.quantile's linear rule)."""
+    n = x.shape[-1]
+    out = []
+    for q in _QUANTILES:
+        pos = q * (n - 1)
+        lo = int(np.floor(pos))
+        hi = min(lo + 1, n - 1)
+        out.append(x[..., lo] + (pos - lo) * (x[..., hi] - x[..., lo]))
+    return np.stack(out)
+
+
+def _draw_stats(draw: PairedDraw, replicates: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """One draw's statistics (2 quantiles, 2 layouts, 3 axes) and (replicates, 2, 2, 3) of its scans
+    resampled, the same scan indices for both layouts."""
+    x = np.concatenate([draw.found, draw.hand], axis=1).T  # (6, n)
+    observed = _quantiles(np.sort(x, axis=1)).reshape(2, 2, 3)
+    index = rng.integers(0, x.shape[1], (replicates, x.shape[1]))
+    boot = np.sort(x[:, index], axis=2)  # (6, replicates, n)
+    return observed, np.moveaxis(_quantiles(boot), 2, 0).reshape(replicates, 2, 2, 3)
+
+
+def _replicates(per_draw: list, rules: Rules) -> tuple[np.ndarray, np.ndarray]:
+    """The observed statistics averaged over draws (2, 2, 3) and (replicates, 2, 2, 3) of the nested
+    bootstrap: draws resampled, each one's statistics shrunk to the cells' spread plus its scans' resampling."""
+    stats = np.stack([s for s, _ in per_draw])  # (D, 2, 2, 3)
+    deviations = np.stack([b - s for s, b in per_draw])  # (D, R, 2, 2, 3)
+    mean, n = stats.mean(axis=0), len(per_draw)
+    shrink = np.zeros_like(mean)
+    if n > 1:
+        between = stats.var(axis=0, ddof=1)
+        within = deviations.var(axis=1).mean(axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            shrink = np.where(between > 0, np.sqrt(np.clip(between - within, 0.0, None) / between), 0.0)
+    rng = np.random.default_rng([rules.seed, 0x0B007])
+    picks = rng.integers(0, n, (rules.replicates, n))
+    columns = rng.integers(0, rules.replicates, (rules.replicates, n))
+    values = mean + shrink * (stats[picks] - mean) + deviations[picks, columns]  # (R, D, 2, 2, 3)
+    return mean, values.mean(axis=1)
+
+
+def _quantities(stats: np.ndarray, statistic: StatisticConfig) -> np.ndarray:
+    """(…, 24) logs of what the verdict reports, from (…, 2 quantiles, 2 layouts, 3 axes) in rad: hand / found
+    of the score, of each axis's share of it, of each median and p75 (10); found's median and p75 per axis,
+    hand's (12); found's and hand's score (2)."""
+    w = np.asarray(statistic.weights, float)
+    share = w * (statistic.median_weight * stats[..., 0, :, :] + statistic.p75_weight * stats[..., 1, :, :])  # (…, 2, 3)
+    log = np.log(np.maximum(np.concatenate([share.sum(axis=-1, keepdims=True), share, stats[..., 0, :, :], stats[..., 1, :, :]], axis=-1), 1e-300))
+    found, hand = log[..., 0, :], log[..., 1, :]  # (…, 10): score, shares, medians, p75s
+    return np.concatenate([hand - found, found[..., 4:], hand[..., 4:], found[..., :1], hand[..., :1]], axis=-1)
+
+
+def _widening(per_draw: list, boot: np.ndarray, rules: Rules, n_scans: int) -> np.ndarray:
+    """(24,) the factor each quantity's bootstrap deviations are scaled by: to the variance of a mean of D
+    draws (the draws' spread over D, at least the scans' own) and the Student quantile of its degrees of
+    freedom over the normal one. With one draw, the scans' variance alone."""
+    d = len(per_draw)
+    per = np.stack([_quantities(s, rules.statistic) for s, _ in per_draw])  # (D, 24)
+    within = np.stack([_quantities(b, rules.statistic).var(axis=0) for _, b in per_draw]).mean(axis=0)
+    between = per.var(axis=0, ddof=1) if d > 1 else within
+    # the draws' spread, an estimate on D − 1 degrees of freedom, where it exceeds the scans' own (the cells
+    # vary); else the scans' variance, known from every scan of every draw
+    df = np.where(between > within, max(d - 1, 1), d * max(n_scans - 1, 1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tail = (1.0 + rules.confidence) / 2.0
+        student = stats_t.ppf(tail, df) / stats_norm.ppf(tail)
+        scale = np.sqrt(np.maximum(between, within) / d / boot.var(axis=0))
+    return np.where(np.isfinite(scale), student * scale, 1.0)
+
+
+def _interval(point: float, samples: np.ndarray, widen: float, confidence: float, unit=np.exp) -> Interval:
+    """The percentile interval of log ``samples`` about log ``point``, its deviations scaled by ``widen``."""
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    low, high = point + widen * (np.percentile(samples, [tail, 100.0 - tail]) - point)
+    return Interval(float(unit(point)), float(unit(low)), float(unit(high)))
+
+
+def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int = 0, found_name: str = "found",
+                  hand_name: str = "hand", reference: str = "hand", seconds_per_draw: float = float("nan")) -> ConfidentVerdict:  # fmt: skip
+    """The verdict on paired draws (one per seed, each the same scans for both layouts)."""
+    if not draws:
+        raise ValueError("a verdict needs at least one paired draw")
+    n_scans = {len(d.found) for d in draws}
+    if len(n_scans) != 1:
+        raise ValueError(f"the draws have different numbers of scans: {sorted(n_scans)}")
+    per_draw = [_draw_stats(d, rules.replicates, np.random.default_rng([rules.seed, i])) for i, d in enumerate(draws)]
+    mean, boot = _replicates(per_draw, rules)
+    point, samples = _quantities(mean, rules.statistic), _quantities(boot, rules.statistic)
+    widen = _widening(per_draw, samples, rules, n_scans.pop())
+    c = rules.confidence
+    iv = [_interval(point[i], samples[:, i], widen[i], c) for i in range(10)]
+    iv += [_interval(point[i], samples[:, i], widen[i], c, lambda v: np.rad2deg(np.exp(v))) for i in range(10, 24)]
+    axes = tuple(AxisRatio(axis, iv[1 + j], iv[4 + j], iv[7 + j]) for j, axis in enumerate(AXES))
+    found = tuple(AxisError(axis, iv[10 + j], iv[13 + j]) for j, axis in enumerate(AXES))
+    hand = tuple(AxisError(axis, iv[16 + j], iv[19 + j]) for j, axis in enumerate(AXES))
+    decision, more = _decide(iv[0], axes, rules.tolerance, len(draws))
+    return ConfidentVerdict(
+        k=k, decision=decision, found_name=found_name, hand_name=hand_name, score=iv[0], axes=axes, found=found,
+        hand=hand, found_score_deg=iv[22], hand_score_deg=iv[23], n_draws=len(draws), n_scans=len(draws[0].found),
+        tolerance=rules.tolerance, confidence=c, more_draws=more, seconds_per_draw=seconds_per_draw, reference=reference,
+    )  # fmt: skip
+
+
+def _decide(score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, n: int) -> tuple[str, int | None]:
+    """The decision from the intervals (module docstring) and, when UNDECIDED, the draws to add."""
+    floor, ceiling = 1.0 / (1.0 + tolerance), 1.0 + tolerance
+    if score.high < 1.0 or any(a.ratio.high < floor for a in axes):
+        return KEEP, None
+    if score.low > 1.0 and all(a.ratio.low >= floor for a in axes):
+        return BUY, None
+    if score.within(floor, ceiling) and all(a.ratio.within(floor, ceiling) for a in axes):
+        return TIE, None
+    return UNDECIDED, _more_draws(score, [a.ratio for a in axes], math.log(ceiling), n)
+
+
+def _needed(interval: Interval, bound: float, above: bool, n: int) -> float:
+    """Draws at which the interval's side towards ``bound`` (log ratio) clears it at the same estimate, the
+    width ∝ 1/√draws; inf when the estimate itself is on the wrong side."""
+    m = math.log(max(interval.estimate, 1e-300))
+    side = interval.low if above else interval.high
+    half = abs(m - math.log(max(side, 1e-300)))
+    gap = (m - bound) if above else (bound - m)
+    if gap <= 0:
+        return math.inf
+    return n * (half / gap) ** 2 if half > 0 else float(n)
+
+
+def _more_draws(score: Interval, axes: list[Interval], tol: float, n: int) -> int | None:
+    """The fewest draws to add for some decision to be reached at the present estimates (None: none would)."""
+    buy = max([_needed(score, 0.0, True, n)] + [_needed(a, -tol, True, n) for a in axes])
+    keep = min([_needed(score, 0.0, False, n)] + [_needed(a, -tol, False, n) for a in axes])
+    tie = max([max(_needed(i, -tol, True, n), _needed(i, tol, False, n)) for i in [score, *axes]])
+    best = min(buy, keep, tie)
+    return None if not math.isfinite(best) else max(1, math.ceil(best) - n)
+
+
+def looks(min_draws: int, max_draws: int) -> tuple[int, ...]:
+    """The draw counts at which :func:`race` decides: ``min_draws``, then half as many again each time, and
+    ``max_draws``. Each look spends an equal share of the error rate (Bonferroni), so that racing does not buy
+    more often than one fixed comparison."""
+    out, n = [], max(1, min_draws)
+    while n < max_draws:
+        out.append(n)
+        n = max(n + 1, math.ceil(1.5 * n))
+    return tuple(out + [max_draws])
+
+
+def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
+         seconds: float = math.inf, clock: Callable[[], float] = time.monotonic, draws: Sequence[PairedDraw] = (),
+         **names) -> ConfidentVerdict:  # fmt: skip
+    """Add draws (``next_draw(i)``: the paired draw at position i, the ``draws`` given first) until the
+    decision at one of the :func:`looks` is not UNDECIDED, or ``max_draws`` are in, or another draw would end
+    past ``seconds`` (at the mean time a draw took so far; then a last look at the draws in). Each look's
+    intervals are at confidence 1 − (1 − ``rules.confidence``) / (looks + 1), which the verdict carries.
+    ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` as :func:`compare_draws` takes them. The
+    verdict carries the seconds a draw took, so an UNDECIDED one says how many minutes more would take."""
+    schedule = looks(min_draws, max_draws)
+    each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) / (len(schedule) + 1))
+    start, taken, added = clock(), list(draws), 0
+    while True:
+        elapsed = clock() - start
+        per_draw = elapsed / added if added else math.nan
+        out_of_time = bool(added) and elapsed + per_draw > seconds
+        if taken and (len(taken) in schedule or len(taken) >= max_draws or out_of_time):
+            verdict = compare_draws(taken, each, seconds_per_draw=per_draw, **names)
+            if verdict.decision != UNDECIDED or len(taken) >= max_draws or out_of_time:
+                return verdict
+        taken.append(next_draw(len(taken)))
+        added += 1
