@@ -1,0 +1,181 @@
+"""The verdict with confidence (optipose/evaluate/confidence.py, issue #33) on synthetic per-scan errors:
+a layout against itself on the same draws is an exact tie, a BUY needs the interval, racing stops when the
+interval is clear, the intervals cover the true ratio at their nominal rate, and all of it is reproducible."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
+from optipose.evaluate.confidence import (
+    BUY, KEEP, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, looks, paired_draw, paired_draws, race, scan_errors,
+)  # fmt: skip
+from optipose.evaluate.statistics import FAILED_ERROR
+
+N_SCANS = 77
+FAST = Rules(replicates=400)
+
+
+def _draws(rng, n_draws, ratio=1.0, extra=0.1, cell=0.2, start=0):
+    """Paired draws shaped like per-scan |errors| (rad): per draw a cell scale shared by both layouts, found's
+    own factor exp(N(0, extra)) / ratio, the two layouts' scans correlated (0.5). The true hand / found of
+    any statistic's expectation over draws is ratio · exp(-extra² / 2)."""
+    out = []
+    for i in range(n_draws):
+        a = 1e-4 * np.exp(rng.normal(0.0, cell))
+        z = rng.normal(size=(N_SCANS, 3))
+        w = 0.5 * z + np.sqrt(0.75) * rng.normal(size=(N_SCANS, 3))
+        out.append(PairedDraw(start + i, np.abs(w) * a * np.exp(rng.normal(0.0, extra)) / ratio, np.abs(z) * a))
+    return out
+
+
+def test_a_layout_against_itself_on_the_same_draws_is_an_exact_tie():
+    rng = np.random.default_rng(1)
+    same = [PairedDraw(d.seed, d.hand.copy(), d.hand) for d in _draws(rng, 4)]
+    verdict = compare_draws(same, FAST, k=2, found_name="S1S2", hand_name="S1S2")
+    assert verdict.decision == TIE
+    assert (verdict.score.estimate, verdict.score.low, verdict.score.high) == (1.0, 1.0, 1.0)
+    assert all((a.ratio.low, a.ratio.high, a.median.low, a.p75.high) == (1.0, 1.0, 1.0, 1.0) for a in verdict.axes)
+    assert verdict.found == verdict.hand  # the predicted errors too
+    for n in (1, 2, 3):  # with any number of draws, even one
+        assert compare_draws(same[:n], FAST).decision == TIE
+
+
+def test_a_buy_needs_the_interval_not_the_point_estimate():
+    hand = _draws(np.random.default_rng(2), 1)[0].hand
+    # found 5 % better in sum on these three draws, but by 1.6x on one and worse on two: a wide interval
+    wide = [PairedDraw(i, hand / f, hand) for i, f in enumerate((1.6, 0.85, 0.95))]
+    verdict = compare_draws(wide, FAST)
+    assert verdict.score.estimate == pytest.approx(3 / (1 / 1.6 + 1 / 0.85 + 1 / 0.95))
+    assert 1.04 < verdict.score.estimate < 1.06
+    assert verdict.score.low < 1.0 < verdict.score.high
+    assert verdict.decision == UNDECIDED and verdict.more_draws > 0
+    # the same 5 % on every draw and scan: the interval is the point, and found is bought
+    tight = [PairedDraw(i, hand / 1.05, hand) for i in range(3)]
+    verdict = compare_draws(tight, FAST)
+    assert verdict.decision == BUY and verdict.score.low == pytest.approx(1.05)
+
+
+def test_keep_when_hand_is_better_in_sum_or_an_axis_is_worse_beyond_the_tolerance():
+    hand = _draws(np.random.default_rng(3), 1)[0].hand
+    assert compare_draws([PairedDraw(0, hand * 1.3, hand)], FAST).decision == KEEP
+    # 1.5x better on roll and pitch, 1.2x worse on yaw: better in sum, worse on yaw beyond 10 %
+    found = hand / np.array([1.5, 1.5, 1 / 1.2])
+    verdict = compare_draws([PairedDraw(0, found, hand)], FAST, k=1, found_name="F1", hand_name="S2")
+    assert verdict.score.low > 1.0 and verdict.decision == KEEP
+    assert "worse on yaw" in verdict.line()
+    # 5 % worse on yaw, within the tolerance, and better in sum: bought
+    found = hand / np.array([1.5, 1.5, 1 / 1.05])
+    assert compare_draws([PairedDraw(0, found, hand)], FAST).decision == BUY
+
+
+def test_racing_stops_when_the_interval_is_clear():
+    rng = np.random.default_rng(4)
+    verdict = race(lambda i: _draws(rng, 1, ratio=2.0, start=i)[0], FAST, min_draws=3, max_draws=40, k=2)
+    assert verdict.decision == BUY and verdict.n_draws <= 5  # the first or second look
+    assert verdict.confidence > 0.95  # each look spends a share of the 5 %
+    # an exact copy on the same draws: a tie at the first look
+    verdict = race(lambda i: PairedDraw(i, *(2 * [_draws(rng, 1)[0].hand])), FAST, max_draws=40)
+    assert verdict.decision == TIE and verdict.n_draws == 3
+
+
+def test_racing_an_equal_layout_runs_to_the_budget():
+    rng = np.random.default_rng(5)
+    calls = []
+
+    def equal(i):
+        calls.append(i)
+        return _draws(rng, 1, ratio=1.0, start=i)[0]
+
+    verdict = race(equal, FAST, min_draws=3, max_draws=8)
+    assert calls == list(range(8)) and verdict.n_draws == 8
+    assert verdict.decision == UNDECIDED and verdict.more_draws > 0
+    assert verdict.score.low < 1.0 < verdict.score.high  # as the rules say: neither better nor within 10 %
+    assert not verdict.score.within(1 / 1.1, 1.1)
+
+
+def test_racing_stops_before_a_draw_would_end_past_the_time_budget():
+    rng, now = np.random.default_rng(6), [0.0]
+
+    def slow(i):
+        now[0] += 10.0  # each draw takes 10 s of the fake clock
+        return _draws(rng, 1, ratio=1.0, start=i)[0]
+
+    verdict = race(slow, FAST, min_draws=3, max_draws=40, seconds=45.0, clock=lambda: now[0])
+    assert verdict.n_draws == 4 and verdict.seconds_per_draw == 10.0  # a fifth would end at 50 s
+    if verdict.decision == UNDECIDED:
+        assert verdict.more_minutes == pytest.approx(verdict.more_draws * 10.0 / 60.0)
+        assert f"+{verdict.more_draws}, " in verdict.line() and " min)" in verdict.line()
+
+
+def test_the_looks():
+    assert looks(3, 20) == (3, 5, 8, 12, 18, 20)
+    assert looks(3, 3) == (3,)
+    assert looks(1, 4) == (1, 2, 3, 4)
+
+
+@pytest.mark.parametrize("n_draws, extra", [(5, 0.1), (3, 0.3)])
+def test_intervals_cover_the_true_ratio_at_their_nominal_rate(n_draws, extra):
+    rng, trials = np.random.default_rng(7 + n_draws), 200
+    truth = 1.2 * np.exp(-(extra**2) / 2)
+    score = median = 0
+    for t in range(trials):
+        verdict = compare_draws(_draws(rng, n_draws, ratio=1.2, extra=extra), Rules(replicates=300, seed=t))
+        score += verdict.score.low <= truth <= verdict.score.high
+        median += verdict.axes[0].median.low <= truth <= verdict.axes[0].median.high
+    sd = np.sqrt(0.95 * 0.05 / trials)  # binomial: 1.5 %
+    assert 0.95 - 3 * sd <= score / trials <= 0.95 + 3 * sd
+    assert 0.95 - 3 * sd <= median / trials <= 0.95 + 3 * sd
+
+
+def test_reproducible_from_the_seed():
+    draws = _draws(np.random.default_rng(8), 4, ratio=1.1)
+    one, two = compare_draws(draws, Rules(seed=3)), compare_draws(draws, Rules(seed=3))
+    assert one == two
+    other = compare_draws(draws, Rules(seed=4))
+    assert other.score.estimate == one.score.estimate and other.score.low != one.score.low
+
+
+def test_one_line_of_at_most_80_columns_naming_the_sensors():
+    rng = np.random.default_rng(9)
+    hand = _draws(rng, 1)[0].hand
+    cases = {BUY: hand / 1.5, KEEP: hand * 1.5, TIE: hand}
+    for decision, found in cases.items():
+        verdict = compare_draws([PairedDraw(0, found, hand)] * 2, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
+        assert verdict.decision == decision
+        line = verdict.line()
+        assert len(line) <= 80 and line.startswith(f"k=3: {decision}") and "F1F2F3" in line and "S1S2S3" in line
+    verdict = race(lambda i: _draws(rng, 1, start=i)[0], FAST, max_draws=4, k=3, found_name="F1F2F3",
+                   hand_name="S1S2S3", reference="conventional")  # fmt: skip
+    assert verdict.decision == UNDECIDED and len(verdict.line()) <= 80 and "conventional S1S2S3" in verdict.line()
+    assert all(len(line) <= 80 for line in verdict.axis_lines())
+
+
+def _result(seed, errors, ok, subsets=("S1", "S2", "S1S2")):
+    rows = [{"scan": s, "subset": name, "ok": bool(ok[s]), "err_roll": -errors[s], "err_pitch": 2 * errors[s],
+             "err_yaw": 3 * errors[s]} for s in range(len(errors)) for name in subsets]  # fmt: skip
+    per_scan = pd.DataFrame(rows).sample(frac=1.0, random_state=0)  # any row order
+    return SimpleNamespace(seed=seed, n_scans=len(errors), per_scan=per_scan)
+
+
+def test_scan_errors_take_each_axis_from_its_subset():
+    errors, ok = np.array([1e-4, 2e-4, 3e-4]), np.array([True, False, True])
+    axes = (AxisChoice("roll", (0,), "S1", 0.0, 0.0), AxisChoice("pitch", (0, 1), "S1S2", 0.0, 0.0),
+            AxisChoice("yaw", (), "", np.nan, np.nan, UNOBSERVABLE))  # fmt: skip
+    choice = Choice(2, (0, 1), "S1S2", axes, 0.0)
+    out = scan_errors(_result(1, errors, ok), choice)
+    np.testing.assert_array_equal(out[:, 0], [1e-4, FAILED_ERROR, 3e-4])
+    np.testing.assert_array_equal(out[:, 1], [2e-4, FAILED_ERROR, 6e-4])
+    np.testing.assert_array_equal(out[:, 2], [UNOBSERVABLE_PENALTY] * 3)
+    draw = paired_draw(_result(1, errors, ok), choice, _result(1, errors, ok), choice)
+    assert draw.seed == 1 and np.array_equal(draw.found, draw.hand)
+    with pytest.raises(ValueError, match="not a paired draw"):
+        paired_draw(_result(1, errors, ok), choice, _result(2, errors, ok), choice)
+    found = [_result(s, errors, ok) for s in (3, 1)]
+    assert [d.seed for d in paired_draws(found, choice, [_result(s, errors, ok) for s in (1, 3)], choice)] == [3, 1]
+    with pytest.raises(ValueError, match="no hand evaluation"):
+        paired_draws(found, choice, [_result(1, errors, ok)], choice)
