@@ -71,9 +71,10 @@ class Rules:
     statistic: StatisticConfig = field(default_factory=StatisticConfig)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PairedDraw:
-    """One draw (a seed) of both layouts: (n_scans, 3) |error| rad per scan and axis, the rows the same scans."""
+    """One draw (a seed) of both layouts: (n_scans, 3) |error| rad per scan and axis, the rows the same scans
+    (compared by identity: its fields are arrays)."""
 
     seed: int
     found: np.ndarray
