@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from optipose.model.convex import hull_arrays
+
 __all__ = ["supporting_faces"]
 
 _CELLS = 8  # cells per side of each of the cube map's six faces
@@ -25,9 +27,7 @@ def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float 
     """(f,) bool: face f's plane (unit ``normals`` (f, 3), ``offsets`` (f,): ``n·x = offset``) has every vertex
     of ``mesh``'s convex hull at most ``tol`` in front of it. Degenerate faces (zero normals) are not."""
     try:
-        hull = mesh.convex_hull
-        points = np.ascontiguousarray(hull.vertices, dtype=np.float64)
-        tris = np.asarray(hull.faces, dtype=np.int64)
+        points, tris = hull_arrays(mesh)  # computed once per mesh (and per machine for a dense one)
     except Exception:  # qhull fails on flat or degenerate meshes: then no face is known to support the part
         return np.zeros(len(normals), dtype=bool)
     if len(points) == 0 or len(tris) == 0:
