@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from optipose.model import convex
+from optipose.model import convex, machine
 from optipose.model.collision import BOUND_LOOSENESS, CollisionModel, ConvexSet
 from optipose.model.convex import hull_arrays
 from optipose.model.motion import ScanMotion
@@ -128,18 +128,36 @@ def test_hull_arrays_are_trimeshs_hull_unoriented(which):
 
 
 def test_a_dense_meshs_hull_is_shared_through_a_file(tmp_path, monkeypatch):
-    monkeypatch.setattr(convex, "SHARED_FACES", 0)
-    monkeypatch.setattr(convex.tempfile, "gettempdir", lambda: str(tmp_path))
-    monkeypatch.setattr(convex, "_WRITTEN", [])
+    monkeypatch.setattr(machine, "SHARED_FACES", 0)
+    monkeypatch.setattr(machine.tempfile, "gettempdir", lambda: str(tmp_path))
+    monkeypatch.setattr(machine, "_WRITTEN", [])
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=R)
     vertices, faces = hull_arrays(mesh)
     (written,) = tmp_path.glob("optipose-hull-*.npz")
-    assert convex._WRITTEN == [written]
+    assert machine._WRITTEN == [written]
     monkeypatch.setattr(convex, "_compute", lambda mesh: pytest.fail("computed again"))
     again = hull_arrays(trimesh.Trimesh(mesh.vertices.copy(), mesh.faces.copy(), process=False))  # another process's mesh
     assert np.array_equal(again[0], vertices) and np.array_equal(again[1], faces)
-    convex._remove_written()
+    machine._remove_written()
     assert not written.exists()
+
+
+def test_a_dense_meshs_scanner_arrays_are_shared_through_a_file(tmp_path, monkeypatch):
+    from optipose.scan import raycast
+    from optipose.scan.hull import face_arrays
+
+    monkeypatch.setattr(machine, "SHARED_FACES", 0)
+    monkeypatch.setattr(machine.tempfile, "gettempdir", lambda: str(tmp_path))
+    monkeypatch.setattr(machine, "_WRITTEN", [])
+    scanner = part_scanner(load_part("part_c"))  # the part with its keep-outs, written by the scanner
+    assert len(list(tmp_path.glob("optipose-faces-*.npz"))) == 1
+    monkeypatch.setattr(raycast, "shared_planes", lambda *a: pytest.fail("computed again"))
+    mesh = trimesh.Trimesh(scanner.vertices.copy(), scanner.faces.copy(), process=False)  # another process's
+    read = face_arrays(mesh, scanner.vertices, scanner.faces)
+    held = (scanner._plane, scanner._normals, scanner._offsets, scanner._edge_n, scanner._edge_c, scanner._on_hull)
+    for a, b in zip(read, held):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    machine._remove_written()
 
 
 def test_a_dense_part_is_drawn_with_a_bounded_number_of_triangles():

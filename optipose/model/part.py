@@ -148,7 +148,7 @@ def _lean(part: Part) -> Part:
     sorting and faces, components, per-face areas and crosses: several times the mesh itself), which nothing
     after the loading reads again; each is derived again, the same, if something asks. Normals are kept (a
     file's own may differ from the derived ones)."""
-    from optipose.model.convex import SHARED_FACES
+    from optipose.model.machine import SHARED_FACES
 
     if len(part.mesh.faces) > SHARED_FACES:
         cached = part.mesh._cache.cache  # trimesh's cache of derived properties, dropped by trimesh itself on any edit
