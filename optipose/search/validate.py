@@ -5,7 +5,7 @@ errors drawn from the held-out seed too), and each choice carries its statistics
 worst over that level's bracket draws: :func:`optipose.evaluate.robust.by_level`).
 
 The hand layout's evaluation does not depend on what the search finds: :class:`BaselineRun` starts it in
-processes of their own when the search starts, at a low priority beside the surrogate search, and
+a process of its own when the search starts, on one core beside the surrogate search, and
 :func:`validate` takes its result instead of evaluating the hand layout again. It is the same result,
 whatever runs it: the scans' noise comes from the seed and the scan's index, not from the worker."""
 
@@ -33,17 +33,16 @@ _LAST = 19  # ... and its check under the band, which runs on through the select
 
 
 class BaselineRun:
-    """The hand layout's validation evaluation (:func:`optipose.model.baseline.baseline`), running in
-    processes of their own from the moment it is made (:class:`optipose.evaluate.background.Background`, one
-    thread each, at a low priority), so it takes what the search leaves idle.
+    """The hand layout's validation evaluation (:func:`optipose.model.baseline.baseline`), running in a
+    process of its own from the moment it is made (:class:`optipose.evaluate.background.Background`, one
+    thread), so it takes one core while the search uses the rest.
 
     ``result()`` waits for it: ``None`` when the part has no baseline, or the evaluation failed or was
     stopped (the validation then evaluates the hand layout itself); ``close()`` stops it. ``last``: at the
     lowest priority (the hand layout under the band of the check after a nominal search, which runs on
     through the selection and yields to it). ``processes``: under a band, its bracket draws are shared
-    out over up to this many processes (each draw's noise levels scanned together); under one draw (a
-    nominal objective), its scans (:class:`_Scans`); so that once the search and the found layouts'
-    evaluations are done the hand layout's takes every core, not one.
+    out over up to this many processes (each draw's noise levels scanned together), so that once the search
+    and the found layouts' check are done the hand layout's check takes every core, not one.
     """
 
     def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False, processes: int = 1):
