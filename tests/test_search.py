@@ -427,24 +427,6 @@ def test_the_hand_layout_evaluated_beside_the_search_is_the_one_validate_would_c
     assert validation.hand[1].score == here.table[0].score
 
 
-def test_the_hand_layouts_scans_shared_out_over_processes_are_one_processs():
-    # a nominal objective has one bracket draw: BaselineRun then shares its scans over the processes
-    from optipose.evaluate.evaluator import Evaluator
-    from optipose.search.validate import BaselineRun
-    from optipose.seeds import validation_seed
-
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
-    with BaselineRun(part, objective, seed=3, processes=2) as run:
-        assert not run._calls and run._thread is not None
-        beside = run.result()
-    with Evaluator(part, objective, seed=validation_seed(3), jobs=1) as evaluator:
-        here = evaluator(part.layouts["hand"])
-    assert beside.per_scan.equals(here.per_scan) and beside.stats.equals(here.stats) and beside.table == here.table
-    with BaselineRun(part, objective, seed=3, processes=2) as run:  # stopped: no result, the validation evaluates it
-        run.close()
-        assert run.result() is None
-
-
 def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_evaluators():
     # the check under the band after a nominal search runs the hand layout's bracket draws in processes of
     # their own (each draw's noise levels together): the result must be RobustEvaluator's, condition by condition

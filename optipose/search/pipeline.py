@@ -111,8 +111,7 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, l
 
     if objective is None or jobs < 2:
         return nullcontext()
-    processes = jobs if last or objective.conditions.trivial else 1  # one draw: its scans over every core (BaselineRun)
-    return BaselineRun(part, objective, seed, config.validation, last=last, processes=processes)
+    return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs if last else 1)
 
 
 def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None, band_run=None) -> SearchReport:

@@ -51,17 +51,13 @@ class BaselineRun:
 
         from optipose.evaluate.background import Background
 
-        self._calls, self._result, self._thread = [], None, None
+        self._calls, self._result = [], None
         layout = baseline(part)
         if layout is None or multiprocessing.current_process().daemon:  # a daemonic worker (Dask) may not start one
             return
         objective = stage_objective(objective, "validation", protocol)
         self._objective, self._conditions = objective, conditions(objective.conditions)
         draws = by_draw(self._conditions)
-        if len(draws) == 1 and processes > 1:  # one draw: its scans shared out over the processes instead
-            self._shares = [self._conditions]
-            self._thread = _Scans(part, objective, validation_seed(seed), layout, self._conditions, processes, _LAST if last else _NICE)
-            return
         n = max(1, min(processes, len(draws)))
         self._shares = [[c for group in draws[i::n] for c in group] for i in range(n)]
         try:
@@ -74,11 +70,10 @@ class BaselineRun:
 
     def wait(self) -> None:
         """Wait until the evaluation has ended (and its processes with it)."""
-        if not self._calls and self._thread is None:
+        if not self._calls:
             return
         try:
-            calls = [self._thread] if self._thread is not None else self._calls
-            done = {c: r for share, call in zip(self._shares, calls) for c, r in zip(share, call.result())}
+            done = {c: r for share, call in zip(self._shares, self._calls) for c, r in zip(share, call.result())}
             each = [done[c] for c in self._conditions]
             self._result = each[0] if self._objective.conditions.trivial else robust_result(list(zip(self._conditions, each)), self._objective)
             for result in each:  # it ran quiet in its own process: say here what the validation's own evaluation would have said
@@ -97,88 +92,12 @@ class BaselineRun:
         for call in self._calls:
             call.close()
         self._calls = []
-        if self._thread is not None:
-            self._thread.close()
-            self._thread = None
 
     def __enter__(self) -> "BaselineRun":
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-class _Scans:
-    """The hand layout's evaluation under one bracket draw, its scans shared out over ``processes`` processes
-    of their own at a lower priority (``nice``): an :class:`Evaluator` in a thread of this process whose
-    executor is :class:`_Processes`. Beside the search the processes take what it leaves idle; once the
-    found layouts' validation is done they take every core, where one process left the others idle. The
-    result is the one a single process gives (the scans' noise comes from the seed and the scan's index)."""
-
-    def __init__(self, part, objective, seed: int, layout, under: list, processes: int, nice: int):
-        import threading
-
-        self._executor = _Processes(processes, nice)
-        self._answer: tuple | None = None
-        args = (part, objective, seed, layout, under)
-        self._thread = threading.Thread(target=self._run, args=args, name="optipose-hand-layout", daemon=True)
-        self._thread.start()
-
-    def _run(self, part, objective, seed, layout, under) -> None:
-        try:
-            with Evaluator(part, objective, seed=seed, quiet=True, executor=self._executor) as evaluator:
-                self._answer = (True, evaluator.under(layout, under))
-        except BaseException as exc:  # noqa: BLE001 - result() reports it
-            self._answer = (False, f"{type(exc).__name__}: {exc}")
-
-    def result(self) -> list:
-        """The evaluations, one per condition (waits for them); :class:`WorkerError` when they failed."""
-        self._thread.join()
-        ok, value = self._answer
-        if not ok:
-            raise WorkerError(f"the hand layout's evaluation: {value}")
-        return value
-
-    def close(self) -> None:
-        """Stop the processes (the thread then ends with an error, unless it had finished)."""
-        self._executor.close()
-        self._thread.join(timeout=30)
-
-
-class _Processes:
-    """An executor (:mod:`optipose.evaluate.executors`) whose workers are processes of their own,
-    :class:`~optipose.evaluate.background.Background` calls at priority ``nice``: worker w runs the items
-    w, w + n, … in order."""
-
-    def __init__(self, n_workers: int, nice: int):
-        self.n_workers, self._nice, self._calls, self._closed = int(n_workers), nice, [], False
-
-    def map(self, fn, items) -> list:
-        from optipose.evaluate.background import Background
-
-        items = list(items)
-        groups = [items[w :: self.n_workers] for w in range(self.n_workers)]
-        calls = []
-        for group in groups:
-            if self._closed:
-                raise WorkerError("stopped")
-            calls.append(Background(_each, fn, group, nice=self._nice) if group else None)
-            self._calls.append(calls[-1])
-        out: list = [None] * len(items)
-        for w, call in enumerate(calls):
-            if call is not None:
-                out[w :: self.n_workers] = call.result()
-        return out
-
-    def close(self) -> None:
-        self._closed = True
-        for call in self._calls:
-            if call is not None:
-                call.close()
-
-
-def _each(fn, items: list) -> list:
-    return [fn(item) for item in items]
 
 
 def _evaluate(part, objective, seed: int, layout, under: list) -> list:
