@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from optipose.model import convex, machine
 from optipose.model.collision import BOUND_LOOSENESS, CollisionModel, ConvexSet
+from optipose.model.convex import hull_arrays
 from optipose.model.motion import ScanMotion
 from optipose.model.part import Part, load_part
 from optipose.report.views import drawn_mesh
@@ -44,7 +46,7 @@ def head_above(model: CollisionModel, z: float) -> np.ndarray:
 @pytest.fixture(scope="module")
 def dense_sphere():
     part = sphere_part(6)  # 81,920 faces, 40,962 vertices all on the hull
-    part.mesh.convex_hull  # trimesh's hull (qhull), cached on the mesh: not the collision model's own memory
+    hull_arrays(part.mesh)  # the hull (qhull), kept per mesh: not the collision model's own memory
     tracemalloc.start()
     model = CollisionModel(part)
     peak = tracemalloc.get_traced_memory()[1]
@@ -111,6 +113,51 @@ def test_supporting_faces_by_climbing_equal_the_definition(which):
     assert np.array_equal(got, brute_force_supporting(mesh, normals, offsets))
     if which == "sphere":  # a convex mesh: every face is on its hull
         assert got.all()
+
+
+@pytest.mark.parametrize("which", ["sphere", *SHIPPED])
+def test_hull_arrays_are_trimeshs_hull_unoriented(which):
+    """The same vertices in the same order as trimesh's repaired hull, and every edge of it."""
+    mesh = trimesh.creation.icosphere(subdivisions=4, radius=R) if which == "sphere" else load_part(which).mesh
+    vertices, faces = hull_arrays(mesh)
+    full = mesh.convex_hull
+    assert np.array_equal(vertices, full.vertices)
+    edges = {tuple(e) for e in np.sort(trimesh.Trimesh(vertices, faces, process=False).edges, axis=1)}
+    assert {tuple(e) for e in np.sort(full.edges, axis=1)} <= edges
+    assert hull_arrays(mesh)[0] is vertices  # kept per mesh
+
+
+def test_a_dense_meshs_hull_is_shared_through_a_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(machine, "SHARED_FACES", 0)
+    monkeypatch.setattr(machine.tempfile, "gettempdir", lambda: str(tmp_path))
+    monkeypatch.setattr(machine, "_WRITTEN", [])
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=R)
+    vertices, faces = hull_arrays(mesh)
+    (written,) = tmp_path.glob("optipose-hull-*.npz")
+    assert machine._WRITTEN == [written]
+    monkeypatch.setattr(convex, "_compute", lambda mesh: pytest.fail("computed again"))
+    again = hull_arrays(trimesh.Trimesh(mesh.vertices.copy(), mesh.faces.copy(), process=False))  # another process's mesh
+    assert np.array_equal(again[0], vertices) and np.array_equal(again[1], faces)
+    machine._remove_written()
+    assert not written.exists()
+
+
+def test_a_dense_meshs_scanner_arrays_are_shared_through_a_file(tmp_path, monkeypatch):
+    from optipose.scan import raycast
+    from optipose.scan.hull import face_arrays
+
+    monkeypatch.setattr(machine, "SHARED_FACES", 0)
+    monkeypatch.setattr(machine.tempfile, "gettempdir", lambda: str(tmp_path))
+    monkeypatch.setattr(machine, "_WRITTEN", [])
+    scanner = part_scanner(load_part("part_c"))  # the part with its keep-outs, written by the scanner
+    assert len(list(tmp_path.glob("optipose-faces-*.npz"))) == 1
+    monkeypatch.setattr(raycast, "shared_planes", lambda *a: pytest.fail("computed again"))
+    mesh = trimesh.Trimesh(scanner.vertices.copy(), scanner.faces.copy(), process=False)  # another process's
+    read = face_arrays(mesh, scanner.vertices, scanner.faces)
+    held = (scanner._plane, scanner._normals, scanner._offsets, scanner._edge_n, scanner._edge_c, scanner._on_hull)
+    for a, b in zip(read, held):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    machine._remove_written()
 
 
 def test_a_dense_part_is_drawn_with_a_bounded_number_of_triangles():

@@ -37,6 +37,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from optipose.model.convex import hull_arrays
 from optipose.model.sensor import SensorModel, load_sensor
 
 __all__ = [
@@ -138,7 +139,7 @@ class CollisionModel:
         offsets = part.motion.offsets()
         travel = np.array([[offsets.min(), 0.0, 0.0], [offsets.max(), 0.0, 0.0]])
         try:
-            hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
+            hull = hull_arrays(part.mesh)[0]
         except Exception:  # trimesh's hull of a flat mesh fails (qhull, or its winding fix): the vertices span the same hull
             hull = np.asarray(part.mesh.vertices, dtype=float)
         self.exact = len(hull) <= EXACT_HULL_VERTICES  # else the hull's bounding polytope (module doc)

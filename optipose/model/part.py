@@ -141,9 +141,23 @@ def load_part(spec: str | Path, units: str = "auto") -> Part:
         part = None
     if part is not None:
         part.units = units
-        return _with_baseline(part)
+        return _lean(_with_baseline(part))
     shipped = ", ".join(list_parts()) or "none found"
     raise ConfigError(f"unknown part '{text}' (shipped parts: {shipped}; or a part .toml or a mesh file)")
+
+
+def _lean(part: Part) -> Part:
+    """A dense mesh without the arrays trimesh derived for the checks and the baseline (its edges, their
+    sorting and faces, components, per-face areas and crosses: several times the mesh itself), which nothing
+    after the loading reads again; each is derived again, the same, if something asks. Normals are kept (a
+    file's own may differ from the derived ones)."""
+    from optipose.model.machine import SHARED_FACES
+
+    if len(part.mesh.faces) > SHARED_FACES:
+        cached = part.mesh._cache.cache  # trimesh's cache of derived properties, dropped by trimesh itself on any edit
+        for key in [k for k in cached if k not in ("face_normals", "vertex_normals")]:
+            del cached[key]
+    return part
 
 
 def _with_baseline(part: Part) -> Part:

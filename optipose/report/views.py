@@ -7,6 +7,7 @@ trapezoid (filled), and the points of a nominal scan, one colour per sensor. Axe
 
 from __future__ import annotations
 
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,7 @@ _BOX_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0
 _MAX_POINTS = 4000  # per sensor in the picture; matplotlib 3D gets slow and muddy beyond that
 _SHARP_DEG = 30.0
 _MAX_TRIANGLES = 50_000  # drawn at most: a dense CAD export is simplified to this many for the picture
+_LAST: dict = {}  # what the views of the last mesh drawn share: its simplification, sharp edges and scanners
 
 
 def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict | None = None) -> Path:
@@ -70,9 +72,22 @@ def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict 
     return out
 
 
-def _nominal_points(part, layout: Layout) -> dict[str, np.ndarray]:
+def _kept(mesh, key, make):
+    """``make()``, kept while ``mesh`` is the last mesh drawn: the four views of a picture, and the pictures of
+    one part's layouts (a search draws one per k), simplify it and build its scanner once."""
+    held = _LAST.get("mesh")
+    if held is None or held() is not mesh:
+        _LAST.clear()
+        _LAST["mesh"] = weakref.ref(mesh, lambda ref: _LAST.clear() if _LAST.get("mesh") is ref else None)
+    if key not in _LAST:
+        _LAST[key] = make()
+    return _LAST[key]
 
-    scanner = part_scanner(part)  # a long part in the evaluation's longer steps: the picture draws a few thousand points
+
+def _nominal_points(part, layout: Layout) -> dict[str, np.ndarray]:
+    occluders = tuple(np.asarray(b, float).tobytes() for box in part.occluders for b in box)
+    scanner = _kept(part.mesh, ("scanner", part.sensor, part.material, occluders), lambda: part_scanner(part))
+    # a long part in the evaluation's longer steps: the picture draws a few thousand points
     scans = scanner.scan_many(layout.poses, registered_motion(part.motion), noise=False)
     return {s.name: scan.points for s, scan in zip(layout.sensors, scans)}
 
@@ -80,17 +95,22 @@ def _nominal_points(part, layout: Layout) -> dict[str, np.ndarray]:
 def _draw_part(ax, part) -> None:
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-    mesh = drawn_mesh(part.mesh)
-    mm = mesh.vertices * 1e3
-    ax.add_collection3d(Poly3DCollection(mm[mesh.faces], facecolor=(0.80, 0.82, 0.86, 0.30), edgecolor="none",
+    mm, triangles, sharp = _kept(part.mesh, "drawn", lambda: _drawn_arrays(part.mesh))
+    ax.add_collection3d(Poly3DCollection(triangles, facecolor=(0.80, 0.82, 0.86, 0.30), edgecolor="none",
                                          axlim_clip=True, zorder=1))  # fmt: skip
-    sharp = mesh.face_adjacency_edges[mesh.face_adjacency_angles > np.deg2rad(_SHARP_DEG)]
     ax.add_collection3d(Line3DCollection(mm[sharp], colors="0.25", linewidths=0.6, axlim_clip=True, zorder=2))
     for keepout in part.keepouts:
         lo, hi = keepout.lo * 1e3, keepout.hi * 1e3
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         ax.add_collection3d(Line3DCollection(corners[_BOX_EDGES], colors="0.55", linewidths=0.8, linestyles=":",
                                               axlim_clip=True, zorder=2))  # fmt: skip
+
+
+def _drawn_arrays(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The drawn mesh's vertices (mm), triangles (t, 3, 3) mm and sharp edges (e, 2) vertex indices."""
+    mesh = drawn_mesh(mesh)
+    mm = mesh.vertices * 1e3
+    return mm, mm[mesh.faces], mesh.face_adjacency_edges[mesh.face_adjacency_angles > np.deg2rad(_SHARP_DEG)]
 
 
 def drawn_mesh(mesh, max_triangles: int = _MAX_TRIANGLES):

@@ -16,7 +16,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["supporting_faces"]
+from optipose.model import machine
+from optipose.model.convex import hull_arrays
+
+__all__ = ["supporting_faces", "face_arrays"]
+
+_FACE_ARRAYS = ("plane", "normals", "offsets", "edge_n", "edge_c", "on_hull")
 
 _CELLS = 8  # cells per side of each of the cube map's six faces
 
@@ -25,9 +30,7 @@ def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float 
     """(f,) bool: face f's plane (unit ``normals`` (f, 3), ``offsets`` (f,): ``n·x = offset``) has every vertex
     of ``mesh``'s convex hull at most ``tol`` in front of it. Degenerate faces (zero normals) are not."""
     try:
-        hull = mesh.convex_hull
-        points = np.ascontiguousarray(hull.vertices, dtype=np.float64)
-        tris = np.asarray(hull.faces, dtype=np.int64)
+        points, tris = hull_arrays(mesh)  # computed once per mesh (and per machine for a dense one)
     except Exception:  # qhull fails on flat or degenerate meshes: then no face is known to support the part
         return np.zeros(len(normals), dtype=bool)
     if len(points) == 0 or len(tris) == 0:
@@ -41,6 +44,21 @@ def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float 
     starts = _cell_starts(points, indptr, neighbours, _cell_centres(_CELLS))
     normals = np.ascontiguousarray(normals, dtype=np.float64)
     return _supporting(points, indptr, neighbours, starts, normals, np.asarray(offsets, dtype=np.float64), tol, _CELLS)
+
+
+def face_arrays(mesh, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The scanner's per-face arrays of ``mesh`` (its ``vertices`` float64, ``faces`` int64): those of
+    :func:`optipose.scan.raycast.shared_planes` and :func:`supporting_faces`; a dense mesh's once per machine
+    (:func:`optipose.model.machine.per_machine`), the same arrays."""
+    from optipose.scan.raycast import shared_planes
+
+    def compute():
+        planes = shared_planes(vertices, faces)
+        return (*planes, supporting_faces(mesh, planes[1], planes[2]))
+
+    if len(faces) <= machine.SHARED_FACES:
+        return compute()
+    return machine.per_machine("faces", machine.digest(vertices, faces), compute, _FACE_ARRAYS)
 
 
 def _cell_centres(cells: int) -> np.ndarray:

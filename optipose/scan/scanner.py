@@ -26,10 +26,10 @@ from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import (
     NORMAL_QUANTILES, block_rays, fill_columns, measure_hits, shadow_rays, split_at_anchors, unsure_between_anchors, write_points,
 )  # fmt: skip
-from optipose.scan.hull import supporting_faces
+from optipose.scan.hull import face_arrays
 from optipose.scan.pose import NOMINAL, PartPose
 from optipose.scan.profiles import EMPTY, ray_lines
-from optipose.scan.raycast import default_threads, make_caster, shared_planes
+from optipose.scan.raycast import default_threads, make_caster
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
@@ -121,8 +121,7 @@ class Scanner:
         self.threads = threads or default_threads()
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._block = _BLOCK_PROFILES if self._pool else _SERIAL_BLOCK_PROFILES
-        self._plane, self._normals, self._offsets, self._edge_n, self._edge_c = shared_planes(self.vertices, self.faces)
-        self._on_hull = supporting_faces(mesh, self._normals, self._offsets)
+        self._plane, self._normals, self._offsets, self._edge_n, self._edge_c, self._on_hull = face_arrays(mesh, self.vertices, self.faces)
         self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
         self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()
         self._ray_lines = ray_lines(self._ray_o_S, self._ray_d_S)
