@@ -72,8 +72,8 @@ def _project(p, i, f, planes, plane_c, q):
 
 @njit(cache=True, nogil=True)
 def _clear(p, i, f, planes, plane_c, adjacent, interior, seen):
-    """Whether p[i], projecting inside face f, lies farther than ``lim`` = 2|d| (d its distance to f's plane)
-    in the plane from every edge of the part: the faces reached from f across the edges p[i] lies within ``lim`` of (or outside of) must all be
+    """Whether p[i], projecting inside face f, lies farther than ``lim`` in the plane from every edge of the
+    part: the faces reached from f across the edges p[i] lies within ``lim`` of (or outside of) must all be
     ``interior`` edges (two faces of one plane: a CAD face's tessellation, no edge of the part), at most
     ``seen``'s length of faces. A straight path in the plane from the projection leaves these faces only
     across one of their other edges, each farther than ``lim``: nothing off the plane projects within
