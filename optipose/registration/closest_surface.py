@@ -57,9 +57,10 @@ def _closest_on_triangle(px, py, pz, a, b, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _project(p, i, f, planes, plane_c, q):
+def _project(p, i, f, planes, plane_c, adjacent, interior, q, seen):
     """Project p[i] on face f's plane into q[i]; True when it lies inside the face by more than 2|d| (d its
-    distance to the plane); then whether it lies inside f."""
+    distance to the plane) — or, given room in ``seen`` (empty: not), inside it and nearer than that only
+    to edges within its plane (:func:`_clear`); then whether it lies inside f."""
     h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
     inset = np.inf
     for k in range(1, 4):
@@ -67,11 +68,16 @@ def _project(p, i, f, planes, plane_c, q):
         inset = min(inset, hk)
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
-    return inset > 2.0 * abs(h0), inset >= 0.0
+    lim = 2.0 * abs(h0)
+    if inset > lim:
+        return True, True
+    if inset > 0.0 and seen.shape[0] > 0:
+        return _clear(p, i, f, lim, planes, plane_c, adjacent, interior, seen), True
+    return False, inset >= 0.0
 
 
-@njit(cache=True, nogil=True)
-def _clear(p, i, f, planes, plane_c, adjacent, interior, seen):
+@njit(cache=True, nogil=True, inline="always")
+def _clear(p, i, f, lim, planes, plane_c, adjacent, interior, seen):
     """Whether p[i], projecting inside face f, lies farther than ``lim`` in the plane from every edge of the
     part: the faces reached from f across the edges p[i] lies within ``lim`` of (or outside of) must all be
     ``interior`` edges (two faces of one plane: a CAD face's tessellation, no edge of the part), at most
@@ -79,8 +85,6 @@ def _clear(p, i, f, planes, plane_c, adjacent, interior, seen):
     across one of their other edges, each farther than ``lim``: nothing off the plane projects within
     ``lim`` of it but what lies over the plane itself (the trust of the keep test), and each face reached
     is farther from p[i] than the projection (in the plane, across an edge of f)."""
-    h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
-    lim = 2.0 * abs(h0)
     seen[0] = f
     n, head = 1, 0
     while head < n:
@@ -90,7 +94,7 @@ def _clear(p, i, f, planes, plane_c, adjacent, interior, seen):
             hk = planes[s, k + 1, 0] * p[i, 0] + planes[s, k + 1, 1] * p[i, 1] + planes[s, k + 1, 2] * p[i, 2] - plane_c[s, k + 1]
             if hk > lim:
                 continue
-            if interior[s, k] == 0 or (s == f and hk <= 0.0):  # p must project inside f itself
+            if interior[s, k] == 0:
                 return False
             g = adjacent[s, k]
             known = False
@@ -175,8 +179,7 @@ def _walk(p, i, f, planes, plane_c, adjacent, interior, q, seen):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        well, inside = _project(p, i, g, planes, plane_c, q)
-        if well or (inside and _clear(p, i, g, planes, plane_c, adjacent, interior, seen)):
+        if _project(p, i, g, planes, plane_c, adjacent, interior, q, seen)[0]:
             return g
     return -1
 
@@ -218,11 +221,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, interior
     for i in range(n):
         f = ids[i]
         if f >= 0:
-            well, inside = _project(p, i, f, planes, plane_c, q)
-            if well or (inside and _clear(p, i, f, planes, plane_c, adjacent, interior, seen)):
-                g = f
-            else:
-                g = _walk(p, i, f, planes, plane_c, adjacent, interior, q, seen)
+            g = f if _project(p, i, f, planes, plane_c, adjacent, interior, q, seen)[0] else _walk(p, i, f, planes, plane_c, adjacent, interior, q, seen)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
@@ -295,7 +294,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, interior
             continue
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
-        well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
+        well_inside, inside = _project(p, i, g_best, planes, plane_c, adjacent, interior, q, seen[:0])
         if not well_inside:  # on or near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
             if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
