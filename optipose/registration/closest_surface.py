@@ -10,9 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "nearest_into", "edge_normal", "adjacent_faces", "interior_edges", "CREASE_DEG"]
+__all__ = ["face_grid", "nearest_into", "edge_normal", "adjacent_faces", "CREASE_DEG"]
 
-_CLEAR = 8  # faces of one plane a point near their common edges is checked against before the search
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
 _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
@@ -57,55 +56,43 @@ def _closest_on_triangle(px, py, pz, a, b, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _project(p, i, f, planes, plane_c, adjacent, interior, q, seen):
+def _project(p, i, f, planes, plane_c, adjacent, plane_id, q, coplanar):
     """Project p[i] on face f's plane into q[i]; True when it lies inside the face by more than 2|d| (d its
-    distance to the plane) — or, given room in ``seen`` (empty: not), inside it and nearer than that only
-    to edges within its plane (:func:`_clear`); then whether it lies inside f."""
+    distance to the plane) — or, with ``coplanar``, nearer than that only to edges shared with a face of
+    the same plane (:func:`_clear_beyond`), inside them all the same; then whether it lies inside f."""
     h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
+    lim = 2.0 * abs(h0)
     inset = np.inf
+    well = True
     for k in range(1, 4):
         hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
         inset = min(inset, hk)
+        if hk <= lim:
+            well = well and coplanar and hk > 0.0 and _clear_beyond(p, i, f, k - 1, lim, planes, plane_c, adjacent, plane_id)
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
-    lim = 2.0 * abs(h0)
-    if inset > lim:
-        return True, True
-    if inset > 0.0 and seen.shape[0] > 0:
-        return _clear(p, i, f, lim, planes, plane_c, adjacent, interior, seen), True
-    return False, inset >= 0.0
+    return well, inset >= 0.0
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _clear(p, i, f, lim, planes, plane_c, adjacent, interior, seen):
-    """Whether p[i], projecting inside face f, lies farther than ``lim`` in the plane from every edge of the
-    part: the faces reached from f across the edges p[i] lies within ``lim`` of (or outside of) must all be
-    ``interior`` edges (two faces of one plane: a CAD face's tessellation, no edge of the part), at most
-    ``seen``'s length of faces. A straight path in the plane from the projection leaves these faces only
-    across one of their other edges, each farther than ``lim``: nothing off the plane projects within
-    ``lim`` of it but what lies over the plane itself (the trust of the keep test), and each face reached
-    is farther from p[i] than the projection (in the plane, across an edge of f)."""
-    seen[0] = f
-    n, head = 1, 0
-    while head < n:
-        s = seen[head]
-        head += 1
-        for k in range(3):
-            hk = planes[s, k + 1, 0] * p[i, 0] + planes[s, k + 1, 1] * p[i, 1] + planes[s, k + 1, 2] * p[i, 2] - plane_c[s, k + 1]
-            if hk > lim:
-                continue
-            if interior[s, k] == 0:
-                return False
-            g = adjacent[s, k]
-            known = False
-            for t in range(n):
-                known = known or seen[t] == g
-            if not known:
-                if n == seen.shape[0]:
-                    return False
-                seen[n] = g
-                n += 1
-    return True
+def _clear_beyond(p, i, f, k, lim, planes, plane_c, adjacent, plane_id):
+    """Whether the face g across f's edge k lies in f's plane (same ``plane_id``) and p[i] projects more than
+    ``lim`` inside each of g's other edges. Then a straight path in the plane from p[i]'s projection (inside
+    f) out through edge k leaves g by one of those edges, farther than ``lim``: nothing of the surface off
+    that plane lies within ``lim`` of the projection beyond edge k, and every point of g is farther from
+    p[i] than its projection (g is in the plane, across the edge)."""
+    g = adjacent[f, k]
+    if g < 0 or plane_id[g] != plane_id[f]:
+        return False
+    shared = False
+    for m in range(3):
+        if adjacent[g, m] == f and not shared:
+            shared = True  # the edge back to f (the first such: a degenerate pair of faces checks the rest)
+            continue
+        hm = planes[g, m + 1, 0] * p[i, 0] + planes[g, m + 1, 1] * p[i, 1] + planes[g, m + 1, 2] * p[i, 2] - plane_c[g, m + 1]
+        if hm <= lim:
+            return False
+    return shared
 
 
 @njit(cache=True, nogil=True)
@@ -163,7 +150,7 @@ def _inset2(p, i, f, planes, plane_c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _walk(p, i, f, planes, plane_c, adjacent, interior, q, seen):
+def _walk(p, i, f, planes, plane_c, adjacent, plane_id, q):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
     the first face p[i] lies inside of by more than 2|d| (its projection in q[i]), or -1."""
@@ -179,23 +166,22 @@ def _walk(p, i, f, planes, plane_c, adjacent, interior, q, seen):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _project(p, i, g, planes, plane_c, adjacent, interior, q, seen)[0]:
+        if _project(p, i, g, planes, plane_c, adjacent, plane_id, q, True)[0]:
             return g
     return -1
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, interior, plane_id, origin, cell, shape, reach, start, faces):
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, origin, cell, shape, reach, start, faces):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
 
     A point inside its guessed face by more than 2|d| keeps it (as ``follow``), and so does one nearer than
-    that only to edges it shares with faces of its plane (``interior`` (f, 3), :func:`interior_edges`: an
-    internal edge of a CAD face's tessellation is no edge of the part) when every other edge of the faces
-    so reached, at most ``_CLEAR``, lies more than 2|d| away (:func:`_clear`; a point a hair inside such
-    an edge keeps its face where the search would give the tie to the lower id: a projection the same
-    to rounding); one that left it walks
+    that only to edges it shares with faces of its plane, when it lies more than 2|d| inside their other
+    edges (:func:`_clear_beyond`: an internal edge of a CAD face's tessellation is no edge of the part; a point
+    a hair inside such an edge keeps its face where the search would give the tie to the lower id, a
+    projection the same to rounding); one that left it walks
     across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face it lies inside of
     by more than 2|d| — the test that keeps a guess. Otherwise the faces listed in the grid's cells
     (:func:`face_grid`) around the point's are searched exactly, ring after ring of cells out to ``reach``
@@ -217,11 +203,10 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, interior
     m2 = margin * margin
     n_open = 0
     cc = np.empty(3, np.int64)
-    seen = np.empty(_CLEAR, np.int64)
     for i in range(n):
         f = ids[i]
         if f >= 0:
-            g = f if _project(p, i, f, planes, plane_c, adjacent, interior, q, seen)[0] else _walk(p, i, f, planes, plane_c, adjacent, interior, q, seen)
+            g = f if _project(p, i, f, planes, plane_c, adjacent, plane_id, q, True)[0] else _walk(p, i, f, planes, plane_c, adjacent, plane_id, q)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
@@ -294,7 +279,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, interior
             continue
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
-        well_inside, inside = _project(p, i, g_best, planes, plane_c, adjacent, interior, q, seen[:0])
+        well_inside, inside = _project(p, i, g_best, planes, plane_c, adjacent, plane_id, q, False)
         if not well_inside:  # on or near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
             if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
@@ -349,15 +334,3 @@ def adjacent_faces(faces: np.ndarray) -> np.ndarray:
     a, b = order[:-1][same], order[1:][same]
     adjacent[a], adjacent[b] = b // 3, a // 3
     return adjacent.reshape(f, 3)
-
-
-def interior_edges(faces: np.ndarray, adjacent: np.ndarray, plane_id: np.ndarray) -> np.ndarray:
-    """(f, 3) int8: 1 where face f's edge k (corner k to corner k + 1) is shared by exactly two faces, both
-    of one plane (``plane_id``; ``adjacent`` of :func:`adjacent_faces`): an edge of the tessellation inside
-    a CAD face. 0 elsewhere (a boundary, a fold, an edge of three or more faces)."""
-    following = np.roll(faces, -1, axis=1)
-    key = (np.minimum(faces, following) * (int(faces.max(initial=0)) + 1) + np.maximum(faces, following)).ravel()
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    two = (counts[inverse.ravel()] == 2).reshape(adjacent.shape)
-    other = np.maximum(adjacent, 0)
-    return (two & (adjacent >= 0) & (plane_id[other] == plane_id[:, None])).astype(np.int8)

@@ -48,7 +48,6 @@ class SurfaceReference:
         self.vertices, self.faces = arrays["vertices"], arrays["faces"]
         self._tri, self._planes, self._plane_c = arrays["tri"], arrays["planes"], arrays["plane_c"]
         self._adjacent, self._plane_id = arrays["adjacent"], arrays["plane_id"]
-        self._interior = None  # interior_edges: on first use
         self._grid_start, self._grid_faces = arrays["grid_start"], arrays["grid_faces"]
         self._meta = arrays["meta"]  # area, the grid's origin (3), cell, shape (3)
         self.area = float(self._meta[0])
@@ -154,11 +153,9 @@ class SurfaceReference:
         """:meth:`nearest` into the caller's arrays: points (m, 3) float64 contiguous, ids (m,) int64 (the
         guesses, each -1 or a face, then the answer), q and n (m, 3), ``open_`` (m,) bool all False (and so
         again on return)."""
-        from optipose.registration.closest_surface import interior_edges, nearest_into
+        from optipose.registration.closest_surface import nearest_into
 
-        if self._interior is None:
-            self._interior = interior_edges(self.faces, self._adjacent, self._plane_id)
-        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._interior, self._plane_id,
+        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id,
                         *self._grid()):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
