@@ -177,11 +177,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
 
-    A point inside its guessed face by more than 2|d| keeps it (as ``follow``), and so does one nearer than
-    that only to edges it shares with faces of its plane, when it lies more than 2|d| inside their other
-    edges (:func:`_clear_beyond`: an internal edge of a CAD face's tessellation is no edge of the part; a point
-    a hair inside such an edge keeps its face where the search would give the tie to the lower id, a
-    projection the same to rounding); one that left it walks
+    A point inside its guessed face by more than 2|d| keeps it (as ``follow``); one that left it walks
     across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face it lies inside of
     by more than 2|d| — the test that keeps a guess. Otherwise the faces listed in the grid's cells
     (:func:`face_grid`) around the point's are searched exactly, ring after ring of cells out to ``reach``
