@@ -56,43 +56,16 @@ def _closest_on_triangle(px, py, pz, a, b, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _project(p, i, f, planes, plane_c, adjacent, plane_id, q, coplanar):
-    """Project p[i] on face f's plane into q[i]; True when it lies inside the face by more than 2|d| (d its
-    distance to the plane) — or, with ``coplanar``, nearer than that only to edges shared with a face of
-    the same plane (:func:`_clear_beyond`), inside them all the same; then whether it lies inside f."""
+def _project(p, i, f, planes, plane_c, q):
+    """Project p[i] on face f's plane into q[i]; True when it lies inside the face by more than 2|d|."""
     h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
-    lim = 2.0 * abs(h0)
     inset = np.inf
-    well = True
     for k in range(1, 4):
         hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
         inset = min(inset, hk)
-        if hk <= lim:
-            well = well and coplanar and hk > 0.0 and _clear_beyond(p, i, f, k - 1, lim, planes, plane_c, adjacent, plane_id)
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
-    return well, inset >= 0.0
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _clear_beyond(p, i, f, k, lim, planes, plane_c, adjacent, plane_id):
-    """Whether the face g across f's edge k lies in f's plane (same ``plane_id``) and p[i] projects more than
-    ``lim`` inside each of g's other edges. Then a straight path in the plane from p[i]'s projection (inside
-    f) out through edge k leaves g by one of those edges, farther than ``lim``: nothing of the surface off
-    that plane lies within ``lim`` of the projection beyond edge k, and every point of g is farther from
-    p[i] than its projection (g is in the plane, across the edge)."""
-    g = adjacent[f, k]
-    if g < 0 or plane_id[g] != plane_id[f]:
-        return False
-    shared = False
-    for m in range(3):
-        if adjacent[g, m] == f and not shared:
-            shared = True  # the edge back to f (the first such: a degenerate pair of faces checks the rest)
-            continue
-        hm = planes[g, m + 1, 0] * p[i, 0] + planes[g, m + 1, 1] * p[i, 1] + planes[g, m + 1, 2] * p[i, 2] - plane_c[g, m + 1]
-        if hm <= lim:
-            return False
-    return shared
+    return inset > 2.0 * abs(h0), inset >= 0.0
 
 
 @njit(cache=True, nogil=True)
@@ -150,7 +123,7 @@ def _inset2(p, i, f, planes, plane_c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _walk(p, i, f, planes, plane_c, adjacent, plane_id, q):
+def _walk(p, i, f, planes, plane_c, adjacent, q):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
     the first face p[i] lies inside of by more than 2|d| (its projection in q[i]), or -1."""
@@ -166,7 +139,7 @@ def _walk(p, i, f, planes, plane_c, adjacent, plane_id, q):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _project(p, i, g, planes, plane_c, adjacent, plane_id, q, True)[0]:
+        if _project(p, i, g, planes, plane_c, q)[0]:
             return g
     return -1
 
@@ -202,7 +175,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     for i in range(n):
         f = ids[i]
         if f >= 0:
-            g = f if _project(p, i, f, planes, plane_c, adjacent, plane_id, q, True)[0] else _walk(p, i, f, planes, plane_c, adjacent, plane_id, q)
+            g = f if _project(p, i, f, planes, plane_c, q)[0] else _walk(p, i, f, planes, plane_c, adjacent, q)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
@@ -275,7 +248,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
             continue
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
-        well_inside, inside = _project(p, i, g_best, planes, plane_c, adjacent, plane_id, q, False)
+        well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
         if not well_inside:  # on or near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
             if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
