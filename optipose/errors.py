@@ -37,6 +37,22 @@ def read_toml(path, what: str = "") -> tuple[dict, str]:
         raise ConfigError(f"{what} {path}: {reason}" if what else f"{path}: {reason}") from None
 
 
+def shipped_toml(spec, folder, what: str):
+    """The TOML file ``spec`` names: a shipped name (``folder/<spec>.toml``) or a path; a name that is
+    neither, or a path that is no file, is one :class:`ConfigError` (``what``: "objective", "cell")."""
+    from pathlib import Path
+
+    path = Path(spec)
+    if not path.suffix and not path.exists():
+        path = Path(folder) / f"{spec}.toml"
+        if not path.is_file():
+            shipped = sorted(p.stem for p in Path(folder).glob("*.toml"))
+            raise ConfigError(f"unknown {what} '{spec}' (shipped: {', '.join(shipped)}; or give a .toml path)")
+    if not path.is_file():
+        raise ConfigError(f"{what} file not found: {path}")
+    return path
+
+
 def is_interrupt(exc: BaseException) -> bool:
     """Ctrl-C: a ``KeyboardInterrupt``, or the ``SystemError`` a compiled (numba) function raises when the
     interrupt arrives while it runs ("returned a result with an exception set", the interrupt its context)."""

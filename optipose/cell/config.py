@@ -35,7 +35,7 @@ import numpy as np
 
 from optipose.cell.asmade import Process
 from optipose.cell.robot import CalibrationErrors, RobotErrors
-from optipose.errors import ConfigError, read_toml
+from optipose.errors import ConfigError, read_toml, shipped_toml
 
 __all__ = ["Cell", "CELLS_DIR", "load_cell", "load_process", "process_names", "IDEAL"]
 
@@ -89,14 +89,7 @@ def load_cell(spec: "str | Path | Cell | None") -> Cell:
         return spec
     if spec is None or spec == "ideal":
         return IDEAL
-    path = Path(spec)
-    if not path.suffix and not path.exists():
-        path = CELLS_DIR / f"{spec}.toml"
-        if not path.is_file():
-            shipped = sorted(p.stem for p in CELLS_DIR.glob("*.toml"))
-            raise ConfigError(f"unknown cell '{spec}' (shipped: {', '.join(shipped)}; or give a .toml path)")
-    if not path.is_file():
-        raise ConfigError(f"cell file not found: {path}")
+    path = shipped_toml(spec, CELLS_DIR, "cell")
     table, text = read_toml(path, "cell file")
     return cell_from_table(table, str(path), default_name=path.stem, source_text=text)
 

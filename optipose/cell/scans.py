@@ -34,10 +34,10 @@ __all__ = ["CellSetup", "LiveCell", "GRAZING"]
 GRAZING = 0.2  # |cos| of the angle between ray and normal below which a displacement's factor is capped
 _CELL, _INSTANCE, _SCAN, _CALIBRATION = 0xCE11, 1, 2, 3
 _EDGE_SAMPLE = 1e-4  # m between the samples of a concave edge that the multipath test measures to
-_CONCAVE_DEG = 20.0
+_CONCAVE_DEG = 20.0  # faces meeting at an inside angle this far below 180° form a concave edge
 # the kernel's part-as-made arguments when the part is its CAD: no form grid, no planes, no scale, warp or layers
 _NO_PART = (np.zeros((0, 0, 0)), np.zeros(3), np.ones(3), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
-            np.zeros(3), np.zeros(3), 0.0, 0, 1.0, 1.0, 0.0, 0.0, 0.5)  # fmt: skip  # faces meeting at an inside angle this far below 180° form a concave edge
+            np.zeros(3), np.zeros(3), 0.0, 0, 1.0, 1.0, 0.0, 0.0, 0.5)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -51,10 +51,9 @@ class CellSetup:
 
     @property
     def ideal(self) -> bool:
-        return self.cell.ideal or (
-            not (self.cell.robot.moves or self.cell.robot.orientation or self.cell.calibration.off)
-            and self.process.exact and self.effects.none
-        )
+        """Every source a no-op (an ideal cell's process is the CAD and its material has no effects)."""
+        robot, calibration = self.cell.robot, self.cell.calibration
+        return not (robot.moves or robot.orientation or calibration.off) and self.process.exact and self.effects.none
 
     @classmethod
     def of(cls, cell: Cell, part) -> "CellSetup":
@@ -143,18 +142,6 @@ class LiveCell:
             ghost = drawn[self.edges.query(x_P, distance_upper_bound=e.concave_distance)[0] < e.concave_distance]
             s[ghost] += rng.uniform(0.0, 1.0, len(ghost)) * e.spurious_range
         return s
-
-
-def _rays(points: np.ndarray, T_O_S: np.ndarray, apex_z: float, shift: np.ndarray) -> np.ndarray:
-    """Unit laser-ray directions (n, 3) in O to ``points`` (motion undone) from a sensor at ``T_O_S``
-    whose laser apex is at ``apex_z`` on its z axis, for profiles taken at ``shift`` (n,) m."""
-    if not np.isfinite(apex_z):
-        return np.broadcast_to(T_O_S[:3, 2], points.shape).copy()
-    apex = T_O_S[:3, :3] @ np.array([0.0, 0.0, apex_z]) + T_O_S[:3, 3]
-    origin = np.repeat(apex[None], len(points), axis=0)
-    origin[:, 0] -= shift
-    ray = points - origin
-    return ray / np.linalg.norm(ray, axis=1, keepdims=True)
 
 
 def _concave_edge_samples(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray | None:

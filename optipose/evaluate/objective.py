@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from optipose.errors import ConfigError, read_toml
+from optipose.errors import ConfigError, read_toml, shipped_toml
 from optipose.registration.backends import BACKENDS as REGISTRATION_BACKENDS
 from optipose.cell.config import IDEAL, Cell, load_cell
 from optipose.cell.robot import CalibrationErrors, RobotErrors
@@ -106,14 +106,7 @@ class Objective:
 
 def load_objective(spec: str | Path) -> Objective:
     """An objective from a shipped name (``paper``) or a TOML path."""
-    path = Path(spec)
-    if not path.suffix and not path.exists():
-        path = OBJECTIVES_DIR / f"{spec}.toml"
-        if not path.is_file():
-            shipped = sorted(p.stem for p in OBJECTIVES_DIR.glob("*.toml"))
-            raise ConfigError(f"unknown objective '{spec}' (shipped: {', '.join(shipped)}; or give a .toml path)")
-    if not path.is_file():
-        raise ConfigError(f"objective file not found: {path}")
+    path = shipped_toml(spec, OBJECTIVES_DIR, "objective")
     table, text = read_toml(path, "objective file")
     return objective_from_table(table, where=str(path), source_text=text, default_name=path.stem)
 
