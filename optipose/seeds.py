@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed", "group_seed", "mounting_seed", "zeroing_seed"]
+__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed", "group_seed", "mounting_seed", "zeroing_seed", "verdict_seed"]
 
 _SELECTION = 0x5E1EC7
 _VALIDATION = 0x7A11D
 _NOMINAL_REFERENCE = 7
 _SENSOR_MODEL = 0x5E4500  # plus the group's index
 _MOUNTING = 0xB4AC7E7
+_VERDICT = 0x7E4D1C7
 
 
 def derived_seed(seed: int, tag: int) -> int:
@@ -33,6 +34,15 @@ def selection_seed(seed: int) -> int:
 def validation_seed(seed: int) -> int:
     """The held-out noise seed of the search's validation: derived from, and never equal to, the search seed."""
     return derived_seed(seed, _VALIDATION)
+
+
+def verdict_seed(seed: int, draw: int) -> int:
+    """The seed of the verdict's draw ``draw`` (a cell instance and its scans' noise, the same for the found
+    and the hand layout): draw 0 is the validation's held-out seed, each later one a seed of its own that
+    neither the search nor the validation saw."""
+    if draw == 0:
+        return validation_seed(seed)
+    return int(np.random.SeedSequence([int(seed), _VERDICT, int(draw)]).generate_state(1)[0])
 
 
 def nominal_reference_seed(seed: int) -> int:

@@ -78,10 +78,11 @@ def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
     assert max(len(line) for line in lines) <= 80
     result = load_result(results["search"])
     verdicts, band = result.verdicts(), result.band_verdicts()
-    from optipose.cli.search import verdict_headline
-
     assert set(band) == {v.k for v in verdicts}  # checked under the band
-    assert lines[: len(verdicts)] == [verdict_headline(v, "conventional", band[v.k]) for v in verdicts]
+    # the verdict with confidence first, one line per k, then the predicted errors with their intervals
+    assert lines[: len(verdicts)] == [result.confident[v.k].line() for v in verdicts]
+    assert all(any(f"{w} conventional" in line for w in ("vs", "than", "KEEP")) for line in lines[:2])
+    assert "predicted median |error| in the cell" in results["stdout"]
     assert [line[:4] for line in lines[:2]] == ["k=1:", "k=2:"]
     table_row = next(i for i, line in enumerate(lines) if line.lstrip().startswith("1  found"))
     assert table_row > len(verdicts)  # the details come after

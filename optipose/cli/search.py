@@ -269,8 +269,11 @@ def _print_report(console, report, part, unchecked: bool = False) -> None:
     if report.validated:
         verdicts = report.validation.verdicts()
         band = report.band.by_k() if report.band is not None else {}
-        for v in verdicts:
-            console.print(verdict_headline(v, label, band.get(v.k), checked=not unchecked), highlight=False)
+        confident = getattr(report, "confident", {})
+        for v in confident.values() or verdicts:
+            console.print(v.line() if confident else verdict_headline(v, label, band.get(v.k), checked=not unchecked), highlight=False)
+        if confident:
+            console.print(_confident_table(confident, part))
         if unchecked and any(v.no_worse for v in verdicts):
             from optipose.evaluate.compare import UNCHECKED
 
@@ -366,6 +369,19 @@ def _narrow_table(title: str, columns: list[tuple[str, str]]):
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
     for name, justify in columns:
         table.add_column(name, justify=justify, no_wrap=True)
+    return table
+
+
+def _confident_table(confident: dict, part):
+    """Per k, found and the baseline: the predicted median |error| per axis in the cell with its interval (mdeg)."""
+    from optipose.report.confidence import interval_cell
+
+    v = next(iter(confident.values()))
+    table = _narrow_table(f"{part.name}: predicted median |error| in the cell, mdeg [{100 * v.confidence:.1f} % interval]",
+                          [("k", "right"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"), ("yaw", "right")])  # fmt: skip
+    for k, v in sorted(confident.items()):
+        for name, axes in ((v.found_name, v.found), (v.hand_name, v.hand)):
+            table.add_row(str(k), name, *(interval_cell(a.median_deg, digits=2) for a in axes))
     return table
 
 

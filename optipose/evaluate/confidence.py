@@ -30,7 +30,8 @@ Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is 
 axes' shares (weight · (median + p75) per axis) carry the tolerance, their medians and p75s are reported.
 
 :func:`race` adds draws from a callable until the decision is not UNDECIDED or a budget ends, deciding only
-at a few :func:`looks`, each at a share of the error rate. Everything is
+at a few :func:`looks`, each at a share of the error rate; :func:`race_many` does it for several k at once
+(one draw evaluates every found layout and the hand one). Everything is
 seeded: the same draws and :class:`Rules` give the same verdict.
 """
 
@@ -51,7 +52,7 @@ from optipose.evaluate.statistics import FAILED_ERROR
 
 __all__ = [
     "BUY", "KEEP", "TIE", "UNDECIDED", "DECISIONS", "Rules", "PairedDraw", "Interval", "AxisError", "AxisRatio",
-    "ConfidentVerdict", "scan_errors", "paired_draw", "paired_draws", "compare_draws", "looks", "race",
+    "ConfidentVerdict", "scan_errors", "paired_draw", "paired_draws", "compare_draws", "looks", "race", "race_many",
 ]  # fmt: skip
 
 BUY, KEEP, TIE, UNDECIDED = "BUY", "KEEP", "TIE", "UNDECIDED"
@@ -201,9 +202,14 @@ class ConfidentVerdict:
         tail = f"{self.n_draws} draw{'s' if self.n_draws != 1 else ''}"
         if self.decision == UNDECIDED and self.more_draws is not None:
             minutes = self.more_minutes
-            tail += f"; +{self.more_draws}" + (f", {minutes:.0f} min" if math.isfinite(minutes) else "")
-        line = f"{text} ({tail})"
-        return line if len(line) <= 80 else text[:80]
+            took = (f", {minutes:.0f} min" if minutes >= 1 else f", {60 * minutes:.0f} s") if math.isfinite(minutes) else ""
+            tail += f"; +{self.more_draws}{took}"
+        # undecided: the axis whose interval straddles the tolerance, where it fits
+        open_ = [a for a in self.axes if a.ratio.low < 1.0 / (1.0 + self.tolerance) <= a.ratio.high]
+        axis = "".join(f"; {a.axis} {a.ratio.estimate:.2f}x [{a.ratio.low:.2f}, {a.ratio.high:.2f}]" for a in open_[:1])
+        axis = axis if self.decision == UNDECIDED else ""
+        fits = [line for line in (f"{text}{axis} ({tail})", f"{text} ({tail})", f"{text}{axis}") if len(line) <= 80]
+        return fits[0] if fits else text[:80]
 
     def axis_lines(self) -> list[str]:
         """Per axis, found's and hand's predicted median / p75 (mdeg) with intervals, each ≤ 80 columns."""
@@ -375,16 +381,39 @@ def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_
     intervals are at confidence 1 − (1 − ``rules.confidence``) / (looks + 1), which the verdict carries.
     ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` as :func:`compare_draws` takes them. The
     verdict carries the seconds a draw took, so an UNDECIDED one says how many minutes more would take."""
+    verdicts = race_many(lambda i: {0: next_draw(i)}, rules, min_draws=min_draws, max_draws=max_draws, seconds=seconds,
+                         clock=clock, draws={0: list(draws)} if draws else None, names={0: names})  # fmt: skip
+    return verdicts[0]
+
+
+def race_many(next_draws: Callable[[int], dict], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
+              seconds: float = math.inf, clock: Callable[[], float] = time.monotonic, draws: dict | None = None,
+              names: dict | None = None) -> dict:  # fmt: skip
+    """:func:`race` for several comparisons that share their draws (one draw evaluates every found layout and
+    the hand one): ``next_draws(i)`` gives key → the paired draw at position i (keys: e.g. k), ``draws`` the
+    draws in hand per key, ``names`` per key what :func:`compare_draws` takes. Draws are added until every
+    key's decision is not UNDECIDED (a decided key keeps the verdict of the look that decided it), or the
+    draws or the ``seconds`` end. Returns key → :class:`ConfidentVerdict`."""
     schedule = looks(min_draws, max_draws)
     each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) / (len(schedule) + 1))
-    start, taken, added = clock(), list(draws), 0
+    taken = {key: list(v) for key, v in (draws or {}).items()}
+    names = names or {}
+    done: dict = {}
+    start, added = clock(), 0
     while True:
+        n = min((len(v) for v in taken.values()), default=0)
         elapsed = clock() - start
         per_draw = elapsed / added if added else math.nan
         out_of_time = bool(added) and elapsed + per_draw > seconds
-        if taken and (len(taken) in schedule or len(taken) >= max_draws or out_of_time):
-            verdict = compare_draws(taken, each, seconds_per_draw=per_draw, **names)
-            if verdict.decision != UNDECIDED or len(taken) >= max_draws or out_of_time:
-                return verdict
-        taken.append(next_draw(len(taken)))
+        last = n >= max_draws or out_of_time
+        if n and (n in schedule or last):
+            for key, pairs in taken.items():
+                if key not in done:
+                    verdict = compare_draws(pairs, each, seconds_per_draw=per_draw, **names.get(key, {}))
+                    if verdict.decision != UNDECIDED or last:
+                        done[key] = verdict
+            if len(done) == len(taken):
+                return done
+        for key, pair in next_draws(n).items():
+            taken.setdefault(key, []).append(pair)
         added += 1

@@ -71,7 +71,38 @@ def load_search(folder: Path, config: RunConfig | None = None):
 
     return SearchResult(folder, config.part_name, int(config.seed), str(given(config.budget, "")), config,
                         layouts, hand, validation(folder / "comparison.csv"),
-                        validation(folder / "band" / "comparison.csv") if config.band is not None else None)  # fmt: skip
+                        validation(folder / "band" / "comparison.csv") if config.band is not None else None,
+                        read_verdicts(folder / "verdict.csv"))  # fmt: skip
+
+
+def read_verdicts(path: Path) -> dict:
+    """k → :class:`~optipose.evaluate.confidence.ConfidentVerdict` from ``verdict.csv`` ({} without one)."""
+    from optipose.evaluate.confidence import AxisError, AxisRatio, ConfidentVerdict, Interval
+
+    if not path.is_file():
+        return {}
+    out = {}
+    with reading(path):
+        rows = pd.read_csv(path, keep_default_na=False, na_values=[""])
+        for k, group in rows.groupby("k", sort=True):
+            score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
+
+            def iv(row, name):
+                return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
+
+            more = int(score["more_draws"])
+            out[int(k)] = ConfidentVerdict(
+                k=int(k), decision=str(score["decision"]), found_name=str(score["found"]), hand_name=str(score["hand"]),
+                score=iv(score, "ratio"),
+                axes=tuple(AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio")) for _, r in axes.iterrows()),
+                found=tuple(AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()),
+                hand=tuple(AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()),
+                found_score_deg=iv(score, "found_median_deg"), hand_score_deg=iv(score, "hand_median_deg"),
+                n_draws=int(score["draws"]), n_scans=int(score["scans"]), tolerance=float(score["tolerance"]),
+                confidence=float(score["confidence"]), more_draws=None if more < 0 else more,
+                seconds_per_draw=float(score["seconds_per_draw"]), reference=str(score["reference"]),
+            )  # fmt: skip
+    return out
 
 
 def load_history(folder: str | Path) -> list:

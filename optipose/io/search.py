@@ -3,7 +3,8 @@
 ``config.toml`` (first), ``history.csv`` and ``cache.npz`` (flushed as the search goes: what was computed
 is never lost, and ``--resume`` replays it), ``layouts/found_k*.toml`` (the surrogate's best first, the
 finalists after the selection), ``selection.csv``, ``surrogate_scores.csv``, ``validation/`` (one
-evaluation folder per evaluated layout) and ``comparison.csv`` (found vs. hand per k and axis); after a
+evaluation folder per evaluated layout) and ``comparison.csv`` (found vs. hand per k and axis), ``verdict/``
+(the verdict's further draws, one folder each) and ``verdict.csv`` (the verdict with confidence); after a
 check under a band (``SearchConfig.band``), ``band/`` holds the same for it: one folder per layout with one
 evaluation per condition, and ``band/comparison.csv``.
 """
@@ -17,7 +18,7 @@ import numpy as np
 from optipose.io.evaluation import write_evaluation
 from optipose.files import atomic_path, reading
 from optipose.io.folders import part_table, versions, write_config, write_csv
-from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame, table1_frame
+from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame, table1_frame, verdict_frame
 from optipose.model.layout import Layout, write_layout
 
 __all__ = ["SearchFolder", "save_cache", "load_cache"]
@@ -67,6 +68,16 @@ class SearchFolder:
     def validation(self, validation) -> None:
         """``comparison.csv``: found vs. hand per k and axis."""
         write_csv(comparison_frame(validation), self.folder / "comparison.csv")
+
+    def verdict_draw(self, draw: int, name: str, result) -> None:
+        """``verdict/draw-<i>/<name>/``: one evaluation of a draw of the verdict (after the validation's), as
+        soon as it ends."""
+        _write_evaluations(self.folder / "verdict" / f"draw-{draw}" / name, result)
+
+    def verdict(self, verdicts: dict) -> None:
+        """``verdict.csv``: the verdict with confidence per k, its intervals per axis."""
+        if verdicts:
+            write_csv(verdict_frame(verdicts), self.folder / "verdict.csv")
 
     def band_evaluation(self, name: str, result) -> None:
         """``band/<name>/<condition>/``: one evaluation of the check under the band, as soon as it ends."""

@@ -11,7 +11,7 @@ import pandas as pd
 
 __all__ = [
     "table1_frame", "comparison_frame", "selection_frame", "history_frame", "surrogate_frame", "robustness_frame",
-    "brackets_frame", "bracket_sensors_frame",
+    "brackets_frame", "bracket_sensors_frame", "verdict_frame", "VERDICT_COLUMNS",
 ]  # fmt: skip
 
 
@@ -142,3 +142,36 @@ def bracket_sensors_frame(sensitivities: dict) -> pd.DataFrame:
                              **{f"change_{axis}_deg": float(np.rad2deg(c)) for axis, c in zip(("roll", "pitch", "yaw"), s.change)},
                              "score_change_deg": float(np.rad2deg(s.score_change))})  # fmt: skip
     return pd.DataFrame(rows)
+
+
+# the interval columns of ``verdict.csv``: each the estimate, then ``_low`` and ``_high``
+VERDICT_COLUMNS = ("ratio", "median_ratio", "p75_ratio", "found_median_deg", "found_p75_deg", "hand_median_deg", "hand_p75_deg")
+
+
+def verdict_frame(verdicts: dict) -> pd.DataFrame:
+    """The verdicts with confidence (``verdict.csv``): per k a row for the score (axis ``score``: hand / found
+    in sum, found's and hand's score in the ``*_median_deg`` columns) and one per axis (hand / found of its
+    share of the score, of its median and p75; each layout's predicted median and p75, degrees), each with its
+    interval (``_low``, ``_high``); the decision and what it rests on repeated on every row."""
+    rows = []
+    for k, v in sorted(verdicts.items()):
+        head = {"k": k, "decision": v.decision, "found": v.found_name, "reference": v.reference, "hand": v.hand_name,
+                "draws": v.n_draws, "scans": v.n_scans, "tolerance": v.tolerance, "confidence": v.confidence,
+                "more_draws": v.more_draws if v.more_draws is not None else -1, "seconds_per_draw": v.seconds_per_draw}  # fmt: skip
+        empty = {"median_ratio": None, "p75_ratio": None, "found_p75_deg": None, "hand_p75_deg": None}
+        score = {"ratio": v.score, "found_median_deg": v.found_score_deg, "hand_median_deg": v.hand_score_deg, **empty}
+        rows.append({**head, "axis": "score", **_intervals(score)})
+        for ratio, found, hand in zip(v.axes, v.found, v.hand):
+            cells = {"ratio": ratio.ratio, "median_ratio": ratio.median, "p75_ratio": ratio.p75, "found_median_deg": found.median_deg,
+                     "found_p75_deg": found.p75_deg, "hand_median_deg": hand.median_deg, "hand_p75_deg": hand.p75_deg}  # fmt: skip
+            rows.append({**head, "axis": ratio.axis, **_intervals(cells)})
+    return pd.DataFrame(rows)
+
+
+def _intervals(cells: dict) -> dict:
+    out = {}
+    for name in VERDICT_COLUMNS:
+        iv = cells[name]
+        values = (np.nan, np.nan, np.nan) if iv is None else (iv.estimate, iv.low, iv.high)
+        out.update({name: values[0], f"{name}_low": values[1], f"{name}_high": values[2]})
+    return out

@@ -143,10 +143,11 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     from optipose.io.load import load_history, load_selection, load_surrogate_scores
     from optipose.model.baseline import baseline_label
     from optipose.report.layouts import layout_section
-    from optipose.report.provenance import provenance_blocks
+    from optipose.report.provenance import cell_name, provenance_blocks
     from optipose.report.robustness import band_blocks
     from optipose.report.scans import scan_blocks
     from optipose.report.search import search_blocks, surrogate_pairs
+    from optipose.report.confidence import confident_blocks
     from optipose.report.verdict import table1_side_by_side, verdict_blocks
 
     label = baseline_label(result.hand)
@@ -157,7 +158,11 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         blocks.append(Paragraph("the search stopped before its validation: no verdict; the layouts below are its best so far", "verdict mixed"))
     else:
         protocol = "the full protocol" if validation.protocol == "full" else "the REDUCED protocol (14 scans; --budget default for the full one)"
-        blocks += verdict_blocks(result.verdicts(), validation.found, validation.hand, label, result.band_verdicts(), result.unchecked)
+        verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, result.band_verdicts(), result.unchecked)
+        if result.confident:
+            verdict = verdict[:1] + confident_blocks(result.confident, cell_name(result.config)) + [
+                Heading("The validation draw alone, statistic by statistic")] + verdict[1:]
+        blocks += verdict
         blocks.append(Paragraph(f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "
                                 f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
                                 "A verdict says 'better in sum' from the summed per-axis medians and 75th percentiles, and 'no worse on any axis' "

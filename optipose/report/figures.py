@@ -163,3 +163,27 @@ def layout_views(part, layout_name: str) -> bytes:
     with tempfile.TemporaryDirectory() as tmp:
         path = render_part(part, Path(tmp) / "view.png", layout_name)
         return path.read_bytes()
+
+
+def verdict_intervals(verdicts: list) -> bytes:
+    """Per axis (a panel each) and k, the predicted median |error| in the cell (mdeg, log) of the found layout
+    and the baseline, each with its interval; ``verdicts``: :class:`~optipose.evaluate.confidence.ConfidentVerdict`."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharey=True)
+    ks = [v.k for v in verdicts]
+    for j, ax in enumerate(axes):
+        for shift, side, colour in ((-0.12, "found", "C0"), (0.12, "hand", "C1")):
+            est = [1e3 * getattr(v, side)[j].median_deg.estimate for v in verdicts]
+            low = [1e3 * getattr(v, side)[j].median_deg.low for v in verdicts]
+            high = [1e3 * getattr(v, side)[j].median_deg.high for v in verdicts]
+            err = np.clip([np.subtract(est, low), np.subtract(high, est)], 0.0, None)
+            label = "found" if side == "found" else (verdicts[0].reference if verdicts else "hand")
+            ax.errorbar(np.add(ks, shift), est, yerr=err, fmt="o", color=colour, capsize=4, label=label)
+        ax.set_xticks(ks, [f"k={k}" for k in ks])
+        ax.set_yscale("log")
+        ax.set_title(f"{_AXES[j]}: median |error|")
+        ax.grid(axis="y", alpha=0.3, which="both")
+    axes[0].set_ylabel("predicted (mdeg, log)")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    return _png(fig)

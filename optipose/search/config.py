@@ -73,6 +73,13 @@ class SearchConfig:
     # at the preset's noise with perfect brackets is not bought. Skipped when the search's own objective
     # has a band (its validation is under it already)
     band: str = ""
+    # the verdict with confidence (search/verdict.py): draws of the cell after the validation's, raced until
+    # every k is BUY, KEEP or TIE, at most verdict_draws in all and while another draw ends within verdict_time
+    # s (0: no limit); an axis may be worse by verdict_tolerance (0.1: 10 %) with verdict_confidence
+    verdict_draws: int = 12
+    verdict_time: float = 120.0
+    verdict_tolerance: float = 0.10
+    verdict_confidence: float = 0.95
 
     def __post_init__(self) -> None:
         if not self.sensors or min(self.sensors) < 1 or max(self.sensors) > 6:
@@ -81,6 +88,8 @@ class SearchConfig:
             raise ConfigError(f"search validation must be full or reduced, not '{self.validation}'")
         if self.strategy not in ("greedy", "joint", "both"):
             raise ConfigError(f"search strategy must be greedy, joint or both, not '{self.strategy}'")
+        if self.verdict_draws < 1 or not 0.5 < self.verdict_confidence < 1 or self.verdict_tolerance < 0:
+            raise ConfigError("search verdict: verdict_draws >= 1, 0.5 < verdict_confidence < 1 and verdict_tolerance >= 0")
         for name in (self.global_algorithm, self.local_algorithm, self.polish_algorithm):
             algorithm_code(name)  # raises ConfigError for an unknown name
 
@@ -91,7 +100,7 @@ BUDGETS: dict[str, dict] = {
     # "Budgets"); no check under the band, so its verdicts say they hold in the ideal cell only
     "quick": dict(
         global_evals=70, local_evals=20, max_time=25.0, random_starts=4, select_candidates=0, strategy="greedy",
-        screen_samples=1024, screen_starts=4, screen_evals=20,
+        screen_samples=1024, screen_starts=4, screen_evals=20, verdict_draws=3, verdict_time=20.0,
     ),  # fmt: skip
     "default": dict(
         global_evals=400, local_evals=120, joint_evals=200, max_time=240.0, select_candidates=3, select_time=240.0,
@@ -101,6 +110,7 @@ BUDGETS: dict[str, dict] = {
         global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16, screen_samples=16384,
         screen_starts=12, screen_evals=60,
         select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6, band="robust",
+        verdict_draws=30, verdict_time=900.0,
     ),  # fmt: skip
 }
 

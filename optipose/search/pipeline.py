@@ -14,7 +14,10 @@
    that wins only in the simulation's ideal cell is not a layout to buy. Every budget validates on the objective's protocol
    (``[search] validation = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
    hand layout's part of it starts with step 2, in a process of its own (``jobs`` ≥ 2), and is waited
-   for before step 3.
+   for before step 3;
+5. the verdict with confidence (:mod:`optipose.search.verdict`): the validation's evaluations are its first
+   draw, and further draws of the cell on seeds of their own are raced until every k is BUY, KEEP or TIE,
+   before the check under the band.
 
 Every result goes to a :class:`ResultSink` the caller gives (``optipose.io.search.SearchFolder`` writes a
 result folder), so the search itself never touches the file system.
@@ -69,6 +72,10 @@ class ResultSink(Protocol):
 
     def validation(self, validation: Validation) -> None: ...
 
+    def verdict_draw(self, draw: int, name: str, result) -> None: ...
+
+    def verdict(self, verdicts: dict) -> None: ...
+
     def band_evaluation(self, name: str, result) -> None: ...
 
     def band(self, validation: Validation) -> None: ...
@@ -83,6 +90,7 @@ class SearchReport:
     validation: Validation | None = None
     band: Validation | None = None  # the check under the band (SearchConfig.band), when there was one
     band_interrupted: bool = False  # Ctrl-C stopped the check under the band (the validation is complete)
+    confident: dict = field(default_factory=dict)  # k -> ConfidentVerdict (search/verdict.py)
 
     @property
     def validated(self) -> bool:
@@ -147,8 +155,21 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
     from optipose.search.validate import validate
 
     stage(f"validating on the {config.validation} protocol (held-out noise seed)")
-    report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, sink.evaluation, hand_run)
+    first: dict = {}
+
+    def evaluation(name, result) -> None:
+        first[name] = result
+        sink.evaluation(name, result)
+
+    report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, evaluation, hand_run)
     sink.validation(report.validation)
+    if report.validation.hand:
+        from optipose.search.verdict import confident_verdicts
+
+        stage(f"the verdict with confidence (up to {config.verdict_draws} draws of the cell)")
+        report.confident = confident_verdicts(part, objective, report.layouts, report.validation, first, seed, config, jobs,
+                                              sink.verdict_draw)  # fmt: skip
+        sink.verdict(report.confident)
     if band is None or not report.validation.hand:  # no band, or nothing to compare with: no check
         return report
     from optipose.evaluate.conditions import conditions

@@ -1,0 +1,53 @@
+"""The verdict with confidence (issue #33): one table and one picture, the first thing a purchaser reads.
+
+Per k: the decision (BUY, KEEP, TIE, UNDECIDED), the found choice and the baseline's, baseline / found in sum
+with its interval, and each layout's predicted median |error| per axis in the cell with its interval; the
+picture draws the same medians per axis. Reads :class:`~optipose.evaluate.confidence.ConfidentVerdict`
+records only; the lines are the ones the terminal prints (:meth:`ConfidentVerdict.line`).
+"""
+
+from __future__ import annotations
+
+from optipose.evaluate.confidence import BUY, KEEP, TIE
+from optipose.report.document import Block, Figure, Paragraph, Table
+from optipose.report.figures import verdict_intervals
+
+__all__ = ["confident_blocks", "confident_css", "interval_cell"]
+
+_CSS = {BUY: "verdict good", KEEP: "verdict bad", TIE: "verdict info"}
+
+
+def confident_css(decision: str) -> str:
+    """good: buy; bad: keep the baseline; info: a tie; mixed: undecided."""
+    return _CSS.get(decision, "verdict mixed")
+
+
+def interval_cell(interval, scale: float = 1e3, digits: int = 3) -> str:
+    """``0.203 [0.151, 0.262]``: an estimate and its interval (scale 1e3: degrees shown in mdeg; ``digits``
+    significant ones)."""
+    e, lo, hi = (f"{scale * x:.{digits}g}" for x in (interval.estimate, interval.low, interval.high))
+    return f"{e} [{lo}, {hi}]" if digits > 2 else f"{e} [{lo}-{hi}]"
+
+
+def confident_blocks(verdicts: dict, cell: str = "ideal") -> list[Block]:
+    """The verdict's lines, its table and its picture (empty without verdicts). ``cell``: the cell's name,
+    which the caption says the errors are predicted in."""
+    if not verdicts:
+        return []
+    ordered = [verdicts[k] for k in sorted(verdicts)]
+    label = ordered[0].reference
+    blocks: list[Block] = [Paragraph(v.line(), confident_css(v.decision)) for v in ordered]
+    rows = []
+    for v in ordered:
+        rows.append((f"k={v.k}", v.decision, "found " + v.found_name, f"{v.score.estimate:.2f}x [{v.score.low:.2f}, {v.score.high:.2f}]",
+                     *(interval_cell(a.median_deg) for a in v.found), str(v.n_draws)))  # fmt: skip
+        rows.append(("", "", f"{label} {v.hand_name}", "", *(interval_cell(a.median_deg) for a in v.hand), ""))
+    v = ordered[0]
+    caption = (f"Predicted median |error| per axis in the {cell} cell (mdeg), each with its {100 * v.confidence:.1f} % interval "
+               f"from paired draws of the cell and a bootstrap over scans; {label} / found in sum; BUY needs the interval of "
+               f"the sum above 1 and no axis worse by more than {100 * v.tolerance:.0f} %.")  # fmt: skip
+    blocks.append(Table(("k", "verdict", "layout", f"{label} / found", "roll", "pitch", "yaw", "draws"), tuple(rows), caption,
+                        anchor="confident-verdict"))  # fmt: skip
+    blocks.append(Figure(verdict_intervals(ordered), "verdict_intervals.png",
+                         f"Found (blue) and {label} (orange): predicted median |error| per axis and k, with intervals."))  # fmt: skip
+    return blocks

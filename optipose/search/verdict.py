@@ -1,0 +1,101 @@
+"""Stage: the verdict with confidence. Found vs. hand per k on paired draws, raced until it is clear.
+
+The validation's evaluations (the held-out seed) are the first draw. Each further draw is one seed of its own
+(:func:`optipose.seeds.verdict_seed`, never seen by the search or the validation) on which every found layout
+and the hand one are evaluated with the validation's objective: one evaluator per draw, so both sides get the
+same cell instance (the part as made, the calibration), the same protocol orientations, robot paths and
+scan noise (common random numbers). Each layout keeps the choice the validation made for it (its subset per
+axis); a draw gives that choice's per-scan errors (:func:`optipose.evaluate.confidence.scan_errors`).
+
+Draws are added (:func:`optipose.evaluate.confidence.race_many`) until every k is BUY, KEEP or TIE, or
+``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
+ideal cell a draw differs from the next only in its noise and orientations, which the scans' own spread
+already measures: the first look is at one draw. In a real cell each draw is another instance of the cell,
+whose spread only draws show: the first look is at three (docs/method.md, "The verdict").
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import string
+import time
+
+from optipose.evaluate.confidence import ConfidentVerdict, Rules, paired_draw, race_many
+from optipose.evaluate.evaluator import EvaluationResult, Evaluator
+from optipose.evaluate.executors import make_executor
+from optipose.model.baseline import baseline, baseline_label
+from optipose.model.layout import Layout
+from optipose.search.objectives import stage_objective
+from optipose.search.records import Validation
+from optipose.search.validate import indices_in, nested_groups
+from optipose.seeds import verdict_seed
+
+__all__ = ["confident_verdicts", "first_look"]
+
+log = logging.getLogger(__name__)
+
+
+def first_look(objective) -> int:
+    """The draws the first look of the race waits for: one in the ideal cell, three in a real one."""
+    return 1 if objective.cell.ideal else 3
+
+
+def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: Validation, first: dict[str, EvaluationResult],
+                       seed: int, config, jobs: int = 1, on_draw=None) -> dict[int, ConfidentVerdict]:  # fmt: skip
+    """k → the confident verdict of ``layouts[k]`` against the part's baseline layout.
+
+    first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``);
+    on_draw(i, name, result) : told of each further draw's evaluations as they end. Empty when the part has no
+    baseline, the validation has no hand choice, or its evaluations are not per-scan ones (a band objective)."""
+    hand = baseline(part)
+    ks = [k for k in sorted(validation.found) if k in validation.hand]
+    groups = [g for g in nested_groups(layouts) if any(k in ks for k in g)]
+    names = ["hand"] + [f"found_k{max(g)}" for g in groups]
+    if hand is None or not ks or not all(isinstance(first.get(n), EvaluationResult) for n in names):
+        return {}
+    objective = stage_objective(objective, "validation", config.validation)
+    rules = Rules(tolerance=config.verdict_tolerance, confidence=config.verdict_confidence, seed=int(seed), statistic=objective.statistic)
+    label = baseline_label(hand)
+    labels = {k: dict(k=k, found_name=_found_name(layouts[k], validation.found[k], layouts[max(g)]),
+                      hand_name=validation.hand[k].name, reference=label)
+              for g in groups for k in g if k in ks}  # fmt: skip
+    big = {k: f"found_k{max(g)}" for g in groups for k in g}
+    done = on_draw or (lambda i, name, result: None)
+
+    def pairs(results: dict[str, EvaluationResult]) -> dict:
+        return {k: paired_draw(results[big[k]], validation.found[k], results["hand"], validation.hand[k]) for k in ks}
+
+    draws = {k: [p] for k, p in pairs(first).items()}
+    if config.verdict_draws <= 1:
+        return race_many(lambda i: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels)
+    executor = make_executor(jobs)
+
+    def next_draws(i: int) -> dict:
+        t0 = time.perf_counter()
+        with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor) as evaluator:
+            results = {"hand": evaluator(hand)} | {f"found_k{max(g)}": evaluator(layouts[max(g)]) for g in groups}
+        for name, result in results.items():
+            done(i, name, result)
+        log.info("verdict draw %d in %.1f s", i, time.perf_counter() - t0)
+        return pairs(results)
+
+    try:
+        seconds = config.verdict_time if config.verdict_time > 0 else math.inf
+        return race_many(next_draws, rules, min_draws=first_look(objective), max_draws=config.verdict_draws,
+                         seconds=seconds, draws=draws, names=labels)  # fmt: skip
+    finally:
+        executor.close()
+
+
+def _found_name(layout: Layout, choice, big: Layout) -> str:
+    """The found choice in the k layout's own sensor names (F1 … Fk as its file and the report's poses say),
+    not in those of the larger layout it was evaluated inside."""
+    own = {big.names[i]: name for i, name in zip(indices_in(layout, big), layout.names)}
+    return "".join(sorted((own.get(big.names[i], big.names[i]) for i in choice.sensors), key=_natural))
+
+
+def _natural(name: str) -> tuple:
+    """``F10`` after ``F9``: a name's letters, then its number."""
+    head = name.rstrip(string.digits)
+    return (head, int(name[len(head):] or 0))

@@ -1,0 +1,94 @@
+"""The search's verdict with confidence (search/verdict.py): common random numbers through the real evaluator,
+the race over several k, and verdict.csv read back as written."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from optipose.evaluate.confidence import BUY, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, race_many
+from optipose.evaluate.objective import load_objective
+from optipose.io.folders import write_csv
+from optipose.io.load import read_verdicts
+from optipose.io.tables import verdict_frame
+from optipose.model.layout import Layout, SensorPose
+from optipose.model.part import load_part
+from optipose.search.config import SearchConfig
+from optipose.search.validate import validate
+from optipose.search.verdict import confident_verdicts
+from optipose.seeds import validation_seed, verdict_seed
+
+FAST = Rules(replicates=400)
+
+
+def _as_found(hand: Layout, k: int) -> Layout:
+    """The hand layout's first k sensors, named as a search names found ones."""
+    return Layout(tuple(SensorPose(f"F{i + 1}", s.T_O_S) for i, s in enumerate(hand.sensors[:k])), name=f"found_k{k}")
+
+
+@pytest.mark.parametrize("cell", ["ideal", "ur10e"])
+def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
+    """Found = hand, evaluated on the same draws: every k a TIE whose intervals are exactly 1 — the draws are
+    common to both sides (the same cell instance, orientations, robot paths and noise)."""
+    part = load_part("part_b")
+    objective = load_objective("paper").in_cell(cell)
+    config = SearchConfig(validation="reduced", verdict_draws=4)
+    hand = part.layouts["hand"]
+    layouts = {k: _as_found(hand, k) for k in (2, 3)}
+    first, draws = {}, []
+    validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)
+    verdicts = confident_verdicts(part, objective, layouts, validation, first, 5, config,
+                                  on_draw=lambda i, name, result: draws.append((i, name, result.seed)))  # fmt: skip
+    assert sorted(verdicts) == [2, 3]
+    for k, v in verdicts.items():
+        assert v.decision == TIE, v.line()
+        assert (v.score.estimate, v.score.low, v.score.high) == (1.0, 1.0, 1.0)
+        assert v.found == v.hand and v.found_name == "".join(f"F{i + 1}" for i in range(k)) and v.hand_name.startswith("S")
+    # the ideal cell looks first at the validation's draw alone; a real cell waits for three instances
+    expected = 1 if cell == "ideal" else 3
+    assert {v.n_draws for v in verdicts.values()} == {expected}
+    assert sorted({(i, seed) for i, _, seed in draws}) == [(i, verdict_seed(5, i)) for i in range(1, expected)]
+    assert verdict_seed(5, 0) == validation_seed(5) and len({verdict_seed(5, i) for i in range(4)}) == 4
+
+
+def _pairs(rng, i, ratio):
+    hand = np.abs(rng.normal(size=(40, 3))) * 1e-4
+    found = hand * np.exp(rng.normal(0.0, 0.05, size=hand.shape)) / ratio
+    return PairedDraw(i, found, hand)
+
+
+def test_racing_several_k_stops_each_at_its_own_look_and_ends_when_all_are_decided():
+    rng = np.random.default_rng(3)
+    calls = []
+
+    def next_draws(i):
+        calls.append(i)
+        return {1: _pairs(rng, i, 3.0), 2: PairedDraw(i, *(2 * [_pairs(rng, i, 1.0).hand]))}
+
+    verdicts = race_many(next_draws, FAST, min_draws=2, max_draws=6, names={1: dict(k=1), 2: dict(k=2)})
+    assert verdicts[1].decision == BUY and verdicts[1].n_draws == 2  # clear at the first look
+    assert verdicts[2].decision == TIE and verdicts[2].n_draws == 2  # an exact copy: a tie as soon as it looks
+    assert calls == [0, 1]
+
+    def undecided(i):
+        return {1: _pairs(rng, i, 3.0), 2: _pairs(rng, i, 1.0)}
+
+    verdicts = race_many(undecided, replace(FAST, tolerance=0.0), min_draws=2, max_draws=6)
+    assert verdicts[1].decision == BUY and verdicts[1].n_draws < 6
+    assert verdicts[2].decision == UNDECIDED and verdicts[2].n_draws == 6  # no tie within a zero tolerance: to the budget
+
+
+def test_the_verdict_table_reads_back_as_written(tmp_path):
+    rng = np.random.default_rng(4)
+    verdicts = {k: compare_draws([_pairs(rng, i, 1.0 + k) for i in range(3)], FAST, k=k, found_name=f"F{k}", hand_name="S1",
+                                 seconds_per_draw=2.5) for k in (1, 2)}  # fmt: skip
+    verdicts[3] = replace(compare_draws([_pairs(rng, 0, 1.01)], FAST, k=3), decision=UNDECIDED, more_draws=7)
+    write_csv(verdict_frame(verdicts), tmp_path / "verdict.csv")
+    back = read_verdicts(tmp_path / "verdict.csv")
+    assert sorted(back) == [1, 2, 3]
+    for k, v in verdicts.items():
+        assert back[k].line() == v.line() and back[k].axis_lines() == v.axis_lines()
+        assert back[k].score.low == pytest.approx(v.score.low, rel=1e-12) and back[k].more_draws == v.more_draws
+    assert read_verdicts(tmp_path / "none.csv") == {}
