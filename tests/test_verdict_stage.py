@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from optipose.evaluate.confidence import BUY, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, race_many
+from optipose.evaluate.confidence import BUY, FEWER, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, race_many, split
 from optipose.evaluate.objective import load_objective
 from optipose.io.folders import write_csv
 from optipose.io.load import read_verdicts
@@ -36,20 +36,28 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
     objective = load_objective("paper").in_cell(cell)
     config = SearchConfig(validation="reduced", verdict_draws=4)
     hand = part.layouts["hand"]
-    layouts = {k: _as_found(hand, k) for k in (2, 3)}
+    layouts = {k: _as_found(hand, k) for k in (1, 2, 3)}
     first, draws = {}, []
     validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)
     verdicts = confident_verdicts(part, objective, layouts, validation, first, 5, config,
                                   on_draw=lambda i, name, result: draws.append((i, name, result.seed)))  # fmt: skip
-    assert sorted(verdicts) == [2, 3]
-    for k, v in verdicts.items():
+    by_k, fewer = split(verdicts)
+    assert sorted(by_k) == [1, 2, 3]
+    # one found sensor against the hand's three rides along on the same draws, without holding the race
+    last = max(v.n_draws for v in by_k.values())
+    assert (fewer.k, fewer.hand_k, fewer.hand_name, fewer.n_draws) == (1, 3, validation.hand[3].name, last)
+    assert fewer.found_name == "F1" and fewer.n_scans == by_k[3].n_scans
+    same = [k for k in by_k if validation.hand[k].sensors == tuple(range(k))]  # the hand's own choice is its first k sensors
+    assert 3 in same
+    for k in same:
+        v = by_k[k]
         assert v.decision == TIE, v.line()
         assert (v.score.estimate, v.score.low, v.score.high) == (1.0, 1.0, 1.0)
         assert v.found == v.hand and v.found_name == "".join(f"F{i + 1}" for i in range(k)) and v.hand_name.startswith("S")
     # the ideal cell looks first at the validation's draw alone; a real cell waits for three instances
     expected = 1 if cell == "ideal" else 3
-    assert {v.n_draws for v in verdicts.values()} == {expected}
-    assert sorted({(i, seed) for i, _, seed in draws}) == [(i, verdict_seed(5, i)) for i in range(1, expected)]
+    assert {by_k[k].n_draws for k in same} == {expected}
+    assert sorted({(i, seed) for i, _, seed in draws}) == [(i, verdict_seed(5, i)) for i in range(1, last)]
     assert verdict_seed(5, 0) == validation_seed(5) and len({verdict_seed(5, i) for i in range(4)}) == 4
 
 
@@ -85,10 +93,11 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
     verdicts = {k: compare_draws([_pairs(rng, i, 1.0 + k) for i in range(3)], FAST, k=k, found_name=f"F{k}", hand_name="S1",
                                  seconds_per_draw=2.5) for k in (1, 2)}  # fmt: skip
     verdicts[3] = replace(compare_draws([_pairs(rng, 0, 1.01)], FAST, k=3), decision=UNDECIDED, more_draws=7)
+    verdicts[FEWER] = compare_draws([_pairs(rng, i, 0.5) for i in range(3)], FAST, k=1, found_name="F1", hand_name="S1S2S3", hand_k=3)
     write_csv(verdict_frame(verdicts), tmp_path / "verdict.csv")
     back = read_verdicts(tmp_path / "verdict.csv")
-    assert sorted(back) == [1, 2, 3]
+    assert set(back) == {1, 2, 3, FEWER} and back[FEWER].hand_k == 3
     for k, v in verdicts.items():
-        assert back[k].line() == v.line() and back[k].axis_lines() == v.axis_lines()
+        assert back[k].line() == v.line() and back[k].axis_lines() == v.axis_lines() and back[k].fewer_line() == v.fewer_line()
         assert back[k].score.low == pytest.approx(v.score.low, rel=1e-12) and back[k].more_draws == v.more_draws
     assert read_verdicts(tmp_path / "none.csv") == {}

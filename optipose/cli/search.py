@@ -263,15 +263,18 @@ def _print_report(console, report, part, unchecked: bool = False) -> None:
     lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
     ``unchecked``: the answer was never checked under a band (a nominal search without the check)."""
     from optipose.evaluate.compare import mdeg
+    from optipose.evaluate.confidence import split
     from optipose.model.baseline import baseline, baseline_label
 
     label = baseline_label(baseline(part))
     if report.validated:
         verdicts = report.validation.verdicts()
         band = report.band.by_k() if report.band is not None else {}
-        confident = getattr(report, "confident", {})
+        confident, fewer = split(getattr(report, "confident", {}))
         for v in confident.values() or verdicts:
             console.print(v.line() if confident else verdict_headline(v, label, band.get(v.k), checked=not unchecked), highlight=False)
+        if fewer is not None:
+            console.print(fewer.fewer_line(), highlight=False)
         if confident:
             console.print(_confident_table(confident, part))
         if unchecked and any(v.no_worse for v in verdicts):
@@ -282,7 +285,7 @@ def _print_report(console, report, part, unchecked: bool = False) -> None:
             console.print(line, style="bold red", highlight=False)
         lines = report.validation.verdict_lines(label)
         found, hand = report.validation.found, report.validation.hand
-        if 1 in found and max(hand, default=0) > 1:  # the headline: fewer sensors to buy
+        if 1 in found and max(hand, default=0) > 1 and fewer is None:  # the headline: fewer sensors to buy
             top = hand[max(hand)]
             beats = "beats" if found[1].score < top.score else "does not beat"
             console.print(f"one found sensor {beats} {label} {top.name} in sum ({mdeg(found[1].score):.3f} vs "

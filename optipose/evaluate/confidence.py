@@ -52,10 +52,11 @@ from optipose.evaluate.statistics import FAILED_ERROR
 
 __all__ = [
     "BUY", "KEEP", "TIE", "UNDECIDED", "DECISIONS", "Rules", "PairedDraw", "Interval", "AxisError", "AxisRatio",
-    "ConfidentVerdict", "scan_errors", "paired_draw", "paired_draws", "compare_draws", "looks", "race", "race_many",
+    "ConfidentVerdict", "scan_errors", "paired_draw", "paired_draws", "compare_draws", "looks", "race", "race_many", "FEWER", "split",
 ]  # fmt: skip
 
 BUY, KEEP, TIE, UNDECIDED = "BUY", "KEEP", "TIE", "UNDECIDED"
+FEWER = "fewer"  # the key, among a search's verdicts by k, of one found sensor against the baseline's largest choice
 DECISIONS = (BUY, KEEP, TIE, UNDECIDED)
 _QUANTILES = (0.5, 0.75)  # median and p75, np.median's and np.percentile(75)'s linear interpolation
 
@@ -177,6 +178,7 @@ class ConfidentVerdict:
     more_draws: int | None = None
     seconds_per_draw: float = float("nan")
     reference: str = "hand"
+    hand_k: int = 0  # the hand choice's size when it differs from k (fewer found sensors against more hand ones)
 
     @property
     def more_minutes(self) -> float:
@@ -211,6 +213,17 @@ class ConfidentVerdict:
         fits = [line for line in (f"{text}{axis} ({tail})", f"{text} ({tail})", f"{text}{axis}") if len(line) <= 80]
         return fits[0] if fits else text[:80]
 
+    def fewer_line(self) -> str:
+        """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line, e.g.
+        ``fewer sensors: found F1 alone matches hand S1S2S3 within 10 % (1.02x [0.95, 1.08])``."""
+        s = self.score
+        ratio, who = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]", f"found {self.found_name} alone"
+        ref = f"{self.reference} {self.hand_name}"
+        text = {BUY: f"{who} is better than {ref}: {ratio}", KEEP: f"{who} does not match {ref} ({ratio})",
+                TIE: f"{who} matches {ref} within {100 * self.tolerance:.0f} % ({ratio})"}.get(
+                    self.decision, f"{who} vs {ref}: {ratio}, not settled")  # fmt: skip
+        return "fewer sensors: " + text
+
     def axis_lines(self) -> list[str]:
         """Per axis, found's and hand's predicted median / p75 (mdeg) with intervals, each ≤ 80 columns."""
         out = []
@@ -219,6 +232,11 @@ class ConfidentVerdict:
             out.append(f"  {f.axis:5} median found {cells[0]} hand {cells[1]} mdeg")
             out.append(f"  {'':5} p75    found {cells[2]} hand {cells[3]} mdeg")
         return out
+
+
+def split(verdicts: dict) -> tuple[dict, "ConfidentVerdict | None"]:
+    """A search's verdicts as (k → verdict, k ascending) and the :data:`FEWER` one (None without it)."""
+    return {k: verdicts[k] for k in sorted(k for k in verdicts if k != FEWER)}, verdicts.get(FEWER)
 
 
 def _mdeg(deg: float) -> str:
@@ -303,7 +321,8 @@ def _interval(point: float, samples: np.ndarray, widen: float, confidence: float
 
 
 def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int = 0, found_name: str = "found",
-                  hand_name: str = "hand", reference: str = "hand", seconds_per_draw: float = float("nan")) -> ConfidentVerdict:  # fmt: skip
+                  hand_name: str = "hand", reference: str = "hand", seconds_per_draw: float = float("nan"),
+                  hand_k: int = 0) -> ConfidentVerdict:  # fmt: skip
     """The verdict on paired draws (one per seed, each the same scans for both layouts)."""
     if not draws:
         raise ValueError("a verdict needs at least one paired draw")
@@ -325,6 +344,7 @@ def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int
         k=k, decision=decision, found_name=found_name, hand_name=hand_name, score=iv[0], axes=axes, found=found,
         hand=hand, found_score_deg=iv[22], hand_score_deg=iv[23], n_draws=len(draws), n_scans=len(draws[0].found),
         tolerance=rules.tolerance, confidence=c, more_draws=more, seconds_per_draw=seconds_per_draw, reference=reference,
+        hand_k=hand_k,
     )  # fmt: skip
 
 
@@ -388,12 +408,13 @@ def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_
 
 def race_many(next_draws: Callable[[int], dict], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
               seconds: float = math.inf, clock: Callable[[], float] = time.monotonic, draws: dict | None = None,
-              names: dict | None = None) -> dict:  # fmt: skip
+              names: dict | None = None, passengers: frozenset = frozenset()) -> dict:  # fmt: skip
     """:func:`race` for several comparisons that share their draws (one draw evaluates every found layout and
     the hand one): ``next_draws(i)`` gives key → the paired draw at position i (keys: e.g. k), ``draws`` the
     draws in hand per key, ``names`` per key what :func:`compare_draws` takes. Draws are added until every
     key's decision is not UNDECIDED (a decided key keeps the verdict of the look that decided it), or the
-    draws or the ``seconds`` end. Returns key → :class:`ConfidentVerdict`."""
+    draws or the ``seconds`` end. ``passengers``: keys that ride along without holding the race, compared at
+    the look it ends on. Returns key → :class:`ConfidentVerdict`."""
     schedule = looks(min_draws, max_draws)
     each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) / (len(schedule) + 1))
     taken = {key: list(v) for key, v in (draws or {}).items()}
@@ -407,13 +428,14 @@ def race_many(next_draws: Callable[[int], dict], rules: Rules = Rules(), *, min_
         out_of_time = bool(added) and elapsed + per_draw > seconds
         last = n >= max_draws or out_of_time
         if n and (n in schedule or last):
-            for key, pairs in taken.items():
-                if key not in done:
-                    verdict = compare_draws(pairs, each, seconds_per_draw=per_draw, **names.get(key, {}))
-                    if verdict.decision != UNDECIDED or last:
-                        done[key] = verdict
-            if len(done) == len(taken):
-                return done
+            for key in taken.keys() - done.keys() - passengers:
+                verdict = compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
+                if verdict.decision != UNDECIDED or last:
+                    done[key] = verdict
+            if not taken.keys() - done.keys() - passengers:
+                riders = {key: compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
+                          for key in passengers & taken.keys()}  # fmt: skip
+                return {key: (done | riders)[key] for key in taken}
         for key, pair in next_draws(n).items():
             taken.setdefault(key, []).append(pair)
         added += 1

@@ -55,8 +55,8 @@ def load_search(folder: Path, config: RunConfig | None = None):
     folder = Path(folder)
     config = config or read_config(folder)
     layouts = {int(p.stem.removeprefix("found_k")): load_layout(p) for p in sorted((folder / "layouts").glob("found_k*.toml"))}
-    hand_path = folder / "layouts" / "hand.toml"
-    hand = load_layout(hand_path) if hand_path.is_file() else None
+    baselines = [p for p in (folder / "layouts" / "hand.toml", folder / "layouts" / "conventional.toml") if p.is_file()]
+    hand = load_layout(baselines[0]) if baselines else None
     found_names = [f"F{i + 1}" for i in range(max(layouts, default=0))]
 
     def validation(path: Path):
@@ -76,22 +76,26 @@ def load_search(folder: Path, config: RunConfig | None = None):
 
 
 def read_verdicts(path: Path) -> dict:
-    """k → :class:`~optipose.evaluate.confidence.ConfidentVerdict` from ``verdict.csv`` ({} without one)."""
-    from optipose.evaluate.confidence import AxisError, AxisRatio, ConfidentVerdict, Interval
+    """k → :class:`~optipose.evaluate.confidence.ConfidentVerdict` from ``verdict.csv`` ({} without one), and
+    the comparison of fewer found sensors with more hand ones under ``FEWER``."""
+    from optipose.evaluate.confidence import FEWER, AxisError, AxisRatio, ConfidentVerdict, Interval
 
     if not path.is_file():
         return {}
     out = {}
     with reading(path):
         rows = pd.read_csv(path, keep_default_na=False, na_values=[""])
-        for k, group in rows.groupby("k", sort=True):
+        if "hand_k" not in rows:
+            rows["hand_k"] = rows["k"]
+        for (k, hand_k), group in rows.groupby(["k", "hand_k"], sort=True):
             score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
 
             def iv(row, name):
                 return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
 
             more = int(score["more_draws"])
-            out[int(k)] = ConfidentVerdict(
+            fewer = int(hand_k) != int(k)
+            out[FEWER if fewer else int(k)] = ConfidentVerdict(
                 k=int(k), decision=str(score["decision"]), found_name=str(score["found"]), hand_name=str(score["hand"]),
                 score=iv(score, "ratio"),
                 axes=tuple(AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio")) for _, r in axes.iterrows()),
@@ -101,6 +105,7 @@ def read_verdicts(path: Path) -> dict:
                 n_draws=int(score["draws"]), n_scans=int(score["scans"]), tolerance=float(score["tolerance"]),
                 confidence=float(score["confidence"]), more_draws=None if more < 0 else more,
                 seconds_per_draw=float(score["seconds_per_draw"]), reference=str(score["reference"]),
+                hand_k=int(hand_k) if fewer else 0,
             )  # fmt: skip
     return out
 

@@ -71,7 +71,7 @@ class SearchResult:
         return self.config.searched_conditions().trivial and self.config.band is None and self.validation is not None
 
     def verdict_lines(self) -> list[str]:
-        """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` says."""
+        """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` (or ``conventional.toml``) says."""
         from optipose.model.baseline import baseline_label
 
         return self.validation.verdict_lines(baseline_label(self.hand)) if self.validation is not None else []

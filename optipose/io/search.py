@@ -19,6 +19,7 @@ from optipose.io.evaluation import write_evaluation
 from optipose.files import atomic_path, reading
 from optipose.io.folders import part_table, versions, write_config, write_csv
 from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame, table1_frame, verdict_frame
+from optipose.model.baseline import baseline_label
 from optipose.model.layout import Layout, write_layout
 
 __all__ = ["SearchFolder", "save_cache", "load_cache"]
@@ -45,13 +46,14 @@ class SearchFolder:
         save_cache(self.folder, cache, space_version)
 
     def layouts(self, layouts: dict[int, Layout], hand: Layout | None) -> None:
-        """``layouts/found_k*.toml`` and, when the part has one, ``layouts/hand.toml``."""
+        """``layouts/found_k*.toml`` and the baseline's: ``layouts/hand.toml`` when the part has a hand layout,
+        else ``layouts/conventional.toml`` (:func:`optipose.model.baseline.baseline_label`)."""
         layout_dir = self.folder / "layouts"
         layout_dir.mkdir(exist_ok=True)
         for k, layout in layouts.items():
             write_layout(layout, layout_dir / f"found_k{k}.toml")
         if hand is not None:
-            write_layout(hand, layout_dir / "hand.toml")
+            write_layout(hand, layout_dir / f"{baseline_label(hand)}.toml")
 
     def selection(self, records) -> None:
         write_csv(selection_frame(records), self.folder / "selection.csv")

@@ -152,10 +152,11 @@ def verdict_frame(verdicts: dict) -> pd.DataFrame:
     """The verdicts with confidence (``verdict.csv``): per k a row for the score (axis ``score``: hand / found
     in sum, found's and hand's score in the ``*_median_deg`` columns) and one per axis (hand / found of its
     share of the score, of its median and p75; each layout's predicted median and p75, degrees), each with its
-    interval (``_low``, ``_high``); the decision and what it rests on repeated on every row."""
+    interval (``_low``, ``_high``); the decision and what it rests on repeated on every row. A row whose
+    ``hand_k`` exceeds its ``k`` compares fewer found sensors with more hand ones."""
     rows = []
-    for k, v in sorted(verdicts.items()):
-        head = {"k": k, "decision": v.decision, "found": v.found_name, "reference": v.reference, "hand": v.hand_name,
+    for v in sorted(verdicts.values(), key=lambda v: (v.hand_k > v.k, v.k)):
+        head = {"k": v.k, "hand_k": v.hand_k or v.k, "decision": v.decision, "found": v.found_name, "reference": v.reference, "hand": v.hand_name,
                 "draws": v.n_draws, "scans": v.n_scans, "tolerance": v.tolerance, "confidence": v.confidence,
                 "more_draws": v.more_draws if v.more_draws is not None else -1, "seconds_per_draw": v.seconds_per_draw}  # fmt: skip
         empty = {"median_ratio": None, "p75_ratio": None, "found_p75_deg": None, "hand_p75_deg": None}

@@ -8,7 +8,7 @@ records only; the lines are the ones the terminal prints (:meth:`ConfidentVerdic
 
 from __future__ import annotations
 
-from optipose.evaluate.confidence import BUY, KEEP, TIE
+from optipose.evaluate.confidence import BUY, KEEP, TIE, split
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
 
@@ -32,11 +32,14 @@ def interval_cell(interval, scale: float = 1e3, digits: int = 3) -> str:
 def confident_blocks(verdicts: dict, cell: str = "ideal") -> list[Block]:
     """The verdict's lines, its table and its picture (empty without verdicts). ``cell``: the cell's name,
     which the caption says the errors are predicted in."""
-    if not verdicts:
+    by_k, fewer = split(verdicts)
+    if not by_k:
         return []
-    ordered = [verdicts[k] for k in sorted(verdicts)]
+    ordered = list(by_k.values())
     label = ordered[0].reference
     blocks: list[Block] = [Paragraph(v.line(), confident_css(v.decision)) for v in ordered]
+    if fewer is not None:
+        blocks.append(Paragraph(fewer.fewer_line(), confident_css(fewer.decision)))
     rows = []
     for v in ordered:
         rows.append((f"k={v.k}", v.decision, "found " + v.found_name, f"{v.score.estimate:.2f}x [{v.score.low:.2f}, {v.score.high:.2f}]",

@@ -21,7 +21,7 @@ import math
 import string
 import time
 
-from optipose.evaluate.confidence import ConfidentVerdict, Rules, paired_draw, race_many
+from optipose.evaluate.confidence import FEWER, Rules, paired_draw, race_many
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 from optipose.evaluate.executors import make_executor
 from optipose.model.baseline import baseline, baseline_label
@@ -42,8 +42,10 @@ def first_look(objective) -> int:
 
 
 def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: Validation, first: dict[str, EvaluationResult],
-                       seed: int, config, jobs: int = 1, on_draw=None) -> dict[int, ConfidentVerdict]:  # fmt: skip
-    """k → the confident verdict of ``layouts[k]`` against the part's baseline layout.
+                       seed: int, config, jobs: int = 1, on_draw=None) -> dict:  # fmt: skip
+    """k → the confident verdict of ``layouts[k]`` against the part's baseline layout, and under ``FEWER``
+    one found sensor against the baseline's largest choice (on the same draws, without holding the race:
+    :data:`~optipose.evaluate.confidence.FEWER`).
 
     first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``);
     on_draw(i, name, result) : told of each further draw's evaluations as they end. Empty when the part has no
@@ -63,12 +65,18 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     big = {k: f"found_k{max(g)}" for g in groups for k in g}
     done = on_draw or (lambda i, name, result: None)
 
+    top = max(validation.hand)
+    fewer = {FEWER: (1, top)} if 1 in ks and top > 1 else {}
+    if fewer:
+        labels[FEWER] = dict(labels[1], hand_name=validation.hand[top].name, hand_k=top)
+
     def pairs(results: dict[str, EvaluationResult]) -> dict:
-        return {k: paired_draw(results[big[k]], validation.found[k], results["hand"], validation.hand[k]) for k in ks}
+        return {key: paired_draw(results[big[f]], validation.found[f], results["hand"], validation.hand[h])
+                for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items()}  # fmt: skip
 
     draws = {k: [p] for k, p in pairs(first).items()}
     if config.verdict_draws <= 1:
-        return race_many(lambda i: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels)
+        return race_many(lambda i: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer))
     executor = make_executor(jobs)
 
     def next_draws(i: int) -> dict:
@@ -83,7 +91,7 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     try:
         seconds = config.verdict_time if config.verdict_time > 0 else math.inf
         return race_many(next_draws, rules, min_draws=first_look(objective), max_draws=config.verdict_draws,
-                         seconds=seconds, draws=draws, names=labels)  # fmt: skip
+                         seconds=seconds, draws=draws, names=labels, passengers=frozenset(fewer))  # fmt: skip
     finally:
         executor.close()
 
