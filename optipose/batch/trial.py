@@ -119,7 +119,7 @@ def _search(trial: TrialSpec, folder: Path, jobs: int) -> None:
 
     part = load_part(trial.part)
     objective = load_objective(trial.objective)
-    config = config_from_budget(trial.budget, (trial.sensors,), band=not objective.conditions.trivial)
+    config = config_from_budget(trial.budget, (trial.sensors,), band=not objective.conditions.trivial, cell=not objective.cell.ideal)
     report = run(part, objective, config, trial.seed, SearchFolder(folder), trial.budget, jobs)
     if not report.validated:
         raise RuntimeError("the search ended before its validation")

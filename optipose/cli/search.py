@@ -69,7 +69,8 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
             units = saved_units or units
     else:
         the_objective = load_objective(objective).in_cell(cell)
-        search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial)
+        search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial,
+                                           cell=not the_objective.cell.ideal)  # fmt: skip
     if not resume:
         check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
@@ -87,7 +88,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         _draw_layouts(folder, the_part, searched.layouts)
     # a nominal search that did not check its answer under a band (quick, or `band = ""`) says so: its "better"
     # holds in the simulation's ideal cell only, which is not yet a reason to buy
-    unchecked = the_objective.conditions.trivial and searched.band is None and not searched.band_interrupted
+    unchecked = the_objective.conditions.trivial and the_objective.cell.ideal and searched.band is None and not searched.band_interrupted
     _print_report(Console(), searched, the_part, unchecked)
     if searched.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "

@@ -172,7 +172,7 @@ class ConfidentVerdict:
     found_score_deg: Interval
     hand_score_deg: Interval
     n_draws: int
-    n_scans: int
+    n_scans: int  # the scans of every draw together
     tolerance: float
     confidence: float
     more_draws: int | None = None
@@ -295,7 +295,7 @@ def _quantities(stats: np.ndarray, statistic: StatisticConfig) -> np.ndarray:
     return np.concatenate([hand - found, found[..., 4:], hand[..., 4:], found[..., :1], hand[..., :1]], axis=-1)
 
 
-def _widening(per_draw: list, boot: np.ndarray, rules: Rules, n_scans: int) -> np.ndarray:
+def _widening(per_draw: list, boot: np.ndarray, rules: Rules, n_scans: list[int]) -> np.ndarray:
     """(24,) the factor each quantity's bootstrap deviations are scaled by: to the variance of a mean of D
     draws (the draws' spread over D, at least the scans' own) and the Student quantile of its degrees of
     freedom over the normal one. With one draw, the scans' variance alone."""
@@ -305,7 +305,7 @@ def _widening(per_draw: list, boot: np.ndarray, rules: Rules, n_scans: int) -> n
     between = per.var(axis=0, ddof=1) if d > 1 else within
     # the draws' spread, an estimate on D − 1 degrees of freedom, where it exceeds the scans' own (the cells
     # vary); else the scans' variance, known from every scan of every draw
-    df = np.where(between > within, max(d - 1, 1), d * max(n_scans - 1, 1))
+    df = np.where(between > within, max(d - 1, 1), max(sum(n - 1 for n in n_scans), 1))
     with np.errstate(divide="ignore", invalid="ignore"):
         tail = (1.0 + rules.confidence) / 2.0
         student = stats_t.ppf(tail, df) / stats_norm.ppf(tail)
@@ -326,13 +326,11 @@ def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int
     """The verdict on paired draws (one per seed, each the same scans for both layouts)."""
     if not draws:
         raise ValueError("a verdict needs at least one paired draw")
-    n_scans = {len(d.found) for d in draws}
-    if len(n_scans) != 1:
-        raise ValueError(f"the draws have different numbers of scans: {sorted(n_scans)}")
+    n_scans = [len(d.found) for d in draws]
     per_draw = [_draw_stats(d, rules.replicates, np.random.default_rng([rules.seed, i])) for i, d in enumerate(draws)]
     mean, boot = _replicates(per_draw, rules)
     point, samples = _quantities(mean, rules.statistic), _quantities(boot, rules.statistic)
-    widen = _widening(per_draw, samples, rules, n_scans.pop())
+    widen = _widening(per_draw, samples, rules, n_scans)
     c = rules.confidence
     iv = [_interval(point[i], samples[:, i], widen[i], c) for i in range(10)]
     iv += [_interval(point[i], samples[:, i], widen[i], c, lambda v: np.rad2deg(np.exp(v))) for i in range(10, 24)]
@@ -342,7 +340,7 @@ def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int
     decision, more = _decide(iv[0], axes, rules.tolerance, len(draws))
     return ConfidentVerdict(
         k=k, decision=decision, found_name=found_name, hand_name=hand_name, score=iv[0], axes=axes, found=found,
-        hand=hand, found_score_deg=iv[22], hand_score_deg=iv[23], n_draws=len(draws), n_scans=len(draws[0].found),
+        hand=hand, found_score_deg=iv[22], hand_score_deg=iv[23], n_draws=len(draws), n_scans=sum(n_scans),
         tolerance=rules.tolerance, confidence=c, more_draws=more, seconds_per_draw=seconds_per_draw, reference=reference,
         hand_k=hand_k,
     )  # fmt: skip

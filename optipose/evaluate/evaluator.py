@@ -112,10 +112,11 @@ class Evaluator:
         ``jobs`` is closed with the evaluator.
     condition : the noise scale and bracket errors to scan under (:mod:`optipose.evaluate.conditions`);
         default the nominal one, the objective's own numbers.
+    scans : evaluate this many of the protocol's scans, drawn by the seed (0: all; :meth:`Perturbations.sample`).
     """
 
     def __init__(self, part, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1, quiet: bool = False,
-                 executor: Executor | None = None, condition: Condition | None = None):  # fmt: skip
+                 executor: Executor | None = None, condition: Condition | None = None, scans: int = 0):  # fmt: skip
         self.part = part
         self.objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.seed = int(seed)
@@ -123,7 +124,7 @@ class Evaluator:
         self.executor: Executor = make_executor(jobs) if executor is None else executor
         self.jobs = self.executor.n_workers
         self._failure_level = logging.INFO if quiet else logging.WARNING
-        self.perturbations: Perturbations = perturbations(self.objective.protocol, self.seed)
+        self.perturbations: Perturbations = perturbations(self.objective.protocol, self.seed).sample(scans, self.seed)
         self.setup = WorkerSetup(
             token=uuid.uuid4().hex,
             vertices=np.asarray(part.mesh.vertices, dtype=np.float64),

@@ -35,6 +35,14 @@ class Perturbations:
     def __len__(self) -> int:
         return len(self.rpy)
 
+    def sample(self, n: int, seed: int) -> "Perturbations":
+        """``n`` of the scans (all when ``n`` is 0 or not below their number), drawn without replacement by
+        ``seed``, in protocol order: a protocol's orientations in proportion, fewer scans."""
+        if n <= 0 or n >= len(self):
+            return self
+        keep = np.sort(np.random.default_rng([int(seed), len(self), int(n)]).choice(len(self), int(n), replace=False))
+        return Perturbations(self.rpy[keep], self.offset[keep], self.label[keep], self.seeds[keep])
+
     def __repr__(self) -> str:
         labels = list(dict.fromkeys(self.label.tolist()))
         span = np.rad2deg(np.abs(self.rpy).max()) if len(self) else 0.0

@@ -83,6 +83,11 @@ class RunConfig:
         """Where the part can be loaded from again: its source file, else its name."""
         return self.part_source or self.part_name
 
+    @property
+    def cell_name(self) -> str:
+        """The name of the cell the run was evaluated in (its sources are in ``[objective.cell]``; ideal without one)."""
+        return str((self.objective or {}).get("cell", {}).get("name", "ideal"))
+
     def searched_conditions(self):
         """The objective's band as the search ran it (noise scales and bracket tolerance; a folder without
         them: the nominal cell) — a :class:`~optipose.evaluate.conditions.ConditionsConfig`."""

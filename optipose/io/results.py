@@ -66,9 +66,10 @@ class SearchResult:
 
     @property
     def unchecked(self) -> bool:
-        """The answer holds for the ideal cell only: a nominal search (one noise level, exact brackets) that was
-        not to check it under a band (``--budget quick``, or ``[search] band = ""``)."""
-        return self.config.searched_conditions().trivial and self.config.band is None and self.validation is not None
+        """The answer holds for the ideal cell only: a nominal search (one noise level, exact brackets) in the
+        ideal cell that was not to check it under a band (``--budget quick``, or ``[search] band = ""``)."""
+        nominal = self.config.searched_conditions().trivial and self.config.cell_name == "ideal"
+        return nominal and self.config.band is None and self.validation is not None
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` (or ``conventional.toml``) says."""

@@ -37,7 +37,7 @@ def command_line(config: RunConfig) -> str:
 
 def cell_name(config: RunConfig) -> str:
     """The name of the cell the run was evaluated in (its sources are in config.toml's ``[objective.cell]``)."""
-    return str((config.objective or {}).get("cell", {}).get("name", "ideal"))
+    return config.cell_name
 
 
 def provenance_blocks(config: RunConfig) -> list[Block]:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from optipose.errors import ConfigError
 from optipose.model.collision import DEFAULT_MARGIN
 
-__all__ = ["SearchConfig", "BUDGETS", "BAND_BUDGETS", "config_from_budget", "algorithm_code"]
+__all__ = ["SearchConfig", "BUDGETS", "BAND_BUDGETS", "CELL_BUDGETS", "config_from_budget", "algorithm_code"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,7 @@ class SearchConfig:
     # s (0: no limit); an axis may be worse by verdict_tolerance (0.1: 10 %) with verdict_confidence
     verdict_draws: int = 12
     verdict_time: float = 120.0
+    verdict_scans: int = 0  # the protocol's scans a draw after the first evaluates, drawn by its seed (0: all)
     verdict_tolerance: float = 0.10
     verdict_confidence: float = 0.95
 
@@ -88,8 +89,8 @@ class SearchConfig:
             raise ConfigError(f"search validation must be full or reduced, not '{self.validation}'")
         if self.strategy not in ("greedy", "joint", "both"):
             raise ConfigError(f"search strategy must be greedy, joint or both, not '{self.strategy}'")
-        if self.verdict_draws < 1 or not 0.5 < self.verdict_confidence < 1 or self.verdict_tolerance < 0:
-            raise ConfigError("search verdict: verdict_draws >= 1, 0.5 < verdict_confidence < 1 and verdict_tolerance >= 0")
+        if self.verdict_scans < 0 or self.verdict_draws < 1 or not 0.5 < self.verdict_confidence < 1 or self.verdict_tolerance < 0:
+            raise ConfigError("search verdict: verdict_draws >= 1, verdict_scans >= 0, 0.5 < verdict_confidence < 1, verdict_tolerance >= 0")
         for name in (self.global_algorithm, self.local_algorithm, self.polish_algorithm):
             algorithm_code(name)  # raises ConfigError for an unknown name
 
@@ -127,12 +128,27 @@ BAND_BUDGETS: dict[str, dict] = {
 }
 
 
-def config_from_budget(budget: str, sensors: tuple[int, ...], overrides: dict | None = None, band: bool = False) -> SearchConfig:
+# In a real cell (an objective's cell other than the ideal one) an ICP evaluation costs several nominal ones
+# (the cell's sources move every point; the paper's pipeline removes outliers) and the verdict's draws, not a
+# confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, the surrogate's and
+# the selection's clocks shorter; no check under the band, whose noise and brackets the cell's sources stand for.
+# The verdict's draws after the validation's evaluate a share of the protocol's scans each: in a real cell the
+# spread between cell instances rules the intervals, so more draws of fewer scans decide sooner.
+CELL_BUDGETS: dict[str, dict] = {
+    "quick": dict(verdict_scans=14),
+    "default": dict(max_time=150.0, select_time=120.0, polish_evals=0, confirm_candidates=0, band="", verdict_scans=20, verdict_time=150.0),
+    "thorough": dict(band="", verdict_scans=20),
+}
+
+
+def config_from_budget(budget: str, sensors: tuple[int, ...], overrides: dict | None = None, band: bool = False,
+                       cell: bool = False) -> SearchConfig:  # fmt: skip
     """The config of a named budget for these sensor counts, with ``overrides`` (``[search]`` keys) on top;
-    ``band``: the objective has a band of conditions (:data:`BAND_BUDGETS` adjusts the budget first)."""
+    ``band``: the objective has a band of conditions (:data:`BAND_BUDGETS` adjusts the budget first);
+    ``cell``: it runs in a real cell (:data:`CELL_BUDGETS`, after the band's)."""
     if budget not in BUDGETS:
         raise ConfigError(f"unknown budget '{budget}' (use {', '.join(BUDGETS)})")
-    adjusted = BAND_BUDGETS.get(budget, {}) if band else {}
+    adjusted = {**(BAND_BUDGETS.get(budget, {}) if band else {}), **(CELL_BUDGETS.get(budget, {}) if cell else {})}
     return SearchConfig(sensors=sensors, **{**BUDGETS[budget], **adjusted, **(overrides or {})})
 
 

@@ -11,7 +11,9 @@ Draws are added (:func:`optipose.evaluate.confidence.race_many`) until every k i
 ``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
 ideal cell a draw differs from the next only in its noise and orientations, which the scans' own spread
 already measures: the first look is at one draw. In a real cell each draw is another instance of the cell,
-whose spread only draws show: the first look is at three (docs/method.md, "The verdict").
+whose spread only draws show: the first look is at three, and a draw after the first may evaluate a seeded
+share of the protocol's scans (``SearchConfig.verdict_scans``): more instances of fewer scans (docs/method.md,
+"The verdict with confidence").
 """
 
 from __future__ import annotations
@@ -81,7 +83,7 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
 
     def next_draws(i: int) -> dict:
         t0 = time.perf_counter()
-        with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor) as evaluator:
+        with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans) as evaluator:
             results = {"hand": evaluator(hand)} | {f"found_k{max(g)}": evaluator(layouts[max(g)]) for g in groups}
         for name, result in results.items():
             done(i, name, result)
