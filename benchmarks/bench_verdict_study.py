@@ -1,0 +1,124 @@
+"""The verdict in the real cell on six parts, and a held-out check of every verdict (issue #33).
+
+    .venv/bin/python benchmarks/bench_verdict_study.py run     [--parts part_a,part_b,part_c,bushing,angle,housing]
+                                                               [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study]
+    .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2]
+    .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/verdict-study]
+
+``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
+``OUT/<part>/``; the wall time and peak memory of each (``getrusage`` of the child) into ``OUT/runs.csv``. The
+parts are the shipped A, B, C (hand layouts) and the three of ``scripts/make_study_parts.py`` (conventional
+baselines; ``studies/parts/``).
+``holdout``: per search folder, its found layouts and its baseline evaluated again on a run seed the search never
+used (the search's seed + ``--offset``: another held-out validation seed, other cell instances, other noise),
+choices made there, and the verdict raced as the search's was (:func:`optipose.search.verdict.confident_verdicts`,
+the search's own settings) — into ``OUT/<part>/holdout.csv``. A BUY holds when the held-out verdict is BUY too.
+``table``: one row per part and k — the search's verdict, hand / found in sum with its interval, the predicted
+median per axis for found and baseline, the draws, and the held-out verdict; as Markdown, for docs/results.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+PARTS = {
+    "part_a": "part_a", "part_b": "part_b", "part_c": "part_c",
+    "bushing": "studies/parts/bushing/part.toml", "angle": "studies/parts/angle/part.toml", "housing": "studies/parts/housing/part.toml",
+}  # fmt: skip
+
+
+def run(args) -> None:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for name in args.parts.split(","):
+        folder = out / name
+        command = [sys.executable, "-m", "optipose", "search", PARTS[name], "--budget", args.budget, "--cell", args.cell,
+                   "--seed", str(args.seed), "--jobs", "2", "--out", str(folder), "--no-report"]  # fmt: skip
+        t0 = time.perf_counter()
+        done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        (out / f"{name}.log").write_text(done.stdout + done.stderr)
+        rows.append({"part": name, "exit": done.returncode, "wall_s": round(wall, 1), "peak_mb_so_far": round(peak)})
+        print(f"{name}: exit {done.returncode}, {wall:.1f} s", flush=True)
+        pd.DataFrame(rows).to_csv(out / "runs.csv", index=False)
+
+
+def holdout(args) -> None:
+    import tomllib
+
+    from optipose.evaluate.confidence import split
+    from optipose.evaluate.objective import objective_from_table
+    from optipose.io.load import load_result
+    from optipose.io.tables import verdict_frame
+    from optipose.model.part import load_part
+    from optipose.search.config import SearchConfig
+    from optipose.search.validate import validate
+    from optipose.search.verdict import confident_verdicts
+
+    for folder in sorted(p.parent for p in Path(args.out).glob("*/verdict.csv")):
+        result = load_result(folder)
+        saved = result.config
+        objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(saved.cell_name)
+        config = SearchConfig(**{**saved.search, "sensors": tuple(saved.search["sensors"])})
+        part = load_part(saved.part_source or saved.part_name)
+        seed = int(saved.seed) + args.offset
+        first: dict = {}
+        t0 = time.perf_counter()
+        validation = validate(part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__)
+        verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
+        pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / "holdout.csv", index=False)
+        by_k, _ = split(verdicts)
+        print(f"{folder.name} ({time.perf_counter() - t0:.0f} s): " + "; ".join(v.line() for v in by_k.values()), flush=True)
+
+
+def table(args) -> None:
+    from optipose.evaluate.confidence import split
+    from optipose.io.load import load_result, read_verdicts
+
+    print("| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |")
+    print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |")
+    for name in PARTS:
+        folder = Path(args.out) / name
+        if not (folder / "verdict.csv").is_file():
+            continue
+        by_k, _ = split(load_result(folder).confident)
+        held, _ = split(read_verdicts(folder / "holdout.csv"))
+        for k, v in by_k.items():
+            axes = [f"{_mdeg(f.median_deg)} / {_mdeg(h.median_deg)}" for f, h in zip(v.found, v.hand)]
+            h = held.get(k)
+            other = f"{h.decision} {h.score.estimate:.2f}x [{h.score.low:.2f}, {h.score.high:.2f}]" if h else "-"
+            s = v.score
+            print(f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}] | "
+                  + " | ".join(axes) + f" | {v.n_draws} | {other} |")  # fmt: skip
+
+
+def _mdeg(interval) -> str:
+    return f"{1e3 * interval.estimate:.3g} [{1e3 * interval.low:.3g}, {1e3 * interval.high:.3g}]"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("run", "holdout", "table"))
+    ap.add_argument("--parts", default=",".join(PARTS))
+    ap.add_argument("--budget", default="default")
+    ap.add_argument("--cell", default="ur10e")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--offset", type=int, default=1000)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
+    args = ap.parse_args()
+    {"run": run, "holdout": holdout, "table": table}[args.what](args)
+
+
+if __name__ == "__main__":
+    main()
