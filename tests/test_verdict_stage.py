@@ -114,3 +114,19 @@ def test_a_draw_of_fewer_scans_keeps_the_protocols_orientations_in_proportion():
     rows = [int(np.flatnonzero((full.seeds == s))[0]) for s in part.seeds]  # each a scan of the protocol, once, in order
     assert rows == sorted(set(rows)) and np.array_equal(full.rpy[rows], part.rpy)
     assert np.array_equal(full.sample(20, 11).seeds, part.seeds) and not np.array_equal(full.sample(20, 12).seeds, part.seeds)
+
+
+def test_a_buy_says_which_bracket_to_move_and_which_hand_sensors_stay():
+    from optipose.model.layout import kept_sensors
+    from optipose.report.confidence import mount_line
+
+    hand = load_part("part_b").layouts["hand"]
+    moved = hand.sensors[0].T_O_S.copy()
+    moved[:3, 3] += [0.0, 0.002, 0.0]  # S1's bracket 2 mm along y
+    found = Layout((SensorPose("F1", moved), SensorPose("F2", hand.sensors[1].T_O_S)), name="found_k2")
+    assert kept_sensors(found, hand) == {"F2": "S2"}
+    buy = replace(compare_draws([_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=2,
+                                found_name="F1F2", hand_name="S1S2"), decision=BUY)  # fmt: skip
+    assert mount_line(buy, found, hand) == "k=2: mount F1 (new), keep S2; S1 freed"
+    assert mount_line(replace(buy, decision=TIE), found, hand) == ""
+    assert mount_line(replace(buy, found_name="F2", hand_name="S2S3"), found, hand) == "k=2: keep S2; S3 freed"

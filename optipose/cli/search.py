@@ -266,6 +266,7 @@ def _print_report(console, report, part, unchecked: bool = False) -> None:
     from optipose.evaluate.compare import mdeg
     from optipose.evaluate.confidence import split
     from optipose.model.baseline import baseline, baseline_label
+    from optipose.report.confidence import mount_line
 
     label = baseline_label(baseline(part))
     if report.validated:
@@ -274,6 +275,9 @@ def _print_report(console, report, part, unchecked: bool = False) -> None:
         confident, fewer = split(getattr(report, "confident", {}))
         for v in confident.values() or verdicts:
             console.print(v.line() if confident else verdict_headline(v, label, band.get(v.k), checked=not unchecked), highlight=False)
+        for v in confident.values():
+            if line := mount_line(v, report.layouts.get(v.k), baseline(part)):
+                console.print(line, highlight=False)
         if fewer is not None:
             console.print(fewer.fewer_line(), highlight=False)
         if confident:

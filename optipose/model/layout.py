@@ -21,7 +21,7 @@ import numpy as np
 from optipose.errors import ConfigError, OptiposeError, read_toml
 from optipose.transforms import validate_pose
 
-__all__ = ["SensorPose", "Layout", "load_layout", "layout_from_table", "write_layout"]
+__all__ = ["SensorPose", "Layout", "load_layout", "layout_from_table", "write_layout", "kept_sensors"]
 
 
 @dataclass(frozen=True)
@@ -102,3 +102,15 @@ def write_layout(layout: Layout, path: str | Path) -> Path:
     from optipose.files import write_text
 
     return write_text(path, tomli_w.dumps(layout.to_table()))
+
+
+def kept_sensors(layout: Layout, other: Layout, tolerance: float = 1e-6) -> dict[str, str]:
+    """Each sensor of ``layout`` that stands where a sensor of ``other`` stands (every entry of ``T_O_S``
+    within ``tolerance``: metres, and the rotation's unitless entries), by name → that sensor's name in ``other``:
+    a found layout's hand sensors left in their brackets."""
+    out = {}
+    for sensor in layout.sensors:
+        same = [o.name for o in other.sensors if np.allclose(sensor.T_O_S, o.T_O_S, rtol=0.0, atol=tolerance)]
+        if same:
+            out[sensor.name] = same[0]
+    return out

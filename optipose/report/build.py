@@ -160,7 +160,7 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         protocol = "the full protocol" if validation.protocol == "full" else "the REDUCED protocol (14 scans; --budget default for the full one)"
         verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, result.band_verdicts(), result.unchecked)
         if result.confident:
-            verdict = verdict[:1] + confident_blocks(result.confident, cell_name(result.config)) + [
+            verdict = verdict[:1] + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.hand) + [
                 Heading("The validation draw alone, statistic by statistic")] + verdict[1:]
         blocks += verdict
         blocks.append(Paragraph(f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "

@@ -12,7 +12,7 @@ from optipose.evaluate.confidence import BUY, KEEP, TIE, split
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
 
-__all__ = ["confident_blocks", "confident_css", "interval_cell"]
+__all__ = ["confident_blocks", "confident_css", "interval_cell", "mount_line"]
 
 _CSS = {BUY: "verdict good", KEEP: "verdict bad", TIE: "verdict info"}
 
@@ -29,15 +29,35 @@ def interval_cell(interval, scale: float = 1e3, digits: int = 3) -> str:
     return f"{e} [{lo}, {hi}]" if digits > 2 else f"{e} [{lo}-{hi}]"
 
 
-def confident_blocks(verdicts: dict, cell: str = "ideal") -> list[Block]:
-    """The verdict's lines, its table and its picture (empty without verdicts). ``cell``: the cell's name,
-    which the caption says the errors are predicted in."""
+def mount_line(verdict, found, hand) -> str:
+    """What a BUY asks of the cell, in one line: the found sensors its choice uses that are new (their poses
+    follow in the layouts), the baseline's it keeps in their brackets and those it frees, e.g.
+    ``k=2: mount F1 (new), keep S2; S1 freed``; "" for another decision. ``found``, ``hand``: the
+    :class:`~optipose.model.layout.Layout` of the found k sensors and the baseline's."""
+    from optipose.model.layout import kept_sensors
+
+    if verdict.decision != BUY or found is None or hand is None:
+        return ""
+    used = [n for n in found.names if n in verdict.found_name]
+    kept = kept_sensors(found, hand)
+    new = [n for n in used if n not in kept]
+    keep = [kept[n] for n in used if n in kept]
+    freed = [n for n in hand.names if n in verdict.hand_name and n not in keep]
+    parts = ([f"mount {', '.join(new)} (new)"] if new else []) + ([f"keep {', '.join(keep)}"] if keep else [])
+    return f"k={verdict.k}: " + ", ".join(parts) + (f"; {', '.join(freed)} freed" if freed else "")
+
+
+def confident_blocks(verdicts: dict, cell: str = "ideal", layouts: dict | None = None, hand=None) -> list[Block]:
+    """The verdict's lines, what a BUY mounts and keeps (:func:`mount_line`), its table and its picture (empty
+    without verdicts). ``cell``: the cell's name, which the caption says the errors are predicted in;
+    ``layouts``: k → the found layout, ``hand``: the baseline's."""
     by_k, fewer = split(verdicts)
     if not by_k:
         return []
     ordered = list(by_k.values())
     label = ordered[0].reference
     blocks: list[Block] = [Paragraph(v.line(), confident_css(v.decision)) for v in ordered]
+    blocks += [Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), hand))]
     if fewer is not None:
         blocks.append(Paragraph(fewer.fewer_line(), confident_css(fewer.decision)))
     rows = []
