@@ -83,6 +83,7 @@ def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
     assert lines[: len(verdicts)] == [result.confident[v.k].line() for v in verdicts]
     assert all(any(f"{w} conventional" in line for w in ("vs", "than", "KEEP")) for line in lines[:2])
     assert "predicted median |error| in the cell" in results["stdout"]
+    assert "these verdicts hold in the ideal cell" in results["stdout"]  # the search ran in the ideal cell: it says so
     assert [line[:4] for line in lines[:2]] == ["k=1:", "k=2:"]
     table_row = next(i for i, line in enumerate(lines) if line.lstrip().startswith("1  found"))
     assert table_row > len(verdicts)  # the details come after

@@ -89,7 +89,7 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     # a nominal search that did not check its answer under a band (quick, or `band = ""`) says so: its "better"
     # holds in the simulation's ideal cell only, which is not yet a reason to buy
     unchecked = the_objective.conditions.trivial and the_objective.cell.ideal and searched.band is None and not searched.band_interrupted
-    _print_report(Console(), searched, the_part, unchecked)
+    _print_report(Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal)
     if searched.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
@@ -257,16 +257,17 @@ def _draw_layouts(folder: Path, part, layouts) -> None:
             logging.getLogger(__name__).warning("could not draw found_k%d: %s", k, exc)
 
 
-def _print_report(console, report, part, unchecked: bool = False) -> None:
+def _print_report(console, report, part, unchecked: bool = False, ideal: bool = True) -> None:
     """The verdict first, one line per k (:func:`verdict_headline`), then the details: found vs. the
     baseline per axis on the validation protocol (the records ``comparison.csv`` was written from, which
     :func:`optipose.io.load_result` reads back), the subsets each axis uses, the band, the full verdict
     lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
-    ``unchecked``: the answer was never checked under a band (a nominal search without the check)."""
+    ``unchecked``: the answer was never checked under a band (a nominal search without the check); ``ideal``:
+    the search ran in the ideal cell (its verdicts say so)."""
     from optipose.evaluate.compare import mdeg
     from optipose.evaluate.confidence import split
     from optipose.model.baseline import baseline, baseline_label
-    from optipose.report.confidence import mount_line
+    from optipose.report.confidence import IDEAL_CELL, mount_line
 
     label = baseline_label(baseline(part))
     if report.validated:
@@ -280,9 +281,11 @@ def _print_report(console, report, part, unchecked: bool = False) -> None:
                 console.print(line, highlight=False)
         if fewer is not None:
             console.print(fewer.fewer_line(), highlight=False)
+        if confident and ideal:
+            console.print("these verdicts hold " + IDEAL_CELL, style="yellow", highlight=False)
         if confident:
             console.print(_confident_table(confident, part))
-        if unchecked and any(v.no_worse for v in verdicts):
+        if unchecked and not confident and any(v.no_worse for v in verdicts):
             from optipose.evaluate.compare import UNCHECKED
 
             console.print(UNCHECKED, style="yellow", highlight=False)

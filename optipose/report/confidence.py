@@ -12,7 +12,10 @@ from optipose.evaluate.confidence import BUY, KEEP, TIE, split
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
 
-__all__ = ["confident_blocks", "confident_css", "interval_cell", "mount_line"]
+__all__ = ["confident_blocks", "confident_css", "interval_cell", "mount_line", "IDEAL_CELL"]
+
+IDEAL_CELL = ("in the ideal cell (the CAD part, an exact robot and calibration): run with --cell ur10e, or a "
+              "cell file of yours, for the errors of a real cell before buying")  # fmt: skip
 
 _CSS = {BUY: "verdict good", KEEP: "verdict bad", TIE: "verdict info"}
 
@@ -58,6 +61,8 @@ def confident_blocks(verdicts: dict, cell: str = "ideal", layouts: dict | None =
     label = ordered[0].reference
     blocks: list[Block] = [Paragraph(v.line(), confident_css(v.decision)) for v in ordered]
     blocks += [Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), hand))]
+    if cell == "ideal":
+        blocks.append(Paragraph("These verdicts hold " + IDEAL_CELL + ".", "verdict mixed"))
     if fewer is not None:
         blocks.append(Paragraph(fewer.fewer_line(), confident_css(fewer.decision)))
     rows = []
