@@ -65,7 +65,8 @@ def holdout(args) -> None:
     from optipose.search.validate import validate
     from optipose.search.verdict import confident_verdicts
 
-    for folder in sorted(p.parent for p in Path(args.out).glob("*/verdict.csv")):
+    wanted = set(args.parts.split(","))
+    for folder in sorted(p.parent for p in Path(args.out).glob("*/verdict.csv") if p.parent.name in wanted):
         result = load_result(folder)
         saved = result.config
         objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(saved.cell_name)

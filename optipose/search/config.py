@@ -101,11 +101,11 @@ BUDGETS: dict[str, dict] = {
     # "Budgets"); no check under the band, so its verdicts say they hold in the ideal cell only
     "quick": dict(
         global_evals=70, local_evals=20, max_time=25.0, random_starts=4, select_candidates=0, strategy="greedy",
-        screen_samples=1024, screen_starts=4, screen_evals=20, verdict_draws=3, verdict_time=20.0,
+        screen_samples=1024, screen_starts=4, screen_evals=20, verdict_draws=1,
     ),  # fmt: skip
     "default": dict(
         global_evals=400, local_evals=120, joint_evals=200, max_time=240.0, select_candidates=3, select_time=240.0,
-        polish_evals=90, confirm_candidates=3, screen_samples=4096, band="robust",
+        polish_evals=90, confirm_candidates=3, screen_samples=4096, band="robust", verdict_time=60.0,
     ),  # fmt: skip
     "thorough": dict(
         global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16, screen_samples=16384,
@@ -135,7 +135,7 @@ BAND_BUDGETS: dict[str, dict] = {
 # The verdict's draws after the validation's evaluate a share of the protocol's scans each: in a real cell the
 # spread between cell instances rules the intervals, so more draws of fewer scans decide sooner.
 CELL_BUDGETS: dict[str, dict] = {
-    "quick": dict(verdict_scans=14),
+    "quick": dict(verdict_draws=4, verdict_scans=14, verdict_time=30.0),
     "default": dict(max_time=150.0, select_time=120.0, polish_evals=0, confirm_candidates=0, band="", verdict_scans=20, verdict_time=150.0),
     "thorough": dict(band="", verdict_scans=20),
 }
