@@ -175,18 +175,32 @@ class Evaluator:
         noise scale (one bracket draw at several noise levels) are scanned together: each orientation is
         cast once for all of them (:func:`optipose.evaluate.worker.run_levels`), and each result is the one
         ``self(layout, condition)`` gives."""
-        if not isinstance(layout, Layout):
-            layout = Layout(tuple(SensorPose(f"S{i + 1}", np.asarray(T, float)) for i, T in enumerate(layout)), name="poses")
+        layout = _as_layout(layout)
+        return [self.result(layout, [raw]) for raw in self.raw(layout, conditions)]
+
+    def raw(self, layout: Layout | list[np.ndarray], conditions: list[Condition], share: tuple[int, int] = (0, 1)) -> list[tuple]:
+        """What :meth:`under` makes its results of, per condition in their order: the workers' outputs and
+        the wall time (s), of the orientations ``share[0]``, ``share[0] + share[1]``, … only. The shares of
+        several calls (other processes') make one result together (:meth:`result`), the one ``under`` gives:
+        each scan's noise comes from the seed and its index."""
+        layout = _as_layout(layout)
+        first, every = share
+        tasks = self.tasks()[first::every]
         out = {}
         for group in by_draw(conditions):
             t0 = time.perf_counter()
             levels = tuple(dict.fromkeys(c.noise_scale for c in group))
             setup = replace(self.setup, condition=group[0])
-            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels), _chunks(self.tasks(), self.jobs))
+            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels), _chunks(tasks, self.jobs))
             wall = (time.perf_counter() - t0) / len(levels)
             for n, level in enumerate(levels):
-                out[replace(group[0], noise_scale=level)] = self._result(layout, [o[n] for o in outputs], wall)
+                out[replace(group[0], noise_scale=level)] = ([o[n] for o in outputs], wall)
         return [out[c] for c in conditions]
+
+    def result(self, layout: Layout | list[np.ndarray], raws: list[tuple]) -> EvaluationResult:
+        """One condition's evaluation from the :meth:`raw` outputs of the shares of its orientations (their
+        wall time the longest)."""
+        return self._result(_as_layout(layout), [o for outputs, _ in raws for o in outputs], max(wall for _, wall in raws))
 
     def _result(self, layout: Layout, outputs: list[tuple], wall: float) -> EvaluationResult:
         """The workers' (rows, point rows, seconds) of one condition as an :class:`EvaluationResult`."""
@@ -200,6 +214,13 @@ class Evaluator:
         timings["wall"] = wall
         log_failures(per_scan, self._failure_level)
         return EvaluationResult(self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings)
+
+
+def _as_layout(layout: Layout | list[np.ndarray]) -> Layout:
+    """A layout, or a list of 4×4 ``T_O_S`` named S1, S2, … as one."""
+    if isinstance(layout, Layout):
+        return layout
+    return Layout(tuple(SensorPose(f"S{i + 1}", np.asarray(T, float)) for i, T in enumerate(layout)), name="poses")
 
 
 def log_failures(per_scan: pd.DataFrame, level: int = logging.WARNING, what: str = "") -> None:

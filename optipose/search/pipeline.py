@@ -13,7 +13,7 @@
    ``objectives/robust.toml``'s noise levels and bracket tolerance), on the same held-out seed: a layout
    that wins only in the simulation's ideal cell is not a layout to buy. Every budget validates on the objective's protocol
    (``[search] validation = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
-   hand layout's part of it starts with step 2, in a process of its own (``jobs`` ≥ 2), and is waited
+   hand layout's part of it starts with step 2, in ``jobs`` processes of its own (``jobs`` ≥ 2), and is waited
    for before step 3.
 
 Every result goes to a :class:`ResultSink` the caller gives (``optipose.io.search.SearchFolder`` writes a
@@ -111,7 +111,7 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, l
 
     if objective is None or jobs < 2:
         return nullcontext()
-    return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs if last else 1)
+    return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs)
 
 
 def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None, band_run=None) -> SearchReport:
