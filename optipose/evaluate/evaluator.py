@@ -112,10 +112,12 @@ class Evaluator:
         ``jobs`` is closed with the evaluator.
     condition : the noise scale and bracket errors to scan under (:mod:`optipose.evaluate.conditions`);
         default the nominal one, the objective's own numbers.
+    reference_dir : a folder of the CAD-surface reference already on this machine (:mod:`optipose.evaluate.shared`),
+        which the workers map instead of building it (a search's, for the hand layout's processes).
     """
 
     def __init__(self, part, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1, quiet: bool = False,
-                 executor: Executor | None = None, condition: Condition | None = None):  # fmt: skip
+                 executor: Executor | None = None, condition: Condition | None = None, reference_dir: str | None = None):  # fmt: skip
         self.part = part
         self.objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.seed = int(seed)
@@ -141,10 +143,11 @@ class Evaluator:
             column_stride=self.objective.scan.column_stride,
             cell=None if self.objective.cell.ideal else CellSetup.of(self.objective.cell, part),
         )
-        self._shared = None  # with workers in other processes, the CAD-surface reference is built here once
-        if self.jobs > 1 and self.objective.registration.reference != "cad-sample":
-            self._shared, folder = shared.acquire(self.setup.vertices, self.setup.faces)
-            self.setup = replace(self.setup, reference_dir=folder)
+        self._shared = None
+        if self.objective.registration.reference != "cad-sample" and (reference_dir is not None or self.jobs > 1):
+            if reference_dir is None:  # with workers in other processes, the CAD-surface reference is built here once
+                self._shared, reference_dir = shared.acquire(self.setup.vertices, self.setup.faces)
+            self.setup = replace(self.setup, reference_dir=reference_dir)
 
     def __enter__(self):
         return self

@@ -43,10 +43,12 @@ class BaselineRun:
     through the selection and yields to it). ``processes``: its work is shared out over up to this many
     processes — its bracket draws where there are enough of them (each draw's noise levels scanned together),
     else its scans (:func:`_shares`) — so that once the search and the found layouts' validation are done the
-    hand layout's takes every core, not one.
+    hand layout's takes every core, not one. ``reference_dir``: the CAD-surface reference the search holds on
+    this machine (:mod:`optipose.evaluate.shared`), mapped by the processes instead of built by each.
     """
 
-    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False, processes: int = 1):
+    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False, processes: int = 1,
+                 reference_dir: str | None = None):  # fmt: skip
         import multiprocessing
         import pickle
 
@@ -63,7 +65,7 @@ class BaselineRun:
         try:
             the_part = pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL)  # once, not once a process: a dense mesh takes seconds
             for under, scans in self._shares:
-                args = (the_part, objective, self._seed, layout, under, scans)
+                args = (the_part, objective, self._seed, layout, under, scans, reference_dir)
                 self._calls.append(Background(_evaluate, *args, nice=_LAST if last else _NICE))
         except (OSError, pickle.PicklingError, AttributeError, TypeError) as exc:  # the validation evaluates it instead
             self.close()
@@ -117,12 +119,12 @@ def _shares(conditions: list, processes: int) -> list[tuple[list, tuple[int, int
     return [(list(conditions), (i, n)) for i in range(n)]
 
 
-def _evaluate(part: bytes, objective, seed: int, layout, under: list, scans: tuple[int, int]) -> list:
+def _evaluate(part: bytes, objective, seed: int, layout, under: list, scans: tuple[int, int], reference_dir: str | None) -> list:
     """The hand layout's raw evaluation under some conditions, on some of its scans (``scans``: first,
     every), in a process of its own; ``part`` pickled."""
     import pickle
 
-    with Evaluator(pickle.loads(part), objective, seed=seed, jobs=1, quiet=True) as evaluator:
+    with Evaluator(pickle.loads(part), objective, seed=seed, jobs=1, quiet=True, reference_dir=reference_dir) as evaluator:
         return evaluator.raw(layout, under, scans)
 
 
