@@ -98,9 +98,9 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     if on_stage:  # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
         on_stage("searching on the surrogate")
-    study = _study(part, objective, config, sink, resume, on_eval)
     with _shared_reference(part, jobs) as folder, _baseline_run(part, objective, config, seed, jobs, folder) as hand_run, \
             _baseline_run(part, band, config, seed, jobs, folder, last=True) as band_run:  # fmt: skip
+        study = _study(part, objective, config, sink, resume, on_eval)  # after the hand layout's processes start: they set up beside it
         return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run)
 
 
