@@ -427,6 +427,22 @@ def test_the_hand_layout_evaluated_beside_the_search_is_the_one_validate_would_c
     assert validation.hand[1].score == here.table[0].score
 
 
+def test_the_hand_layout_shared_out_over_processes_by_its_scans_is_the_evaluators():
+    # one condition, two processes: each evaluates every other scan, and together they make the one result
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.search.validate import BaselineRun
+    from optipose.seeds import validation_seed
+
+    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    with BaselineRun(part, objective, seed=3, processes=2) as run:
+        assert [scans for _, scans in run._shares] == [(0, 2), (1, 2)]
+        beside = run.result()
+    with Evaluator(part, objective, seed=validation_seed(3), jobs=1) as evaluator:
+        here = evaluator(part.layouts["hand"])
+    assert beside.per_scan.equals(here.per_scan) and beside.points.equals(here.points)
+    assert beside.stats.equals(here.stats) and beside.table == here.table
+
+
 def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_evaluators():
     # the check under the band after a nominal search runs the hand layout's bracket draws in processes of
     # their own (each draw's noise levels together): the result must be RobustEvaluator's, condition by condition

@@ -62,6 +62,7 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
     assert (again, same) == (key, folder)
     mapped = load_reference(folder)
     assert not mapped._tri.flags.writeable
+    assert not shared.surface(mesh.vertices, mesh.faces)._tri.flags.writeable  # held here: the surrogate maps it too
     points = trimesh.sample.sample_surface(mesh, 500, seed=1)[0] + np.random.default_rng(1).normal(size=(500, 3)) * 4e-4
     for a, b in zip(built.nearest(points), mapped.nearest(points)):
         np.testing.assert_array_equal(a, b)
@@ -69,6 +70,7 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
     assert os.path.isdir(folder)  # one user left
     shared.release(key)
     assert not os.path.exists(folder)
+    assert shared.surface(mesh.vertices, mesh.faces)._tri.flags.writeable  # held by no one: built
 
 
 def test_the_grid_lists_each_face_a_few_times_whatever_the_density():

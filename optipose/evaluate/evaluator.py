@@ -113,10 +113,13 @@ class Evaluator:
     condition : the noise scale and bracket errors to scan under (:mod:`optipose.evaluate.conditions`);
         default the nominal one, the objective's own numbers.
     scans : evaluate this many of the protocol's scans, drawn by the seed (0: all; :meth:`Perturbations.sample`).
+    reference_dir : a folder of the CAD-surface reference already on this machine (:mod:`optipose.evaluate.shared`),
+        which the workers map instead of building it (a search's, for the hand layout's processes).
     """
 
     def __init__(self, part, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1, quiet: bool = False,
-                 executor: Executor | None = None, condition: Condition | None = None, scans: int = 0):  # fmt: skip
+                 executor: Executor | None = None, condition: Condition | None = None, scans: int = 0,
+                 reference_dir: str | None = None):  # fmt: skip
         self.part = part
         self.objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.seed = int(seed)
@@ -142,10 +145,11 @@ class Evaluator:
             column_stride=self.objective.scan.column_stride,
             cell=None if self.objective.cell.ideal else CellSetup.of(self.objective.cell, part),
         )
-        self._shared = None  # with workers in other processes, the CAD-surface reference is built here once
-        if self.jobs > 1 and self.objective.registration.reference != "cad-sample":
-            self._shared, folder = shared.acquire(self.setup.vertices, self.setup.faces)
-            self.setup = replace(self.setup, reference_dir=folder)
+        self._shared = None
+        if self.objective.registration.reference != "cad-sample" and (reference_dir is not None or self.jobs > 1):
+            if reference_dir is None:  # with workers in other processes, the CAD-surface reference is built here once
+                self._shared, reference_dir = shared.acquire(self.setup.vertices, self.setup.faces)
+            self.setup = replace(self.setup, reference_dir=reference_dir)
 
     def __enter__(self):
         return self
@@ -176,18 +180,32 @@ class Evaluator:
         noise scale (one bracket draw at several noise levels) are scanned together: each orientation is
         cast once for all of them (:func:`optipose.evaluate.worker.run_levels`), and each result is the one
         ``self(layout, condition)`` gives."""
-        if not isinstance(layout, Layout):
-            layout = Layout(tuple(SensorPose(f"S{i + 1}", np.asarray(T, float)) for i, T in enumerate(layout)), name="poses")
+        layout = _as_layout(layout)
+        return [self.result(layout, [raw]) for raw in self.raw(layout, conditions)]
+
+    def raw(self, layout: Layout | list[np.ndarray], conditions: list[Condition], share: tuple[int, int] = (0, 1)) -> list[tuple]:
+        """What :meth:`under` makes its results of, per condition in their order: the workers' outputs and
+        the wall time (s), of the orientations ``share[0]``, ``share[0] + share[1]``, … only. The shares of
+        several calls (other processes') make one result together (:meth:`result`), the one ``under`` gives:
+        each scan's noise comes from the seed and its index."""
+        layout = _as_layout(layout)
+        first, every = share
+        tasks = self.tasks()[first::every]
         out = {}
         for group in by_draw(conditions):
             t0 = time.perf_counter()
             levels = tuple(dict.fromkeys(c.noise_scale for c in group))
             setup = replace(self.setup, condition=group[0])
-            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels), _chunks(self.tasks(), self.jobs))
+            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels), _chunks(tasks, self.jobs))
             wall = (time.perf_counter() - t0) / len(levels)
             for n, level in enumerate(levels):
-                out[replace(group[0], noise_scale=level)] = self._result(layout, [o[n] for o in outputs], wall)
+                out[replace(group[0], noise_scale=level)] = ([o[n] for o in outputs], wall)
         return [out[c] for c in conditions]
+
+    def result(self, layout: Layout | list[np.ndarray], raws: list[tuple]) -> EvaluationResult:
+        """One condition's evaluation from the :meth:`raw` outputs of the shares of its orientations (their
+        wall time the longest)."""
+        return self._result(_as_layout(layout), [o for outputs, _ in raws for o in outputs], max(wall for _, wall in raws))
 
     def _result(self, layout: Layout, outputs: list[tuple], wall: float) -> EvaluationResult:
         """The workers' (rows, point rows, seconds) of one condition as an :class:`EvaluationResult`."""
@@ -201,6 +219,13 @@ class Evaluator:
         timings["wall"] = wall
         log_failures(per_scan, self._failure_level)
         return EvaluationResult(self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings)
+
+
+def _as_layout(layout: Layout | list[np.ndarray]) -> Layout:
+    """A layout, or a list of 4×4 ``T_O_S`` named S1, S2, … as one."""
+    if isinstance(layout, Layout):
+        return layout
+    return Layout(tuple(SensorPose(f"S{i + 1}", np.asarray(T, float)) for i, T in enumerate(layout)), name="poses")
 
 
 def log_failures(per_scan: pd.DataFrame, level: int = logging.WARNING, what: str = "") -> None:

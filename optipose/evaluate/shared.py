@@ -6,7 +6,9 @@ arrays into a temporary folder (:func:`~optipose.registration.reference.save_ref
 map them read-only (:func:`~optipose.registration.reference.load_reference`): one copy in the page cache
 for every process of the machine. A worker that does not find the folder (a Dask worker on another
 machine) builds its own. Evaluators of one mesh in one process share one folder, removed when the last of
-them closes (or, at the latest, when the process exits).
+them closes (or, at the latest, when the process exits). A search acquires it before anything else needs it,
+so that its surrogate (:func:`surface`), the hand layout's processes and the validation's workers all map the
+one built.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import threading
 
 import numpy as np
 
-__all__ = ["acquire", "release"]
+__all__ = ["acquire", "release", "surface"]
 
 _LOCK = threading.Lock()
 _FOLDERS: dict[str, list] = {}  # mesh key -> [folder, users]
@@ -66,3 +68,15 @@ def release(key: str) -> None:
         if entry[1] <= 0:
             del _FOLDERS[key]
             shutil.rmtree(entry[0], ignore_errors=True)
+
+
+def surface(vertices: np.ndarray, faces: np.ndarray):
+    """The surface reference of this mesh: mapped from its folder when this process holds one
+    (:func:`acquire`), else built here."""
+    from optipose.registration.reference import SurfaceReference, load_reference
+
+    with _LOCK:
+        entry = _FOLDERS.get(_key(vertices, faces)) if _FOLDERS else None
+        if entry is not None:
+            return load_reference(entry[0])
+    return SurfaceReference(vertices, faces)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "nearest_into", "edge_normal", "adjacent_faces", "CREASE_DEG"]
+__all__ = ["face_grid", "face_boxes", "nearest_into", "edge_normal", "adjacent_faces", "CREASE_DEG"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
@@ -145,7 +145,8 @@ def _walk(p, i, f, planes, plane_c, adjacent, q):
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, origin, cell, shape, reach, start, faces):
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, origin, cell, shape, reach, start, faces,
+                 box32):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
@@ -156,7 +157,9 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     (:func:`face_grid`) around the point's are searched exactly, ring after ring of cells out to ``reach``
     rings: after each ring, every face nearer than the ring block's walls has been seen, so the search
     stops once its best is nearer than those, and is certain for an answer within ``reach`` × ``cell``
-    (faces whose bounding box is farther than the best so far are skipped; the guessed face
+    (faces whose bounding box is farther than the best so far are skipped, first by ``box32`` (f, 6) float32,
+    each face's box rounded outward (:func:`face_boxes`): it skips a subset of what the float64 box skips, which
+    then still decides, so the faces searched are the same; the guessed face
     starts the search, which prunes more). A point inside the face found by more than 2|d| gets its
     projection on the face's plane, like a followed point; a point closest to an edge or a corner gets
     the closest point of that face, in float64, and the direction from it to the point as its normal
@@ -218,6 +221,12 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
                             cell_id = (a * shape[1] + b) * shape[2] + c
                             for e in range(start[cell_id], start[cell_id + 1]):
                                 g = np.int64(faces[e])
+                                gap2 = 0.0  # the float32 box first: a compact row, read where the float64 corners are three
+                                for j in range(3):
+                                    gap = max(box32[g, j] - p[i, j], p[i, j] - box32[g, j + 3], 0.0)
+                                    gap2 += gap * gap
+                                if gap2 > best:
+                                    continue
                                 if g == g_best or (planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0):
                                     continue  # the best again; or a zero-area face (no normal), on its neighbours' edges: they answer for it
                                 if plane_id[g] == plane_id[g_best] and inset2 > best * 1e-6 + 1e-18:
@@ -303,3 +312,13 @@ def adjacent_faces(faces: np.ndarray) -> np.ndarray:
     a, b = order[:-1][same], order[1:][same]
     adjacent[a], adjacent[b] = b // 3, a // 3
     return adjacent.reshape(f, 3)
+
+
+def face_boxes(tri: np.ndarray) -> np.ndarray:
+    """(f, 6) float32: each face's bounding box, lowest corner then highest, rounded outward so that it
+    contains the float64 box of ``tri`` (f, 3, 3): the first test of :func:`nearest_into`'s search."""
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)
+    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
+    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
+    return np.ascontiguousarray(np.hstack([lo32, hi32]))

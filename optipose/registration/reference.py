@@ -35,6 +35,7 @@ _MAX_CELLS = 4_000_000
 _SURFACE_REACH = 2  # rings of cells around a point that the surface's search looks at: exact within 2 cells
 _NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
 _REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
+_ARRAYS = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "plane_id", "grid_start", "grid_faces", "box32", "meta")
 
 
 class SurfaceReference:
@@ -48,7 +49,7 @@ class SurfaceReference:
         self.vertices, self.faces = arrays["vertices"], arrays["faces"]
         self._tri, self._planes, self._plane_c = arrays["tri"], arrays["planes"], arrays["plane_c"]
         self._adjacent, self._plane_id = arrays["adjacent"], arrays["plane_id"]
-        self._grid_start, self._grid_faces = arrays["grid_start"], arrays["grid_faces"]
+        self._grid_start, self._grid_faces, self._box32 = arrays["grid_start"], arrays["grid_faces"], arrays["box32"]
         self._meta = arrays["meta"]  # area, the grid's origin (3), cell, shape (3)
         self.area = float(self._meta[0])
         # views of the packed planes: the face plane (row 0) and its inward edge planes (rows 1-3); a point
@@ -60,10 +61,9 @@ class SurfaceReference:
     def arrays(self) -> dict:
         """Everything the reference is built from, as arrays: ``SurfaceReference(None, None, arrays)`` is
         the same reference (:func:`save_reference` writes them, :func:`load_reference` maps them back)."""
-        names = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "plane_id", "grid_start", "grid_faces", "meta")
         values = (self.vertices, self.faces, self._tri, self._planes, self._plane_c, self._adjacent, self._plane_id,
-                  self._grid_start, self._grid_faces, self._meta)  # fmt: skip
-        return dict(zip(names, values))
+                  self._grid_start, self._grid_faces, self._box32, self._meta)  # fmt: skip
+        return dict(zip(_ARRAYS, values))
 
     def _grid(self) -> tuple:
         """The grid's origin (3,), cell (m), shape (3,), the search's reach in cells, and the CSR start and
@@ -156,7 +156,7 @@ class SurfaceReference:
         from optipose.registration.closest_surface import nearest_into
 
         if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id,
-                        *self._grid()):
+                        *self._grid(), self._box32):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
@@ -182,8 +182,9 @@ class SurfaceReference:
 def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     """The arrays of :class:`SurfaceReference` (see :meth:`SurfaceReference.arrays`), about 400 bytes a face:
     the mesh, its triangles (f, 3, 3), each face's plane and inward edge planes packed (f, 4, 3) and (f, 4)
-    for one gather per point, the face across each edge (int32), a number per plane (int32), and the grid."""
-    from optipose.registration.closest_surface import adjacent_faces, face_grid
+    for one gather per point, the face across each edge (int32), a number per plane (int32), the grid, and each
+    face's bounding box in float32 (the search's first test, :func:`optipose.registration.closest_surface.face_boxes`)."""
+    from optipose.registration.closest_surface import adjacent_faces, face_boxes, face_grid
     from optipose.scan.raycast import plane_numbers
 
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -207,7 +208,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     meta = np.concatenate([[0.5 * float(area2.sum())], origin, [cell], shape.astype(np.float64)])
     return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
             "adjacent": adjacent_faces(faces), "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
-            "meta": meta}  # fmt: skip
+            "box32": face_boxes(tri), "meta": meta}  # fmt: skip
 
 
 def save_reference(reference: SurfaceReference, folder) -> None:
@@ -223,8 +224,7 @@ def load_reference(folder) -> SurfaceReference:
     processes of one machine that load it share one copy in the page cache."""
     from pathlib import Path
 
-    names = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "plane_id", "grid_start", "grid_faces", "meta")
-    return SurfaceReference(None, None, {name: np.load(Path(folder) / f"{name}.npy", mmap_mode="r") for name in names})
+    return SurfaceReference(None, None, {name: np.load(Path(folder) / f"{name}.npy", mmap_mode="r") for name in _ARRAYS})
 
 
 def _edge_normals(points, q, n, edge_c, edge_h, adjacent, normals) -> None:

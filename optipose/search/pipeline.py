@@ -13,7 +13,7 @@
    ``objectives/robust.toml``'s noise levels and bracket tolerance), on the same held-out seed: a layout
    that wins only in the simulation's ideal cell is not a layout to buy. Every budget validates on the objective's protocol
    (``[search] validation = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
-   hand layout's part of it starts with step 2, in a process of its own (``jobs`` ≥ 2), and is waited
+   hand layout's part of it starts with step 2, in ``jobs`` processes of its own (``jobs`` ≥ 2), and is waited
    for before step 3;
 5. the verdict with confidence (:mod:`optipose.search.verdict`): the validation's evaluations are its first
    draw, and further draws of the cell on seeds of their own are raced until every k is BUY, KEEP or TIE,
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -103,28 +104,48 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
     search; ``on_stage(text)`` is told when a stage starts; ``resume`` reloads the sink's cache."""
     band = stage_objective(objective, "band", band=config.band)  # a bad name fails here, before any work
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
-    study = _study(part, objective, config, sink, resume, on_eval)
-    with _baseline_run(part, objective, config, seed, jobs) as hand_run, _baseline_run(part, band, config, seed, jobs, last=True) as band_run:
+    if on_stage:  # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
+        on_stage("searching on the surrogate")
+    with _shared_reference(part, jobs) as folder, _baseline_run(part, objective, config, seed, jobs, folder) as hand_run, \
+            _baseline_run(part, band, config, seed, jobs, folder, last=True) as band_run:  # fmt: skip
+        study = _study(part, objective, config, sink, resume, on_eval)  # after the hand layout's processes start: they set up beside it
         return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run)
 
 
-def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, last: bool = False):
+@contextmanager
+def _shared_reference(part, jobs: int):
+    """The folder of the part's CAD-surface reference on this machine (:mod:`optipose.evaluate.shared`), built
+    once for the search's processes: its surrogate, the hand layout's processes and the validation's workers
+    map it. ``None`` in one process (``jobs`` 1): the surrogate builds its own, as the evaluator's one worker."""
+    from optipose.evaluate import shared
+
+    if jobs < 2:
+        yield None
+        return
+    key, folder = shared.acquire(part.mesh.vertices, part.mesh.faces)
+    try:
+        yield folder
+    finally:
+        shared.release(key)
+
+
+def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, folder: str | None, last: bool = False):
     """The hand layout's validation (``objective``: the search's, or the band's for the check after it),
-    started beside the surrogate search when there are cores for both (``jobs`` ≥ 2); a do-nothing
-    context otherwise, or without an objective. ``last``: at the lowest priority, so that it takes only
-    what nothing else wants (it is not waited for before the selection, whose clock is wall time)."""
+    started beside the surrogate search when there are cores for both (``jobs`` ≥ 2), in ``jobs`` processes
+    mapping the reference in ``folder``; a do-nothing context otherwise, or without an objective. ``last``: at
+    the lowest priority, so that it takes only what nothing else wants (it is not waited for before the
+    selection, whose clock is wall time)."""
     from contextlib import nullcontext
 
     from optipose.search.validate import BaselineRun
 
     if objective is None or jobs < 2:
         return nullcontext()
-    return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs if last else 1)
+    return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs, reference_dir=folder)
 
 
 def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None, band_run=None) -> SearchReport:
     stage = on_stage or (lambda text: None)
-    stage("searching on the surrogate")
     outcome = run_search(part, objective, config, seed, study)
     _flush(sink, study)
     if not outcome.found:

@@ -157,9 +157,9 @@ class Surrogate:
     def ready(self) -> None:
         """Build what :meth:`info` builds on first use (the CAD reference), e.g. before calling it from threads."""
         if self._reference is None and len(self.motions):
-            from optipose.registration.reference import SurfaceReference
+            from optipose.evaluate import shared
 
-            self._reference = SurfaceReference(self.part.mesh.vertices, self.part.mesh.faces)
+            self._reference = shared.surface(self.part.mesh.vertices, self.part.mesh.faces)  # a search's one, when it holds it
 
     def info(self, T_O_S: np.ndarray) -> SensorInfo:
         """Information matrix of one sensor pose from a noise-free nominal scan."""

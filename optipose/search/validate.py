@@ -5,7 +5,7 @@ errors drawn from the held-out seed too), and each choice carries its statistics
 worst over that level's bracket draws: :func:`optipose.evaluate.robust.by_level`).
 
 The hand layout's evaluation does not depend on what the search finds: :class:`BaselineRun` starts it in
-a process of its own when the search starts, on one core beside the surrogate search, and
+processes of its own at a low priority when the search starts, beside the surrogate search, and
 :func:`validate` takes its result instead of evaluating the hand layout again. It is the same result,
 whatever runs it: the scans' noise comes from the seed and the scan's index, not from the worker."""
 
@@ -33,19 +33,22 @@ _LAST = 19  # ... and its check under the band, which runs on through the select
 
 
 class BaselineRun:
-    """The hand layout's validation evaluation (:func:`optipose.model.baseline.baseline`), running in a
-    process of its own from the moment it is made (:class:`optipose.evaluate.background.Background`, one
-    thread), so it takes one core while the search uses the rest.
+    """The hand layout's validation evaluation (:func:`optipose.model.baseline.baseline`), running in
+    processes of its own from the moment it is made (:class:`optipose.evaluate.background.Background`, one
+    thread each) at a low priority, so it takes the cores the search leaves idle.
 
     ``result()`` waits for it: ``None`` when the part has no baseline, or the evaluation failed or was
     stopped (the validation then evaluates the hand layout itself); ``close()`` stops it. ``last``: at the
     lowest priority (the hand layout under the band of the check after a nominal search, which runs on
-    through the selection and yields to it). ``processes``: under a band, its bracket draws are shared
-    out over up to this many processes (each draw's noise levels scanned together), so that once the search
-    and the found layouts' check are done the hand layout's check takes every core, not one.
+    through the selection and yields to it). ``processes``: its work is shared out over up to this many
+    processes — its bracket draws where there are enough of them (each draw's noise levels scanned together),
+    else its scans (:func:`_shares`) — so that once the search and the found layouts' validation are done the
+    hand layout's takes every core, not one. ``reference_dir``: the CAD-surface reference the search holds on
+    this machine (:mod:`optipose.evaluate.shared`), mapped by the processes instead of built by each.
     """
 
-    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False, processes: int = 1):
+    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False, processes: int = 1,
+                 reference_dir: str | None = None):  # fmt: skip
         import multiprocessing
         import pickle
 
@@ -57,12 +60,12 @@ class BaselineRun:
             return
         objective = stage_objective(objective, "validation", protocol)
         self._objective, self._conditions = objective, conditions(objective.conditions)
-        draws = by_draw(self._conditions)
-        n = max(1, min(processes, len(draws)))
-        self._shares = [[c for group in draws[i::n] for c in group] for i in range(n)]
+        self._part, self._seed, self._layout = part, validation_seed(seed), layout
+        self._shares = _shares(self._conditions, processes)
         try:
-            for share in self._shares:
-                args = (part, objective, validation_seed(seed), layout, share)
+            the_part = pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL)  # once, not once a process: a dense mesh takes seconds
+            for under, scans in self._shares:
+                args = (the_part, objective, self._seed, layout, under, scans, reference_dir)
                 self._calls.append(Background(_evaluate, *args, nice=_LAST if last else _NICE))
         except (OSError, pickle.PicklingError, AttributeError, TypeError) as exc:  # the validation evaluates it instead
             self.close()
@@ -73,8 +76,12 @@ class BaselineRun:
         if not self._calls:
             return
         try:
-            done = {c: r for share, call in zip(self._shares, self._calls) for c, r in zip(share, call.result())}
-            each = [done[c] for c in self._conditions]
+            raws: dict = {}
+            for (under, _), call in zip(self._shares, self._calls):
+                for condition, raw in zip(under, call.result()):
+                    raws.setdefault(condition, []).append(raw)
+            with Evaluator(self._part, self._objective, seed=self._seed, quiet=True) as evaluator:
+                each = [evaluator.result(self._layout, raws[c]) for c in self._conditions]
             self._result = each[0] if self._objective.conditions.trivial else robust_result(list(zip(self._conditions, each)), self._objective)
             for result in each:  # it ran quiet in its own process: say here what the validation's own evaluation would have said
                 log_failures(result.per_scan, what="hand layout: ")
@@ -100,10 +107,25 @@ class BaselineRun:
         self.close()
 
 
-def _evaluate(part, objective, seed: int, layout, under: list) -> list:
-    """The evaluations of ``layout`` under some conditions of the band, in the baseline's process."""
-    with Evaluator(part, objective, seed=seed, jobs=1, quiet=True) as evaluator:
-        return evaluator.under(layout, under)
+def _shares(conditions: list, processes: int) -> list[tuple[list, tuple[int, int]]]:
+    """The hand layout's evaluation shared out over up to ``processes`` processes: per process, its
+    conditions and its scans (first, every; see :meth:`optipose.evaluate.evaluator.Evaluator.raw`). Its
+    bracket draws when there are as many as processes, each draw's noise levels together; else every
+    process evaluates every condition on every ``processes``-th scan."""
+    draws = by_draw(conditions)
+    n = max(1, processes)
+    if len(draws) >= n:
+        return [([c for group in draws[i::n] for c in group], (0, 1)) for i in range(n)]
+    return [(list(conditions), (i, n)) for i in range(n)]
+
+
+def _evaluate(part: bytes, objective, seed: int, layout, under: list, scans: tuple[int, int], reference_dir: str | None) -> list:
+    """The hand layout's raw evaluation under some conditions, on some of its scans (``scans``: first,
+    every), in a process of its own; ``part`` pickled."""
+    import pickle
+
+    with Evaluator(pickle.loads(part), objective, seed=seed, jobs=1, quiet=True, reference_dir=reference_dir) as evaluator:
+        return evaluator.raw(layout, under, scans)
 
 
 def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full",
