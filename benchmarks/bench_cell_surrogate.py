@@ -47,6 +47,8 @@ def main() -> None:
     ap.add_argument("--layouts", type=int, default=50, help="random feasible layouts per part (the hand layout is added)")
     ap.add_argument("--cell", default="ur10e")
     ap.add_argument("--seed", type=int, default=0, help="the layouts' draws; ICP runs with seed + 1")
+    ap.add_argument("--icp-seeds", default="", help="ICP seeds, comma-separated (default: seed + 1); the first is the one ranked "
+                    "against, the others (other cell instances) are ranked against it as a ceiling")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/optipose-bench-cellsurr"))
     ap.add_argument("--icp-only", action="store_true", help="fill the ICP cache, score no surrogate")
@@ -57,11 +59,12 @@ def main() -> None:
         part = load_part(name)
         problem = SurrogateProblem(part, load_objective("paper"), SearchConfig())
         layouts = _layouts(problem, part, args.layouts, args.seed)
+        seeds = [int(x) for x in args.icp_seeds.split(",")] if args.icp_seeds else [args.seed + 1]
         print(f"bench_cell_surrogate: {name}, cell {args.cell}, {args.layouts} random feasible {SENSORS}-sensor layouts + the hand "
-              f"layout, layouts seed {args.seed}, ICP seed {args.seed + 1} (reduced protocol)", flush=True)
-        icp = _icp(part, objective, problem, layouts, args)
+              f"layout, layouts seed {args.seed}, ICP seed(s) {', '.join(map(str, seeds))} (reduced protocol)", flush=True)
+        icp = [_icp(part, objective, problem, layouts, args, s) for s in seeds]
         if not args.icp_only:
-            _rank(part, objective, problem, layouts, icp)
+            _rank(part, objective, problem, layouts, icp, seeds)
 
 
 def _layouts(problem, part, n: int, seed: int) -> list[np.ndarray]:
@@ -75,16 +78,16 @@ def _layouts(problem, part, n: int, seed: int) -> list[np.ndarray]:
     return out + [np.concatenate([problem.space.from_pose(T) for T in hand])]
 
 
-def _icp(part, objective, problem, layouts, args) -> dict:
+def _icp(part, objective, problem, layouts, args, seed: int) -> dict:
     """Per layout, ICP's best-choice score (k,) and per-axis median + p75 (k, 3), deg; cached per layout."""
     reduced = reduced_objective(objective)
     scores, axes, todo = [], [], []
-    stem = f"{part.name}-{args.cell}-seed{args.seed}"
+    stem = f"{part.name}-{args.cell}-seed{args.seed}" + ("" if seed == args.seed + 1 else f"-icp{seed}")
     files = [args.cache / f"{stem}-{i:03d}.npz" for i in range(len(layouts) - 1)] + [args.cache / f"{stem}-hand.npz"]
     todo = [i for i, f in enumerate(files) if not f.is_file()]
     if todo:
         t0 = time.perf_counter()
-        with Evaluator(part, reduced, seed=args.seed + 1, jobs=args.jobs, quiet=True) as evaluator:
+        with Evaluator(part, reduced, seed=seed, jobs=args.jobs, quiet=True) as evaluator:
             for n, i in enumerate(todo):
                 table = evaluator(problem.space.to_poses(layouts[i])).table
                 np.savez(files[i], u=layouts[i], score=np.rad2deg([c.score for c in table]),
@@ -115,22 +118,36 @@ def _models(part, objective, problem) -> dict:
     return {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)} | {k: make(s) for k, s in alone.items()}
 
 
-def _rank(part, objective, problem, layouts, icp) -> None:
-    rows = {}
+def _rank(part, objective, problem, layouts, icp: list[dict], seeds: list[int]) -> None:
+    """Spearman ρ of each surrogate against ICP under the first seed's cell instance (and of ICP under the
+    other seeds' instances: how far one instance alone moves the ranking), then, with several seeds, against
+    the geometric mean of ICP's scores over them."""
+    rows = {f"ICP, seed {s}": (v["score"], v["axes"], np.nan) for s, v in zip(seeds[1:], icp[1:])}
     for name, surrogate in _models(part, objective, problem).items():
         t0 = time.perf_counter()
         infos = [[surrogate.info(T) for T in problem.space.to_poses(u)] for u in layouts]
         t_info = time.perf_counter() - t0
         score, axes = _predicted(infos, problem.weights)
         rows[name] = (score, axes, t_info / len(layouts))
-    for k in range(SENSORS):
-        print(f"-- k = {k + 1}: Spearman rho against ICP under the cell ({len(layouts)} layouts)")
-        for name, (score, axes, t) in rows.items():
-            ok = np.isfinite(icp["axes"][:, k])
-            per_axis = " / ".join(f"{spearmanr(axes[ok[:, a], k, a], icp['axes'][ok[:, a], k, a])[0]:.2f}" for a in range(3))
-            factor = np.exp(np.median(np.log(score[:, k] / icp["score"][:, k])))
-            print(f"  {name:24s} score {spearmanr(score[:, k], icp['score'][:, k])[0]:5.2f}; roll / pitch / yaw {per_axis}; "
-                  f"median factor predicted / ICP {factor:.2f}; surrogate {1e3 * t:.0f} ms per layout", flush=True)
+    targets = {f"ICP under the cell, seed {seeds[0]}": icp[0]}
+    if len(icp) > 1:
+        mean = {key: np.exp(np.mean([np.log(v[key]) for v in icp], axis=0)) for key in ("score", "axes")}
+        targets[f"the geometric mean of ICP under the cell over seeds {', '.join(map(str, seeds))}"] = mean
+    for label, target in targets.items():
+        for k in range(SENSORS):
+            print(f"-- k = {k + 1}: Spearman rho against {label} ({len(layouts)} layouts)")
+            for name, (score, axes, t) in rows.items():
+                if name.startswith("ICP") and label != next(iter(targets)):
+                    continue
+                _line(name, score[:, k], axes[:, k], target["score"][:, k], target["axes"][:, k], t)
+
+
+def _line(name: str, score, axes, icp_score, icp_axes, t: float) -> None:
+    ok = np.isfinite(icp_axes) & np.isfinite(axes)
+    per_axis = " / ".join(f"{spearmanr(axes[ok[:, a], a], icp_axes[ok[:, a], a])[0]:.2f}" for a in range(3))
+    factor = np.exp(np.median(np.log(score / icp_score)))
+    print(f"  {name:26s} score {spearmanr(score, icp_score)[0]:5.2f}; roll / pitch / yaw {per_axis}; median factor predicted / ICP "
+          f"{factor:.2f}" + ("" if np.isnan(t) else f"; surrogate {1e3 * t:.0f} ms per layout"), flush=True)
 
 
 def _predicted(infos, weights) -> tuple[np.ndarray, np.ndarray]:
