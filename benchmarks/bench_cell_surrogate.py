@@ -10,9 +10,12 @@ counterpart is the best-scoring k-subset of the same three sensors, so one ICP e
 The surrogates compared: the nominal one (sensor noise and voxel bias: what the search scores with today,
 blind to the cell), and the same with the cell's terms (:mod:`optipose.search.cell_terms`), all of them and
 each source alone. Printed: Spearman ρ of each against ICP under the cell, per part and k, and per axis.
-ICP results are cached per layout in ``--cache`` (npz), so a rerun only re-scores the surrogate.
+With ``--icp-seeds 1,2`` ICP runs under each seed's cell instance: the later seeds' ICP is ranked against
+the first (how much one instance alone moves the ranking), and every surrogate also against the geometric
+mean of ICP's scores over the seeds. ICP results are cached per layout and seed in ``--cache`` (npz), so a
+rerun only re-scores the surrogates.
 
-    nice .venv/bin/python benchmarks/bench_cell_surrogate.py --parts part_a,part_b,part_c --layouts 50 --jobs 1
+    nice .venv/bin/python benchmarks/bench_cell_surrogate.py --parts part_a,part_b,part_c --layouts 50 --icp-seeds 1,2 --jobs 2
     nice .venv/bin/python benchmarks/bench_cell_surrogate.py --icp-only ...   # fill the ICP cache only
 """
 
@@ -153,7 +156,7 @@ def _line(name: str, score, axes, icp_score, icp_axes, t: float) -> None:
 def _predicted(infos, weights) -> tuple[np.ndarray, np.ndarray]:
     """Per layout, the surrogate's best-choice score (k,) and its per-axis median + p75 (k, 3), deg: for each
     k the k-subset of the layout's sensors with the lowest score, as ICP's Table 1 chooses."""
-    scores, axes, memo = [], [], {}
+    scores, axes = [], []
     for layout in infos:
         s_row, a_row = [], []
         for k in range(1, SENSORS + 1):

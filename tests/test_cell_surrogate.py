@@ -154,3 +154,17 @@ def test_a_zeroed_cell_takes_off_what_a_fixed_source_does_at_the_nominal_orienta
     var, _ = _terms(cell)
     assert np.abs(var).max() < 1e-6 * SIGMA**2
     assert load_cell("ur10e").calibration.zeroed is False  # the paper's cell is not zeroed: the term is the un-zeroed one
+
+
+def test_the_form_fields_features_carry_its_rms_at_every_point():
+    # cos² + sin² = 1 per frequency: the features' variance at a point is the process's form RMS², exactly,
+    # and two points far apart in wavelengths are nearly uncorrelated
+    import trimesh
+
+    box = trimesh.creation.box((0.04, 0.04, 0.01))
+    process = Process(name="milled", form_rms=3e-6, form_wavelengths=(0.01, 0.06))
+    model = CellModel(CellSetup(_cell(), process, MaterialEffects()), box.vertices, box.faces, np.zeros(3), np.zeros(1), np.inf)
+    x = np.array([[0.0, 0.0, 0.005], [0.0, 0.0, 0.005], [2.0, 0.0, 0.005]])
+    form = model.part_columns(x, np.tile([0.0, 0.0, 1.0], (3, 1)))[:, :-4]  # the scale and warp columns are zero here
+    assert (form**2).sum(axis=1) == pytest.approx(np.full(3, 3e-6**2))
+    assert form[0] @ form[1] == pytest.approx(3e-6**2) and abs(form[0] @ form[2]) < 0.3 * 3e-6**2
