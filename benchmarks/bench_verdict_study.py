@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_verdict_study.py run     [--parts part_a,part_b,part_c,bushing,angle,housing]
                                                                [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study]
-    .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2]
+    .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2] [--verdict-time 0]
     .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/verdict-study]
 
 ``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
@@ -24,6 +24,7 @@ import resource
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -71,6 +72,8 @@ def holdout(args) -> None:
         saved = result.config
         objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(saved.cell_name)
         config = SearchConfig(**{**saved.search, "sensors": tuple(saved.search["sensors"])})
+        if args.verdict_time is not None:  # 0: race on draws alone, whatever the machine's load
+            config = replace(config, verdict_time=args.verdict_time)
         part = load_part(saved.part_source or saved.part_name)
         seed = int(saved.seed) + args.offset
         first: dict = {}
@@ -116,6 +119,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--offset", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--verdict-time", type=float, default=None, help="holdout: the race's seconds (default: the search's; 0: draws alone)")
     ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
     args = ap.parse_args()
     {"run": run, "holdout": holdout, "table": table}[args.what](args)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["displacement", "mounting_maps", "mounting_variance"]
+__all__ = ["displacement", "mounting_maps", "mounting_variance", "scaled_solve"]
 
 _X = np.array([1.0, 0.0, 0.0])
 _MAX_STD = np.deg2rad(5.0)  # as the surrogate's weak prior: beyond it an error is not small
@@ -69,7 +69,7 @@ def mounting_maps(v: np.ndarray, n: np.ndarray, R: np.ndarray, centre: np.ndarra
     return J.T @ J, J.T @ a
 
 
-def _scaled_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+def scaled_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """pinv(A) @ B for stacks A (..., 6, 6), B (..., 6, q), rotation and translation rows scaled to one size
     first (as :func:`optipose.search.surrogate.bias_rotation`): directions no point pins down get nothing."""
     d = np.diagonal(A, axis1=-2, axis2=-1)
@@ -89,7 +89,7 @@ def mounting_variance(A: list[np.ndarray], N: list[np.ndarray], translation: flo
     if translation <= 0 and rotation <= 0:
         return np.zeros((len(A[0]) - 1, 3))
     cov = np.array([rotation**2 / 3] * 3 + [translation**2 / 3] * 3)
-    P = _scaled_solve(sum(A), np.concatenate(N, axis=2))[:, :3]  # (turns + 1, 3, 6·sensors)
+    P = scaled_solve(sum(A), np.concatenate(N, axis=2))[:, :3]  # (turns + 1, 3, 6·sensors)
     W = P[1:] - P[:1]  # zeroed on the master scan at the nominal orientation
     var = (W**2 * np.tile(cov, len(N))).sum(axis=2)
     return np.minimum(var, _MAX_STD**2)

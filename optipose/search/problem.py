@@ -25,6 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from optipose.cell.scans import CellSetup
 from optipose.evaluate.compare import weighted_excess
 from optipose.model.collision import collision_model, heads_clearance
 from optipose.search.config import SearchConfig
@@ -65,15 +66,19 @@ class SurrogateProblem:
         self.part, self.objective, self.config = part, objective, config
         stat = objective.statistic
         self.weights = (tuple(stat.weights), stat.median_weight, stat.p75_weight)
+        cell = None if objective.cell.ideal else CellSetup.of(objective.cell, part)  # the cell's sources, scored by the surrogate too
         self.surrogate = surrogate or Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective),
                                                 noise_band=max(objective.conditions.noise_scales),
-                                                mounting=objective.conditions.mounted)  # fmt: skip
+                                                mounting=objective.conditions.mounted, cell=cell)  # fmt: skip
         self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
         self.collision = collision_model(part)
         corners = self.collision.sensor.head_box_corners()
         middle = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
         self._head_sphere = (middle, float(np.linalg.norm(corners - middle, axis=1).max()))  # the head box's bounding sphere in S
         self._cache: dict = {} if cache is None else cache
+        if self.surrogate.cell is not None:  # a resumed cache holds no cell term (io.search does not save it): score those poses again
+            for key in [k for k, v in self._cache.items() if isinstance(v, SensorInfo) and v.cell is None and v.n_voxels]:
+                del self._cache[key]
         self._given: dict = {}  # u key → SensorInfo of a sensor scored as given (:meth:`info`)
         self._subsets: dict = {} if subsets is None else subsets  # sensor subsets' predicted statistics (predicted_stats' memo)
         self._targets = dict(targets or {})

@@ -47,6 +47,9 @@ What the surrogate models, and why:
   its drawing and the cell is zeroed on a master part; the change with orientation of the compromise
   between sensors whose clouds disagree is linearised in the bracket errors at the same turns and added as
   a variance (:mod:`optipose.search.mounting`, which says what it leaves out).
+* **the cell.** Under an objective's real cell (``Objective.cell``), its error sources (calibration, the
+  robot's path, the part as made, the material) are propagated to the estimate the same way and added as a
+  variance and a bias (:mod:`optipose.search.cell_terms`, which says what it leaves out); the ideal cell adds nothing.
 
 It ranks layouts; the full ICP protocol (:mod:`optipose.evaluate.evaluator`) gives the numbers that are reported.
 """
@@ -62,6 +65,7 @@ from scipy.stats import norm
 from optipose.model.motion import ScanMotion
 from optipose.scan.pose import PartPose
 from optipose.scan.scanner import Scanner
+from optipose.search.cell_terms import CellMaps, CellModel, sensor_maps, subset_terms
 from optipose.search.mounting import mounting_maps, mounting_variance
 from optipose.transforms import part_motion
 
@@ -106,6 +110,7 @@ class SensorInfo:
     # surrogate's ``noise_band`` adds to G through the voxels' membership (turns, 6); None: no such term
     G_noise: np.ndarray | None = None
     noise_band: float = 1.0
+    cell: CellMaps | None = None  # the cell's error sources (:mod:`optipose.search.cell_terms`); None: the ideal cell
 
 
 class Surrogate:
@@ -120,12 +125,14 @@ class Surrogate:
         few to share; the search scores several poses at once instead, :meth:`optipose.search.problem.SurrogateProblem.prefetch`).
     mounting : whether to compute the bracket term's matrices (``A_turns``, ``N_turns``: one more turn per
         pose and a map per turn); an objective whose brackets are exact never reads them.
+    cell : a :class:`optipose.cell.scans.CellSetup` whose sources the layouts are scored under (the cell
+        term, :mod:`optipose.search.cell_terms`); None or an ideal one: none, today's surrogate bit for bit.
     """
 
     def __init__(
         self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0,
         threads: int | None = 1, extra_variance: float = 0.0, turns: np.ndarray | None = None,
-        noise_band: float = 1.0, mounting: bool = True,
+        noise_band: float = 1.0, mounting: bool = True, cell=None,
     ):  # fmt: skip
         from optipose.model.sensor import load_sensor
 
@@ -152,6 +159,9 @@ class Surrogate:
         self.motions = [part_motion(rpy, self.centre, shift) for rpy, shift in zip(turns, shifts)]
         self.noise_band = float(noise_band)  # the highest noise scale the objective's band asks for
         self.mounting = bool(mounting)
+        self.cell = None
+        if cell is not None and not cell.ideal and len(self.motions):
+            self.cell = CellModel(cell, part.mesh.vertices, part.mesh.faces, self.centre, self.motion.offsets(), self.full_sensor.apex_z)
         self._reference = None
 
     def ready(self) -> None:
@@ -175,41 +185,45 @@ class Surrogate:
         # the number of points a full-fidelity scan puts there; its tangential spread does not matter
         var = self.full_sensor.noise_sigma**2 / inten / (counts * self.scale) + self.extra_variance
         J = np.hstack([np.cross(p, n), n]) / np.sqrt(var)[:, None]
-        A, G, A_turns, N_turns = self._bias(scan.points, T_O_S)
+        A, G, A_turns, N_turns, turned = self._bias(scan.points, T_O_S)
         noisy = self._noise_bias(scan, T_O_S, G) if G is not None and self.noise_band > 1.0 else None
-        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G, A_turns, N_turns, noisy, self.noise_band)
+        cell = None if self.cell is None else sensor_maps(self.cell, turned, T_O_S, float(np.mean(counts)) * self.scale)
+        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G, A_turns, N_turns, noisy, self.noise_band, cell)
 
     def _bias(self, points: np.ndarray, T_O_S: np.ndarray) -> tuple:
         """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and
-        per turn and at the nominal orientation, the mounting term's normal matrices and maps."""
+        per turn and at the nominal orientation, the mounting term's normal matrices and maps; and, for the
+        cell term, the centroids, normals, faces and turn at the nominal orientation and each turn."""
         if not len(self.motions):
-            return None, None, None, None
+            return None, None, None, None, []
         self.ready()
         A, G = np.zeros((6, 6)), np.zeros((len(self.motions), 6))
-        A_turns = N_turns = None
+        A_turns, N_turns, turned = None, None, []
         if self.mounting:
             A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
-            if m == 0 and not self.mounting:
+            if m == 0 and not self.mounting and self.cell is None:
                 continue
-            v, n, r, J = self._turned(points, T)
+            v, n, r, J, face = self._turned(points, T)
+            if self.cell is not None:
+                turned.append((v, n, face, T[:3, :3]))
             if self.mounting:
                 A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
             if m > 0:
                 G[m - 1] = J.T @ r
                 A += J.T @ J / len(self.motions)
-        return A, G, A_turns, N_turns
+        return A, G, A_turns, N_turns, turned
 
     def _turned(self, points: np.ndarray, T: np.ndarray) -> tuple:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
-        centroids v (in the part's frame), their surface normals n, signed distances r to the CAD surface
-        and point-to-plane rows J = [(v − c) × n, n] about the rotation centre c."""
+        centroids v (in the part's frame), their surface normals n, signed distances r to the CAD surface,
+        point-to-plane rows J = [(v − c) × n, n] about the rotation centre c, and their closest faces."""
         from optipose.registration.voxels import voxel_centroids
 
         turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
         v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
-        q, n, _ = self._reference.nearest(v)
-        return v, n, np.einsum("ij,ij->i", v - q, n), np.hstack([np.cross(v - self.centre, n), n])
+        q, n, face = self._reference.nearest(v)
+        return v, n, np.einsum("ij,ij->i", v - q, n), np.hstack([np.cross(v - self.centre, n), n]), face
 
     def _noise_bias(self, scan, T_O_S: np.ndarray, G: np.ndarray) -> np.ndarray:
         """Per turn, what the sensor noise at ``noise_band`` adds to ΣJᵀr through the voxels (turns, 6).
@@ -234,7 +248,7 @@ class Surrogate:
         for sign in (1.0, -1.0):
             points = scan.points + sign * eps[:, None] * u
             for m, T in enumerate(self.motions):
-                _, _, r, J = self._turned(points, T)
+                _, _, r, J, _ = self._turned(points, T)
                 out[m] += 0.5 * (J.T @ r)
         return out - G
 
@@ -316,6 +330,8 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     mounting : (translation m, rotation rad), the brackets' tolerance (± per axis), or None: the zeroed
     cell's error from bracket errors (:mod:`optipose.search.mounting`) adds its variance, the same at every
     noise level, to the noise's at each turn. It needs the turns (``A_turns``); without them it is left out.
+    The cell's error sources (:mod:`optipose.search.cell_terms`), when the sensors carry them (``cell``), add
+    their variance the same way and their bias to the voxel bias's.
     memo, keys : a dict kept between calls and one key per sensor (its pose's): a subset's statistics depend
     only on its sensors, in order, so a subset met before (a screen adds one new sensor to the same placed
     ones thousands of times) is looked up instead of computed again — the same numbers, bit for bit.
@@ -336,12 +352,16 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
         mount = None
         if mounting is not None and delta is not None and all(infos[i].A_turns is not None for i in c):
             mount = mounting_variance([infos[i].A_turns for i in c], [infos[i].N_turns for i in c], *mounting)
+        cell_var, cell_bias = 0.0, 0.0
+        if delta is not None and all(infos[i].cell is not None for i in c):
+            cell_var, cell_bias = subset_terms([infos[i].cell for i in c])
+            mount = cell_var if mount is None else mount + cell_var
         for n, scale in enumerate(noise_scales):
             sigma = rotation_sigma(H if scale == 1.0 else H / scale**2)
             d = delta
             if noisy:  # the noise's own bias grows as σ²: measured at each sensor's band top, scaled to this level
                 d = bias_rotation(A, sum(infos[i].G + (scale / infos[i].noise_band) ** 2 * infos[i].G_noise for i in c))
-            m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d)
+            m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d if d is None else d + cell_bias)
             levels[n, s] = m, q
         if key is not None:
             memo[key] = levels[:, s].copy()

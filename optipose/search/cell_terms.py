@@ -1,0 +1,248 @@
+"""The surrogate's cell term: a real cell's error sources propagated to the rotation estimate, linearly
+(docs/method.md, "The surrogate under the cell"; the sources in docs/cell.md).
+
+Each source moves a voxel centroid i of a sensor's cloud off the CAD by a normal residual rᵢ, linear in the
+source's random numbers η ~ N(0, I): r = X η. One point-to-plane Gauss–Newton step of a subset then settles on
+
+    δ = −P Σ_j Jⱼᵀ rⱼ,   P = (Σ_j Aⱼ)⁻¹ (its rotation rows),   Aⱼ = Σ JᵀJ of sensor j's centroids,
+
+so each source adds P Cov(ΣJᵀr) Pᵀ to the estimate's covariance, the algebra of
+:mod:`optipose.search.mounting`. Per sensor pose and turn, :func:`sensor_maps` keeps ΣJᵀr per unit η of
+every source (:class:`CellMaps`); a subset's covariance needs only sums of those, and the sources that two
+sensors share (the same part, the same robot path, the same frame) are kept as shared columns so that
+their errors add before they are squared. The sources:
+
+* **calibration**: each head's own rigid error (σ per axis, independent between heads) and the frame's
+  (one for every head, about the rotation centre, mapped into each head's frame); the point displacement is
+  mounting.py's, a rigid motion plus the shear of a laser plane that met each point at another travel.
+  Not zeroed (the cell's default), a rigid error is not cancelled: a head's rotation about its laser plane's
+  normal turns its cloud and the estimate by as much. Zeroed (``[calibration] zeroed``), what the map is at
+  the nominal orientation is taken off, as mounting.py does.
+* **robot path**: the part's pose error (translation, rotation about the centre) at the travel where each
+  point was seen, a Gauss–Markov process along the travel (correlation exp(−|Δs|/ℓ)): its covariance's
+  leading eigenvectors on the travel's grid are the shared columns; the scan step's relative error is one
+  more column. The set orientation's error is the protocol's ground truth's: it adds σ² to every axis of
+  every layout alike (:attr:`CellMaps.orientation`), and does not rank.
+* **part as made**: the form field (random plane waves in the process's wavelength band) as random Fourier
+  features of its isotropic covariance (fixed frequencies, the band's spectrum); each plane face's offset
+  and tilt (columns per plane, shared by the sensors that see it); the scale per axis and the warp.
+* **material**: speckle, the sub-surface spread and spurious returns (their variance f·range²/3) as white
+  noise along the rays, averaged over the raw points of a voxel; the sub-surface bias as a deterministic
+  ΣJᵀr (points moved deeper along their rays), added to the voxel bias's step.
+
+What it leaves out: what the voxels do with displaced points (a centroid moves with its points, to first
+order); the layer lines of a print (a period under the voxel size, averaged out); multipath ghosts near
+concave edges; the grazing cap on d / cos; ICP's re-matching and its later steps; that one cell instance
+(the calibration, the part) is fixed per run where the surrogate takes the variance over instances; and the
+per-turn re-scan, as the rest of the surrogate (turns are the nominal scan turned).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from optipose.search.mounting import displacement, scaled_solve
+
+__all__ = ["CellMaps", "CellModel", "sensor_maps", "subset_terms"]
+
+_FORM_FEATURES = 48  # random Fourier frequencies of the form field: its covariance within ~15 % (1/√48)
+_PATH_MODES = 12  # Gauss–Markov eigenvectors kept along the travel (the rest hold little variance over a scan)
+_MAX_STD = np.deg2rad(5.0)  # as the surrogate's weak prior: beyond it an error is not small
+
+
+@dataclass(frozen=True)
+class CellMaps:
+    """One sensor pose's ΣJᵀr per unit random number of each source, per turn (index 0 the nominal
+    orientation), in O about the rotation centre; float32 (a search caches one per pose).
+
+    A : (turns + 1, 6, 6) ΣJᵀJ of the voxel centroids.
+    own : (turns + 1, 6, 6) the head's own calibration error (independent between heads).
+    shared : (turns + 1, 6, F) the sources every sensor of a subset shares per cell instance: the frame's
+        calibration, the form field, the scale and the warp.
+    path : (turns + 1, 6, Q) the robot path's modes and the step error (shared, one draw per scan).
+    planes, faces : (p,) the part's plane numbers the centroids lie on, (turns + 1, p, 6, 4) each plane's
+        offset and tilt (shared by the sensors that see the plane).
+    white : (turns + 1, 6, 6) Cov(ΣJᵀr) of the material's white noise (independent between heads).
+    bias : (turns + 1, 6) ΣJᵀr of the material's sub-surface bias (deterministic).
+    orientation : rad, σ of the set orientation's error; zeroed : the cell is zeroed on a master scan.
+    """
+
+    A: np.ndarray
+    own: np.ndarray
+    shared: np.ndarray
+    path: np.ndarray
+    planes: np.ndarray
+    faces: np.ndarray
+    white: np.ndarray
+    bias: np.ndarray
+    orientation: float
+    zeroed: bool
+
+
+class CellModel:
+    """What :func:`sensor_maps` needs of a cell and a part, built once per surrogate.
+
+    setup : :class:`optipose.cell.scans.CellSetup` (the cell, the part's process, the material's effects).
+    vertices, faces : the part's mesh (m); centre : (3,) m, the rotation centre; offsets : (profiles,) m,
+    the scan's travel at each profile (:meth:`optipose.model.motion.ScanMotion.offsets`); apex_z : m, the
+    laser's apex on the sensor's z (inf: parallel rays).
+    """
+
+    def __init__(self, setup, vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray, offsets: np.ndarray, apex_z: float):
+        from optipose.cell.asmade import AsMade
+        from optipose.scan.raycast import face_planes, plane_numbers
+
+        cell, p, e = setup.cell, setup.process, setup.effects
+        self.cell, self.process, self.centre, self.apex_z = cell, p, np.asarray(centre, float), float(apex_z)
+        c = cell.calibration
+        self.own_sigma = np.repeat([c.sensor_rotation, c.sensor_translation], 3)
+        self.frame_sigma = np.repeat([c.frame_rotation, c.frame_translation], 3)
+        r = cell.robot
+        self.path_sigma = np.repeat([r.path_rotation, r.path], 3)
+        self.offsets = np.asarray(offsets, float)
+        self.modes = _gauss_markov_modes(self.offsets, r.path_correlation) if r.path or r.path_rotation else np.zeros((len(offsets), 0))
+        self.step = r.step
+        self.white = e.speckle**2 + e.subsurface_sigma**2 + e.spurious_fraction * e.spurious_range**2 / 3
+        self.sub_bias = e.subsurface_bias
+        self.made = None
+        if not p.exact:
+            self.plane = plane_numbers(*face_planes(vertices, faces))
+            self.made = AsMade(p, vertices, faces, self.plane, 0)  # its planes' centroids, centre and extent (no draw is used)
+            rng = np.random.default_rng(2022_1536)  # fixed: a pose always scores the same
+            d = rng.normal(size=(_FORM_FEATURES, 3))
+            lam = np.exp(rng.uniform(*np.log(p.form_wavelengths), _FORM_FEATURES))
+            self.k = d / np.linalg.norm(d, axis=1, keepdims=True) * (2 * np.pi / lam)[:, None]
+
+    def part_columns(self, x: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """(m, F) the normal offset at part-frame points x (m, 3), outward normals n, per unit random number of
+        the form field's features, the scale per axis and the warp (F = 0 for the CAD)."""
+        if self.made is None:
+            return np.zeros((len(x), 0))
+        p, made = self.process, self.made
+        phase = x @ self.k.T
+        form = p.form_rms / np.sqrt(_FORM_FEATURES) * np.hstack([np.cos(phase), np.sin(phase)])
+        scale = (x - made.centre) * n * p.scale
+        long = int(np.argmax(made.extent[:2]))
+        s = 2.0 * (x[:, long] - made.centre[long]) / made.extent[long]
+        warp = (p.warp * (s**2 - 1.0 / 3.0) * n[:, 2])[:, None]
+        return np.hstack([form, scale, warp])
+
+    @property
+    def face_width(self) -> int:
+        """Random numbers per plane face: its offset and tilt (4), or none when the process moves no face."""
+        p = self.process
+        return 4 if self.made is not None and (p.face_offset or p.face_tilt) else 0
+
+    def face_columns(self, x: np.ndarray, n: np.ndarray, face: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each point's plane number (m,), and per unit random number its plane's offset and tilt (m, 4)."""
+        p = self.process
+        if not self.face_width:
+            return np.zeros(len(x), np.int64), np.zeros((len(x), 0))
+        plane = self.plane[face]
+        arm = np.cross(x - self.made.plane_centroid[plane], n)  # tilt τ turns the point's normal offset by τ·(arm × n)
+        return plane, np.hstack([np.full((len(x), 1), p.face_offset), arm * p.face_tilt])
+
+
+def _gauss_markov_modes(s: np.ndarray, length: float) -> np.ndarray:
+    """(profiles, q): the leading eigenvectors of exp(−|Δs|/length) on the travel s, times √eigenvalue."""
+    w, V = np.linalg.eigh(np.exp(-np.abs(s[:, None] - s[None, :]) / length))
+    keep = np.argsort(w)[::-1][:_PATH_MODES]
+    return V[:, keep] * np.sqrt(np.clip(w[keep], 0.0, None))
+
+
+def sensor_maps(model: CellModel, turns: list[tuple], T_O_S: np.ndarray, raw_per_voxel: float) -> CellMaps:
+    """One sensor pose's :class:`CellMaps` from its voxel centroids at each turn.
+
+    turns : per turn (nominal first), (v (m, 3) part-frame centroids, n (m, 3) their CAD normals, face (m,)
+    their faces, R (3, 3) the part's turn); T_O_S : the sensor's pose; raw_per_voxel : raw points a
+    full-fidelity scan puts in a voxel, on average (the white noise averages down over them).
+    """
+    parts = [_turn_maps(model, T_O_S, raw_per_voxel, *t) for t in turns]
+    planes = np.unique(np.concatenate([p[6] for p in parts]))
+    faces = np.zeros((len(turns), len(planes), 6, model.face_width), np.float32)
+    for m, p in enumerate(parts):
+        if len(p[6]):
+            faces[m, np.searchsorted(planes, p[6])] = p[7]
+    f32 = lambda i: np.array([p[i] for p in parts], np.float32)  # noqa: E731
+    c = model.cell
+    return CellMaps(f32(0), f32(1), f32(2), f32(3), planes, faces, f32(4), f32(5), c.robot.orientation, c.calibration.zeroed)
+
+
+def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, face, R) -> tuple:
+    """One turn's maps: A, own, shared, path, white, bias, the planes seen and their (p, 6, 4) maps."""
+    c = model.centre
+    p, n_O = (v - c) @ R.T + c, n @ R.T
+    J = np.hstack([np.cross(p - c, n_O), n_O])
+    L = np.einsum("ij,ijk->ik", n_O, displacement(p, T_O_S))  # (m, 6): residual per unit head error (r, t), its frame
+    own = J.T @ (L * model.own_sigma)
+    Rs, o = T_O_S[:3, :3], T_O_S[:3, 3]
+    frame = np.zeros((6, 6))  # the frame's error (ω, t about the centre) as this head's own: r = Rsᵀω, t = Rsᵀ(ω × (o − c) + t_F)
+    frame[:3, :3], frame[3:, 3:] = Rs.T, Rs.T
+    frame[3:, :3] = -Rs.T @ _cross(o - c)
+    shared = np.hstack([J.T @ (L @ frame * model.frame_sigma), J.T @ model.part_columns(v, n)])
+    s = _travel(p, T_O_S)
+    path = np.zeros((6, 0))
+    if model.modes.shape[1]:
+        at = np.clip(np.searchsorted(model.offsets, s), 0, len(model.offsets) - 1)  # the profile that saw each point
+        JJ = J[:, :, None] * (J * model.path_sigma)[:, None, :]  # (m, 6, 6): r = J·ξ(s) for a pose error ξ at travel s
+        path = np.einsum("mq,mij->iqj", model.modes[at], JJ).reshape(6, -1)
+    if model.step:
+        path = np.hstack([path, (J.T @ (n_O[:, 0] * s * model.step))[:, None]])
+    cos = np.einsum("ij,ij->i", _rays(model, p, s, T_O_S), n_O)  # a move along the ray moves the point cos along n
+    white = (J * (cos**2 * model.white / max(raw_per_voxel, 1.0))[:, None]).T @ J
+    bias = J.T @ (cos * model.sub_bias)
+    plane, cols = model.face_columns(v, n, face)
+    planes = np.unique(plane) if cols.shape[1] else np.zeros(0, np.int64)
+    per_plane = np.zeros((len(planes), 6, cols.shape[1]))
+    if len(planes):
+        np.add.at(per_plane, np.searchsorted(planes, plane), J[:, :, None] * cols[:, None, :])
+    return J.T @ J, own, shared, path, white, bias, planes, per_plane
+
+
+def _cross(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _travel(p: np.ndarray, T_O_S: np.ndarray) -> np.ndarray:
+    """(m,) m: the travel at which the laser plane met each point p (m, 3) in O (as mounting.displacement)."""
+    y_S = T_O_S[:3, 1]
+    across = float(y_S[0])
+    return (T_O_S[:3, 3] - p) @ y_S / np.copysign(max(abs(across), 1e-3), across)
+
+
+def _rays(model: CellModel, p: np.ndarray, s: np.ndarray, T_O_S: np.ndarray) -> np.ndarray:
+    """(m, 3) unit laser rays to the points p seen at travel s (from the fan's apex, or along z_S)."""
+    if not np.isfinite(model.apex_z):
+        return np.broadcast_to(T_O_S[:3, 2], p.shape)
+    apex = T_O_S[:3, :3] @ np.array([0.0, 0.0, model.apex_z]) + T_O_S[:3, 3]
+    u = p + s[:, None] * np.array([1.0, 0.0, 0.0]) - apex
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+def subset_terms(maps: list[CellMaps]) -> tuple[np.ndarray, np.ndarray]:
+    """A subset's variance (turns, 3) rad² of its rotation estimate from the cell's random sources, and the
+    bias (turns, 3) rad the material's sub-surface bias adds to it. Zeroed: what a source fixed per cell
+    instance does at the nominal orientation is taken off; a per-scan one (the path, the white noise, the
+    set orientation) adds the master scan's own draw."""
+    A = sum(m.A.astype(float) for m in maps)
+    P = scaled_solve(A, np.broadcast_to(np.eye(6), A.shape))[:, :3]  # (turns + 1, 3, 6)
+    planes = np.unique(np.concatenate([m.planes for m in maps]))
+    faces = np.zeros((len(A), len(planes), 6, maps[0].faces.shape[3]))
+    for m in maps:
+        faces[:, np.searchsorted(planes, m.planes)] += m.faces
+    fixed = np.concatenate([*(m.own for m in maps), sum(m.shared for m in maps),
+                            faces.transpose(0, 2, 1, 3).reshape(len(A), 6, -1)], axis=2).astype(float)  # fmt: skip
+    per_scan = sum(m.path for m in maps).astype(float)
+    white = sum(m.white for m in maps).astype(float)
+    bias = -np.einsum("tij,tj->ti", P, sum(m.bias for m in maps).astype(float))
+    PF = P @ fixed
+    scan_var = (P @ per_scan) ** 2
+    var = scan_var.sum(axis=2) + np.einsum("tij,tjk,tik->ti", P, white, P) + maps[0].orientation**2
+    if maps[0].zeroed:
+        PF, bias = PF - PF[:1], bias - bias[:1]
+        var = var + var[:1]
+    var = var + (PF**2).sum(axis=2)
+    # float32 maps in a direction no point pins down can round to a small negative variance: none
+    return np.clip(var[1:], 0.0, _MAX_STD**2), bias[1:]
