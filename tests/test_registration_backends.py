@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
+from meshes import centroid_split
 
 from optipose.errors import ConfigError
 from optipose.evaluate.objective import load_objective
@@ -320,22 +321,27 @@ def test_combined_start_moves_each_model_to_a_common_origin():
     np.testing.assert_allclose(start, T, atol=1e-12)
 
 
-@pytest.mark.parametrize("name", ["part_a", "part_b", "part_c"])
-def test_the_surface_search_answers_what_every_face_does(name):
+@pytest.mark.parametrize("off_mm", [0.3, 0.08])
+@pytest.mark.parametrize("name", ["part_a", "part_b", "part_c", "part_b_split"])
+def test_the_surface_search_answers_what_every_face_does(name, off_mm):
     """Closest points on A, B and C against the distance to every face: points within a millimetre
     of the surface, without a guess (the grid, its faces in order of their bound, the skips) and with the
-    face of a point a few hundred µm away as the guess (the follow test and the walk across edges)."""
+    face of a point a few hundred µm away as the guess (the follow test and the walk across edges). At
+    0.08 mm off, a cloud of the part as made: most points near an edge of the tessellation inside a plane
+    keep their face and its neighbour there; part B split at its faces' centroids has three times as many."""
     from optipose.model.part import load_part
 
-    mesh = load_part(name).mesh
+    mesh = load_part(name.removesuffix("_split")).mesh
+    if name.endswith("_split"):
+        mesh = centroid_split(mesh)
     reference = SurfaceReference(mesh.vertices, mesh.faces)
     rng = np.random.default_rng(7)
-    base, _ = trimesh.sample.sample_surface(mesh, 600, seed=7)
-    points = base + rng.normal(size=(len(base), 3)) * 0.3e-3
+    base, _ = trimesh.sample.sample_surface(mesh, 600 if off_mm > 0.1 else 2000, seed=7)
+    points = base + rng.normal(size=(len(base), 3)) * off_mm * 1e-3
     truth = np.array([_distance_to_every_face(mesh.triangles, p).min() for p in points])
     near = truth < 0.9e-3  # the grid's reach (farther, Open3D answers in float32)
     points, truth = points[near], truth[near]
-    drifted = points + rng.normal(size=points.shape) * 0.2e-3  # where the ICP's last step put them
+    drifted = points + rng.normal(size=points.shape) * (2.0 / 3.0) * off_mm * 1e-3  # where the ICP's last step put them
     guess = reference.nearest(drifted)[2]
     for hints in (None, guess):
         q, n, ids = reference.nearest(points, hints)

@@ -3,15 +3,8 @@
 import numpy as np
 import trimesh
 
+from meshes import centroid_split
 from optipose.registration.reference import SurfaceReference
-
-
-def _centroid_split(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """Each triangle split in three at its centroid: the same surface, other triangles and other edges."""
-    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
-    c = np.arange(len(v), len(v) + len(f))
-    faces = np.concatenate([np.stack([f[:, a], f[:, b], c], 1) for a, b in ((0, 1), (1, 2), (2, 0))])
-    return trimesh.Trimesh(np.vstack([v, v[f].mean(axis=1)]), faces, process=False)
 
 
 def test_a_point_off_an_edge_gets_the_direction_to_the_edge_whatever_the_triangles():
@@ -27,7 +20,7 @@ def test_a_point_off_an_edge_gets_the_direction_to_the_edge_whatever_the_triangl
     points = np.stack([r * np.cos(angle), r * np.sin(angle), z], axis=1)
     expected_q = np.stack([np.zeros(50), np.zeros(50), z], axis=1)
     expected_n = np.stack([np.cos(angle), np.sin(angle), np.zeros(50)], axis=1)
-    for mesh in (box, _centroid_split(box), box.subdivide().subdivide()):
+    for mesh in (box, centroid_split(box), box.subdivide().subdivide()):
         reference = SurfaceReference(mesh.vertices, mesh.faces)
         for hints in (None, reference.nearest(points + 1e-4)[2]):
             q, n, _ = reference.nearest(points, hints)

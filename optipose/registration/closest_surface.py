@@ -15,6 +15,10 @@ __all__ = ["face_grid", "face_boxes", "nearest_into", "edge_normal", "adjacent_f
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
 _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
+# m: a point keeps a face and its neighbour in its plane (:func:`_keep`) only this near the plane. A cloud of the part
+# as made lies within a tenth of a millimetre of the CAD; a point farther may be past the middle of a thin wall, whose
+# other side the search must see (a wall thicker than twice this is safe).
+_KEEP_NEAR = 0.25e-3
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -66,6 +70,41 @@ def _project(p, i, f, planes, plane_c, q):
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
     return inset > 2.0 * abs(h0), inset >= 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _keep(p, i, f, planes, plane_c, adjacent, plane_id, q):
+    """Whether no face can be nearer p[i] than its projection on face f (then written into q[i]): the disc of
+    radius 2|d| about the projection, in f's plane, lies inside f (:func:`_project`'s test), or inside f and the
+    face across one of f's edges when that face lies in f's plane — an edge of the tessellation, not of the
+    part, which a cloud a few tens of µm off the CAD crosses everywhere. Within f and that neighbour the disc
+    is checked against each one's own other edges; near a corner of f (two edges within 2|d|), or farther
+    than ``_KEEP_NEAR`` from the plane, the search decides."""
+    h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
+    r = 2.0 * abs(h0)
+    far = abs(h0) > _KEEP_NEAR  # only the face itself: past that a thin wall's other side may be nearer
+    near = -1
+    for k in range(1, 4):
+        hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
+        if hk <= 0.0:
+            return False
+        if hk <= r:
+            if near >= 0 or far:
+                return False
+            near = k - 1
+    if near >= 0:
+        g = adjacent[f, near]
+        if g < 0 or plane_id[g] != plane_id[f]:
+            return False
+        for m in range(3):
+            if adjacent[g, m] == f:
+                continue  # the edge they share: the disc's part beyond it is in g if g's other edges are far enough
+            hm = planes[g, m + 1, 0] * p[i, 0] + planes[g, m + 1, 1] * p[i, 1] + planes[g, m + 1, 2] * p[i, 2] - plane_c[g, m + 1]
+            if hm <= r:
+                return False
+    for j in range(3):
+        q[i, j] = p[i, j] - h0 * planes[f, 0, j]
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -123,10 +162,10 @@ def _inset2(p, i, f, planes, plane_c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _walk(p, i, f, planes, plane_c, adjacent, q):
+def _walk(p, i, f, planes, plane_c, adjacent, plane_id, q):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
-    the first face p[i] lies inside of by more than 2|d| (its projection in q[i]), or -1."""
+    the first face that keeps it (:func:`_keep`; its projection in q[i]), or -1."""
     g = f
     for _ in range(_WALK):
         worst, k_out = np.inf, -1
@@ -139,7 +178,7 @@ def _walk(p, i, f, planes, plane_c, adjacent, q):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _project(p, i, g, planes, plane_c, q)[0]:
+        if _keep(p, i, g, planes, plane_c, adjacent, plane_id, q):
             return g
     return -1
 
@@ -151,17 +190,17 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
 
-    A point inside its guessed face by more than 2|d| keeps it (as ``follow``); one that left it walks
-    across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face it lies inside of
-    by more than 2|d| — the test that keeps a guess. Otherwise the faces listed in the grid's cells
+    A point keeps its guessed face when no other face can be nearer (:func:`_keep`: it projects inside
+    the face by more than 2|d|, or inside it and a neighbour in its plane by that much); one that left it
+    walks across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face that keeps it. Otherwise the faces listed in the grid's cells
     (:func:`face_grid`) around the point's are searched exactly, ring after ring of cells out to ``reach``
     rings: after each ring, every face nearer than the ring block's walls has been seen, so the search
     stops once its best is nearer than those, and is certain for an answer within ``reach`` × ``cell``
     (faces whose bounding box is farther than the best so far are skipped, first by ``box32`` (f, 6) float32,
     each face's box rounded outward (:func:`face_boxes`): it skips a subset of what the float64 box skips, which
     then still decides, so the faces searched are the same; the guessed face
-    starts the search, which prunes more). A point inside the face found by more than 2|d| gets its
-    projection on the face's plane, like a followed point; a point closest to an edge or a corner gets
+    starts the search, which prunes more). A point the face found keeps gets its projection on the
+    face's plane, like a followed point, so that the answer does not depend on the guess; a point closest to an edge or a corner gets
     the closest point of that face, in float64, and the direction from it to the point as its normal
     (:func:`edge_normal`; where faces tie exactly, at their common edge, the lowest face id takes the
     point, whatever the guess: the point and the normal are the same whichever face it is). Points left
@@ -178,7 +217,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     for i in range(n):
         f = ids[i]
         if f >= 0:
-            g = f if _project(p, i, f, planes, plane_c, q)[0] else _walk(p, i, f, planes, plane_c, adjacent, q)
+            g = f if _keep(p, i, f, planes, plane_c, adjacent, plane_id, q) else _walk(p, i, f, planes, plane_c, adjacent, plane_id, q)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
@@ -258,7 +297,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
         well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
-        if not well_inside:  # on or near an edge: the face's closest point
+        if not well_inside and not _keep(p, i, g_best, planes, plane_c, adjacent, plane_id, q):  # near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
             if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
                 edge_normal(p, i, q, nrm)
