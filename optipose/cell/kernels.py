@@ -10,7 +10,7 @@ from numba import njit
 __all__ = ["along_rays", "trilinear"]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _cell(u: float, n: int) -> tuple[int, float]:
     """The grid cell (0..n-2) and the fraction in it of a coordinate ``u`` in node units, clamped to the grid."""
     u = min(max(u, 0.0), float(n - 1))
@@ -18,13 +18,13 @@ def _cell(u: float, n: int) -> tuple[int, float]:
     return i, u - i
 
 
-@njit(cache=True, nogil=True)
-def trilinear(grid: np.ndarray, lo: np.ndarray, h: np.ndarray, x: float, y: float, z: float) -> float:
-    """The grid's value at (x, y, z), trilinear between its nodes (``lo`` the first node, ``h`` the
-    spacing per axis); a point off the grid takes its nearest face's value."""
-    i, fx = _cell((x - lo[0]) / h[0], grid.shape[0])
-    j, fy = _cell((y - lo[1]) / h[1], grid.shape[1])
-    k, fz = _cell((z - lo[2]) / h[2], grid.shape[2])
+@njit(cache=True, nogil=True, inline="always")
+def trilinear(grid: np.ndarray, lo: np.ndarray, inv_h: np.ndarray, x: float, y: float, z: float) -> float:
+    """The grid's value at (x, y, z), trilinear between its nodes (``lo`` the first node, ``inv_h`` the
+    inverse of the spacing per axis); a point off the grid takes its nearest face's value."""
+    i, fx = _cell((x - lo[0]) * inv_h[0], grid.shape[0])
+    j, fy = _cell((y - lo[1]) * inv_h[1], grid.shape[1])
+    k, fz = _cell((z - lo[2]) * inv_h[2], grid.shape[2])
     c00 = grid[i, j, k] * (1 - fx) + grid[i + 1, j, k] * fx
     c10 = grid[i, j + 1, k] * (1 - fx) + grid[i + 1, j + 1, k] * fx
     c01 = grid[i, j, k + 1] * (1 - fx) + grid[i + 1, j, k + 1] * fx
@@ -45,6 +45,8 @@ def along_rays(points, face, profile, shifts, normals_P, R, t, apex, view, grazi
     cosine between ray and normal, kept at least ``grazing`` in size. The ray comes from the laser's
     ``apex`` in O (nan: parallel rays along ``view``)."""
     n = points.shape[0]
+    form_inv_h = 1.0 / form_h  # products, not quotients, in the loop: a division costs as much as the rest of it
+    inv_warp, inv_layer = 1.0 / warp_half if warp != 0.0 else 0.0, 1.0 / layer_h if layer_amp != 0.0 else 0.0
     for i in range(n):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         sh = shifts[profile[i]]
@@ -52,8 +54,8 @@ def along_rays(points, face, profile, shifts, normals_P, R, t, apex, view, grazi
             rx, ry, rz = view[0], view[1], view[2]
         else:
             rx, ry, rz = px - (apex[0] - sh), py - apex[1], pz - apex[2]
-            norm = np.sqrt(rx * rx + ry * ry + rz * rz)
-            rx, ry, rz = rx / norm, ry / norm, rz / norm
+            inv = 1.0 / np.sqrt(rx * rx + ry * ry + rz * rz)
+            rx, ry, rz = rx * inv, ry * inv, rz * inv
         f = face[i]
         # the normal and the point in the part's frame (x_P = R^T (p - t), n_P from the mesh)
         mx, my, mz = normals_P[f, 0], normals_P[f, 1], normals_P[f, 2]
@@ -66,7 +68,7 @@ def along_rays(points, face, profile, shifts, normals_P, R, t, apex, view, grazi
         z = R[0, 2] * qx + R[1, 2] * qy + R[2, 2] * qz
         d = 0.0
         if form.shape[0] > 0:
-            d += trilinear(form, form_lo, form_h, x, y, z)
+            d += trilinear(form, form_lo, form_inv_h, x, y, z)
         if plane.shape[0] > 0:
             k = plane[f]
             ax, ay, az = x - plane_centroid[k, 0], y - plane_centroid[k, 1], z - plane_centroid[k, 2]
@@ -74,10 +76,10 @@ def along_rays(points, face, profile, shifts, normals_P, R, t, apex, view, grazi
             d += plane_offset[k] + (wy * az - wz * ay) * mx + (wz * ax - wx * az) * my + (wx * ay - wy * ax) * mz
         d += (x - part_centre[0]) * scale[0] * mx + (y - part_centre[1]) * scale[1] * my + (z - part_centre[2]) * scale[2] * mz
         if warp != 0.0:
-            s = ((x, y)[warp_axis] - part_centre[warp_axis]) / warp_half
+            s = ((x, y)[warp_axis] - part_centre[warp_axis]) * inv_warp
             d += warp * (s * s - 1.0 / 3.0) * mz
         if layer_amp != 0.0 and abs(mz) < wall:
-            u = (z / layer_h + layer_phase) % 1.0
+            u = (z * inv_layer + layer_phase) % 1.0
             d += layer_amp * (abs(2.0 * u - 1.0) - 0.5)
         if path_t.shape[0] > 0:
             kk = profile[i]

@@ -15,10 +15,11 @@ __all__ = ["face_grid", "face_boxes", "nearest_into", "edge_normal", "adjacent_f
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
 _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
-# m: a point keeps a face and its neighbour in its plane (:func:`_keep`) only this near the plane. A cloud of the part
+# m: a point keeps a face for the faces of its plane around it (:func:`_keep`) only this near the plane. A cloud of the part
 # as made lies within a tenth of a millimetre of the CAD; a point farther may be past the middle of a thin wall, whose
 # other side the search must see (a wall thicker than twice this is safe).
 _KEEP_NEAR = 0.25e-3
+_PATCH = 16  # faces of one plane a point's disc may cover before the search decides instead
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -73,38 +74,78 @@ def _project(p, i, f, planes, plane_c, q):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _keep(p, i, f, planes, plane_c, adjacent, plane_id, q):
+def _keep(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
     """Whether no face can be nearer p[i] than its projection on face f (then written into q[i]): the disc of
-    radius 2|d| about the projection, in f's plane, lies inside f (:func:`_project`'s test), or inside f and the
-    face across one of f's edges when that face lies in f's plane — an edge of the tessellation, not of the
-    part, which a cloud a few tens of µm off the CAD crosses everywhere. Within f and that neighbour the disc
-    is checked against each one's own other edges; near a corner of f (two edges within 2|d|), or farther
-    than ``_KEEP_NEAR`` from the plane, the search decides."""
+    radius 2|d| about the projection, in f's plane, lies inside f (:func:`_project`'s test), or, within
+    ``_KEEP_NEAR`` of the plane, inside the faces of f's plane around it (:func:`_disc_in_plane`) — across the
+    edges of the tessellation, not of the part, which a cloud a few tens of µm off the CAD crosses everywhere."""
     h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
-    r = 2.0 * abs(h0)
-    far = abs(h0) > _KEEP_NEAR  # only the face itself: past that a thin wall's other side may be nearer
-    near = -1
+    inset = np.inf
     for k in range(1, 4):
-        hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
-        if hk <= 0.0:
+        inset = min(inset, planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k])
+    if inset <= 0.0:
+        return False
+    if inset <= 2.0 * abs(h0):
+        if abs(h0) > _KEEP_NEAR or not _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
             return False
-        if hk <= r:
-            if near >= 0 or far:
-                return False
-            near = k - 1
-    if near >= 0:
-        g = adjacent[f, near]
-        if g < 0 or plane_id[g] != plane_id[f]:
-            return False
-        for m in range(3):
-            if adjacent[g, m] == f:
-                continue  # the edge they share: the disc's part beyond it is in g if g's other edges are far enough
-            hm = planes[g, m + 1, 0] * p[i, 0] + planes[g, m + 1, 1] * p[i, 1] + planes[g, m + 1, 2] * p[i, 2] - plane_c[g, m + 1]
-            if hm <= r:
-                return False
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
     return True
+
+
+@njit(cache=True, nogil=True)
+def _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
+    """Whether the disc of radius 2|h0| about p[i]'s projection on face f's plane lies in the faces of that plane
+    connected to f: the faces it covers are visited across the edges it crosses (at most ``_PATCH``), and
+    none of those edges may be the plane's border (no face across, more than one (``paired``), or one in
+    another plane). The disc is convex and starts inside f, so it cannot leave the plane's faces without
+    crossing such an edge."""
+    x0 = p[i, 0] - h0 * planes[f, 0, 0]
+    x1 = p[i, 1] - h0 * planes[f, 0, 1]
+    x2 = p[i, 2] - h0 * planes[f, 0, 2]
+    r2 = 4.0 * h0 * h0
+    seen = np.empty(_PATCH, np.int64)
+    seen[0], n, head = f, 1, 0
+    while head < n:
+        g = seen[head]
+        head += 1
+        for k in range(3):
+            a, b = tri[g, k], tri[g, (k + 1) % 3]
+            e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+            t = ((x0 - a[0]) * e0 + (x1 - a[1]) * e1 + (x2 - a[2]) * e2) / max(e0 * e0 + e1 * e1 + e2 * e2, 1e-300)
+            t = min(max(t, 0.0), 1.0)
+            d0, d1, d2 = x0 - a[0] - t * e0, x1 - a[1] - t * e1, x2 - a[2] - t * e2
+            if d0 * d0 + d1 * d1 + d2 * d2 >= r2:
+                continue  # the disc does not reach this edge
+            h = adjacent[g, k]
+            if h < 0 or not (paired[g] >> k) & 1:
+                return False
+            if plane_id[h] != plane_id[f]:
+                if _folds_away(h, f, h0, tri, planes, plane_c):
+                    continue  # an edge of the part that turns away from the point: the face across is farther
+                return False
+            known = False
+            for m in range(n):
+                known = known or seen[m] == h
+            if not known:
+                if n == _PATCH:
+                    return False
+                seen[n] = h
+                n += 1
+    return True
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _folds_away(h, f, h0, tri, planes, plane_c):
+    """Whether face h, across an edge of face f's plane, lies on the side of that plane away from the point
+    (h0: its signed distance from it): then every point of h is farther from the point than |h0|, the
+    distance of its projection on f."""
+    far = 0.0
+    for m in range(3):
+        s = planes[f, 0, 0] * tri[h, m, 0] + planes[f, 0, 1] * tri[h, m, 1] + planes[f, 0, 2] * tri[h, m, 2] - plane_c[f, 0]
+        if abs(s) > abs(far):
+            far = s
+    return far * h0 < 0.0
 
 
 @njit(cache=True, nogil=True)
@@ -162,7 +203,7 @@ def _inset2(p, i, f, planes, plane_c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _walk(p, i, f, planes, plane_c, adjacent, plane_id, q):
+def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
     the first face that keeps it (:func:`_keep`; its projection in q[i]), or -1."""
@@ -178,13 +219,13 @@ def _walk(p, i, f, planes, plane_c, adjacent, plane_id, q):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _keep(p, i, g, planes, plane_c, adjacent, plane_id, q):
+        if _keep(p, i, g, planes, plane_c, tri, adjacent, paired, plane_id, q):
             return g
     return -1
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id, origin, cell, shape, reach, start, faces,
+def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, plane_id, origin, cell, shape, reach, start, faces,
                  box32):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
@@ -217,7 +258,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
     for i in range(n):
         f = ids[i]
         if f >= 0:
-            g = f if _keep(p, i, f, planes, plane_c, adjacent, plane_id, q) else _walk(p, i, f, planes, plane_c, adjacent, plane_id, q)
+            g = f if _keep(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q) else _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
@@ -297,7 +338,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, plane_id
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
         well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
-        if not well_inside and not _keep(p, i, g_best, planes, plane_c, adjacent, plane_id, q):  # near an edge: the face's closest point
+        if not well_inside and not _keep(p, i, g_best, planes, plane_c, tri, adjacent, paired, plane_id, q):  # near an edge: the face's closest point
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
             if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
                 edge_normal(p, i, q, nrm)
@@ -338,9 +379,10 @@ def edge_normal(p, i, q, nrm):
     nrm[i, 0], nrm[i, 1], nrm[i, 2] = dx / d, dy / d, dz / d
 
 
-def adjacent_faces(faces: np.ndarray) -> np.ndarray:
+def adjacent_faces(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(f, 3) int32: the face across each face's edge k (corner k to corner k + 1), -1 on a boundary;
-    where more than two faces share an edge, one of the others."""
+    where more than two faces share an edge, one of the others. And (f,) uint8: bit k set where edge k
+    has exactly one face across (the mesh is a 2-manifold there)."""
     f = len(faces)
     following = np.roll(faces, -1, axis=1)
     # each half-edge as one int64 key (its lower vertex, then its higher), row 3·face + k: sorted in linear memory
@@ -350,7 +392,12 @@ def adjacent_faces(faces: np.ndarray) -> np.ndarray:
     same = key[order[1:]] == key[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
     a, b = order[:-1][same], order[1:][same]
     adjacent[a], adjacent[b] = b // 3, a // 3
-    return adjacent.reshape(f, 3)
+    sorted_key = key[order]
+    run = np.searchsorted(sorted_key, sorted_key, side="right") - np.searchsorted(sorted_key, sorted_key, side="left")
+    two = np.zeros(3 * f, dtype=np.uint8)
+    two[order] = run == 2
+    paired = (two.reshape(f, 3) << np.arange(3, dtype=np.uint8)).sum(axis=1).astype(np.uint8)
+    return adjacent.reshape(f, 3), paired
 
 
 def face_boxes(tri: np.ndarray) -> np.ndarray:

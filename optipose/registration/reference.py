@@ -35,7 +35,7 @@ _MAX_CELLS = 4_000_000
 _SURFACE_REACH = 2  # rings of cells around a point that the surface's search looks at: exact within 2 cells
 _NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
 _REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
-_ARRAYS = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "plane_id", "grid_start", "grid_faces", "box32", "meta")
+_ARRAYS = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "paired", "plane_id", "grid_start", "grid_faces", "box32", "meta")
 
 
 class SurfaceReference:
@@ -48,7 +48,7 @@ class SurfaceReference:
             arrays = _surface_arrays(vertices, faces)
         self.vertices, self.faces = arrays["vertices"], arrays["faces"]
         self._tri, self._planes, self._plane_c = arrays["tri"], arrays["planes"], arrays["plane_c"]
-        self._adjacent, self._plane_id = arrays["adjacent"], arrays["plane_id"]
+        self._adjacent, self._paired, self._plane_id = arrays["adjacent"], arrays["paired"], arrays["plane_id"]
         self._grid_start, self._grid_faces, self._box32 = arrays["grid_start"], arrays["grid_faces"], arrays["box32"]
         self._meta = arrays["meta"]  # area, the grid's origin (3), cell, shape (3)
         self.area = float(self._meta[0])
@@ -61,7 +61,7 @@ class SurfaceReference:
     def arrays(self) -> dict:
         """Everything the reference is built from, as arrays: ``SurfaceReference(None, None, arrays)`` is
         the same reference (:func:`save_reference` writes them, :func:`load_reference` maps them back)."""
-        values = (self.vertices, self.faces, self._tri, self._planes, self._plane_c, self._adjacent, self._plane_id,
+        values = (self.vertices, self.faces, self._tri, self._planes, self._plane_c, self._adjacent, self._paired, self._plane_id,
                   self._grid_start, self._grid_faces, self._box32, self._meta)  # fmt: skip
         return dict(zip(_ARRAYS, values))
 
@@ -155,8 +155,8 @@ class SurfaceReference:
         again on return)."""
         from optipose.registration.closest_surface import nearest_into
 
-        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._plane_id,
-                        *self._grid(), self._box32):
+        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._paired,
+                        self._plane_id, *self._grid(), self._box32):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
@@ -182,7 +182,7 @@ class SurfaceReference:
 def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     """The arrays of :class:`SurfaceReference` (see :meth:`SurfaceReference.arrays`), about 400 bytes a face:
     the mesh, its triangles (f, 3, 3), each face's plane and inward edge planes packed (f, 4, 3) and (f, 4)
-    for one gather per point, the face across each edge (int32), a number per plane (int32), the grid, and each
+    for one gather per point, the face across each edge (int32) and whether it is the only one (a bit per edge), a number per plane (int32), the grid, and each
     face's bounding box in float32 (the search's first test, :func:`optipose.registration.closest_surface.face_boxes`)."""
     from optipose.registration.closest_surface import adjacent_faces, face_boxes, face_grid
     from optipose.scan.raycast import plane_numbers
@@ -199,6 +199,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     planes[:, 1:], plane_c[:, 1:] = edge_planes(tri, normal)
     del normal
     plane_id = plane_numbers(planes[:, 0], plane_c[:, 0]).astype(np.int32)
+    adjacent, paired = adjacent_faces(faces)
     lo, hi = tri.min(axis=1).min(axis=0), tri.max(axis=1).max(axis=0)
     cell = max(_CELL, float(np.prod(hi - lo + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
     margin = _SURFACE_REACH * cell  # exact for points within a millimetre of the surface at the default cell
@@ -207,7 +208,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     start, listed = face_grid(tri, planes[:, 0], plane_c[:, 0], origin, cell, shape)
     meta = np.concatenate([[0.5 * float(area2.sum())], origin, [cell], shape.astype(np.float64)])
     return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
-            "adjacent": adjacent_faces(faces), "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
+            "adjacent": adjacent, "paired": paired, "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
             "box32": face_boxes(tri), "meta": meta}  # fmt: skip
 
 
