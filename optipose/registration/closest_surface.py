@@ -15,9 +15,9 @@ __all__ = ["face_grid", "face_boxes", "nearest_into", "edge_normal", "adjacent_f
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
 _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
-# m: a point keeps a face for the faces of its plane around it (:func:`_keep`) only this near the plane. A cloud of the part
-# as made lies within a tenth of a millimetre of the CAD; a point farther may be past the middle of a thin wall, whose
-# other side the search must see (a wall thicker than twice this is safe).
+# m: a point keeps a face for the faces of its plane around it (:func:`_in_plane`) only this near the plane. A
+# cloud of the part as made lies within a tenth of a millimetre of the CAD; a point farther may be past the
+# middle of a thin wall, whose other side the search must see (a wall thicker than twice this is safe).
 _KEEP_NEAR = 0.25e-3
 _PATCH = 16  # faces of one plane a point's disc may cover before the search decides instead
 
@@ -73,21 +73,21 @@ def _project(p, i, f, planes, plane_c, q):
     return inset > 2.0 * abs(h0), inset >= 0.0
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _keep(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
-    """Whether no face can be nearer p[i] than its projection on face f (then written into q[i]): the disc of
-    radius 2|d| about the projection, in f's plane, lies inside f (:func:`_project`'s test), or, within
-    ``_KEEP_NEAR`` of the plane, inside the faces of f's plane around it (:func:`_disc_in_plane`) — across the
-    edges of the tessellation, not of the part, which a cloud a few tens of µm off the CAD crosses everywhere."""
+@njit(cache=True, nogil=True)
+def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
+    """For a point that :func:`_project` does not keep on face f: whether it projects into f and, within
+    ``_KEEP_NEAR`` of the plane, the disc of radius 2|d| about its projection lies in the faces of f's plane
+    around it (:func:`_disc_in_plane`) — across the edges of the tessellation, not of the part, which a cloud
+    a few tens of µm off the CAD crosses everywhere. Then no face can be nearer than the projection (written
+    into q[i]). Out of line: inlined into the search it slowed every point."""
     h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
-    inset = np.inf
-    for k in range(1, 4):
-        inset = min(inset, planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k])
-    if inset <= 0.0:
+    if abs(h0) > _KEEP_NEAR:
         return False
-    if inset <= 2.0 * abs(h0):
-        if abs(h0) > _KEEP_NEAR or not _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
+    for k in range(1, 4):
+        if planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k] <= 0.0:
             return False
+    if not _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
+        return False
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
     return True
@@ -206,7 +206,7 @@ def _inset2(p, i, f, planes, plane_c):
 def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
-    the first face that keeps it (:func:`_keep`; its projection in q[i]), or -1."""
+    the first face that keeps it (:func:`_project`, :func:`_in_plane`; its projection in q[i]), or -1."""
     g = f
     for _ in range(_WALK):
         worst, k_out = np.inf, -1
@@ -219,7 +219,8 @@ def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _keep(p, i, g, planes, plane_c, tri, adjacent, paired, plane_id, q):
+        if _project(p, i, g, planes, plane_c, q)[0] or _in_plane(p, i, g, planes, plane_c, tri, adjacent, paired,
+                                                                   plane_id, q):
             return g
     return -1
 
@@ -231,24 +232,23 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
 
-    A point keeps its guessed face when no other face can be nearer (:func:`_keep`: it projects inside
-    the face by more than 2|d|, or inside it and a neighbour in its plane by that much); one that left it
-    walks across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face that keeps it. Otherwise the faces listed in the grid's cells
-    (:func:`face_grid`) around the point's are searched exactly, ring after ring of cells out to ``reach``
-    rings: after each ring, every face nearer than the ring block's walls has been seen, so the search
-    stops once its best is nearer than those, and is certain for an answer within ``reach`` × ``cell``
-    (faces whose bounding box is farther than the best so far are skipped, first by ``box32`` (f, 6) float32,
-    each face's box rounded outward (:func:`face_boxes`): it skips a subset of what the float64 box skips, which
-    then still decides, so the faces searched are the same; the guessed face
-    starts the search, which prunes more). A point the face found keeps gets its projection on the
-    face's plane, like a followed point, so that the answer does not depend on the guess; a point closest to an edge or a corner gets
-    the closest point of that face, in float64, and the direction from it to the point as its normal
-    (:func:`edge_normal`; where faces tie exactly, at their common edge, the lowest face id takes the
-    point, whatever the guess: the point and the normal are the same whichever face it is). Points left
-    to the global search (outside the grid or farther than the reach from the surface) are marked in
-    ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer its face than any
-    face not adjacent to it (true near a part's surface; not for a point past the middle of a thin sheet,
-    or in a slot narrower than twice its distance): the search's answer otherwise.
+    A point keeps its guessed face when no other face can be nearer (it projects inside the face by more than 2|d|,
+    :func:`_project`, or the faces of its plane around it hold the disc of that radius, :func:`_in_plane`); one that
+    left it walks across the edges it left by (``adjacent``, :func:`_walk`) and takes the first face that keeps it.
+    Otherwise the faces listed in the grid's cells (:func:`face_grid`) around the point's are searched exactly, ring
+    after ring of cells out to ``reach`` rings: after each ring, every face nearer than the ring block's walls has
+    been seen, so the search stops once its best is nearer than those, and is certain for an answer within ``reach``
+    × ``cell`` (faces whose bounding box is farther than the best so far are skipped, first by ``box32`` (f, 6)
+    float32, each face's box rounded outward (:func:`face_boxes`): it skips a subset of what the float64 box skips,
+    which then still decides, so the faces searched are the same; the guessed face starts the search, which prunes
+    more). A point the face found keeps gets its projection on the face's plane, like a followed point, so that the
+    answer does not depend on the guess; a point closest to an edge or a corner gets the closest point of that face,
+    in float64, and the direction from it to the point as its normal (:func:`edge_normal`; where faces tie exactly,
+    at their common edge, the lowest face id takes the point, whatever the guess: the point and the normal are the
+    same whichever face it is). Points left to the global search (outside the grid or farther than the reach from
+    the surface) are marked in ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer
+    its face than any face not adjacent to it (true near a part's surface; not for a point past the middle of a thin
+    sheet, or in a slot narrower than twice its distance): the search's answer otherwise.
     """
     n = p.shape[0]
     margin = reach * cell
@@ -258,7 +258,10 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
     for i in range(n):
         f = ids[i]
         if f >= 0:
-            g = f if _keep(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q) else _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q)
+            g = f
+            if not _project(p, i, f, planes, plane_c, q)[0] and not _in_plane(p, i, f, planes, plane_c, tri, adjacent,
+                                                                              paired, plane_id, q):
+                g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
@@ -338,7 +341,8 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
         ids[i] = g_best
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
         well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
-        if not well_inside and not _keep(p, i, g_best, planes, plane_c, tri, adjacent, paired, plane_id, q):  # near an edge: the face's closest point
+        # near an edge, and not kept by the faces of its plane: the face's closest point
+        if not well_inside and not _in_plane(p, i, g_best, planes, plane_c, tri, adjacent, paired, plane_id, q):
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
             if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
                 edge_normal(p, i, q, nrm)
