@@ -16,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
-from meshes import centroid_split
+from meshes import centroid_split, distance_to_every_face
 
 from optipose.errors import ConfigError
 from optipose.evaluate.objective import load_objective
@@ -338,7 +338,7 @@ def test_the_surface_search_answers_what_every_face_does(name, off_mm):
     rng = np.random.default_rng(7)
     base, _ = trimesh.sample.sample_surface(mesh, 600 if off_mm > 0.1 else 2000, seed=7)
     points = base + rng.normal(size=(len(base), 3)) * off_mm * 1e-3
-    truth = np.array([_distance_to_every_face(mesh.triangles, p).min() for p in points])
+    truth = np.array([distance_to_every_face(mesh.triangles, p).min() for p in points])
     near = truth < 0.9e-3  # the grid's reach (farther, Open3D answers in float32)
     points, truth = points[near], truth[near]
     drifted = points + rng.normal(size=points.shape) * (2.0 / 3.0) * off_mm * 1e-3  # where the ICP's last step put them
@@ -347,30 +347,6 @@ def test_the_surface_search_answers_what_every_face_does(name, off_mm):
         q, n, ids = reference.nearest(points, hints)
         d = np.linalg.norm(points - q, axis=1)
         np.testing.assert_allclose(d, truth, rtol=0, atol=1e-12)
-        own = np.array([_distance_to_every_face(mesh.triangles[[f]], p)[0] for p, f in zip(points, ids)])
+        own = np.array([distance_to_every_face(mesh.triangles[[f]], p)[0] for p, f in zip(points, ids)])
         np.testing.assert_allclose(own, d, rtol=0, atol=1e-12)  # the face named is one that near
         np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-12)
-
-
-def _distance_to_every_face(triangles: np.ndarray, point: np.ndarray) -> np.ndarray:
-    """The distance (m) from one point to each triangle (f, 3, 3): to its plane where the point projects
-    inside it (barycentric coordinates), else to the nearest of its three edges."""
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    normal = np.cross(b - a, c - a)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    h = np.einsum("ij,ij->i", point - a, normal)
-    x = point - h[:, None] * normal - a
-    e0, e1 = b - a, c - a
-    d00, d01, d11 = (np.einsum("ij,ij->i", u, v) for u, v in ((e0, e0), (e0, e1), (e1, e1)))
-    d20, d21 = np.einsum("ij,ij->i", x, e0), np.einsum("ij,ij->i", x, e1)
-    den = np.where(d00 * d11 - d01**2 > 0, d00 * d11 - d01**2, 1.0)
-    v, w = (d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den
-    inside = (v >= 0) & (w >= 0) & (v + w <= 1)
-
-    def to_segment(s, t):
-        d = t - s
-        u = np.clip(np.einsum("ij,ij->i", point - s, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
-        return np.linalg.norm(point - (s + u[:, None] * d), axis=1)
-
-    edges = np.minimum(np.minimum(to_segment(a, b), to_segment(b, c)), to_segment(c, a))
-    return np.where(inside, np.abs(h), edges)

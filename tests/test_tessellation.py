@@ -3,7 +3,7 @@
 import numpy as np
 import trimesh
 
-from meshes import centroid_split
+from meshes import centroid_split, distance_to_every_face
 from optipose.registration.reference import SurfaceReference
 
 
@@ -75,3 +75,78 @@ def test_the_grid_lists_each_face_a_few_times_whatever_the_density():
     reference = SurfaceReference(v, f)
     assert len(reference._grid_faces) < 10 * len(f)
     assert reference._grid_faces.dtype == np.int32 and reference._adjacent.dtype == np.int32
+
+
+MM = 1e-3
+
+
+def _strip(xz_mm) -> tuple[np.ndarray, np.ndarray]:
+    """An open strip: the profile ``xz_mm`` (k, 2) extruded along y over ±5 mm, each quad two triangles."""
+    k = len(xz_mm)
+    vertices = np.array([[x, y, z] for y in (-5.0, 5.0) for x, z in xz_mm]) * MM
+    faces = [f for i in range(k - 1) for f in ([i, i + 1, k + i + 1], [i, k + i + 1, k + i])]
+    return vertices, np.array(faces)
+
+
+def _assert_exact(vertices, faces, points, hints) -> None:
+    reference = SurfaceReference(vertices, faces)
+    truth = np.array([distance_to_every_face(vertices[faces], p).min() for p in points])
+    for guess in (None, np.asarray(hints, dtype=np.int64)):
+        q = reference.nearest(points, guess)[0]
+        np.testing.assert_allclose(np.linalg.norm(points - q, axis=1), truth, rtol=0, atol=1e-12)
+
+
+def test_a_point_beside_a_groove_at_the_parts_edge_finds_the_wall_beyond_it():
+    """A top face ends at an edge that turns away (a groove 0.1 mm wide, 1 mm deep), and the far side of the
+    groove rises 1 mm above the top: a point 0.2 mm above the top, 0.05 mm from its edge, is 0.15 mm from the
+    wall, nearer than its projection on the top it was guessed on. The face across the edge turns away from it,
+    but the edge lies within the point's distance: the faces beyond must be searched."""
+    vertices, faces = _strip([(-5, 0), (0, 0), (0, -1), (0.1, -1), (0.1, 1), (5, 1)])
+    point = np.array([[-0.05, 0.0, 0.2]]) * MM
+    _assert_exact(vertices, faces, point, [0])
+    assert np.isclose(np.linalg.norm(point - SurfaceReference(vertices, faces).nearest(point, np.array([0]))[0]), 0.15 * MM)
+
+
+def test_a_face_in_the_plane_to_rounding_does_not_hide_the_wall_behind_it():
+    """At a top face's edge, a sliver (zero area, its normal rounding) or a face of the same plane wound the other
+    way lies between the top and a wall rising 1 mm: neither turns away from a point 0.2 mm above the top near
+    that edge, whatever rotation puts the rounding on either side; the wall 0.05-0.06 mm away answers."""
+    rng = np.random.default_rng(1)
+    sliver_v = np.array([[-5, -5, 0], [0, -5, 0], [0, 5, 0], [-5, 5, 0], [0, 0, 0], [0, -5, 1], [0, 0, 1], [0, 5, 1]]) * MM
+    sliver_f = np.array([[0, 1, 2], [0, 2, 3], [2, 1, 4], [1, 5, 6], [1, 6, 4], [4, 6, 7], [4, 7, 2]])
+    flip_v = np.array([[x, y, 0] for x in (-5, -0.01, 0) for y in (-5, 5)] + [[0, -5, 1], [0, 5, 1]]) * MM
+    flip_f = np.array([[0, 2, 3], [0, 3, 1], [2, 3, 4], [3, 5, 4], [4, 6, 7], [4, 7, 5]])
+    for vertices, faces, point in ((sliver_v, sliver_f, [-0.05, 1.0, 0.2]), (flip_v, flip_f, [-0.06, 0.3, 0.2])):
+        for _ in range(20):
+            rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+            shift = rng.normal(size=3) * 0.05
+            _assert_exact(vertices @ rotation.T + shift, faces, (np.array(point) * MM @ rotation.T + shift)[None], [0])
+
+
+def test_a_point_over_an_edge_inside_a_plane_gets_one_answer_whatever_its_guess():
+    """A 10 mm box split twice at its centroids and turned: points over edges between two faces of one plane
+    (0.2-0.8 along the edge, up to 0.2 mm off the plane) get the same face, point and normal with either face
+    as the guess as without one."""
+    rng = np.random.default_rng(7)
+    box = trimesh.creation.box((10 * MM, 10 * MM, 10 * MM))
+    mesh = centroid_split(centroid_split(box))
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    mesh = trimesh.Trimesh(mesh.vertices @ rotation.T + 0.03, mesh.faces, process=False)
+    reference = SurfaceReference(mesh.vertices, mesh.faces)
+    adjacent, plane = reference.arrays()["adjacent"], reference.arrays()["plane_id"]
+    points, own, across = [], [], []
+    for f in rng.choice(len(mesh.faces), 200):
+        for k in range(3):
+            g = adjacent[f, k]
+            if g >= 0 and plane[g] == plane[f]:
+                a, b = mesh.vertices[mesh.faces[f, k]], mesh.vertices[mesh.faces[f, (k + 1) % 3]]
+                points.append(a + rng.uniform(0.2, 0.8) * (b - a) + mesh.face_normals[f] * rng.uniform(-0.2, 0.2) * MM)
+                own.append(f)
+                across.append(g)
+    points = np.array(points)
+    q0, n0, ids0 = reference.nearest(points)
+    for guess in (own, across):
+        q, n, ids = reference.nearest(points, np.array(guess, dtype=np.int64))
+        np.testing.assert_array_equal(ids, ids0)
+        np.testing.assert_array_equal(q, q0)
+        np.testing.assert_array_equal(n, n0)

@@ -20,6 +20,7 @@ _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
 # middle of a thin wall, whose other side the search must see (a wall thicker than twice this is safe).
 _KEEP_NEAR = 0.25e-3
 _PATCH = 16  # faces of one plane a point's disc may cover before the search decides instead
+_FOLD = 1e-8  # m: how far off a face's plane the face across an edge must reach to turn away from it
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -83,8 +84,9 @@ def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
     h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
     if abs(h0) > _KEEP_NEAR:
         return False
-    for k in range(1, 4):
-        if planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k] <= 0.0:
+    for k in range(1, 4):  # inside f, off its edges by more than rounding: on an edge the search's lowest id decides
+        hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
+        if hk <= 0.0 or hk * hk <= 1e-6 * h0 * h0 + 1e-18:
             return False
     if not _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
         return False
@@ -95,11 +97,13 @@ def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
 
 @njit(cache=True, nogil=True)
 def _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
-    """Whether the disc of radius 2|h0| about p[i]'s projection on face f's plane lies in the faces of that plane
-    connected to f: the faces it covers are visited across the edges it crosses (at most ``_PATCH``), and
-    none of those edges may be the plane's border (no face across, more than one (``paired``), or one in
-    another plane). The disc is convex and starts inside f, so it cannot leave the plane's faces without
-    crossing such an edge."""
+    """Whether the disc of radius 2|h0| about p[i]'s projection on face f's plane lies in the faces of that
+    plane connected to f: the faces it covers are visited across the edges it crosses (at most ``_PATCH``), and
+    none of those edges may be the plane's border (no face across, more than one (``paired``), or one in another
+    plane) — unless it lies farther than |h0| from the projection and the face across turns away from the point
+    (:func:`_folds_away`): then nothing within |h0| of the point lies beyond it but what the search's trust
+    excludes anyway (a slot, a thin wall's other side). The disc is convex and starts inside f, so it cannot
+    leave the plane's faces without crossing such an edge."""
     x0 = p[i, 0] - h0 * planes[f, 0, 0]
     x1 = p[i, 1] - h0 * planes[f, 0, 1]
     x2 = p[i, 2] - h0 * planes[f, 0, 2]
@@ -121,8 +125,8 @@ def _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id
             if h < 0 or not (paired[g] >> k) & 1:
                 return False
             if plane_id[h] != plane_id[f]:
-                if _folds_away(h, f, h0, tri, planes, plane_c):
-                    continue  # an edge of the part that turns away from the point: the face across is farther
+                if d0 * d0 + d1 * d1 + d2 * d2 > h0 * h0 and _folds_away(h, f, h0, tri, planes, plane_c):
+                    continue  # an edge of the part, farther than |d|, that turns away from the point
                 return False
             known = False
             for m in range(n):
@@ -145,7 +149,7 @@ def _folds_away(h, f, h0, tri, planes, plane_c):
         s = planes[f, 0, 0] * tri[h, m, 0] + planes[f, 0, 1] * tri[h, m, 1] + planes[f, 0, 2] * tri[h, m, 2] - plane_c[f, 0]
         if abs(s) > abs(far):
             far = s
-    return far * h0 < 0.0
+    return far * h0 < 0.0 and abs(far) > _FOLD  # a face in the plane to rounding (a sliver, a flipped face) is not
 
 
 @njit(cache=True, nogil=True)

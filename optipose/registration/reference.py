@@ -137,7 +137,8 @@ class SurfaceReference:
         where it must.
 
         ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
-        inside its face by more than twice its distance keeps it (:meth:`follow`). Any other point is searched exactly among
+        inside its face by more than twice its distance keeps it (:meth:`follow`), as does one whose disc of that radius
+        the faces of its plane around it hold (within 0.25 mm of the plane). Any other point is searched exactly among
         the faces listed in the grid cells around it, out to two cells
         (:func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
         or, closest to an edge or a corner, that face's closest point and the direction to it. Points outside the grid or
