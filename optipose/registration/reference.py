@@ -33,6 +33,11 @@ __all__ = ["SurfaceReference", "SampledReference", "sample_surface", "save_refer
 _CELL = 0.5e-3  # m: grid cells of nearest(), larger if the part would need more than _MAX_CELLS
 _MAX_CELLS = 4_000_000
 _SURFACE_REACH = 2  # rings of cells around a point that the surface's search looks at: exact within 2 cells
+# A dense mesh gets smaller cells, about this many of its mean edges across (at least _FINE_CELL, and at most
+# two cells a face in all): a cell of _CELL would list the faces of a 5 M-face sphere by the hundred, and every
+# point the search answers would test them all. The reach in cells grows to keep the same reach in metres.
+_EDGES_A_CELL = 4.0
+_FINE_CELL = 0.1e-3
 _NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
 _REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
 _ARRAYS = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "paired", "plane_id", "grid_start", "grid_faces", "box32", "meta")
@@ -69,7 +74,7 @@ class SurfaceReference:
         """The grid's origin (3,), cell (m), shape (3,), the search's reach in cells, and the CSR start and
         face list of the faces that cross each cell (:func:`optipose.registration.closest_surface.face_grid`)."""
         meta = self._meta
-        return meta[1:4], float(meta[4]), meta[5:8].astype(np.int64), _SURFACE_REACH, self._grid_start, self._grid_faces
+        return meta[1:4], float(meta[4]), meta[5:8].astype(np.int64), _reach(float(meta[4])), self._grid_start, self._grid_faces
 
     def _bvh(self):
         """Open3D's ``RaycastingScene`` of the mesh, built on first use. The BVH is float32: built about the
@@ -202,8 +207,10 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     plane_id = plane_numbers(planes[:, 0], plane_c[:, 0]).astype(np.int32)
     adjacent, paired = adjacent_faces(faces)
     lo, hi = tri.min(axis=1).min(axis=0), tri.max(axis=1).max(axis=0)
-    cell = max(_CELL, float(np.prod(hi - lo + 4 * _CELL) / _MAX_CELLS) ** (1 / 3))
-    margin = _SURFACE_REACH * cell  # exact for points within a millimetre of the surface at the default cell
+    edge = np.sqrt(2.0 * float(area2.sum()) / np.sqrt(3.0) / max(len(faces), 1))  # an equilateral face's, of the mean area
+    fine = min(_CELL, max(_FINE_CELL, _EDGES_A_CELL * edge))
+    cell = max(fine, float(np.prod(hi - lo + 4 * _CELL) / max(_MAX_CELLS, 2 * len(faces))) ** (1 / 3))
+    margin = _reach(cell) * cell  # exact for points within a millimetre of the surface
     origin = lo - margin
     shape = np.floor((hi + margin - origin) / cell).astype(np.int64) + 1
     start, listed = face_grid(tri, planes[:, 0], plane_c[:, 0], origin, cell, shape)
@@ -211,6 +218,12 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
             "adjacent": adjacent, "paired": paired, "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
             "box32": face_boxes(tri), "meta": meta}  # fmt: skip
+
+
+def _reach(cell: float) -> int:
+    """The rings of cells of side ``cell`` (m) the surface's search looks at: ``_SURFACE_REACH`` of the default cell's
+    width in metres, or of this cell's if it is larger."""
+    return max(_SURFACE_REACH, int(np.ceil(_SURFACE_REACH * _CELL / cell - 1e-9)))
 
 
 def save_reference(reference: SurfaceReference, folder) -> None:
