@@ -119,13 +119,14 @@ def _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id
             t = ((x0 - a[0]) * e0 + (x1 - a[1]) * e1 + (x2 - a[2]) * e2) / max(e0 * e0 + e1 * e1 + e2 * e2, 1e-300)
             t = min(max(t, 0.0), 1.0)
             d0, d1, d2 = x0 - a[0] - t * e0, x1 - a[1] - t * e1, x2 - a[2] - t * e2
-            if d0 * d0 + d1 * d1 + d2 * d2 >= r2:
+            dist2 = d0 * d0 + d1 * d1 + d2 * d2
+            if dist2 >= r2:
                 continue  # the disc does not reach this edge
             h = adjacent[g, k]
             if h < 0 or not (paired[g] >> k) & 1:
                 return False
             if plane_id[h] != plane_id[f]:
-                if d0 * d0 + d1 * d1 + d2 * d2 > h0 * h0 and _folds_away(h, f, h0, tri, planes, plane_c):
+                if dist2 > h0 * h0 and _folds_away(h, f, h0, tri, planes, plane_c):
                     continue  # an edge of the part, farther than |d|, that turns away from the point
                 return False
             known = False
@@ -400,10 +401,10 @@ def adjacent_faces(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     same = key[order[1:]] == key[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
     a, b = order[:-1][same], order[1:][same]
     adjacent[a], adjacent[b] = b // 3, a // 3
-    sorted_key = key[order]
-    run = np.searchsorted(sorted_key, sorted_key, side="right") - np.searchsorted(sorted_key, sorted_key, side="left")
+    # an edge of exactly two faces: a pair of equal keys with no third before or after it
+    alone = same & ~np.r_[False, same[:-1]] & ~np.r_[same[1:], False]
     two = np.zeros(3 * f, dtype=np.uint8)
-    two[order] = run == 2
+    two[order[:-1][alone]] = two[order[1:][alone]] = 1
     paired = (two.reshape(f, 3) << np.arange(3, dtype=np.uint8)).sum(axis=1).astype(np.uint8)
     return adjacent.reshape(f, 3), paired
 

@@ -144,10 +144,10 @@ class SurfaceReference:
         ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
         inside its face by more than twice its distance keeps it (:meth:`follow`), as does one whose disc of that radius
         the faces of its plane around it hold (within 0.25 mm of the plane). Any other point is searched exactly among
-        the faces listed in the grid cells around it, out to two cells
+        the faces listed in the grid cells around it, out to a millimetre (two cells of 0.5 mm)
         (:func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
         or, closest to an edge or a corner, that face's closest point and the direction to it. Points outside the grid or
-        farther than two cells from the surface get Open3D's answer (float32 off the faces' interiors).
+        farther than that from the surface get Open3D's answer (float32 off the faces' interiors).
         """
         points = np.ascontiguousarray(points, dtype=np.float64)
         ids = _face_hints(ids, len(points), len(self.faces))
@@ -207,14 +207,15 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     plane_id = plane_numbers(planes[:, 0], plane_c[:, 0]).astype(np.int32)
     adjacent, paired = adjacent_faces(faces)
     lo, hi = tri.min(axis=1).min(axis=0), tri.max(axis=1).max(axis=0)
-    edge = np.sqrt(2.0 * float(area2.sum()) / np.sqrt(3.0) / max(len(faces), 1))  # an equilateral face's, of the mean area
+    area = 0.5 * float(area2.sum())
+    edge = np.sqrt(4.0 * area / np.sqrt(3.0) / max(len(faces), 1))  # an equilateral face's, of the mean area
     fine = min(_CELL, max(_FINE_CELL, _EDGES_A_CELL * edge))
     cell = max(fine, float(np.prod(hi - lo + 4 * _CELL) / max(_MAX_CELLS, 2 * len(faces))) ** (1 / 3))
     margin = _reach(cell) * cell  # exact for points within a millimetre of the surface
     origin = lo - margin
     shape = np.floor((hi + margin - origin) / cell).astype(np.int64) + 1
     start, listed = face_grid(tri, planes[:, 0], plane_c[:, 0], origin, cell, shape)
-    meta = np.concatenate([[0.5 * float(area2.sum())], origin, [cell], shape.astype(np.float64)])
+    meta = np.concatenate([[area], origin, [cell], shape.astype(np.float64)])
     return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
             "adjacent": adjacent, "paired": paired, "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
             "box32": face_boxes(tri), "meta": meta}  # fmt: skip
