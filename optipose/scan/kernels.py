@@ -13,7 +13,7 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def measure_hits(
-    tri, n_part, n_col, shift_b, ray_cos, ray_sin, nu, nw, q, b, a, on_hull,
+    tri, n_part, n_col, shift_b, ray_cos, ray_sin, normals, offsets, frame, on_hull,
     apex_z, z_near, z_far, intensity_grid, threshold, saturation,
 ):  # fmt: skip
     """From Embree's first triangles (m,) of a block of rays to the hits that are measured; triangles
@@ -23,6 +23,7 @@ def measure_hits(
     ``intensity`` (n,), ``tri`` (n,) and ``shadow_test`` (n,) bool: hits whose shadow must still be
     traced (off the convex hull). A hit is kept when it faces the laser, lies in the Z range, clears
     the intensity threshold (and saturation, when > 0) and has the receiver in front of its face.
+    A hit face's scalars come from its normal and offset and the sensor's ``frame`` (:func:`face_terms`).
     """
     m = tri.shape[0]
     out_idx = np.empty(m, np.int32)
@@ -40,14 +41,15 @@ def measure_hits(
         col = i - k * n_col
         shift = shift_b[k]
         c = ray_cos[col]
-        den = c * nu[f] + ray_sin[col] * nw[f]  # n·d = -cos(AoI)
+        nu, nw, q, b, a = face_terms(normals, offsets, frame, f)
+        den = c * nu + ray_sin[col] * nw  # n·d = -cos(AoI)
         if den >= 0.0:
             continue
-        T = (q[f] + shift * b[f]) / den
+        T = (q + shift * b) / den
         z = apex_z + T * c
         if z < z_near or z > z_far:
             continue
-        if a[f] - shift * b[f] <= 0.0:  # the receiver is behind the face
+        if a - shift * b <= 0.0:  # the receiver is behind the face
             continue
         x = -den * n_grid
         j = min(int(x), n_grid - 1)
@@ -64,7 +66,7 @@ def measure_hits(
 
 
 @njit(cache=True, nogil=True)
-def fill_columns(anchor_tri, cols, n_col, plane, shift_b, ray_cos, ray_sin, nu, nw, q, b, apex, d, step, edge_n, edge_c):
+def fill_columns(anchor_tri, cols, n_col, plane, shift_b, ray_cos, ray_sin, normals, offsets, frame, d, edge_n, edge_c):
     """The first triangles of a block's rays (m·n_col,) from those of its anchor columns (m, a) only.
 
     cols : (a,) the anchor columns, increasing, the first and last column among them. Between two
@@ -76,7 +78,7 @@ def fill_columns(anchor_tri, cols, n_col, plane, shift_b, ray_cos, ray_sin, nu, 
     between meet that plane on the same segment, and a ray whose point there lies inside either
     triangle hits it, for the same reason; the rest (a gap or a third triangle between) are cast.
     For the point: a ray of column c at shift s meets face f's plane ``T = (q_f + s·b_f)/(cos_c·nu_f +
-    sin_c·nw_f)`` from the apex, at ``apex + T·d_c − s·step`` (part frame); it lies inside f when it is
+    sin_c·nw_f)`` from the apex (:func:`face_terms`), at ``apex + T·d_c − s·step`` (part frame); it lies inside f when it is
     on the inner side of f's three edge planes (``edge_n`` (f, 3, 3), ``edge_c`` (f, 3)).
     Returns the filled triangles and ``need`` (n,), the rays that must be cast.
     """
@@ -99,12 +101,13 @@ def fill_columns(anchor_tri, cols, n_col, plane, shift_b, ray_cos, ray_sin, nu, 
                     tri[base + c] = t0
                     continue
                 if coplanar:
-                    den = ray_cos[c] * nu[t0] + ray_sin[c] * nw[t0]
+                    nu, nw, q, b, _ = face_terms(normals, offsets, frame, t0)
+                    den = ray_cos[c] * nu + ray_sin[c] * nw
                     if den != 0.0:
-                        T = (q[t0] + s * b[t0]) / den
-                        p0 = apex[0] + T * d[c, 0] - s * step[0]
-                        p1 = apex[1] + T * d[c, 1] - s * step[1]
-                        p2 = apex[2] + T * d[c, 2] - s * step[2]
+                        T = (q + s * b) / den
+                        p0 = frame[2, 0] + T * d[c, 0] - s * frame[3, 0]
+                        p1 = frame[2, 1] + T * d[c, 1] - s * frame[3, 1]
+                        p2 = frame[2, 2] + T * d[c, 2] - s * frame[3, 2]
                         if _inside(edge_n, edge_c, t0, p0, p1, p2):
                             tri[base + c] = t0
                             continue
@@ -114,6 +117,21 @@ def fill_columns(anchor_tri, cols, n_col, plane, shift_b, ray_cos, ray_sin, nu, 
                 need[n] = base + c
                 n += 1
     return tri, need[:n]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def face_terms(normals, offsets, frame, f):
+    """Face f's scalars for one sensor view, from its unit normal n and plane offset (n·x = offset) and the
+    view's ``frame`` (5, 3): the fan's axis u, the line's direction w, the apex, the part's step and the
+    receiver, in the part's frame at shift 0. Returns ``nu = n·u``, ``nw = n·w``, ``q = offset − n·apex``,
+    ``b = n·step`` and ``a = n·receiver − offset``: formed per hit, so a scan costs nothing per face it misses."""
+    n0, n1, n2 = normals[f, 0], normals[f, 1], normals[f, 2]
+    nu = n0 * frame[0, 0] + n1 * frame[0, 1] + n2 * frame[0, 2]
+    nw = n0 * frame[1, 0] + n1 * frame[1, 1] + n2 * frame[1, 2]
+    q = offsets[f] - (n0 * frame[2, 0] + n1 * frame[2, 1] + n2 * frame[2, 2])
+    b = n0 * frame[3, 0] + n1 * frame[3, 1] + n2 * frame[3, 2]
+    a = n0 * frame[4, 0] + n1 * frame[4, 1] + n2 * frame[4, 2] - offsets[f]
+    return nu, nw, q, b, a
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -252,7 +252,7 @@ class Scanner:
         shift_b = shifts[k0:k1]
         ray_tri = self._first_triangles(view, shift_b)
         idx, T, inten, tri, test = measure_hits(
-            ray_tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw, view.q, view.b, view.a,
+            ray_tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, self._normals, self._offsets, view.frame,
             self._on_hull, s.apex_z, s.z_near, s.z_far, self._intensity_grid, s.detection_threshold, s.saturation,
         )  # fmt: skip
         test = np.flatnonzero(test)
@@ -289,8 +289,8 @@ class Scanner:
             anchor_tri[live] = np.asarray(caster.first_triangle(*view.rays(rays, shift_b, t_max))).reshape(len(live), len(cols))
         if self._anchors is None:
             return anchor_tri.ravel()
-        tri, need = fill_columns(anchor_tri, self._anchors, n_col, self._plane, shift_b, self._ray_cos, self._ray_sin, view.nu, view.nw,
-                                 view.q, view.b, view.apex_P, view.d_P, view.step_P, self._edge_n, self._edge_c)  # fmt: skip
+        tri, need = fill_columns(anchor_tri, self._anchors, n_col, self._plane, shift_b, self._ray_cos, self._ray_sin,
+                                 self._normals, self._offsets, view.frame, view.d_P, self._edge_n, self._edge_c)  # fmt: skip
         if len(need):
             tri[need] = caster.first_triangle(*view.rays(need, shift_b, t_max))
         return tri
@@ -357,11 +357,11 @@ def nominal_scans(part, layout: str = "hand") -> dict:
 
 @dataclass(frozen=True)
 class _SensorView:
-    """One sensor's fan and receiver in the part's frame at shift 0, and per-face scalars for its hits.
+    """One sensor's fan and receiver in the part's frame at shift 0.
 
-    For face f (unit normal n_f, plane n_f·x = offset_f): ``nu, nw`` = n_f along the fan's axis and along
-    the line; ``q`` = offset_f − n_f·apex; ``b`` = n_f·step (the part's +x_O motion seen from the part);
-    ``a`` = n_f·receiver − offset_f (receiver height above the face's plane at shift 0).
+    ``frame`` (5, 3) holds the fan's axis, the line's direction, the apex, ``step_P`` (the part's +x_O motion
+    seen from the part) and the receiver: the kernels form a hit face's scalars from it
+    (:func:`optipose.scan.kernels.face_terms`), so building a view does not grow with the mesh.
     """
 
     T_O_S: np.ndarray
@@ -373,11 +373,7 @@ class _SensorView:
     step_P: np.ndarray  # (3,)
     fan_lo: np.ndarray  # (3,) the box of the fan's trapezoid (window to far limit) at shift 0
     fan_hi: np.ndarray
-    nu: np.ndarray  # (f,)
-    nw: np.ndarray
-    q: np.ndarray
-    b: np.ndarray
-    a: np.ndarray
+    frame: np.ndarray  # (5, 3)
 
     def rays(self, rays: np.ndarray, shift_b: np.ndarray, t_max: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Embree's float32 origins (n, 3), directions (n, 3) and far limits (n,) of a block's rays (profile
@@ -393,7 +389,6 @@ class _SensorView:
         receiver_P = to_P(scanner.sensor.receiver)
         o_P = scanner._ray_o_S @ R_PS.T + (to_P(np.zeros(3)))
         d_P = scanner._ray_d_S @ R_PS.T
-        n, off = scanner._normals, scanner._offsets
         step_P = R_PO[:, 0].copy()
         t_far = scanner._t_max[[0, -1]]
         corners = np.vstack([o_P[[0, -1]], o_P[[0, -1]] + t_far[:, None] * d_P[[0, -1]]])
@@ -407,9 +402,5 @@ class _SensorView:
             step_P=step_P,
             fan_lo=corners.min(axis=0) - 1e-6,
             fan_hi=corners.max(axis=0) + 1e-6,
-            nu=n @ R_PS[:, 2],
-            nw=n @ R_PS[:, 0],
-            q=off - n @ apex_P,
-            b=n @ step_P,
-            a=n @ receiver_P - off,
+            frame=np.array([R_PS[:, 2], R_PS[:, 0], apex_P, step_P, receiver_P]),
         )
