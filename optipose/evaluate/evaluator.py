@@ -136,7 +136,7 @@ class Evaluator:
             material=part.material,
             motion=registered_motion(part.motion),  # a long part in longer steps (SCAN_PROFILES)
             centre=np.asarray(part.rotation_centre, dtype=float),
-            registration=self.objective.registration,
+            registration=replace(self.objective.registration, null_tolerance=self.objective.statistic.observability_tolerance),
             observability_tolerance=self.objective.statistic.observability_tolerance,
             seed=self.seed,
             threads=None if self.jobs == 1 else 1,

@@ -8,10 +8,15 @@ its few successes to speak for it; the mean and max describe the registrations t
 averaging a stand-in in. With no failure both are the plain statistics of the measured errors.
 
 Observability: the point-to-plane information matrix ``H`` (6×6, rotation about the cloud's centroid,
-then translation) is made unitless by scaling rotation by the cloud's RMS radius; an axis is
-*unobservable* when the unit vector of that axis lies mostly (> ½ of its squared length) in the span of
-eigenvectors whose eigenvalues are below ``tolerance × λ_max``. A flat plate seen from above leaves yaw
-and in-plane translation there.
+then translation) is made unitless by scaling rotation by the cloud's RMS radius. A rotation axis is
+*unobservable* when the rotation's own information, the translation left free (the Schur complement
+``H_rr − H_rt H_tt⁺ H_tr``, with the translations below the cut left out of ``H_tt⁺``), has that axis
+mostly (> ½ of its squared length) in the span of eigenvectors whose eigenvalues are below ``tolerance ×
+λ_max`` (λ_max of the whole ``H``); a translation axis when it lies so in the null span of ``H_tt`` (the
+rotation held). A flat plate seen
+from above leaves yaw and in-plane translation there; a patch of a sphere every rotation, which about the
+patch's centroid is a rotation about the sphere's centre plus a translation (the rotation the estimate reports
+is the same).
 """
 
 from __future__ import annotations
@@ -37,9 +42,16 @@ def unobservable_axes(information: np.ndarray, scale: float, tolerance: float = 
         return np.ones(6, dtype=bool)
     D = np.diag([1.0 / max(scale, 1e-12)] * 3 + [1.0] * 3)
     H = D @ information @ D
-    w, V = np.linalg.eigh(0.5 * (H + H.T))
-    null = V[:, w < tolerance * w.max()]
-    return (null**2).sum(axis=1) > 0.5
+    H = 0.5 * (H + H.T)
+    cut = tolerance * np.linalg.eigvalsh(H)[-1]
+    out = np.empty(6, dtype=bool)
+    w, V = np.linalg.eigh(H[3:, 3:])
+    out[3:] = (V[:, w < cut] ** 2).sum(axis=1) > 0.5  # the translations with the rotation held
+    free = H[:3, 3:] @ V[:, w > cut]  # the rotation's coupling to the translations the cloud observes
+    marginal = H[:3, :3] - free @ np.diag(1.0 / w[w > cut]) @ free.T
+    w, V = np.linalg.eigh(0.5 * (marginal + marginal.T))
+    out[:3] = (V[:, w < cut] ** 2).sum(axis=1) > 0.5
+    return out
 
 
 def error_stats(abs_errors: np.ndarray, n_failed: int = 0) -> dict[str, float]:

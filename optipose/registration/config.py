@@ -38,4 +38,8 @@ class RegistrationConfig:
     # a registration that converges with an RMSE over this (m) fails ("rmse ... over max_rmse_mm"): a wrong
     # basin or a wrong reference, which the ICP's own tests pass; 0 = no such test
     max_rmse: float = 0.0
+    # motions whose information on the smooth surface (the CAD's curved regions as curved, not as facets) is below
+    # this times the largest are not stepped along and are left out of the reported information: the
+    # statistic's observability tolerance (the evaluator sets it); 0 = every motion the faces' normals see
+    null_tolerance: float = 1e-6
     subset_start: str = "identity"  # every subset from identity, or "combined": a subset of several sensors starts where its sensors' own registrations put it

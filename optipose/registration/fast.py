@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 __all__ = ["FastBackend", "PlainBackend"]
 
 _TWIST_LENGTH = 0.03  # m: weighs rotation against translation when comparing ICP steps
+_TURNING = 1e-3  # a free motion (unit, scaled) whose turn is smaller than this is a shift
 
 
 class FastBackend:
@@ -52,10 +53,14 @@ class FastBackend:
         converged, it, history, before = False, 0, None, None
         cycle = Cycle(cfg)
         track = reference.tracker(ids, initial)
+        smooth = _smooth(reference, cfg)
+        seen = None  # the motions the smooth surface constrains, from the first step's matches (None: all six)
         p = np.empty_like(source)  # every step's moved cloud, in one buffer
         for it in range(1, cfg.max_iterations + 1):
             p = transform(source, T, p)
             q, n, ids = track(p)
+            if it == 1 and smooth is not None:
+                seen = _seen(smooth, p, q, ids, max_d2, cfg.null_tolerance)
             if cfg.method == "point_to_point":  # the information matrix is summed once, after the last step
                 n_in, sum_d2, c, mq, H = cross_covariance(p, q, max_d2)
             else:
@@ -72,7 +77,7 @@ class FastBackend:
             if cfg.method == "point_to_point":
                 delta = kabsch(H, c, mq)
             else:
-                delta = _solve_point_to_plane(AtA, Atb, c)
+                delta = _solve_point_to_plane(AtA, Atb, c, seen)
             if delta is None:
                 return Registration.failed(len(source), "degenerate step", T, it)
             T = delta @ T
@@ -89,6 +94,8 @@ class FastBackend:
                 T, history = _accelerate(T, delta, c, history)
         if cfg.method == "point_to_point":
             AtA = normal_equations(p, q, n, max_d2)[2]
+        if smooth is not None:
+            AtA = _without_unseen(AtA, smooth, p, q, ids, max_d2, cfg.null_tolerance)
         return Registration(
             T_target_source=T,
             converged=converged,
@@ -122,6 +129,7 @@ class PlainBackend:
         step = _kabsch if cfg.method == "point_to_point" else _point_to_plane
         converged, it, history = False, 0, None
         cycle = Cycle(cfg)
+        smooth, seen = _smooth(reference, cfg), None
         for it in range(1, cfg.max_iterations + 1):
             p = source @ T[:3, :3].T + T[:3, 3]
             if it == 1 and initial is not None:
@@ -136,7 +144,9 @@ class PlainBackend:
             inlier = np.einsum("ij,ij->i", p - q, p - q) <= max_d2
             if inlier.sum() < MIN_POINTS:
                 return Registration.failed(len(source), f"{int(inlier.sum())} points within the correspondence distance", T, it)
-            delta = step(p[inlier], q[inlier], n[inlier])
+            if it == 1 and smooth is not None:
+                seen = _seen(smooth, p, q, ids, max_d2, cfg.null_tolerance)
+            delta = step(p[inlier], q[inlier], n[inlier], seen)
             if delta is None:
                 return Registration.failed(len(source), "degenerate step", T, it)
             T = delta @ T
@@ -150,6 +160,9 @@ class PlainBackend:
                 T, history = _accelerate(T, delta, p[inlier].mean(axis=0), history)
         d2 = np.einsum("ij,ij->i", p - q, p - q)
         inlier = d2 <= max_d2
+        information = information_matrix(p[inlier], n[inlier])
+        if smooth is not None:
+            information = _without_unseen(information, smooth, p, q, ids, max_d2, cfg.null_tolerance)
         return Registration(
             T_target_source=T,
             converged=converged,
@@ -157,7 +170,7 @@ class PlainBackend:
             fitness=float(inlier.mean()),
             rmse=float(np.sqrt(d2[inlier].mean())),
             n_points=len(source),
-            information=information_matrix(p[inlier], n[inlier]),
+            information=information,
             failure="" if converged else f"no convergence in {cfg.max_iterations} iterations",
             matched=ids,
         )
@@ -232,7 +245,63 @@ def _accelerate(T: np.ndarray, delta: np.ndarray, c: np.ndarray, previous: np.nd
     return T, x
 
 
-def _kabsch(p: np.ndarray, q: np.ndarray, _n=None) -> np.ndarray | None:
+def _smooth(reference, cfg: RegistrationConfig):
+    """The reference's smooth normals (:meth:`~optipose.registration.reference.SurfaceReference.smooth_normals`),
+    or None: a sampled reference has none, and ``null_tolerance`` 0 asks for none."""
+    return getattr(reference, "smooth_normals", None) if cfg.null_tolerance > 0 else None
+
+
+def _smooth_information(smooth, p, q, ids, max_d2: float) -> tuple[np.ndarray, float]:
+    """The point-to-plane information of the pairs within ``sqrt(max_d2)`` on the smooth surface's normals, and
+    the RMS radius (m) of those points about their centroid (the scale of rotation against translation)."""
+    inlier = np.flatnonzero(np.einsum("ij,ij->i", p - q, p - q) <= max_d2)
+    if len(inlier) == 0:
+        return np.zeros((6, 6)), 1.0
+    p_in = p[inlier]
+    scale = float(np.sqrt(((p_in - p_in.mean(axis=0)) ** 2).sum(axis=1).mean()))
+    return information_matrix(p_in, smooth(q[inlier], ids[inlier])), scale
+
+
+def _seen(smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray | None:
+    """The motions the ICP steps along: None when the smooth surface constrains all six, else a basis K (6, r)
+    (a step is ``K @ y``). A facet's turn is no reason to move (:mod:`optipose.registration.smooth`).
+
+    Of the motions that differ by one the surface leaves free, K keeps the one that does not turn along the free
+    rotations (a sphere's cloud then only shifts: its rotation about the centre stays at identity's) and does not
+    shift along the free translations (a plate's in-plane shift, as the minimum-norm step has it).
+    """
+    from optipose.registration.smooth import null_directions
+
+    H, scale = _smooth_information(smooth, p, q, ids, max_d2)
+    null = null_directions(H, scale, tolerance)
+    if null.shape[1] == 0:
+        return None
+    k = null.shape[1]
+    U, S, Wt = np.linalg.svd(null[:3], full_matrices=True)  # the free motions' turns, largest first
+    turning = np.zeros(k, dtype=bool)
+    turning[: len(S)] = S > _TURNING
+    shifts = null[3:] @ Wt[~turning].T  # the free motions that hardly turn: shifts
+    held = np.zeros((6, k))
+    held[:3, : turning.sum()] = U[:, : turning.sum()]
+    held[3:, turning.sum() :] = shifts / np.linalg.norm(shifts, axis=0)
+    return np.linalg.svd(held, full_matrices=True)[0][:, k:]  # the motions orthogonal to what is held
+
+
+def _without_unseen(AtA: np.ndarray, smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray:
+    """``AtA`` (6, 6) with the motions the smooth surface leaves free (at the final matches) taken out, in the
+    scaled coordinates of the observability test: unchanged where it constrains all six."""
+    from optipose.registration.smooth import null_directions
+
+    H, scale = _smooth_information(smooth, p, q, ids, max_d2)
+    null = null_directions(H, scale, tolerance)
+    if null.shape[1] == 0:
+        return AtA
+    d = np.array([1.0 / max(scale, 1e-12)] * 3 + [1.0] * 3)
+    P = np.eye(6) - null @ null.T
+    return (P @ (d[:, None] * AtA * d[None, :]) @ P) / d[:, None] / d[None, :]
+
+
+def _kabsch(p: np.ndarray, q: np.ndarray, _n=None, _seen=None) -> np.ndarray | None:
     """Rigid transform (4, 4) minimising Σ |R pᵢ + t − qᵢ|² (Arun / Umeyama without scale)."""
     mp, mq = p.mean(axis=0), q.mean(axis=0)
     U, _, Vt = np.linalg.svd((p - mp).T @ (q - mq))
@@ -241,7 +310,7 @@ def _kabsch(p: np.ndarray, q: np.ndarray, _n=None) -> np.ndarray | None:
     return _make_T(R, mq - R @ mp)
 
 
-def _point_to_plane(p: np.ndarray, q: np.ndarray, n: np.ndarray) -> np.ndarray | None:
+def _point_to_plane(p: np.ndarray, q: np.ndarray, n: np.ndarray, seen=None) -> np.ndarray | None:
     """One Gauss-Newton step of Σ ((R pᵢ + t − qᵢ)·nᵢ)², linearised about the centroid c of p.
 
     Directions the normals cannot see (a plate's in-plane motion) get no motion: minimum-norm solution.
@@ -249,12 +318,17 @@ def _point_to_plane(p: np.ndarray, q: np.ndarray, n: np.ndarray) -> np.ndarray |
     c = p.mean(axis=0)
     A = np.hstack([np.cross(p - c, n), n])
     b = np.einsum("ij,ij->i", q - p, n)
-    return _solve_point_to_plane(A.T @ A, A.T @ b, c)
+    return _solve_point_to_plane(A.T @ A, A.T @ b, c, seen)
 
 
-def _solve_point_to_plane(AtA: np.ndarray, Atb: np.ndarray, c: np.ndarray) -> np.ndarray | None:
-    """The step (4, 4) from the normal equations about c: rotation vector then translation."""
-    x, *_ = np.linalg.lstsq(AtA, Atb, rcond=1e-12)
+def _solve_point_to_plane(AtA: np.ndarray, Atb: np.ndarray, c: np.ndarray, seen=None) -> np.ndarray | None:
+    """The step (4, 4) from the normal equations about c: rotation vector then translation; with ``seen``
+    (:func:`_seen`), the step within the motions it allows."""
+    if seen is None:
+        x, *_ = np.linalg.lstsq(AtA, Atb, rcond=1e-12)
+    else:
+        y, *_ = np.linalg.lstsq(seen.T @ AtA @ seen, seen.T @ Atb, rcond=1e-12)
+        x = seen @ y
     if not np.all(np.isfinite(x)):
         return None
     R = Rotation.from_rotvec(x[:3]).as_matrix()

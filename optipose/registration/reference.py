@@ -40,7 +40,7 @@ _EDGES_A_CELL = 4.0
 _FINE_CELL = 0.1e-3
 _NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
 _REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
-_ARRAYS = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "paired", "plane_id", "grid_start", "grid_faces", "box32", "meta")
+_ARRAYS = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "paired", "plane_id", "grid_start", "grid_faces", "box32", "corners", "meta")
 
 
 class SurfaceReference:
@@ -55,6 +55,7 @@ class SurfaceReference:
         self._tri, self._planes, self._plane_c = arrays["tri"], arrays["planes"], arrays["plane_c"]
         self._adjacent, self._paired, self._plane_id = arrays["adjacent"], arrays["paired"], arrays["plane_id"]
         self._grid_start, self._grid_faces, self._box32 = arrays["grid_start"], arrays["grid_faces"], arrays["box32"]
+        self._corners = arrays["corners"]  # (f, 3, 3) float32: the smooth surface's normal at each face's corners
         self._meta = arrays["meta"]  # area, the grid's origin (3), cell, shape (3)
         self.area = float(self._meta[0])
         # views of the packed planes: the face plane (row 0) and its inward edge planes (rows 1-3); a point
@@ -67,7 +68,7 @@ class SurfaceReference:
         """Everything the reference is built from, as arrays: ``SurfaceReference(None, None, arrays)`` is
         the same reference (:func:`save_reference` writes them, :func:`load_reference` maps them back)."""
         values = (self.vertices, self.faces, self._tri, self._planes, self._plane_c, self._adjacent, self._paired, self._plane_id,
-                  self._grid_start, self._grid_faces, self._box32, self._meta)  # fmt: skip
+                  self._grid_start, self._grid_faces, self._box32, self._corners, self._meta)  # fmt: skip
         return dict(zip(_ARRAYS, values))
 
     def _grid(self) -> tuple:
@@ -167,6 +168,12 @@ class SurfaceReference:
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
 
+    def smooth_normals(self, q: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """(n, 3): the normals of the surface the faces stand for at points ``q`` (n, 3) on faces ``ids`` (:mod:`optipose.registration.smooth`)."""
+        from optipose.registration.smooth import smooth_normals
+
+        return smooth_normals(np.ascontiguousarray(q, dtype=np.float64), np.ascontiguousarray(ids, dtype=np.int64), self._tri, self._corners)
+
     def matches(self, points: np.ndarray):
         """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is: searched, not
         guessed (a guess is kept by a test that trusts a point near its face; at identity a point can be a
@@ -186,11 +193,13 @@ class SurfaceReference:
 
 
 def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
-    """The arrays of :class:`SurfaceReference` (see :meth:`SurfaceReference.arrays`), about 400 bytes a face:
+    """The arrays of :class:`SurfaceReference` (see :meth:`SurfaceReference.arrays`), about 440 bytes a face:
     the mesh, its triangles (f, 3, 3), each face's plane and inward edge planes packed (f, 4, 3) and (f, 4)
     for one gather per point, the face across each edge (int32) and whether it is the only one (a bit per edge), a number per plane (int32), the grid, and each
-    face's bounding box in float32 (the search's first test, :func:`optipose.registration.closest_surface.face_boxes`)."""
+    face's bounding box in float32 (the search's first test, :func:`optipose.registration.closest_surface.face_boxes`),
+    and the smooth surface's normals at its corners in float32 (:func:`optipose.registration.smooth.corner_normals`)."""
     from optipose.registration.closest_surface import adjacent_faces, face_boxes, face_grid
+    from optipose.registration.smooth import CREASE_DEG, corner_normals
     from optipose.scan.raycast import plane_numbers
 
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -218,7 +227,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     meta = np.concatenate([[area], origin, [cell], shape.astype(np.float64)])
     return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
             "adjacent": adjacent, "paired": paired, "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
-            "box32": face_boxes(tri), "meta": meta}  # fmt: skip
+            "box32": face_boxes(tri), "meta": meta, "corners": corner_normals(vertices, faces, planes[:, 0].copy(), np.cos(np.deg2rad(CREASE_DEG)))}  # fmt: skip
 
 
 def _reach(cell: float) -> int:
