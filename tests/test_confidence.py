@@ -179,3 +179,20 @@ def test_scan_errors_take_each_axis_from_its_subset():
     assert [d.seed for d in paired_draws(found, choice, [_result(s, errors, ok) for s in (1, 3)], choice)] == [3, 1]
     with pytest.raises(ValueError, match="no hand evaluation"):
         paired_draws(found, choice, [_result(1, errors, ok)], choice)
+
+
+def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
+    # a sphere: every axis unobservable for found and hand alike, the penalty on every scan of every draw
+    blind = np.full((20, 3), UNOBSERVABLE_PENALTY)
+    verdict = compare_draws([PairedDraw(i, blind, blind) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2")
+    assert verdict.unmeasured == ["roll", "pitch", "yaw"]
+    assert verdict.line() == "k=2: nothing measured: neither F1F2 nor hand S1S2 observes roll/pitch/yaw"
+    from optipose.report.confidence import interval_cell
+
+    assert interval_cell(verdict.found[0].median_deg) == "not measured"
+    # one axis measured: the usual line, and that axis's cell a number
+    seen = blind.copy()
+    seen[:, 0] = np.deg2rad(0.01)
+    verdict = compare_draws([PairedDraw(i, seen, seen) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2")
+    assert verdict.unmeasured == ["pitch", "yaw"] and verdict.line().startswith("k=2: TIE")
+    assert interval_cell(verdict.found[0].median_deg) != "not measured"

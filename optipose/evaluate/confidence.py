@@ -192,6 +192,9 @@ class ConfidentVerdict:
         s, ref = self.score, f"{self.reference} {self.hand_name}"
         ratio = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]"
         head = f"k={self.k}: {self.decision}"
+        if len(self.unmeasured) == len(self.found):  # equal because neither measures anything: say that
+            text = f"k={self.k}: nothing measured: neither {self.found_name} nor {ref} observes {'/'.join(self.unmeasured)}"
+            return text if len(text) <= 80 else text[:80]
         if self.decision == KEEP:
             worse = [a.axis for a in self.axes if a.ratio.high < 1.0 / (1.0 + self.tolerance)]
             text = f"{head} {ref}; {self.found_name} {ratio}" + (f", worse on {'/'.join(worse)}" if worse else "")
@@ -213,12 +216,20 @@ class ConfidentVerdict:
         fits = [line for line in (f"{text}{axis} ({tail})", f"{text} ({tail})", f"{text}{axis}") if len(line) <= 80]
         return fits[0] if fits else text[:80]
 
+    @property
+    def unmeasured(self) -> list[str]:
+        """The axes neither layout measures in any draw (unobservable, or failed: the penalty throughout)."""
+        penalty = np.degrees(UNOBSERVABLE_PENALTY) * (1.0 - 1e-9)
+        return [f.axis for f, h in zip(self.found, self.hand) if min(f.median_deg.low, h.median_deg.low) >= penalty]
+
     def fewer_line(self) -> str:
         """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line, e.g.
         ``fewer sensors: found F1 alone matches hand S1S2S3 within 10 % (1.02x [0.95, 1.08])``."""
         s = self.score
         ratio, who = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]", f"found {self.found_name} alone"
         ref = f"{self.reference} {self.hand_name}"
+        if len(self.unmeasured) == len(self.found):
+            return f"fewer sensors: nothing measured, neither {who} nor {ref}"
         text = {BUY: f"{who} is better than {ref}: {ratio}", KEEP: f"{who} does not match {ref} ({ratio})",
                 TIE: f"{who} matches {ref} within {100 * self.tolerance:.0f} % ({ratio})"}.get(
                     self.decision, f"{who} vs {ref}: {ratio}, not settled")  # fmt: skip
