@@ -94,7 +94,7 @@ class FastBackend:
                 T, history = _accelerate(T, delta, c, history)
         if cfg.method == "point_to_point":
             AtA = normal_equations(p, q, n, max_d2)[2]
-        if smooth is not None:
+        if seen is not None:  # free motions where it started: those at its end leave the information
             AtA = _without_unseen(AtA, smooth, p, q, ids, max_d2, cfg.null_tolerance)
         return Registration(
             T_target_source=T,
@@ -161,7 +161,7 @@ class PlainBackend:
         d2 = np.einsum("ij,ij->i", p - q, p - q)
         inlier = d2 <= max_d2
         information = information_matrix(p[inlier], n[inlier])
-        if smooth is not None:
+        if seen is not None:
             information = _without_unseen(information, smooth, p, q, ids, max_d2, cfg.null_tolerance)
         return Registration(
             T_target_source=T,
@@ -246,20 +246,10 @@ def _accelerate(T: np.ndarray, delta: np.ndarray, c: np.ndarray, previous: np.nd
 
 
 def _smooth(reference, cfg: RegistrationConfig):
-    """The reference's smooth normals (:meth:`~optipose.registration.reference.SurfaceReference.smooth_normals`),
-    or None: a sampled reference has none, and ``null_tolerance`` 0 asks for none."""
-    return getattr(reference, "smooth_normals", None) if cfg.null_tolerance > 0 else None
-
-
-def _smooth_information(smooth, p, q, ids, max_d2: float) -> tuple[np.ndarray, float]:
-    """The point-to-plane information of the pairs within ``sqrt(max_d2)`` on the smooth surface's normals, and
-    the RMS radius (m) of those points about their centroid (the scale of rotation against translation)."""
-    inlier = np.flatnonzero(np.einsum("ij,ij->i", p - q, p - q) <= max_d2)
-    if len(inlier) == 0:
-        return np.zeros((6, 6)), 1.0
-    p_in = p[inlier]
-    scale = float(np.sqrt(((p_in - p_in.mean(axis=0)) ** 2).sum(axis=1).mean()))
-    return information_matrix(p_in, smooth(q[inlier], ids[inlier])), scale
+    """The reference's information on its smooth surface's normals
+    (:meth:`~optipose.registration.reference.SurfaceReference.smooth_information`), or None: a sampled
+    reference has none, and ``null_tolerance`` 0 asks for none."""
+    return getattr(reference, "smooth_information", None) if cfg.null_tolerance > 0 else None
 
 
 def _seen(smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray | None:
@@ -272,7 +262,7 @@ def _seen(smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray | No
     """
     from optipose.registration.smooth import null_directions
 
-    H, scale = _smooth_information(smooth, p, q, ids, max_d2)
+    H, scale = smooth(np.ascontiguousarray(p), np.ascontiguousarray(q), ids, max_d2)
     null = null_directions(H, scale, tolerance)
     if null.shape[1] == 0:
         return None
@@ -292,7 +282,7 @@ def _without_unseen(AtA: np.ndarray, smooth, p, q, ids, max_d2: float, tolerance
     scaled coordinates of the observability test: unchanged where it constrains all six."""
     from optipose.registration.smooth import null_directions
 
-    H, scale = _smooth_information(smooth, p, q, ids, max_d2)
+    H, scale = smooth(np.ascontiguousarray(p), np.ascontiguousarray(q), ids, max_d2)
     null = null_directions(H, scale, tolerance)
     if null.shape[1] == 0:
         return AtA

@@ -168,11 +168,11 @@ class SurfaceReference:
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
 
-    def smooth_normals(self, q: np.ndarray, ids: np.ndarray) -> np.ndarray:
-        """(n, 3): the normals of the surface the faces stand for at points ``q`` (n, 3) on faces ``ids`` (:mod:`optipose.registration.smooth`)."""
-        from optipose.registration.smooth import smooth_normals
+    def smooth_information(self, p: np.ndarray, q: np.ndarray, ids: np.ndarray, max_d2: float) -> tuple[np.ndarray, float]:
+        """:func:`optipose.registration.smooth.smooth_information` of pairs (p, q) on faces ``ids``: (H (6, 6), RMS radius)."""
+        from optipose.registration.smooth import smooth_information
 
-        return smooth_normals(np.ascontiguousarray(q, dtype=np.float64), np.ascontiguousarray(ids, dtype=np.int64), self._tri, self._corners)
+        return smooth_information(p, q, np.ascontiguousarray(ids, dtype=np.int64), max_d2, self._tri, self._corners)
 
     def matches(self, points: np.ndarray):
         """The :class:`~optipose.registration.result.Matches` of a cloud (n, 3) where it is: searched, not
