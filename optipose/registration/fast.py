@@ -29,6 +29,10 @@ __all__ = ["FastBackend", "PlainBackend"]
 
 _TWIST_LENGTH = 0.03  # m: weighs rotation against translation when comparing ICP steps
 _TURNING = 1e-3  # a free motion (unit, scaled) whose turn is smaller than this is a shift
+# the ICP takes no step along a motion whose smooth-surface information is below the observability tolerance times
+# this: far below it (a sphere's rotation at 10⁻⁹–10⁻¹⁰ of the largest, a plate's yaw at 10⁻¹⁷), not near it, where
+# whether a facet's turn or the surface decides would move with the tessellation (a bent sheet's bend, part C)
+STEP_NULL = 1e-2
 
 
 class FastBackend:
@@ -54,13 +58,13 @@ class FastBackend:
         cycle = Cycle(cfg)
         track = reference.tracker(ids, initial)
         smooth = _smooth(reference, cfg)
-        seen = None  # the motions the smooth surface constrains, from the first step's matches (None: all six)
+        seen, free = None, False  # the motions stepped along (None: all six), and whether the smooth surface leaves any free
         p = np.empty_like(source)  # every step's moved cloud, in one buffer
         for it in range(1, cfg.max_iterations + 1):
             p = transform(source, T, p)
             q, n, ids = track(p)
             if it == 1 and smooth is not None:
-                seen = _seen(smooth, p, q, ids, max_d2, cfg.null_tolerance)
+                seen, free = _seen(smooth, p, q, ids, max_d2, cfg.null_tolerance)
             if cfg.method == "point_to_point":  # the information matrix is summed once, after the last step
                 n_in, sum_d2, c, mq, H = cross_covariance(p, q, max_d2)
             else:
@@ -94,7 +98,7 @@ class FastBackend:
                 T, history = _accelerate(T, delta, c, history)
         if cfg.method == "point_to_point":
             AtA = normal_equations(p, q, n, max_d2)[2]
-        if seen is not None:  # free motions where it started: those at its end leave the information
+        if free:  # free motions where it started: those at its end leave the information
             AtA = _without_unseen(AtA, smooth, p, q, ids, max_d2, cfg.null_tolerance)
         return Registration(
             T_target_source=T,
@@ -129,7 +133,7 @@ class PlainBackend:
         step = _kabsch if cfg.method == "point_to_point" else _point_to_plane
         converged, it, history = False, 0, None
         cycle = Cycle(cfg)
-        smooth, seen = _smooth(reference, cfg), None
+        smooth, seen, free = _smooth(reference, cfg), None, False
         for it in range(1, cfg.max_iterations + 1):
             p = source @ T[:3, :3].T + T[:3, 3]
             if it == 1 and initial is not None:
@@ -145,7 +149,7 @@ class PlainBackend:
             if inlier.sum() < MIN_POINTS:
                 return Registration.failed(len(source), f"{int(inlier.sum())} points within the correspondence distance", T, it)
             if it == 1 and smooth is not None:
-                seen = _seen(smooth, p, q, ids, max_d2, cfg.null_tolerance)
+                seen, free = _seen(smooth, p, q, ids, max_d2, cfg.null_tolerance)
             delta = step(p[inlier], q[inlier], n[inlier], seen)
             if delta is None:
                 return Registration.failed(len(source), "degenerate step", T, it)
@@ -161,7 +165,7 @@ class PlainBackend:
         d2 = np.einsum("ij,ij->i", p - q, p - q)
         inlier = d2 <= max_d2
         information = information_matrix(p[inlier], n[inlier])
-        if seen is not None:
+        if free:
             information = _without_unseen(information, smooth, p, q, ids, max_d2, cfg.null_tolerance)
         return Registration(
             T_target_source=T,
@@ -252,9 +256,12 @@ def _smooth(reference, cfg: RegistrationConfig):
     return getattr(reference, "smooth_information", None) if cfg.null_tolerance > 0 else None
 
 
-def _seen(smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray | None:
-    """The motions the ICP steps along: None when the smooth surface constrains all six, else a basis K (6, r)
-    (a step is ``K @ y``). A facet's turn is no reason to move (:mod:`optipose.registration.smooth`).
+def _seen(smooth, p, q, ids, max_d2: float, tolerance: float) -> tuple[np.ndarray | None, bool]:
+    """The motions the ICP steps along — None when the smooth surface constrains all six by far, else a basis K
+    (6, r), a step being ``K @ y`` — and whether it leaves any motion free at ``tolerance``. A facet's turn is
+    no reason to move (:mod:`optipose.registration.smooth`): a motion whose information is below
+    ``tolerance × STEP_NULL`` is not stepped along. One nearer the tolerance is (the ICP of a weakly seen
+    direction settles where its facets put it, as it always did) and only the observability test drops it.
 
     Of the motions that differ by one the surface leaves free, K keeps the one that does not turn along the free
     rotations (a sphere's cloud then only shifts: its rotation about the centre stays at identity's) and does not
@@ -263,9 +270,10 @@ def _seen(smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray | No
     from optipose.registration.smooth import null_directions
 
     H, scale = smooth(np.ascontiguousarray(p), np.ascontiguousarray(q), ids, max_d2)
-    null = null_directions(H, scale, tolerance)
+    free = null_directions(H, scale, tolerance).shape[1] > 0
+    null = null_directions(H, scale, tolerance * STEP_NULL) if free else np.zeros((6, 0))
     if null.shape[1] == 0:
-        return None
+        return None, free
     k = null.shape[1]
     U, S, Wt = np.linalg.svd(null[:3], full_matrices=True)  # the free motions' turns, largest first
     turning = np.zeros(k, dtype=bool)
@@ -274,7 +282,7 @@ def _seen(smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray | No
     held = np.zeros((6, k))
     held[:3, : turning.sum()] = U[:, : turning.sum()]
     held[3:, turning.sum() :] = shifts / np.linalg.norm(shifts, axis=0)
-    return np.linalg.svd(held, full_matrices=True)[0][:, k:]  # the motions orthogonal to what is held
+    return np.linalg.svd(held, full_matrices=True)[0][:, k:], True  # the motions orthogonal to what is held
 
 
 def _without_unseen(AtA: np.ndarray, smooth, p, q, ids, max_d2: float, tolerance: float) -> np.ndarray:
