@@ -186,7 +186,11 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
     blind = np.full((20, 3), UNOBSERVABLE_PENALTY)
     verdict = compare_draws([PairedDraw(i, blind, blind) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2")
     assert verdict.unmeasured == ["roll", "pitch", "yaw"]
-    assert verdict.line() == "k=2: nothing measured: neither F1F2 nor hand S1S2 observes roll/pitch/yaw"
+    assert verdict.line() == "k=2: nothing measured: F1F2 and hand S1S2 see no roll/pitch/yaw"
+    wide = compare_draws([PairedDraw(i, blind, blind) for i in range(2)], FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3",
+                         reference="conventional")  # fmt: skip
+    assert wide.line() == "k=3: nothing measured: F1F2F3 and conventional S1S2S3 see no roll/pitch/yaw"
+    assert len(wide.line()) <= 80
     from optipose.report.confidence import interval_cell
 
     assert interval_cell(verdict.found[0].median_deg) == "not measured"

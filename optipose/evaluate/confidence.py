@@ -193,8 +193,8 @@ class ConfidentVerdict:
         ratio = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]"
         head = f"k={self.k}: {self.decision}"
         if len(self.unmeasured) == len(self.found):  # equal because neither measures anything: say that
-            text = f"k={self.k}: nothing measured: neither {self.found_name} nor {ref} observes {'/'.join(self.unmeasured)}"
-            return text if len(text) <= 80 else text[:80]
+            text = f"k={self.k}: nothing measured: {self.found_name} and {ref} see no {'/'.join(self.unmeasured)}"
+            return text if len(text) <= 80 else f"k={self.k}: nothing measured: {self.found_name} and {ref} see no axis"
         if self.decision == KEEP:
             worse = [a.axis for a in self.axes if a.ratio.high < 1.0 / (1.0 + self.tolerance)]
             text = f"{head} {ref}; {self.found_name} {ratio}" + (f", worse on {'/'.join(worse)}" if worse else "")
@@ -229,7 +229,7 @@ class ConfidentVerdict:
         ratio, who = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]", f"found {self.found_name} alone"
         ref = f"{self.reference} {self.hand_name}"
         if len(self.unmeasured) == len(self.found):
-            return f"fewer sensors: nothing measured, neither {who} nor {ref}"
+            return f"fewer sensors: nothing measured by {who} or {ref}"
         text = {BUY: f"{who} is better than {ref}: {ratio}", KEEP: f"{who} does not match {ref} ({ratio})",
                 TIE: f"{who} matches {ref} within {100 * self.tolerance:.0f} % ({ratio})"}.get(
                     self.decision, f"{who} vs {ref}: {ratio}, not settled")  # fmt: skip
