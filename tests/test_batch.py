@@ -365,3 +365,33 @@ def test_no_report_leaves_the_study_without_its_report(tmp_path):
                           capture_output=True, text=True, timeout=300)  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "out" / "index.parquet").is_file() and not (tmp_path / "out" / "study.html").exists()
+
+
+@pytest.mark.parametrize("how", ["numba", "search"])
+def test_a_ctrl_c_a_trial_kept_to_itself_still_stops_the_study(tmp_path, monkeypatch, how):
+    """Ctrl-C while compiled code runs arrives as a SystemError (numba), and a search ends its own stage on it
+    and returns: either way the trial is not a failure to record and go past, the study stops."""
+    from types import SimpleNamespace
+
+    from optipose.batch import trial as trial_module
+    from optipose.batch.spec import TrialSpec
+    from optipose.batch.threads import Plan
+
+    def interrupted(*_):
+        if how == "numba":
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as exc:
+                raise SystemError("returned a result with an exception set") from exc
+        return SimpleNamespace(outcome=SimpleNamespace(interrupted=False), band_interrupted=True, validated=True)
+
+    if how == "numba":
+        monkeypatch.setitem(trial_module.TASK_RUNNERS, "evaluate", interrupted)
+    else:
+        import optipose.search.pipeline as pipeline
+
+        monkeypatch.setattr(pipeline, "run", interrupted)
+    spec = TrialSpec("part_c", "evaluate" if how == "numba" else "search", "paper", 1, "" if how == "numba" else "quick", 0)
+    with pytest.raises(KeyboardInterrupt):
+        trial_module.run_trial(spec, str(tmp_path), Plan(workers=1, trial_jobs=1, threads=1))
+    assert not any((tmp_path / "trials").iterdir())  # nothing half-written stays behind

@@ -27,7 +27,7 @@ from pathlib import Path
 from optipose.batch.records import TrialRecord, TrialState
 from optipose.batch.spec import TrialSpec
 from optipose.batch.threads import Plan, cap_threads
-from optipose.errors import ConfigError
+from optipose.errors import ConfigError, is_interrupt
 from optipose.files import write_text
 
 __all__ = ["run_trial", "TRIAL_FILE", "TMP_PREFIX", "now", "TASK_RUNNERS"]
@@ -64,6 +64,8 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
         return done
     except Exception as exc:  # a failing trial is recorded and the study goes on
         shutil.rmtree(tmp, ignore_errors=True)
+        if is_interrupt(exc):  # Ctrl-C while compiled code ran (numba raises it as a SystemError): the study stops
+            raise KeyboardInterrupt from exc
         log.debug("trial %s failed:\n%s", trial.key, traceback.format_exc())
         return replace(record.failed(error_line(exc), now()), seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0)
     except BaseException:  # Ctrl-C in a serial study: nothing half-written stays behind
@@ -121,6 +123,8 @@ def _search(trial: TrialSpec, folder: Path, jobs: int) -> None:
     objective = load_objective(trial.objective)
     config = config_from_budget(trial.budget, (trial.sensors,), band=not objective.conditions.trivial, cell=not objective.cell.ideal)
     report = run(part, objective, config, trial.seed, SearchFolder(folder), trial.budget, jobs)
+    if report.outcome.interrupted or report.band_interrupted:  # the search kept a Ctrl-C to itself: the study stops
+        raise KeyboardInterrupt
     if not report.validated:
         raise RuntimeError("the search ended before its validation")
 
