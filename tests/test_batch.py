@@ -385,6 +385,7 @@ def test_a_ctrl_c_a_trial_kept_to_itself_still_stops_the_study(tmp_path, monkeyp
                 raise SystemError("returned a result with an exception set") from exc
         return SimpleNamespace(outcome=SimpleNamespace(interrupted=False), band_interrupted=True, validated=True)
 
+    monkeypatch.setattr(trial_module, "cap_threads", lambda threads: None)  # this process's thread caps stay as they are
     if how == "numba":
         monkeypatch.setitem(trial_module.TASK_RUNNERS, "evaluate", interrupted)
     else:
