@@ -23,13 +23,19 @@ from optipose.evaluate.statistics import FAILED_ERROR
 
 __all__ = [
     "all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "choose", "restated", "stats_by_key",
-    "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY", "UNOBSERVABLE", "FAILED",
+    "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY", "UNOBSERVABLE", "FAILED", "not_measured",
 ]  # fmt: skip
 
 MAX_FAILED_FRACTION = 0.1
 UNOBSERVABLE_PENALTY = FAILED_ERROR  # rad per axis (10°): worse than any measurable error under ±2° protocols
 UNOBSERVABLE = "unobservable"  # why an axis has no subset: none of the choice's subsets can observe it
 FAILED = "registrations failed"  # some could, but each failed in over MAX_FAILED_FRACTION of the scans
+
+
+def not_measured(interval) -> bool:
+    """A predicted error's interval (degrees) at the penalty throughout: an unobservable axis, or failed
+    registrations, in every draw; no error was measured."""
+    return interval.low >= np.degrees(UNOBSERVABLE_PENALTY) * (1.0 - 1e-9)
 
 
 def all_subsets(n: int) -> list[tuple[int, ...]]:

@@ -46,7 +46,7 @@ import numpy as np
 from scipy.stats import norm as stats_norm
 from scipy.stats import t as stats_t
 
-from optipose.evaluate.assignment import UNOBSERVABLE_PENALTY, Choice
+from optipose.evaluate.assignment import UNOBSERVABLE_PENALTY, Choice, not_measured
 from optipose.evaluate.objective import AXES, StatisticConfig
 from optipose.evaluate.statistics import FAILED_ERROR
 
@@ -219,8 +219,7 @@ class ConfidentVerdict:
     @property
     def unmeasured(self) -> list[str]:
         """The axes neither layout measures in any draw (unobservable, or failed: the penalty throughout)."""
-        penalty = np.degrees(UNOBSERVABLE_PENALTY) * (1.0 - 1e-9)
-        return [f.axis for f, h in zip(self.found, self.hand) if min(f.median_deg.low, h.median_deg.low) >= penalty]
+        return [f.axis for f, h in zip(self.found, self.hand) if not_measured(f.median_deg) and not_measured(h.median_deg)]
 
     def fewer_line(self) -> str:
         """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line, e.g.

@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from optipose.evaluate.objective import AXES, StatisticConfig
+from optipose.registration.preprocess import scaled_information
 
 __all__ = ["unobservable_axes", "error_stats", "summarize", "STAT_COLUMNS", "FAILED_ERROR"]
 
@@ -40,9 +41,7 @@ def unobservable_axes(information: np.ndarray, scale: float, tolerance: float = 
     """
     if not np.any(information):
         return np.ones(6, dtype=bool)
-    D = np.diag([1.0 / max(scale, 1e-12)] * 3 + [1.0] * 3)
-    H = D @ information @ D
-    H = 0.5 * (H + H.T)
+    H, _ = scaled_information(information, scale)
     cut = tolerance * np.linalg.eigvalsh(H)[-1]
     out = np.empty(6, dtype=bool)
     w, V = np.linalg.eigh(H[3:, 3:])

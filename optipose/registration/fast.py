@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from optipose.registration.config import FITNESS_CHANGE, RMSE_CHANGE
-from optipose.registration.preprocess import information_matrix
+from optipose.registration.preprocess import information_matrix, scaled_information
 from optipose.transforms import mean_pose
 from optipose.registration.result import MIN_POINTS, Matches, Registration
 
@@ -294,9 +294,9 @@ def _without_unseen(AtA: np.ndarray, smooth, p, q, ids, max_d2: float, tolerance
     null = null_directions(H, scale, tolerance)
     if null.shape[1] == 0:
         return AtA
-    d = np.array([1.0 / max(scale, 1e-12)] * 3 + [1.0] * 3)
+    scaled, d = scaled_information(AtA, scale)
     P = np.eye(6) - null @ null.T
-    return (P @ (d[:, None] * AtA * d[None, :]) @ P) / d[:, None] / d[None, :]
+    return (P @ scaled @ P) / d[:, None] / d[None, :]
 
 
 def _kabsch(p: np.ndarray, q: np.ndarray, _n=None, _seen=None) -> np.ndarray | None:

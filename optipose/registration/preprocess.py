@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["voxel_down", "grid_origin", "remove_outliers", "information_matrix"]
+__all__ = ["voxel_down", "grid_origin", "remove_outliers", "information_matrix", "scaled_information"]
 
 
 def voxel_down(points: np.ndarray, size: float, origin=None) -> np.ndarray:
@@ -64,3 +64,11 @@ def information_matrix(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         return np.zeros((6, 6))
     J = np.hstack([np.cross(points - points.mean(axis=0), normals), normals])
     return J.T @ J
+
+
+def scaled_information(information: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """``H`` made unitless, rotation scaled by ``scale`` (m, the cloud's RMS radius) so that rotation and
+    translation compare: (``D H D`` symmetrised (6, 6), the diagonal d (6,) of D = diag(1/scale × 3, 1 × 3))."""
+    d = np.array([1.0 / max(scale, 1e-12)] * 3 + [1.0] * 3)
+    H = d[:, None] * information * d[None, :]
+    return 0.5 * (H + H.T), d

@@ -21,6 +21,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from optipose.registration.normal_equations import normal_equations
+from optipose.registration.preprocess import scaled_information
+
 __all__ = ["corner_normals", "smooth_normals", "smooth_information", "null_directions", "CREASE_DEG"]
 
 CREASE_DEG = 30.0  # faces meeting at more than this are two sides of an edge of the part, each keeping its normal
@@ -113,70 +116,23 @@ def smooth_normals(q, ids, tri, corners):
 @njit(cache=True, nogil=True)
 def smooth_information(p, q, ids, max_d2, tri, corners):
     """The point-to-plane information (6, 6) of the pairs (p, q) within ``sqrt(max_d2)`` with the normals of
-    :func:`smooth_normals` at q (rotation about the pairs' centroid first, as
-    :func:`optipose.registration.preprocess.information_matrix`), and the RMS radius (m) of those p about the
-    centroid; in two passes over the cloud, no temporaries."""
-    m = p.shape[0]
+    :func:`smooth_normals` at q (the normal equations' ``AᵀA``, rotation about the pairs' centroid first:
+    :func:`optipose.registration.normal_equations.normal_equations`), and the RMS radius (m) of those p about
+    the centroid."""
+    inlier, c, H, _, _ = normal_equations(p, q, smooth_normals(q, ids, tri, corners), max_d2)
     count = 0
-    c0 = c1 = c2 = 0.0
-    for i in range(m):
-        if (p[i, 0] - q[i, 0]) ** 2 + (p[i, 1] - q[i, 1]) ** 2 + (p[i, 2] - q[i, 2]) ** 2 <= max_d2:
-            count += 1
-            c0 += p[i, 0]
-            c1 += p[i, 1]
-            c2 += p[i, 2]
-    H = np.zeros((6, 6))
-    if count == 0:
-        return H, 1.0
-    c0, c1, c2 = c0 / count, c1 / count, c2 / count
     r2 = 0.0
-    # every sum a register of its own (as optipose.registration.normal_equations does)
-    a00 = a01 = a02 = a03 = a04 = a05 = a11 = a12 = a13 = a14 = a15 = a22 = a23 = a24 = a25 = 0.0
-    a33 = a34 = a35 = a44 = a45 = a55 = 0.0
-    for i in range(m):
-        if (p[i, 0] - q[i, 0]) ** 2 + (p[i, 1] - q[i, 1]) ** 2 + (p[i, 2] - q[i, 2]) ** 2 > max_d2:
-            continue
-        nx, ny, nz = _smooth_at(q[i, 0], q[i, 1], q[i, 2], ids[i], tri, corners)
-        x, y, z = p[i, 0] - c0, p[i, 1] - c1, p[i, 2] - c2
-        r2 += x * x + y * y + z * z
-        j0, j1, j2 = y * nz - z * ny, z * nx - x * nz, x * ny - y * nx
-        a00 += j0 * j0
-        a01 += j0 * j1
-        a02 += j0 * j2
-        a03 += j0 * nx
-        a04 += j0 * ny
-        a05 += j0 * nz
-        a11 += j1 * j1
-        a12 += j1 * j2
-        a13 += j1 * nx
-        a14 += j1 * ny
-        a15 += j1 * nz
-        a22 += j2 * j2
-        a23 += j2 * nx
-        a24 += j2 * ny
-        a25 += j2 * nz
-        a33 += nx * nx
-        a34 += nx * ny
-        a35 += nx * nz
-        a44 += ny * ny
-        a45 += ny * nz
-        a55 += nz * nz
-    upper = (a00, a01, a02, a03, a04, a05, a11, a12, a13, a14, a15, a22, a23, a24, a25, a33, a34, a35, a44, a45, a55)
-    k = 0
-    for r in range(6):
-        for s in range(r, 6):
-            H[r, s] = upper[k]
-            H[s, r] = upper[k]
-            k += 1
-    return H, np.sqrt(r2 / count)
+    for i in range(p.shape[0]):
+        if inlier[i]:
+            count += 1
+            r2 += (p[i, 0] - c[0]) ** 2 + (p[i, 1] - c[1]) ** 2 + (p[i, 2] - c[2]) ** 2
+    return H, np.sqrt(r2 / count) if count else 1.0
 
 
 def null_directions(information: np.ndarray, scale: float, tolerance: float) -> np.ndarray:
     """(6, k): the unit motions (in the scaled coordinates of ``unobservable_axes``: rotation × ``scale``,
     translation) whose information is below ``tolerance`` × the largest; k = 0 when the cloud sees all six."""
-    D = np.diag([1.0 / max(scale, 1e-12)] * 3 + [1.0] * 3)
-    H = D @ information @ D
-    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    w, V = np.linalg.eigh(scaled_information(information, scale)[0])
     if not w[-1] > 0.0:
         return np.eye(6)
     return V[:, w < tolerance * w[-1]]

@@ -8,9 +8,7 @@ records only; the lines are the ones the terminal prints (:meth:`ConfidentVerdic
 
 from __future__ import annotations
 
-import numpy as np
-
-from optipose.evaluate.assignment import UNOBSERVABLE_PENALTY
+from optipose.evaluate.assignment import not_measured
 from optipose.evaluate.confidence import BUY, KEEP, TIE, split
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
@@ -31,8 +29,8 @@ def confident_css(decision: str) -> str:
 def interval_cell(interval, scale: float = 1e3, digits: int = 3) -> str:
     """``0.203 [0.151, 0.262]``: an estimate and its interval (scale 1e3: degrees shown in mdeg; ``digits``
     significant ones)."""
-    if interval.low >= np.degrees(UNOBSERVABLE_PENALTY) * (1.0 - 1e-9):
-        return "not measured"  # the penalty of an unobservable axis or failed registrations in every draw
+    if not_measured(interval):
+        return "not measured"
     e, lo, hi = (f"{scale * x:.{digits}g}" for x in (interval.estimate, interval.low, interval.high))
     return f"{e} [{lo}, {hi}]" if digits > 2 else f"{e} [{lo}-{hi}]"
 
