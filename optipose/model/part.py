@@ -150,12 +150,13 @@ def _lean(part: Part) -> Part:
     """A dense mesh without the arrays trimesh derived for the checks and the baseline (its edges, their
     sorting and faces, components, per-face areas and crosses: several times the mesh itself), which nothing
     after the loading reads again; each is derived again, the same, if something asks. Normals are kept (a
-    file's own may differ from the derived ones)."""
+    file's own may differ from the derived ones), and so are the answers of the closed-solid check, two booleans
+    that cost a pass over the edges."""
     from optipose.model.machine import SHARED_FACES
 
     if len(part.mesh.faces) > SHARED_FACES:
         cached = part.mesh._cache.cache  # trimesh's cache of derived properties, dropped by trimesh itself on any edit
-        for key in [k for k in cached if k not in ("face_normals", "vertex_normals")]:
+        for key in [k for k in cached if k not in ("face_normals", "vertex_normals", "is_watertight", "is_winding_consistent")]:
             del cached[key]
     return part
 

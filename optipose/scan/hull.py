@@ -6,7 +6,8 @@ the largest height of the hull's vertices over the plane. A linear function's la
 polytope is found by climbing the hull's vertex graph (a vertex none of whose neighbours is higher is the
 highest of all, as in the simplex method), and a climb stops as soon as it is above the plane. Each face's
 climb starts at the highest vertex for the centre of a cell of a cube map of directions holding its
-normal, so it takes a few steps: the whole test is linear in the faces, where the heights of every hull
+normal, so it takes a few steps (the map has more cells for a larger hull, about :data:`_PER_CELL` hull
+vertices to a cell, so the steps stay few as the mesh is refined): the whole test is linear in the faces, where the heights of every hull
 vertex over every face's plane would be the hull's vertices times the faces (a round part's hull holds most
 of its vertices).
 """
@@ -23,7 +24,9 @@ __all__ = ["supporting_faces", "face_arrays"]
 
 _FACE_ARRAYS = ("plane", "normals", "offsets", "edge_n", "edge_c", "on_hull")
 
-_CELLS = 8  # cells per side of each of the cube map's six faces
+_CELLS = 8  # cells per side of each of the cube map's six faces, at least ...
+_MAX_CELLS = 128  # ... and at most
+_PER_CELL = 24  # hull vertices to a cell
 
 
 def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-9) -> np.ndarray:
@@ -35,15 +38,12 @@ def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float 
         return np.zeros(len(normals), dtype=bool)
     if len(points) == 0 or len(tris) == 0:
         return np.zeros(len(normals), dtype=bool)
-    edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     n = len(points)
-    key = np.sort(np.concatenate([edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]]))
-    key = key[np.r_[True, key[1:] != key[:-1]]]  # each edge once each way, sorted by source: a CSR graph
-    indptr = np.r_[0, np.cumsum(np.bincount(key // n, minlength=n))].astype(np.int64)
-    neighbours = np.ascontiguousarray(key % n)
-    starts = _cell_starts(points, indptr, neighbours, _cell_centres(_CELLS))
+    indptr, neighbours = _vertex_graph(np.ascontiguousarray(tris, dtype=np.int64), n)
+    cells = int(np.clip(np.sqrt(n / (6 * _PER_CELL)), _CELLS, _MAX_CELLS))
+    starts = _cell_starts(points, indptr, neighbours, _cell_centres(cells))
     normals = np.ascontiguousarray(normals, dtype=np.float64)
-    return _supporting(points, indptr, neighbours, starts, normals, np.asarray(offsets, dtype=np.float64), tol, _CELLS)
+    return _supporting(points, indptr, neighbours, starts, normals, np.asarray(offsets, dtype=np.float64), tol, cells)
 
 
 def face_arrays(mesh, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -63,16 +63,47 @@ def face_arrays(mesh, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarr
 
 def _cell_centres(cells: int) -> np.ndarray:
     """Unit directions (6 · cells², 3) at the centres of the cube map's cells, in :func:`_cell` order."""
-    out = np.empty((6 * cells * cells, 3))
     centres = (np.arange(cells) + 0.5) / cells * 2.0 - 1.0
+    out = np.empty((3, 2, cells, cells, 3))
     for axis in range(3):
         for side, sign in enumerate((1.0, -1.0)):
-            for i, u in enumerate(centres):
-                for j, v in enumerate(centres):
-                    d = np.empty(3)
-                    d[axis], d[(axis + 1) % 3], d[(axis + 2) % 3] = sign, u, v
-                    out[((axis * 2 + side) * cells + i) * cells + j] = d / np.linalg.norm(d)
-    return out
+            out[axis, side, :, :, axis] = sign
+            out[axis, side, :, :, (axis + 1) % 3] = centres[:, None]
+            out[axis, side, :, :, (axis + 2) % 3] = centres[None, :]
+    out = out.reshape(-1, 3)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+@njit(cache=True, nogil=True)
+def _vertex_graph(tris, n):
+    """The hull's vertex graph as CSR (``indptr`` (n + 1,), ``neighbours``): each vertex's neighbours once, in
+    ascending order, listed by counting (each triangle names both ways of its three edges) and each vertex's
+    few sorted in place."""
+    indptr = np.zeros(n + 1, np.int64)
+    for t in range(tris.shape[0]):
+        for k in range(3):
+            indptr[tris[t, k] + 1] += 2
+    for v in range(n):
+        indptr[v + 1] += indptr[v]
+    fill = indptr[:-1].copy()
+    listed = np.empty(indptr[n], np.int64)
+    for t in range(tris.shape[0]):
+        for k in range(3):
+            a, b, c = tris[t, k], tris[t, (k + 1) % 3], tris[t, (k + 2) % 3]
+            listed[fill[a]] = b
+            listed[fill[a] + 1] = c
+            fill[a] += 2
+    out = np.zeros(n + 1, np.int64)
+    neighbours = np.empty(indptr[n], np.int64)
+    m = 0
+    for v in range(n):
+        row = np.sort(listed[indptr[v]:indptr[v + 1]])
+        for i in range(row.shape[0]):
+            if i == 0 or row[i] != row[i - 1]:
+                neighbours[m] = row[i]
+                m += 1
+        out[v + 1] = m
+    return out, neighbours[:m].copy()
 
 
 @njit(cache=True, nogil=True, inline="always")

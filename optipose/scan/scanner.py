@@ -111,7 +111,10 @@ class Scanner:
                 box = trimesh.creation.box(np.asarray(hi, float) - np.asarray(lo, float))
                 box.apply_translation((np.asarray(lo, float) + np.asarray(hi, float)) / 2)
                 boxes.append(box)
-            mesh = trimesh.util.concatenate([trimesh.Trimesh(mesh.vertices, mesh.faces, process=False), *boxes])
+            parts = [(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))]
+            parts += [(np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)) for box in boxes]
+            first = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])  # each body's first vertex
+            mesh = trimesh.Trimesh(np.concatenate([v for v, _ in parts]), np.concatenate([f + o for (_, f), o in zip(parts, first)]), process=False)
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
         self._bounds = (self.vertices.min(axis=0) - 1e-6, self.vertices.max(axis=0) + 1e-6)  # the scene's box, keep-outs included
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
