@@ -59,3 +59,32 @@ def is_interrupt(exc: BaseException) -> bool:
     while isinstance(exc, SystemError):  # numba may wrap it twice (its dispatcher, and an unpickling under it)
         exc = exc.__cause__ or exc.__context__
     return isinstance(exc, KeyboardInterrupt)
+
+
+_INTERRUPTS: list[int] = []  # the Ctrl-Cs this process was sent since note_interrupts()
+
+
+def note_interrupts() -> None:
+    """Note every Ctrl-C (SIGINT) this process is sent before Python raises its ``KeyboardInterrupt``, so that
+    code which catches that by mistake (a library's broad ``except``, a compiled function's ``SystemError``
+    whose cause was lost) cannot hide it from :func:`interrupted`. Call it from the main thread; an ignored
+    SIGINT stays ignored."""
+    import signal
+
+    previous = signal.getsignal(signal.SIGINT)
+    if previous in (signal.SIG_IGN, None) or getattr(previous, "notes_interrupts", False):
+        return
+
+    def handler(signum, frame):
+        _INTERRUPTS.append(signum)
+        if callable(previous):  # Python's own: raises KeyboardInterrupt
+            return previous(signum, frame)
+        raise KeyboardInterrupt
+
+    handler.notes_interrupts = True
+    signal.signal(signal.SIGINT, handler)
+
+
+def interrupted() -> bool:
+    """Whether this process was sent a Ctrl-C since :func:`note_interrupts` (always False before it)."""
+    return bool(_INTERRUPTS)

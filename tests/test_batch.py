@@ -396,3 +396,30 @@ def test_a_ctrl_c_a_trial_kept_to_itself_still_stops_the_study(tmp_path, monkeyp
     with pytest.raises(KeyboardInterrupt):
         trial_module.run_trial(spec, str(tmp_path), Plan(workers=1, trial_jobs=1, threads=1))
     assert not any((tmp_path / "trials").iterdir())  # nothing half-written stays behind
+
+
+def test_a_ctrl_c_a_trial_swallowed_whole_still_stops_the_study(tmp_path, monkeypatch):
+    """A Ctrl-C that something in a trial catches and goes past (no exception reaches the study) is noted by the
+    study's handler: the trial is not recorded complete, and the study stops."""
+    from optipose import errors
+    from optipose.batch import trial as trial_module
+
+    def swallowing(*_):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # the handler runs here
+        except KeyboardInterrupt:
+            pass
+
+    monkeypatch.setattr(trial_module, "cap_threads", lambda threads: None)
+    monkeypatch.setitem(trial_module.TASK_RUNNERS, "evaluate", swallowing)
+    monkeypatch.setattr(errors, "_INTERRUPTS", [])
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        errors.note_interrupts()
+        with pytest.raises(KeyboardInterrupt):
+            run_study(load_study(_study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0, 1))), tmp_path / "out", SerialPool())
+    finally:
+        signal.signal(signal.SIGINT, before)
+    index = read_index(tmp_path / "out")
+    assert (index.state == "pending").all() and not list((tmp_path / "out" / "trials").iterdir())

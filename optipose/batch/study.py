@@ -29,7 +29,7 @@ from optipose.batch.records import TrialRecord, TrialState
 from optipose.batch.results import trial_results
 from optipose.batch.spec import StudySpec
 from optipose.batch.trial import TMP_PREFIX, error_line, now, run_trial
-from optipose.errors import ConfigError, WorkerError
+from optipose.errors import ConfigError, WorkerError, interrupted
 from optipose.files import write_text
 
 __all__ = ["run_study", "prepare_folder", "remove_leftovers", "MAX_RETRIES"]
@@ -75,6 +75,8 @@ def run_study(spec: StudySpec, folder: Path, pool, resume: bool = False,
                     if on_record:
                         on_record(record)
                 index.write()
+                if interrupted():  # a Ctrl-C a trial caught and went past (optipose.errors.note_interrupts)
+                    raise KeyboardInterrupt
             _fill(queue, in_flight, index, pool, folder)
     except (KeyboardInterrupt, WorkerError):  # Ctrl-C, or a cluster without workers the user would not wait for
         for record in list(index.records.values()):  # in flight, or handed to a serial pool when it came

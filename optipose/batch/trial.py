@@ -27,7 +27,7 @@ from pathlib import Path
 from optipose.batch.records import TrialRecord, TrialState
 from optipose.batch.spec import TrialSpec
 from optipose.batch.threads import Plan, cap_threads
-from optipose.errors import ConfigError, is_interrupt
+from optipose.errors import ConfigError, interrupted, is_interrupt
 from optipose.files import write_text
 
 __all__ = ["run_trial", "TRIAL_FILE", "TMP_PREFIX", "now", "TASK_RUNNERS"]
@@ -54,6 +54,8 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
     try:
         tmp.mkdir(parents=True)
         TASK_RUNNERS[trial.task](trial, tmp, plan.trial_jobs)
+        if interrupted():  # a Ctrl-C that something in the task caught and went past: its result is not sure
+            raise KeyboardInterrupt
         seconds = time.perf_counter() - t0
         done = TrialRecord(trial, TrialState.COMPLETE, started=started, finished=now(), seconds=seconds,
                            cpu_seconds=time.process_time() - c0, worker=worker, folder=f"trials/{trial.key}")  # fmt: skip
@@ -64,7 +66,7 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
         return done
     except Exception as exc:  # a failing trial is recorded and the study goes on
         shutil.rmtree(tmp, ignore_errors=True)
-        if is_interrupt(exc):  # Ctrl-C while compiled code ran (numba raises it as a SystemError): the study stops
+        if is_interrupt(exc) or interrupted():  # Ctrl-C while compiled code ran (numba raises it as a SystemError): the study stops
             raise KeyboardInterrupt from exc
         log.debug("trial %s failed:\n%s", trial.key, traceback.format_exc())
         return replace(record.failed(error_line(exc), now()), seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0)

@@ -68,6 +68,7 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
     exit 2, the finished trials kept) or is waited for (``"wait"``: one line)."""
     from optipose.batch.pools import make_pool
     from optipose.batch.scheduler import NoWorkers, WorkerWatch
+    from optipose.errors import note_interrupts
     from optipose.batch.spec import load_study
     from optipose.batch.study import prepare_folder
 
@@ -81,6 +82,7 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
     def notify(line: str) -> None:
         console.print(f"optipose: warning: {line}", markup=False, highlight=False)
 
+    note_interrupts()  # a Ctrl-C stops the study even where a trial's code catches it (optipose.errors)
     pool = make_pool(jobs, backend, scheduler, trial_jobs, no_workers=no_workers, after=no_workers_after, notify=notify)
     resume_hint = f"`optipose batch {study_file} --out {folder} --resume`"
     try:
