@@ -191,7 +191,8 @@ def test_bodies_are_trimeshs_body_count(which):
 
 def test_the_hull_graph_is_every_edge_once_each_way():
     mesh = trimesh.creation.icosphere(subdivisions=2)
-    indptr, neighbours = hull._vertex_graph(np.asarray(mesh.faces, np.int64), len(mesh.vertices))
+    faces = np.asarray(mesh.faces, np.int64)
+    indptr, neighbours = hull._neighbours(faces, *grouping.vertex_faces(faces, len(mesh.vertices)))
     got = {(v, int(w)) for v in range(len(mesh.vertices)) for w in neighbours[indptr[v]:indptr[v + 1]]}
     want = {(int(a), int(b)) for a, b in mesh.edges_unique} | {(int(b), int(a)) for a, b in mesh.edges_unique}
     assert got == want and all(np.all(np.diff(neighbours[indptr[v]:indptr[v + 1]]) > 0) for v in range(len(mesh.vertices)))

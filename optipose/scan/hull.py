@@ -19,6 +19,7 @@ from numba import njit
 
 from optipose.model import machine
 from optipose.model.convex import hull_arrays
+from optipose.model.grouping import vertex_faces
 
 __all__ = ["supporting_faces", "face_arrays"]
 
@@ -39,7 +40,8 @@ def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float 
     if len(points) == 0 or len(tris) == 0:
         return np.zeros(len(normals), dtype=bool)
     n = len(points)
-    indptr, neighbours = _vertex_graph(np.ascontiguousarray(tris, dtype=np.int64), n)
+    tris = np.ascontiguousarray(tris, dtype=np.int64)
+    indptr, neighbours = _neighbours(tris, *vertex_faces(tris, n))
     cells = int(np.clip(np.sqrt(n / (6 * _PER_CELL)), _CELLS, _MAX_CELLS))
     starts = _cell_starts(points, indptr, neighbours, _cell_centres(cells))
     normals = np.ascontiguousarray(normals, dtype=np.float64)
@@ -75,30 +77,24 @@ def _cell_centres(cells: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _vertex_graph(tris, n):
-    """The hull's vertex graph as CSR (``indptr`` (n + 1,), ``neighbours``): each vertex's neighbours once, in
-    ascending order, listed by counting (each triangle names both ways of its three edges) and each vertex's
-    few sorted in place."""
-    indptr = np.zeros(n + 1, np.int64)
-    for t in range(tris.shape[0]):
-        for k in range(3):
-            indptr[tris[t, k] + 1] += 2
-    for v in range(n):
-        indptr[v + 1] += indptr[v]
-    fill = indptr[:-1].copy()
-    listed = np.empty(indptr[n], np.int64)
-    for t in range(tris.shape[0]):
-        for k in range(3):
-            a, b, c = tris[t, k], tris[t, (k + 1) % 3], tris[t, (k + 2) % 3]
-            listed[fill[a]] = b
-            listed[fill[a] + 1] = c
-            fill[a] += 2
+def _neighbours(tris, indptr, around):
+    """The hull's vertex graph as CSR (``indptr`` (n + 1,), ``neighbours``) from the triangles around each vertex
+    (:func:`optipose.model.grouping.vertex_faces`): each vertex's neighbours once, in ascending order."""
+    n = indptr.shape[0] - 1
     out = np.zeros(n + 1, np.int64)
-    neighbours = np.empty(indptr[n], np.int64)
+    neighbours = np.empty(2 * around.shape[0], np.int64)
     m = 0
     for v in range(n):
-        row = np.sort(listed[indptr[v]:indptr[v + 1]])
-        for i in range(row.shape[0]):
+        row = np.empty(2 * (indptr[v + 1] - indptr[v]), np.int64)
+        r = 0
+        for a in range(indptr[v], indptr[v + 1]):
+            for k in range(3):
+                w = tris[around[a], k]
+                if w != v:
+                    row[r] = w
+                    r += 1
+        row = np.sort(row[:r])
+        for i in range(r):
             if i == 0 or row[i] != row[i - 1]:
                 neighbours[m] = row[i]
                 m += 1
