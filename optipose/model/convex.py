@@ -66,9 +66,10 @@ def _compute(mesh) -> tuple[np.ndarray, np.ndarray]:
 
     points = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
-    if len(faces) > machine.SHARED_FACES and closed_and_wound(faces, len(points)) == (True, True):
+    csr = vertex_faces(faces, len(points)) if len(faces) > machine.SHARED_FACES else None
+    if csr is not None and closed_and_wound(faces, len(points), csr) == (True, True):
         normals = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
-        indptr, around = vertex_faces(faces, len(points))
+        indptr, around = csr
         if _locally_convex(points, faces, normals, indptr, around, _TOL):
             return np.ascontiguousarray(points), faces
         points = points[~_flat_interior(points, faces, normals, indptr, around, _TOL)]
