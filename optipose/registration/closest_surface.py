@@ -75,7 +75,7 @@ def _project(p, i, f, planes, plane_c, q):
 
 
 @njit(cache=True, nogil=True)
-def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
+def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
     """For a point that :func:`_project` does not keep on face f: whether it projects into f and, within
     ``_KEEP_NEAR`` of the plane, the disc of radius 2|d| about its projection lies in the faces of f's plane
     around it (:func:`_disc_in_plane`) — across the edges of the tessellation, not of the part, which a cloud
@@ -88,7 +88,7 @@ def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
         hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
         if hk <= 0.0 or hk * hk <= 1e-6 * h0 * h0 + 1e-18:
             return False
-    if not _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
+    if not _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id, seen):
         return False
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
@@ -96,19 +96,19 @@ def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
 
 
 @njit(cache=True, nogil=True)
-def _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id):
+def _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id, seen):
     """Whether the disc of radius 2|h0| about p[i]'s projection on face f's plane lies in the faces of that
     plane connected to f: the faces it covers are visited across the edges it crosses (at most ``_PATCH``), and
     none of those edges may be the plane's border (no face across, more than one (``paired``), or one in another
     plane) — unless it lies farther than |h0| from the projection and the face across turns away from the point
     (:func:`_folds_away`): then nothing within |h0| of the point lies beyond it but what the search's trust
     excludes anyway (a slot, a thin wall's other side). The disc is convex and starts inside f, so it cannot
-    leave the plane's faces without crossing such an edge."""
+    leave the plane's faces without crossing such an edge. ``seen`` (``_PATCH``,) int64: the caller's scratch for
+    the faces visited (allocated once per call of :func:`nearest_into`, not once per point)."""
     x0 = p[i, 0] - h0 * planes[f, 0, 0]
     x1 = p[i, 1] - h0 * planes[f, 0, 1]
     x2 = p[i, 2] - h0 * planes[f, 0, 2]
     r2 = 4.0 * h0 * h0
-    seen = np.empty(_PATCH, np.int64)
     seen[0], n, head = f, 1, 0
     while head < n:
         g = seen[head]
@@ -199,6 +199,13 @@ def _grid_pass(tri, normals, offsets, origin, cell, shape, slot, faces):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _gap(x, lo, cell):
+    """The square of how far x lies outside the slab [lo, lo + cell]."""
+    d = max(lo - x, x - lo - cell, 0.0)
+    return d * d
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _inset2(p, i, f, planes, plane_c):
     """The square of how far inside face f's edges p[i] projects, or -1 where it projects outside."""
     inset = np.inf
@@ -208,7 +215,7 @@ def _inset2(p, i, f, planes, plane_c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
+def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
     the first face that keeps it (:func:`_project`, :func:`_in_plane`; its projection in q[i]), or -1."""
@@ -225,7 +232,7 @@ def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q):
         if g < 0:
             return -1
         if _project(p, i, g, planes, plane_c, q)[0] or _in_plane(p, i, g, planes, plane_c, tri, adjacent, paired,
-                                                                   plane_id, q):
+                                                                   plane_id, q, seen):
             return g
     return -1
 
@@ -260,13 +267,14 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
     m2 = margin * margin
     n_open = 0
     cc = np.empty(3, np.int64)
+    seen = np.empty(_PATCH, np.int64)  # the plane test's faces, one buffer for every point
     for i in range(n):
         f = ids[i]
         if f >= 0:
             g = f
             if not _project(p, i, f, planes, plane_c, q)[0] and not _in_plane(p, i, f, planes, plane_c, tri, adjacent,
-                                                                              paired, plane_id, q):
-                g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q)
+                                                                              paired, plane_id, q, seen):
+                g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
@@ -300,12 +308,17 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
             wall = min(wall, below, cell - below)
         for r in range(reach + 1):
             for a in range(max(cc[0] - r, 0), min(cc[0] + r, shape[0] - 1) + 1):
+                ga = _gap(px, origin[0] + a * cell, cell)
                 for b in range(max(cc[1] - r, 0), min(cc[1] + r, shape[1] - 1) + 1):
+                    gab = ga + _gap(py, origin[1] + b * cell, cell)
+                    if gab > best * (1.0 + 1e-6) + 1e-22:  # the column's cells all lie farther than the best
+                        continue
                     shell = abs(a - cc[0]) == r or abs(b - cc[1]) == r
                     step = 1 if shell else 2 * r
                     c = cc[2] - r
                     while c <= cc[2] + r:
-                        if 0 <= c < shape[2]:
+                        # a cell farther than the best holds no nearer face: a face is listed in every cell it meets
+                        if 0 <= c < shape[2] and gab + _gap(pz, origin[2] + c * cell, cell) <= best * (1.0 + 1e-6) + 1e-22:
                             cell_id = (a * shape[1] + b) * shape[2] + c
                             for e in range(start[cell_id], start[cell_id + 1]):
                                 g = np.int64(faces[e])
@@ -347,7 +360,7 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g_best, 0, 0], planes[g_best, 0, 1], planes[g_best, 0, 2]
         well_inside, inside = _project(p, i, g_best, planes, plane_c, q)
         # near an edge, and not kept by the faces of its plane: the face's closest point
-        if not well_inside and not _in_plane(p, i, g_best, planes, plane_c, tri, adjacent, paired, plane_id, q):
+        if not well_inside and not _in_plane(p, i, g_best, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
             q[i, 0], q[i, 1], q[i, 2] = bx, by, bz
             if not inside and _crease(p, i, g_best, planes, plane_c, adjacent):
                 edge_normal(p, i, q, nrm)
