@@ -187,7 +187,7 @@ def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, 
     if model.modes.shape[1]:
         at = np.clip(np.searchsorted(model.offsets, s), 0, len(model.offsets) - 1)  # the profile that saw each point
         JJ = J[:, :, None] * (J * model.path_sigma)[:, None, :]  # (m, 6, 6): r = J·ξ(s) for a pose error ξ at travel s
-        path = np.einsum("mq,mij->iqj", model.modes[at], JJ).reshape(6, -1)
+        path = (model.modes[at].T @ JJ.reshape(len(J), 36)).reshape(-1, 6, 6).transpose(1, 0, 2).reshape(6, -1)  # Σ_m modes ⊗ JJ
     if model.step:
         path = np.hstack([path, (J.T @ (n_O[:, 0] * s * model.step))[:, None]])
     cos = np.einsum("ij,ij->i", _rays(model, p, s, T_O_S), n_O)  # a move along the ray moves the point cos along n
@@ -196,8 +196,10 @@ def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, 
     plane, cols = model.face_columns(v, n, face)
     planes = np.unique(plane) if cols.shape[1] else np.zeros(0, np.int64)
     per_plane = np.zeros((len(planes), 6, cols.shape[1]))
-    if len(planes):
-        np.add.at(per_plane, np.searchsorted(planes, plane), J[:, :, None] * cols[:, None, :])
+    if len(planes):  # the points' J ⊗ cols summed per plane: sorted by plane, each plane's run added
+        order = np.argsort(plane, kind="stable")
+        runs = np.searchsorted(plane[order], planes)
+        per_plane = np.add.reduceat((J[order, :, None] * cols[order, None, :]), runs, axis=0)
     return J.T @ J, own, shared, path, white, bias, planes, per_plane
 
 

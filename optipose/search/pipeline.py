@@ -102,6 +102,16 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
         jobs: int = 1, resume: bool = False, on_eval=None, on_stage=None) -> SearchReport:  # fmt: skip
     """Search, validate and hand everything to ``sink``. ``on_eval(evaluation)`` follows the surrogate
     search; ``on_stage(text)`` is told when a stage starts; ``resume`` reloads the sink's cache."""
+    from threadpoolctl import threadpool_limits
+
+    # one BLAS thread in this process: its products are the surrogate's small ones (6 × points), and the hand
+    # layout's processes run beside it on every core, where a second BLAS thread only waits for a busy core and
+    # slows every product many times over (measured in benchmarks/README.md, "bench_cell_surrogate.py")
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, on_stage)
+
+
+def _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, on_stage) -> SearchReport:
     band = stage_objective(objective, "band", band=config.band)  # a bad name fails here, before any work
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     if on_stage:  # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
