@@ -114,6 +114,11 @@ def _disc_in_plane(p, i, f, h0, tri, planes, plane_c, adjacent, paired, plane_id
         g = seen[head]
         head += 1
         for k in range(3):
+            # the edge's line first (its inward plane, four loads): a disc that misses the line misses the edge; the
+            # margin keeps rounding from skipping an edge the exact distance below would call reached
+            hk = planes[g, k + 1, 0] * x0 + planes[g, k + 1, 1] * x1 + planes[g, k + 1, 2] * x2 - plane_c[g, k + 1]
+            if hk * hk >= r2 * (1.0 + 1e-9) + 1e-24:
+                continue
             a, b = tri[g, k], tri[g, (k + 1) % 3]
             e0, e1, e2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
             t = ((x0 - a[0]) * e0 + (x1 - a[1]) * e1 + (x2 - a[2]) * e2) / max(e0 * e0 + e1 * e1 + e2 * e2, 1e-300)
@@ -332,16 +337,16 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
                                     continue  # the best again; or a zero-area face (no normal), on its neighbours' edges: they answer for it
                                 if plane_id[g] == plane_id[g_best] and inset2 > best * 1e-6 + 1e-18:
                                     continue  # in the plane of the best face, which p projects well inside of: farther by at least that inset
-                                box = 0.0
+                                h = planes[g, 0, 0] * px + planes[g, 0, 1] * py + planes[g, 0, 2] * pz - plane_c[g, 0]
+                                if h * h > best * (1.0 + 1e-6) + 1e-22:  # its plane alone is farther (with room for rounding: no tie is lost)
+                                    continue
+                                box = 0.0  # after the plane: a long face's box holds the point more often than its plane passes near it
                                 for j in range(3):
                                     lo_j = min(tri[g, 0, j], tri[g, 1, j], tri[g, 2, j])
                                     hi_j = max(tri[g, 0, j], tri[g, 1, j], tri[g, 2, j])
                                     gap = max(lo_j - p[i, j], p[i, j] - hi_j, 0.0)
                                     box += gap * gap
                                 if box > best:
-                                    continue
-                                h = planes[g, 0, 0] * px + planes[g, 0, 1] * py + planes[g, 0, 2] * pz - plane_c[g, 0]
-                                if h * h > best * (1.0 + 1e-6) + 1e-22:  # its plane alone is farther (with room for rounding: no tie is lost)
                                     continue
                                 gx, gy, gz = _closest_on_triangle(px, py, pz, tri[g, 0], tri[g, 1], tri[g, 2])
                                 d2 = (px - gx) ** 2 + (py - gy) ** 2 + (pz - gz) ** 2
