@@ -106,7 +106,7 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
 
     # one BLAS thread in this process: its products are the surrogate's small ones (6 × points), and the hand
     # layout's processes run beside it on every core, where a second BLAS thread only waits for a busy core and
-    # slows every product many times over (measured in benchmarks/README.md, "bench_cell_surrogate.py")
+    # slows every product many times over (benchmarks/README.md, "bench_surrogate_threads.py")
     with threadpool_limits(limits=1, user_api="blas"):
         return _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, on_stage)
 
