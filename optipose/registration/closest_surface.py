@@ -255,10 +255,11 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
     Otherwise the faces listed in the grid's cells (:func:`face_grid`) around the point's are searched exactly, ring
     after ring of cells out to ``reach`` rings: after each ring, every face nearer than the ring block's walls has
     been seen, so the search stops once its best is nearer than those, and is certain for an answer within ``reach``
-    × ``cell`` (faces whose bounding box is farther than the best so far are skipped, first by ``box32`` (f, 6)
-    float32, each face's box rounded outward (:func:`face_boxes`): it skips a subset of what the float64 box skips,
-    which then still decides, so the faces searched are the same; the guessed face starts the search, which prunes
-    more). A point the face found keeps gets its projection on the face's plane, like a followed point, so that the
+    × ``cell`` (cells farther than the best so far are skipped whole: a face is listed in every cell it meets, so a
+    nearer face has a nearer cell; faces whose plane or bounding box is farther than the best are skipped, first by
+    ``box32`` (f, 6) float32, each face's box rounded outward (:func:`face_boxes`): it skips a subset of what the
+    float64 box skips, which then still decides, so the faces searched are the same; the guessed face starts the
+    search, which prunes more). A point the face found keeps gets its projection on the face's plane, like a followed point, so that the
     answer does not depend on the guess; a point closest to an edge or a corner gets the closest point of that face,
     in float64, and the direction from it to the point as its normal (:func:`edge_normal`; where faces tie exactly,
     at their common edge, the lowest face id takes the point, whatever the guess: the point and the normal are the
