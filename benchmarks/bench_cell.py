@@ -116,12 +116,13 @@ def instance_figures(objective, seeds: list[int], jobs: int, cache: Path, parts=
     out = []
     for part in parts:
         runs = {s: evaluate(part, objective, s, jobs, cache)[0] for s in seeds}
+        others = {s: pd.concat([runs[o] for o in seeds if o != s], ignore_index=True) for s in seeds}  # once per seed
         for (p, k, axis, subset), (_, _, real_m, real_q) in PAPER.items():
             if p != part:
                 continue
             for s in seeds:
                 own = figures(runs[s], axis, subset)
-                rest = figures(pd.concat([runs[o] for o in seeds if o != s], ignore_index=True), axis, subset)
+                rest = figures(others[s], axis, subset)
                 for stat, real, mine, pooled in zip(("median", "p75"), (real_m, real_q), own, rest):
                     out.append({"part": part[-1].upper(), "k": k, "axis": axis, "subset": subset, "stat": stat, "real": real,
                                 "seed": s, "instance": mine, "others": pooled})  # fmt: skip

@@ -127,7 +127,7 @@ def check_mesh(mesh, name: str = "mesh", watertight: bool = True) -> None:
     # a soup of loose triangles is too, but its registrations may fail, and every verdict then says so
     # (evaluate.compare.Verdict.failed_line)
     problems = [w for w, bad in (("open: some edges have one face", not mesh.is_watertight),
-                                                           ("faces not consistently oriented", not mesh.is_winding_consistent)) if bad]  # fmt: skip
+                                 ("faces not consistently oriented", not mesh.is_winding_consistent)) if bad]  # fmt: skip
     if problems:
         log.warning("%s: mesh is not a closed solid (%s); shadows and inside/outside tests may be wrong and registrations "
                     "may fail: export the part as a closed solid", name, "; ".join(problems))  # fmt: skip
