@@ -416,6 +416,8 @@ def test_a_ctrl_c_a_trial_swallowed_whole_still_stops_the_study(tmp_path, monkey
     monkeypatch.setattr(errors, "_INTERRUPTS", [])
     before = signal.getsignal(signal.SIGINT)
     try:
+        # as in a terminal: a run in the background of a shell starts with SIGINT ignored, which note_interrupts keeps
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         errors.note_interrupts()
         with pytest.raises(KeyboardInterrupt):
             run_study(load_study(_study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0, 1))), tmp_path / "out", SerialPool())
