@@ -60,7 +60,7 @@ def main() -> None:
     objective = load_objective("paper").in_cell(args.cell)
     for name in args.parts.split(","):
         part = load_part(name)
-        problem = SurrogateProblem(part, load_objective("paper"), SearchConfig())
+        problem = SurrogateProblem(part, load_objective("paper").in_cell("ideal"), SearchConfig())
         layouts = _layouts(problem, part, args.layouts, args.seed)
         seeds = [int(x) for x in args.icp_seeds.split(",")] if args.icp_seeds else [args.seed + 1]
         print(f"bench_cell_surrogate: {name}, cell {args.cell}, {args.layouts} random feasible {SENSORS}-sensor layouts + the hand "

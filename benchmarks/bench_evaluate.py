@@ -101,7 +101,7 @@ def main() -> None:
 
     part = load_part("part_b")
     layout = part.layouts["hand"]
-    objective = load_objective("paper")
+    objective = load_objective("paper").in_cell("ideal")
     print(f"part_b, hand layout {layout.names}, objective 'paper' ({objective.registration.method}, "
           f"reference {objective.registration.reference}), {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")  # fmt: skip
 

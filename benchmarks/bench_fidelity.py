@@ -109,7 +109,7 @@ def _shipped(p, o):
     of their run: stride 8 and the combined start then)."""
     from optipose.evaluate.objective import load_objective
 
-    return p, load_objective("paper")
+    return p, load_objective("paper").in_cell("ideal")
 
 
 def rungs() -> list[Rung]:
@@ -139,7 +139,7 @@ def rungs() -> list[Rung]:
 def reference_objective():
     from optipose.evaluate.objective import load_objective
 
-    o = load_objective("paper")
+    o = load_objective("paper").in_cell("ideal")
     return replace(o, scan=replace(o.scan, column_stride=1),
                    registration=replace(o.registration, subset_start="identity", tolerance_rotation=1e-5 * DEG, tolerance_translation=1e-5 * MM))  # fmt: skip
 

@@ -57,7 +57,7 @@ def rung(axis: str, value: float) -> dict:
             T[0, 3] += 0.008
             sensors.append(SensorPose(name=f"{s.name}'", T_O_S=T))
         layout = Layout(tuple(sensors[: int(value)]), name=f"{int(value)} sensors")
-    objective = reduced_objective(load_objective("paper"))
+    objective = reduced_objective(load_objective("paper").in_cell("ideal"))
     t0 = time.perf_counter()
     with Evaluator(part, objective, seed=0, jobs=1, quiet=True) as ev:
         from optipose.evaluate.worker import run_chunk

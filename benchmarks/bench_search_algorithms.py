@@ -218,7 +218,7 @@ def main() -> None:
 
     from optipose.evaluate.objective import load_objective
 
-    objective = load_objective("paper")
+    objective = load_objective("paper").in_cell("ideal")
     checkpoints = tuple(c for c in CHECKPOINTS if c < args.evals) + (args.evals,)
     print(f"bench_search_algorithms: --evals {args.evals} --seeds {args.seeds}, objective 'paper', "
           f"optipose at {_revision()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")  # fmt: skip

@@ -1,12 +1,14 @@
 """The verdict in the real cell on six parts, and a held-out check of every verdict (issue #33).
 
     .venv/bin/python benchmarks/bench_verdict_study.py run     [--parts part_a,part_b,part_c,bushing,angle,housing]
-                                                               [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study]
+                                                               [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study] [--report]
     .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2] [--verdict-time 0]
-    .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/verdict-study]
+    .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study]
 
 ``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
-``OUT/<part>/``; the wall time and peak memory of each (``getrusage`` of the child) into ``OUT/runs.csv``. The
+``OUT/<part>/`` (with its report under ``--report``: ``scripts/reference.sh`` makes results/reference so); the
+wall time and peak memory of each (``getrusage`` of the child) into ``OUT/runs.csv``. ``--out`` may name several
+folders, separated by commas (``holdout`` and ``table``: each part in the first that holds it). The
 parts are the shipped A, B, C (hand layouts) and the three of ``scripts/make_study_parts.py`` (conventional
 baselines; ``studies/parts/``).
 ``holdout``: per search folder, its found layouts and its baseline evaluated again on a run seed the search never
@@ -43,7 +45,7 @@ def run(args) -> None:
     for name in args.parts.split(","):
         folder = out / name
         command = [sys.executable, "-m", "optipose", "search", PARTS[name], "--budget", args.budget, "--cell", args.cell,
-                   "--seed", str(args.seed), "--jobs", "2", "--out", str(folder), "--no-report"]  # fmt: skip
+                   "--seed", str(args.seed), "--jobs", "2", "--out", str(folder)] + ([] if args.report else ["--no-report"])  # fmt: skip
         t0 = time.perf_counter()
         done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
         wall = time.perf_counter() - t0
@@ -67,7 +69,7 @@ def holdout(args) -> None:
     from optipose.search.verdict import confident_verdicts
 
     wanted = set(args.parts.split(","))
-    for folder in sorted(p.parent for p in Path(args.out).glob("*/verdict.csv") if p.parent.name in wanted):
+    for folder in sorted(_folders(args.out, wanted).values()):
         result = load_result(folder)
         saved = result.config
         objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(saved.cell_name)
@@ -91,10 +93,7 @@ def table(args) -> None:
 
     print("| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |")
     print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |")
-    for name in PARTS:
-        folder = Path(args.out) / name
-        if not (folder / "verdict.csv").is_file():
-            continue
+    for name, folder in _folders(args.out, set(PARTS)).items():
         by_k, _ = split(load_result(folder).confident)
         held, _ = split(read_verdicts(folder / "holdout.csv"))
         for k, v in by_k.items():
@@ -104,6 +103,16 @@ def table(args) -> None:
             s = v.score
             print(f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}] | "
                   + " | ".join(axes) + f" | {v.n_draws} | {other} |")  # fmt: skip
+
+
+def _folders(outs: str, wanted: set) -> dict[str, Path]:
+    """Part name → its search folder: the first of the comma-separated ``outs`` that holds one, in PARTS' order."""
+    found = {}
+    for out in outs.split(","):
+        for name in PARTS:
+            if name in wanted and name not in found and (Path(out) / name / "verdict.csv").is_file():
+                found[name] = Path(out) / name
+    return {name: found[name] for name in PARTS if name in found}
 
 
 def _mdeg(interval) -> str:
@@ -119,6 +128,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--offset", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--report", action="store_true", help="run: write each search's report")
     ap.add_argument("--verdict-time", type=float, default=None, help="holdout: the race's seconds (default: the search's; 0: draws alone)")
     ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
     args = ap.parse_args()

@@ -27,7 +27,7 @@ from optipose.search.validate import indices_in, nested_groups
 
 
 def variants():
-    paper = load_objective("paper")
+    paper = load_objective("paper").in_cell("ideal")
     noisy = replace(paper, conditions=ConditionsConfig(noise_scales=(5.0,)))
     shaken = replace(paper, protocol=replace(paper.protocol, kind="random", count=40, range_offset=(1e-3, 1e-3, 1e-3)))
     coarse = replace(paper, registration=replace(paper.registration, voxel_size=1e-3))

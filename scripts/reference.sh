@@ -1,13 +1,10 @@
 #!/usr/bin/env bash
-# The reference results of parts A, B and C (issue #16): the search for one, two and three sensors under the
-# robust objective (the band of noise levels and bracket tolerances), each validated against the hand-placed
-# layout under every condition with a held-out seed, its report, and the table of all three.
+# The reference results of parts A, B and C (issues #16, #33): the search for one, two and three sensors in the
+# paper's cell (`optipose search PART --budget default --seed 0 --jobs 2`: the objective `paper`, cell `ur10e`),
+# its verdict with confidence and report, then a held-out check of each verdict (the found layouts and the hand
+# one again on other cell instances, seed 1000, raced on draws alone), and the table of all three.
 #
-#   bash scripts/reference.sh            # about 50 min on 2 cores; writes results/reference/
-#
-# Then, per part, the found layouts and the hand one side by side under the band again (another noise seed)
-# with what the brackets' tolerance does to each (the spread per axis, the bias of an un-zeroed cell, the
-# bracket to make precise): results/reference/<part>/robustness/.
+#   bash scripts/reference.sh            # about 20 min on 2 cores; writes results/reference/
 #
 # What is kept in git: each part's report (report.html is self-contained), its small tables and layouts;
 # not the search caches, the per-scan tables or the figures' source folders (see .gitignore).
@@ -16,11 +13,8 @@ cd "$(dirname "$0")/.."
 [ -x .venv/bin/optipose ] || bash scripts/setup.sh
 out=results/reference
 mkdir -p "$out"
-for part in part_a part_b part_c; do
-    rm -rf "$out/$part"
-    .venv/bin/optipose search "$part" --budget default --objective robust --seed 0 --jobs 2 --out "$out/$part"
-    .venv/bin/optipose robustness "$part" --objective robust --seed 1 --jobs 2 --out "$out/$part/robustness" \
-        --layout "$out/$part/layouts/found_k1.toml" --layout "$out/$part/layouts/found_k2.toml" --layout "$out/$part/layouts/found_k3.toml"
-done
-.venv/bin/python scripts/search_table.py "$out/part_a" "$out/part_b" "$out/part_c" > "$out/table.md"
+rm -rf "$out"/part_a "$out"/part_b "$out"/part_c
+.venv/bin/python benchmarks/bench_verdict_study.py run --parts part_a,part_b,part_c --report --out "$out"
+.venv/bin/python benchmarks/bench_verdict_study.py holdout --parts part_a,part_b,part_c --verdict-time 0 --out "$out"
+.venv/bin/python benchmarks/bench_verdict_study.py table --out "$out" > "$out/table.md"
 echo "reference: $out (table: $out/table.md)"

@@ -82,7 +82,7 @@ def plain_part():
 
 @pytest.fixture(scope="module")
 def ideal_errors(plain_part):
-    with Evaluator(plain_part, _short(load_objective("paper")), seed=11) as ev:
+    with Evaluator(plain_part, _short(load_objective("paper").in_cell("ideal")), seed=11) as ev:
         return _errors(ev(plain_part.layouts["hand"]))
 
 
@@ -107,7 +107,7 @@ def test_every_source_at_zero_is_the_ideal_cell_exactly(plain_part, ideal_errors
         assert setup.process.exact and setup.effects.none and setup.ideal
     else:
         assert cell.ideal
-    with Evaluator(part, _short(load_objective("paper")).in_cell(cell), seed=11) as ev:
+    with Evaluator(part, _short(load_objective("paper").in_cell("ideal")).in_cell(cell), seed=11) as ev:
         errors = _errors(ev(part.layouts["hand"]))
     assert np.array_equal(errors, ideal_errors, equal_nan=True)
 
@@ -126,7 +126,7 @@ def test_the_live_cell_with_every_source_at_zero_changes_nothing(plain_part, ide
     monkeypatch.setattr(LiveCell, "perturb", counted)
     part = dataclasses.replace(plain_part, process="fdm")
     cell = load_cell(_zero_file(tmp_path, 0.0))
-    with Evaluator(part, _short(load_objective("paper")).in_cell(cell), seed=11) as ev:
+    with Evaluator(part, _short(load_objective("paper").in_cell("ideal")).in_cell(cell), seed=11) as ev:
         errors = _errors(ev(part.layouts["hand"]))
     assert len(calls) == 2  # one per orientation: the live cell ran
     assert np.array_equal(errors, ideal_errors, equal_nan=True)
@@ -409,7 +409,7 @@ def ur10e_runs():
     in a second one, seed 6."""
     part = load_part("part_b")
     layout = Layout((part.layouts["hand"].sensors[1],), name="S2")
-    objective = _short(load_objective("paper"), ("R",)).in_cell(CELLS_DIR / "ur10e.toml")
+    objective = _short(load_objective("paper").in_cell("ideal"), ("R",)).in_cell(CELLS_DIR / "ur10e.toml")
     assert objective.cell.name == "ur10e" and not objective.cell.ideal
     with Evaluator(part, objective, seed=5) as ev:
         first, again = ev(layout), ev(layout)
@@ -417,7 +417,7 @@ def ur10e_runs():
         fresh = ev(layout)
     with Evaluator(part, objective, seed=6) as ev:
         other = ev(layout)
-    with Evaluator(part, _short(load_objective("paper"), ("R",)), seed=5) as ev:
+    with Evaluator(part, _short(load_objective("paper").in_cell("ideal"), ("R",)), seed=5) as ev:
         ideal = ev(layout)
     return first, again, fresh, other, ideal
 
@@ -562,7 +562,7 @@ def test_a_zeroed_cell_takes_off_what_the_calibration_adds_at_the_nominal_orient
     carries its bias; zeroed on the master scan, what is left is the ideal cell's error to a small fraction
     of that bias (the master scan is one noise-free scan of the same cell)."""
     off = CalibrationErrors(frame_rotation=0.05 * DEG, frame_translation=0.1e-3)
-    objective = _short(load_objective("paper"))
+    objective = _short(load_objective("paper").in_cell("ideal"))
     errs = {}
     for zeroed in (False, True):
         cell = Cell(name="frame", calibration=dataclasses.replace(off, zeroed=zeroed))
@@ -578,7 +578,10 @@ def test_a_zeroed_cell_takes_off_what_the_calibration_adds_at_the_nominal_orient
 
 
 def test_an_objective_file_names_its_cell(tmp_path):
-    text = (OBJECTIVES_DIR / "paper.toml").read_text()
+    # the shipped paper objectives run in the paper's cell, the band's in the ideal one
+    assert load_objective("paper").cell == load_objective("paper-literal").cell == load_cell("ur10e")
+    assert load_objective("robust").cell.ideal
+    text = (OBJECTIVES_DIR / "robust.toml").read_text()
     (tmp_path / "mine.toml").write_text('cell = "ur10e"\n' + text)
     objective = load_objective(tmp_path / "mine.toml")
     assert objective.cell == load_cell("ur10e") and not objective.cell.ideal

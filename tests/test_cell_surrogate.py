@@ -122,7 +122,7 @@ def part_b():
 
 
 def test_the_ideal_cell_is_todays_surrogate_exactly(part_b):
-    turns = protocol_turns(load_objective("paper"))
+    turns = protocol_turns(load_objective("paper").in_cell("ideal"))
     today = Surrogate(part_b, turns=turns)
     ideal = Surrogate(part_b, turns=turns, cell=CellSetup.of(IDEAL, part_b))
     assert ideal.cell is None
@@ -140,7 +140,7 @@ def test_the_search_problem_scores_under_its_objectives_cell(part_b):
     from optipose.search.config import SearchConfig
     from optipose.search.problem import SurrogateProblem
 
-    paper = load_objective("paper")
+    paper = load_objective("paper").in_cell("ideal")
     ideal, real = SurrogateProblem(part_b, paper, SearchConfig()), SurrogateProblem(part_b, paper.in_cell("ur10e"), SearchConfig())
     assert ideal.surrogate.cell is None and real.surrogate.cell is not None
     hand = np.concatenate([ideal.space.from_pose(T) for T in part_b.layouts["hand"].poses])

@@ -36,7 +36,7 @@ def _short(objective, sequences=("R", "P")):
 
 
 def test_the_shipped_objectives_and_the_trivial_band(part_b):
-    assert load_objective("paper").conditions.trivial
+    assert load_objective("paper").in_cell("ideal").conditions.trivial
     robust = load_objective("robust").conditions
     assert robust.noise_scales == (1.0, 5.0) and robust.mounting_draws == 2 and not robust.trivial
     assert robust.mounting_translation == pytest.approx(0.2e-3) and robust.mounting_rotation == pytest.approx(np.deg2rad(0.1))
@@ -55,7 +55,7 @@ def test_bad_conditions_are_refused_naming_the_key(table, message):
 
 
 def test_a_zero_tolerance_and_a_one_level_band_give_exactly_the_objective(part_b):
-    objective = _short(load_objective("paper"))
+    objective = _short(load_objective("paper").in_cell("ideal"))
     layout = _one_sensor(part_b)
     with Evaluator(part_b, objective, seed=4) as evaluator:
         plain = evaluator(layout)
@@ -82,7 +82,7 @@ def test_one_cast_gives_every_noise_level_exactly_as_a_scanner_of_that_noise(par
 def test_conditions_of_one_bracket_draw_evaluated_together_are_each_evaluated_alone(part_b):
     # Evaluator.under scans the noise levels of a draw together; each result must be the one the condition
     # gives on its own, on two workers too (the master scans' zeros are shared, the noise is not)
-    objective = _short(load_objective("paper"))
+    objective = _short(load_objective("paper").in_cell("ideal"))
     layout = part_b.layouts["hand"]
     band = [Condition(s, d, 0.2e-3, np.deg2rad(0.1)) for s in (1.0, 5.0) for d in (0, 1)]
     with Evaluator(part_b, objective, seed=6, jobs=2) as evaluator:
@@ -139,8 +139,8 @@ def test_the_zeroed_cell_takes_the_constant_bias_off(part_b):
     # rigidly (and sheared along the scan), so without zeroing every scan would be off by about that much;
     # noise-free master-part scans at the nominal orientation measure what the bracket adds there and
     # zeroing takes it off: at that orientation the cell reports what a cell with exact brackets reports
-    objective = replace(_short(load_objective("paper"), ("R",)), protocol=replace(
-        load_objective("paper").protocol, sequences=("R",), start=-np.deg2rad(2.0), stop=np.deg2rad(2.0), step=np.deg2rad(2.0)))  # fmt: skip
+    objective = replace(_short(load_objective("paper").in_cell("ideal"), ("R",)), protocol=replace(
+        load_objective("paper").in_cell("ideal").protocol, sequences=("R",), start=-np.deg2rad(2.0), stop=np.deg2rad(2.0), step=np.deg2rad(2.0)))  # fmt: skip
     layout = _one_sensor(part_b)
     cond = Condition(1e-6, 0, 0.0, np.deg2rad(0.2))
     with Evaluator(part_b, objective, seed=2, condition=cond) as evaluator:
@@ -253,7 +253,7 @@ def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():
     band = ConditionsConfig((3.0, 1.0, 5.0, 2.0), 2e-4, 1e-3, 2)
     assert band_ends(band) == ConditionsConfig((1.0, 5.0), 2e-4, 1e-3, 2)
     assert [c.noise_scale for c in conditions(band_ends(band))] == [1.0, 1.0, 5.0, 5.0]
-    paper = load_objective("paper")
+    paper = load_objective("paper").in_cell("ideal")
     assert search_objective(paper) is paper
     assert search_objective(replace(paper, conditions=band)).conditions.noise_scales == (1.0, 5.0)
     nominal, banded = config_from_budget("default", (1, 2, 3)), config_from_budget("default", (1, 2, 3), band=True)

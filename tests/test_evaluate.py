@@ -69,7 +69,7 @@ def block_result(block):
 
 # -- objective and protocol -------------------------------------------------------------------------------
 def test_paper_objective_is_the_papers_protocol():
-    obj = load_objective("paper")
+    obj = load_objective("paper").in_cell("ideal")
     p = perturbations(obj.protocol, seed=0)
     assert len(p) == 77
     assert list(dict.fromkeys(p.label)) == ["R", "P", "Y", "RP", "PY", "YR", "RPY"]

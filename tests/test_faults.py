@@ -353,7 +353,7 @@ def test_search_resume_with_a_damaged_cache_is_one_line_and_keeps_it(tmp_path):
     from optipose.model.part import load_part
     from optipose.search.config import config_from_budget
 
-    SearchFolder(tmp_path).start(load_part("part_b"), load_objective("paper"), config_from_budget("quick", (1,)), "quick", 0, 1)
+    SearchFolder(tmp_path).start(load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1)
     garbage = b"PK\x03\x04" + np.random.default_rng(4).bytes(200)
     (tmp_path / "cache.npz").write_bytes(garbage)
     assert_one_line_error(run("search", "--resume", str(tmp_path), "--no-report"), f"{tmp_path}/cache.npz: damaged")

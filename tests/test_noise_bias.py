@@ -50,14 +50,14 @@ def test_a_scans_grid_origin_is_seeded_and_within_one_voxel():
 
 
 def test_voxel_grid_is_a_checked_key_of_the_objective():
-    assert load_objective("paper").registration.voxel_grid == "part"  # the paper's figures stand as they were
+    assert load_objective("paper").in_cell("ideal").registration.voxel_grid == "part"  # the paper's figures stand as they were
     assert load_objective("robust").registration.voxel_grid == "random"
     with pytest.raises(ConfigError, match="voxel_grid"):
         objective_from_table({"registration": {"voxel_grid": "diagonal"}}, "bad.toml")
 
 
 def test_a_random_grid_is_reproducible_and_moves_the_errors_only_by_the_grid(part_b):
-    base = load_objective("paper")
+    base = load_objective("paper").in_cell("ideal")
     base = replace(base, protocol=replace(reduced_objective(base).protocol, sequences=("R", "Y")))
     randomised = replace(base, registration=replace(base.registration, voxel_grid="random"))
     layout = replace(part_b.layouts["hand"], sensors=part_b.layouts["hand"].sensors[1:2])  # S2 alone: B's top face
@@ -129,7 +129,7 @@ def test_the_search_gives_the_surrogate_the_bands_top(part_b):
     from optipose.search.problem import SurrogateProblem
 
     assert SurrogateProblem(part_b, load_objective("robust"), SearchConfig()).surrogate.noise_band == 5.0
-    assert SurrogateProblem(part_b, load_objective("paper"), SearchConfig()).surrogate.noise_band == 1.0
+    assert SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig()).surrogate.noise_band == 1.0
 
 
 # -- hand-anchored candidates ---------------------------------------------------------------------------
@@ -150,7 +150,7 @@ def test_anchored_layouts_keep_the_used_hand_sensors_in_their_places(part_b):
     from optipose.search.config import SearchConfig
     from optipose.search.problem import SurrogateProblem
 
-    problem = SurrogateProblem(part_b, load_objective("paper"), SearchConfig())
+    problem = SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig())
     hand = part_b.layouts["hand"].poses
     outcome = _outcome(problem, [])
     # k = 3, the choice uses S1 and S2: both stay where they are, the found sensor takes S3's place
@@ -218,7 +218,7 @@ def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
     from optipose.search.config import SearchConfig
     from optipose.search.problem import SurrogateProblem
 
-    problem = SurrogateProblem(part_b, load_objective("paper"), SearchConfig(hand_margin=1.0, hand_weight=1.0))
+    problem = SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig(hand_margin=1.0, hand_weight=1.0))
     stats = replace(_STATED, axis_score=np.array([1.0, 2.0, 3.0]), level_axis_score=np.array([[1.0, 2.0, 3.0]]))
     one = problem.with_targets({1: np.array([[1.0, 1.0, 4.0]])})
     assert one.shortfall(1, stats) == pytest.approx(1.0)

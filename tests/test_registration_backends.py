@@ -33,7 +33,7 @@ CASES = [(name, method) for name in BACKENDS for method in get_backend(name).met
 def _config(name: str, method: str, **changes):
     # a step of 1e-5° whatever the paper objective says: point-to-point ICP crawls (each step ~0.8 of the
     # last), and 1e-4° (ample for point-to-plane's Gauss-Newton steps) stopped it 2.8e-4° short of the turn
-    cfg = replace(load_objective("paper").registration, backend=name, method=method, max_iterations=500,
+    cfg = replace(load_objective("paper").in_cell("ideal").registration, backend=name, method=method, max_iterations=500,
                   tolerance_rotation=np.deg2rad(1e-5), tolerance_translation=1e-8)  # fmt: skip
     return replace(cfg, **changes)
 
@@ -224,7 +224,7 @@ def test_the_fitness_stop_runs_open3ds_point_to_point_icp(block, turned):
 
 # -- the registry ----------------------------------------------------------------------------------------
 def test_generalized_icp_goes_to_open3d_whatever_the_backend():
-    cfg = load_objective("paper").registration
+    cfg = load_objective("paper").in_cell("ideal").registration
     assert backend_for(replace(cfg, backend="fast", method="generalized")) is get_backend("open3d")
     assert backend_for(replace(cfg, backend="fast", method="point_to_plane")) is get_backend("fast")
 

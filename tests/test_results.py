@@ -113,7 +113,7 @@ def test_an_evaluation_folder_reads_back_with_the_same_table(tmp_path):
     from optipose.io.evaluation import write_evaluation
     from optipose.model.part import load_part
 
-    objective = load_objective("paper")
+    objective = load_objective("paper").in_cell("ideal")
     objective = replace(objective, protocol=replace(objective.protocol, sequences=("R", "P"), step=objective.protocol.stop - objective.protocol.start))
     part = load_part("part_b")
     result = evaluate(part, replace(part.layouts["hand"], sensors=part.layouts["hand"].sensors[:2]), objective, seed=3)

@@ -194,7 +194,7 @@ def part_b_problem():
         global_evals=40, local_evals=15, joint_evals=20, max_time=120, random_starts=2, sensors=(1, 2),
         screen_samples=64, screen_starts=2, screen_evals=8,
     )  # fmt: skip
-    return load_part("part_b"), load_objective("paper"), cfg
+    return load_part("part_b"), load_objective("paper").in_cell("ideal"), cfg
 
 
 def test_same_seed_same_layout(part_b_problem):
@@ -266,7 +266,7 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
     from optipose.search.polish import polish
 
     part = load_part("part_b")
-    objective = load("paper")
+    objective = load("paper").in_cell("ideal")
     short = objective.__class__(**{**objective.__dict__, "protocol": objective.protocol.__class__(
         **{**objective.protocol.__dict__, "sequences": ("R", "Y"), "step": objective.protocol.stop - objective.protocol.start})})  # fmt: skip
     cfg = SearchConfig(polish_evals=8, polish_time=120.0, polish_step=0.2)
@@ -391,7 +391,7 @@ def test_a_tight_time_budget_still_places_every_sensor_count():
     k = 1 using all of it, so k = 1, 2 and 3 all have a feasible layout, and the search keeps to its clock."""
     cfg = SearchConfig(global_evals=5000, local_evals=2000, joint_evals=2000, max_time=8.0, random_starts=2,
                        sensors=(1, 2, 3), screen_samples=0)  # fmt: skip
-    out = run_search(load_part("part_b"), load_objective("paper"), cfg, seed=1)
+    out = run_search(load_part("part_b"), load_objective("paper").in_cell("ideal"), cfg, seed=1)
     assert sorted(out.found) == [1, 2, 3]
     assert all(f.score < PENALTY and len(f.poses) == k for k, f in out.found.items())
     stages = {r.stage.split(":")[0] + f":{r.k}" for r in out.history}
@@ -409,7 +409,7 @@ def test_the_hand_layout_evaluated_beside_the_search_is_the_one_validate_would_c
     from optipose.search.validate import BaselineRun, validate
     from optipose.seeds import validation_seed
 
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     with BaselineRun(part, objective, seed=3) as run:
         beside = run.result()
     with Evaluator(part, objective, seed=validation_seed(3), jobs=1) as evaluator:
@@ -433,7 +433,7 @@ def test_the_hand_layout_shared_out_over_processes_by_its_scans_is_the_evaluator
     from optipose.search.validate import BaselineRun
     from optipose.seeds import validation_seed
 
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     with BaselineRun(part, objective, seed=3, processes=2) as run:
         assert [scans for _, scans in run._shares] == [(0, 2), (1, 2)]
         beside = run.result()
@@ -452,7 +452,7 @@ def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_ev
     from optipose.seeds import validation_seed
 
     part = load_part("part_b")
-    objective = band_objective(_short(load_objective("paper")), "robust")
+    objective = band_objective(_short(load_objective("paper").in_cell("ideal")), "robust")
     with BaselineRun(part, objective, seed=3, last=True, processes=2) as run:
         assert len(run._calls) == 2  # one process per bracket draw
         beside = run.result()
@@ -469,7 +469,7 @@ def test_a_found_pair_inside_the_triple_in_another_order_shares_its_evaluation()
     # another order: validation evaluates the triple once and takes the pair's choice from it (sorted indices)
     from optipose.search.validate import nested_groups, validate
 
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     hand = part.layouts["hand"]
     layouts = {3: hand, 2: replace(hand, name="pair", sensors=(hand.sensors[2], hand.sensors[1]))}
     assert nested_groups(layouts) == [[3, 2]]
@@ -481,7 +481,7 @@ def test_a_found_pair_inside_the_triple_in_another_order_shares_its_evaluation()
 def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
     from optipose.search.validate import BaselineRun, validate
 
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     run = BaselineRun(part, objective, seed=5)
     run.close()  # stopped before it could finish: no result, and validate evaluates the hand layout itself
     assert run.result() is None
@@ -501,7 +501,7 @@ def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_p
     from optipose.search.pipeline import run
     from optipose.seeds import validation_seed
 
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     config = SearchConfig(sensors=(1, 2), global_evals=20, local_evals=6, joint_evals=8, random_starts=2,
                           select_candidates=1, select_time=60.0)  # fmt: skip
     stages = []
@@ -550,7 +550,7 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
 
     band_file = tmp_path / "band.toml"
     band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     config = SearchConfig(sensors=(1, 2), global_evals=20, local_evals=6, joint_evals=8, random_starts=2, select_candidates=0,
                           band=str(band_file))  # fmt: skip
     out = tmp_path / "search"
@@ -590,7 +590,7 @@ def test_each_stage_objective_is_derived_in_one_place():
     from optipose.search.objectives import STAGES, stage_objective
 
     robust = load_objective("robust")
-    for objective in (load_objective("paper"), robust):
+    for objective in (load_objective("paper").in_cell("ideal"), robust):
         stage = {name: stage_objective(objective, name, band="robust") for name in STAGES}
         assert stage["surrogate"] is objective and stage["validation"] is objective
         ends = objective.conditions if objective.conditions.trivial else band_ends(objective.conditions)
@@ -599,8 +599,8 @@ def test_each_stage_objective_is_derived_in_one_place():
         assert repr(stage_objective(objective, "validation", "reduced")) == repr(reduced_objective(objective))
         # a check under another band only after a nominal search, with that band's conditions
         assert (stage["band"] is None) == (not objective.conditions.trivial)
-    band = stage_objective(load_objective("paper"), "band", band="robust")
-    assert band.conditions == robust.conditions and band.protocol == load_objective("paper").protocol
+    band = stage_objective(load_objective("paper").in_cell("ideal"), "band", band="robust")
+    assert band.conditions == robust.conditions and band.protocol == load_objective("paper").in_cell("ideal").protocol
     assert stage_objective(band, "selection").conditions.noise_scales == (min(robust.conditions.noise_scales), max(robust.conditions.noise_scales))
     with pytest.raises(ValueError, match="no stage"):
         stage_objective(robust, "polishing")
@@ -685,7 +685,7 @@ def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, m
     monkeypatch.setattr(validate_module, "validate", validate)
     band_file = tmp_path / "band.toml"
     band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
-    part, objective = load_part("part_b"), _short(load_objective("paper"))
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     config = SearchConfig(sensors=(1,), global_evals=12, local_evals=4, random_starts=1, select_candidates=0, band=str(band_file))
     report = run(part, objective, config, 3, SearchFolder(tmp_path / "search"), jobs=1)
     assert len(calls) == 2 and report.validated and report.band is None and report.band_interrupted

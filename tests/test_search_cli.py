@@ -118,4 +118,4 @@ def test_every_budget_validates_on_the_full_protocol_and_reduced_is_still_there(
     # the paper's 7 sequences at their two end angles: 14 of the 77 scans
     from optipose.evaluate.protocol import perturbations
 
-    assert len(perturbations(reduced_objective(load_objective("paper")).protocol, 0)) == 14
+    assert len(perturbations(reduced_objective(load_objective("paper").in_cell("ideal")).protocol, 0)) == 14

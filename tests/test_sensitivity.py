@@ -27,7 +27,7 @@ def part_b():
 
 def _objective(translation=0.0, rotation=TURN, draws=1):
     """The paper's protocol cut to sequences R and P at their end angles (4 scans), with a bracket tolerance."""
-    base = load_objective("paper")
+    base = load_objective("paper").in_cell("ideal")
     protocol = replace(reduced_objective(base).protocol, sequences=("R", "P"))
     return replace(base, protocol=protocol, conditions=ConditionsConfig((1.0,), translation, rotation, draws))
 

@@ -24,7 +24,7 @@ TURNS = [(2, 0, 0), (-1.2, 0, 0), (0, 2, 0), (0, -1.2, 0), (0, 0, 2), (0, 0, -1.
 @pytest.fixture(scope="module")
 def part_b():
     part = load_part("part_b")
-    return part, load_objective("paper").registration, SurfaceReference(part.mesh.vertices, part.mesh.faces)
+    return part, load_objective("paper").in_cell("ideal").registration, SurfaceReference(part.mesh.vertices, part.mesh.faces)
 
 
 def _roll_errors_mdeg(part, cfg, reference, T, voxel: float, noise: bool) -> np.ndarray:
@@ -242,7 +242,7 @@ def test_prefetching_poses_on_threads_fills_the_cache_as_scoring_them_one_by_one
     from optipose.search.config import config_from_budget
     from optipose.search.problem import SurrogateProblem
 
-    part, objective, config = part_b[0], load_objective("paper"), config_from_budget("default", (1,))
+    part, objective, config = part_b[0], load_objective("paper").in_cell("ideal"), config_from_budget("default", (1,))
     points = qmc.Sobol(6, scramble=True, seed=3).random(24)
     threaded, plain = SurrogateProblem(part, objective, config), SurrogateProblem(part, objective, config)
     threaded.prefetch(points, threads=3)

@@ -108,7 +108,7 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
 def test_a_draw_of_fewer_scans_keeps_the_protocols_orientations_in_proportion():
     from optipose.evaluate.protocol import perturbations
 
-    full = perturbations(load_objective("paper").protocol, seed=3)
+    full = perturbations(load_objective("paper").in_cell("ideal").protocol, seed=3)
     part = full.sample(20, 11)
     assert len(part) == 20 and full.sample(0, 11) is full and full.sample(len(full), 11) is full
     rows = [int(np.flatnonzero((full.seeds == s))[0]) for s in part.seeds]  # each a scan of the protocol, once, in order

@@ -26,7 +26,7 @@ def search(
     part: Part = None,
     units: Units = "auto",
     sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
-    budget: Annotated[str, typer.Option(help="quick (a first look, not checked under the band), default (the search, then its answer checked under the band of a real cell) or thorough; every budget validates on the full protocol.")] = "default",
+    budget: Annotated[str, typer.Option(help="quick (a first look), default (the search in the objective's cell, the paper's by default, its verdict raced on draws of the cell; in the ideal cell then checked under the band too) or thorough.")] = "default",
     objective: Objective = "paper",
     cell: CellOption = None,
     seed: Seed = 0,

@@ -1,10 +1,9 @@
 """A verdict with confidence (issue #33): a found layout against the hand one on the same draws, with intervals.
 
 Both layouts are evaluated on the same draws (common random numbers: one seed gives both the same part
-instance, calibration, robot paths and scan noise, scan by scan; docs/cell.md). Per draw and layout, each
-axis's per-scan |error| is that of the subset the layout's :class:`Choice` uses for it (a failed
-registration as ``FAILED_ERROR``, an axis the choice does not measure as ``UNOBSERVABLE_PENALTY`` on every
-scan): a :class:`PairedDraw`. The statistic is the objective's (docs/method.md, "The score"): per axis the
+instance, calibration, robot paths and scan noise; docs/cell.md). A :class:`PairedDraw` holds, per layout,
+each axis's per-scan |error| of the subset its :class:`Choice` uses (a failed registration ``FAILED_ERROR``,
+an axis it does not measure ``UNOBSERVABLE_PENALTY``). The statistic is the objective's (docs/method.md, "The score"): per axis the
 median and 75th percentile over a draw's scans, averaged over draws (the expected error in the cell), and
 the score Σ weight · (median_weight · median + p75_weight · p75).
 
@@ -16,23 +15,21 @@ statistics are shrunk towards their mean until their spread is the cells' alone 
 interval's deviations from the estimate (in logs) are then scaled to the variance of a mean of D draws — the
 draws' spread over D, or the scans' own where that is larger — times Student's quantile over the normal
 one, on D − 1 degrees of freedom where the cells vary (the draws' spread exceeds the scans'), else on all
-the scans'. With one draw the interval is the scans' alone: the cell held fixed. Intervals are two-sided at
-``confidence``: of the ratio hand / found (above 1: found is better) of the score, of each axis's share of
-it and of each axis's median and p75. The decision (:data:`DECISIONS`):
+the scans' (one draw: the scans' alone). Intervals are two-sided at ``confidence``: of the ratio hand /
+found (above 1: found is better) of the score, of each axis's test (the hand layout's score over that
+score with the axis's share, weight · (median + p75), the found layout's: an axis is worse by more than the
+tolerance when found's error on it alone adds more than the tolerance to the hand layout's total;
+docs/method.md, "The verdict with confidence") and of each axis's median and p75. The decision:
 
-- KEEP: the score's interval lies below 1 (the hand layout is better), or some axis's interval lies below
-  1 / (1 + tolerance) (found is worse there by more than the tolerance);
-- BUY: the score's interval lies above 1 and no axis's reaches below 1 / (1 + tolerance);
-- TIE: the score's and every axis's intervals lie within [1 / (1 + tolerance), 1 + tolerance];
+- KEEP: the score's interval lies below 1 (hand is better), or some axis's test lies below 1 / (1 + tolerance);
+- BUY: the score's interval lies above 1 and no axis's test reaches below 1 / (1 + tolerance);
+- TIE: the score's and every axis's test's intervals lie within [1 / (1 + tolerance), 1 + tolerance];
 - UNDECIDED: none of these, with how many more draws would settle it (the interval's width ∝ 1/√draws).
 
-Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is one-sided at 97.5 %; the
-axes' shares (weight · (median + p75) per axis) carry the tolerance, their medians and p75s are reported.
-
-:func:`race` adds draws from a callable until the decision is not UNDECIDED or a budget ends, deciding only
-at a few :func:`looks`, each at a share of the error rate; :func:`race_many` does it for several k at once
-(one draw evaluates every found layout and the hand one). Everything is
-seeded: the same draws and :class:`Rules` give the same verdict.
+Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is one-sided at 97.5 %.
+:func:`race` adds draws until the decision is not UNDECIDED or a budget ends, deciding only at a few
+:func:`looks`, each at a share of the error rate; :func:`race_many` does it for several k at once (one draw
+evaluates every found layout and the hand one). The same draws and :class:`Rules` give the same verdict.
 """
 
 from __future__ import annotations
@@ -146,7 +143,8 @@ class AxisError:
 
 @dataclass(frozen=True)
 class AxisRatio:
-    """Hand / found on one axis: its share of the score, its median and its p75."""
+    """One axis: its test ``ratio`` (the hand layout's score over that score with this axis's share the
+    found layout's), and hand / found of its median and of its p75."""
 
     axis: str
     ratio: Interval
@@ -296,13 +294,16 @@ def _replicates(per_draw: list, rules: Rules) -> tuple[np.ndarray, np.ndarray]:
 
 def _quantities(stats: np.ndarray, statistic: StatisticConfig) -> np.ndarray:
     """(…, 24) logs of what the verdict reports, from (…, 2 quantiles, 2 layouts, 3 axes) in rad: hand / found
-    of the score, of each axis's share of it, of each median and p75 (10); found's median and p75 per axis,
-    hand's (12); found's and hand's score (2)."""
-    w = np.asarray(statistic.weights, float)
-    share = w * (statistic.median_weight * stats[..., 0, :, :] + statistic.p75_weight * stats[..., 1, :, :])  # (…, 2, 3)
-    log = np.log(np.maximum(np.concatenate([share.sum(axis=-1, keepdims=True), share, stats[..., 0, :, :], stats[..., 1, :, :]], axis=-1), 1e-300))
-    found, hand = log[..., 0, :], log[..., 1, :]  # (…, 10): score, shares, medians, p75s
-    return np.concatenate([hand - found, found[..., 4:], hand[..., 4:], found[..., :1], hand[..., :1]], axis=-1)
+    of the score, each axis's test (the hand layout's score over that score with the axis's share, weight ·
+    (median + p75), the found layout's), hand / found of each median and p75 (10); found's median and p75 per
+    axis, hand's (12); found's and hand's score (2)."""
+    share = np.asarray(statistic.weights, float) * (statistic.median_weight * stats[..., 0, :, :] + statistic.p75_weight * stats[..., 1, :, :])
+    score = share.sum(axis=-1, keepdims=True)  # (…, 2 layouts, 1)
+    swapped = score[..., 1, :] - share[..., 1, :] + share[..., 0, :]  # (…, 3)
+    log = np.log(np.maximum(np.concatenate([score, stats[..., 0, :, :], stats[..., 1, :, :]], axis=-1), 1e-300))
+    f, h = log[..., 0, :], log[..., 1, :]  # (…, 7): score, medians, p75s
+    tests = h[..., :1] - np.log(np.maximum(swapped, 1e-300))
+    return np.concatenate([h[..., :1] - f[..., :1], tests, h[..., 1:] - f[..., 1:], f[..., 1:], h[..., 1:], f[..., :1], h[..., :1]], axis=-1)
 
 
 def _widening(per_draw: list, boot: np.ndarray, rules: Rules, n_scans: list[int]) -> np.ndarray:

@@ -15,8 +15,8 @@ from optipose.report.figures import verdict_intervals
 
 __all__ = ["confident_blocks", "confident_css", "interval_cell", "mount_line", "IDEAL_CELL"]
 
-IDEAL_CELL = ("in the ideal cell (the CAD part, an exact robot and calibration): run with --cell ur10e, or a "
-              "cell file of yours, for the errors of a real cell before buying")  # fmt: skip
+IDEAL_CELL = ("in the ideal cell (the CAD part, an exact robot and calibration): run without --cell ideal, or "
+              "with a cell file of yours, for the errors of a real cell before buying")  # fmt: skip
 
 _CSS = {BUY: "verdict good", KEEP: "verdict bad", TIE: "verdict info"}
 

@@ -135,8 +135,9 @@ BAND_BUDGETS: dict[str, dict] = {
 # The verdict's draws after the validation's evaluate a share of the protocol's scans each: in a real cell the
 # spread between cell instances rules the intervals, so more draws of fewer scans decide sooner.
 CELL_BUDGETS: dict[str, dict] = {
-    "quick": dict(verdict_draws=4, verdict_scans=14, verdict_time=30.0),
-    "default": dict(max_time=150.0, select_time=120.0, polish_evals=0, confirm_candidates=0, band="", verdict_scans=20, verdict_time=150.0),
+    "quick": dict(max_time=12.0, screen_samples=512, validation="reduced", verdict_draws=6, verdict_time=8.0),
+    "default": dict(max_time=75.0, screen_samples=1024, select_time=45.0, polish_evals=0, confirm_candidates=0, band="", verdict_scans=20,
+                    verdict_time=40.0),
     "thorough": dict(band="", verdict_scans=20),
 }
 

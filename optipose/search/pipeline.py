@@ -9,7 +9,7 @@
    band's ends (:func:`optipose.search.objectives.search_objective`) and compare with the hand layout condition by condition;
 4. validation on a noise seed the search never saw (:mod:`optipose.search.validate`), under every
    condition of the band: the numbers reported. A search whose objective has no band then checks the
-   found layouts and the hand one under the band of ``SearchConfig.band`` (the ``default`` and ``thorough`` budgets:
+   found layouts and the hand one under the band of ``SearchConfig.band`` (the ``default`` and ``thorough`` budgets in the ideal cell:
    ``objectives/robust.toml``'s noise levels and bracket tolerance), on the same held-out seed: a layout
    that wins only in the simulation's ideal cell is not a layout to buy. Every budget validates on the objective's protocol
    (``[search] validation = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The

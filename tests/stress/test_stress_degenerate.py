@@ -21,7 +21,7 @@ ALONG_X = trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0])
 
 
 def _short():
-    objective = load_objective("paper")
+    objective = load_objective("paper").in_cell("ideal")
     return replace(objective, protocol=replace(reduced_objective(objective).protocol, sequences=("R", "P", "Y")))
 
 

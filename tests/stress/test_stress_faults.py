@@ -160,7 +160,7 @@ def search_config(tmp_path_factory) -> dict:
     from optipose.search.config import config_from_budget
 
     folder = tmp_path_factory.mktemp("search_config")
-    SearchFolder(folder).start(load_part("part_b"), load_objective("paper"), config_from_budget("quick", (1,)), "quick", 0, 1)
+    SearchFolder(folder).start(load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1)
     return tomllib.loads((folder / "config.toml").read_text())
 
 

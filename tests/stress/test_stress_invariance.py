@@ -30,7 +30,7 @@ def part_b():
 
 
 def _short(sequences):
-    objective = load_objective("paper")
+    objective = load_objective("paper").in_cell("ideal")
     return replace(objective, protocol=replace(reduced_objective(objective).protocol, sequences=sequences))
 
 

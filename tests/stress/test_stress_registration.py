@@ -26,7 +26,7 @@ def part_b():
 
 def _at(offset_deg: float, max_iterations: int = 100):
     """The paper objective at ±offset_deg only (R, P, Y, RPY: 8 scans), ICP capped at max_iterations."""
-    objective = load_objective("paper")
+    objective = load_objective("paper").in_cell("ideal")
     start, stop = -np.deg2rad(offset_deg), np.deg2rad(offset_deg)
     protocol = replace(objective.protocol, sequences=("R", "P", "Y", "RPY"), start=start, stop=stop, step=stop - start)
     return replace(objective, protocol=protocol, registration=replace(objective.registration, max_iterations=max_iterations))
@@ -75,7 +75,7 @@ def test_registrations_cut_short_are_counted_not_dropped(part_b):
 @pytest.fixture(scope="module")
 def s1_cloud(part_b):
     """Part B turned 2° in roll, seen by the hand layout's S1, down-sampled as the evaluator does."""
-    cfg = load_objective("paper").registration
+    cfg = load_objective("paper").in_cell("ideal").registration
     scan = part_scanner(part_b).scan(part_b.layouts["hand"].poses[0], part_b.motion, PartPose(np.deg2rad([2, 0, 0]), part_b.rotation_centre))
     return voxel_down(scan.points, cfg.voxel_size), cfg
 
@@ -145,6 +145,6 @@ def test_max_rmse_in_an_objective_file():
     from optipose.evaluate.objective import objective_from_table
 
     assert objective_from_table({"registration": {"max_rmse_mm": 0.1}}).registration.max_rmse == pytest.approx(1e-4)
-    assert load_objective("paper").registration.max_rmse == 0.0  # off unless set
+    assert load_objective("paper").in_cell("ideal").registration.max_rmse == 0.0  # off unless set
     with pytest.raises(ConfigError, match="max_rmse"):
         objective_from_table({"registration": {"max_rmse_mm": -1}})

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.transforms import make_T
 
@@ -22,10 +23,10 @@ def test_the_paper_protocol_on_a_cell_far_from_O():
     # 1.3e-4° (the size of what a nanometre does to them near O too), S2 alone's yaw 0.18° (its flat valley,
     # see test_stress_invariance); the median change over all scans 1e-6° or less but S2's yaw
     part = load_part("part_b")
-    with Evaluator(part, "paper", seed=0) as evaluator:
+    with Evaluator(part, load_objective("paper").in_cell("ideal"), seed=0) as evaluator:
         near = evaluator(part.layouts["hand"])
     far_part = _moved(part, make_T(t=[10.0, -10.0, 10.0]))
-    with Evaluator(far_part, "paper", seed=0) as evaluator:
+    with Evaluator(far_part, load_objective("paper").in_cell("ideal"), seed=0) as evaluator:
         far = evaluator(far_part.layouts["hand"])
     assert near.per_scan["ok"].equals(far.per_scan["ok"])
     subsets = near.per_scan["subset"].to_numpy()

@@ -16,7 +16,7 @@ from dataclasses import replace
 from meshes import centroid_split, midpoint_split
 
 from optipose.evaluate.evaluator import evaluate
-from optipose.evaluate.objective import objective_from_table
+from optipose.evaluate.objective import load_objective, objective_from_table
 from optipose.model.part import load_part
 
 TOLERANCE = 0.01  # relative, per statistic of Table 1
@@ -53,6 +53,6 @@ def test_part_b_split_at_its_centroids_gives_the_same_table_on_a_short_protocol(
 def test_a_retessellated_part_gives_the_same_table(name, split):
     """The paper's whole protocol (77 orientations) on the shipped mesh and on the re-tessellated one."""
     part = load_part(name)
-    shipped = _evaluate(part, part.mesh, "paper", 2)
-    other = _evaluate(part, split(part.mesh), "paper", 2)
+    shipped = _evaluate(part, part.mesh, load_objective("paper").in_cell("ideal"), 2)
+    other = _evaluate(part, split(part.mesh), load_objective("paper").in_cell("ideal"), 2)
     _same_table(shipped, other)
