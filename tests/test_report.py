@@ -131,10 +131,16 @@ def test_conventional_placement_clears_the_part_and_sees_it(spec, tmp_path):
 
 # --- what the report says ------------------------------------------------------------------------------
 def test_the_report_says_the_verdicts_of_the_result(results):
+    from optipose.evaluate.confidence import split
+
     result = load_result(results["search"])
     text = (results["search"] / "report.html").read_text()
     md = (results["search"] / "report.md").read_text()
-    for line in result.verdict_lines():
+    by_k, _ = split(result.confident)
+    assert by_k  # a search with a baseline races its verdict on draws: its lines, not the first draw's hedges, decide
+    for line in [v.line() for v in by_k.values()]:
+        assert html.escape(line) in text and line in md
+    for line in result.verdict_lines():  # checked under a band, the first draw's lines stay beside it
         assert html.escape(line) in text and line in md
     assert text.index("Verdict") < text.index("Table 1") < text.index("Under the band of a real cell") < text.index("Where the sensors go")
     for v in result.band_verdicts().values():  # each k's verdict under the band, and its table per level

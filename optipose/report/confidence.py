@@ -31,7 +31,8 @@ def interval_cell(interval, scale: float = 1e3, digits: int = 3) -> str:
     significant ones)."""
     if not_measured(interval):
         return "not measured"
-    e, lo, hi = (f"{scale * x:.{digits}g}" for x in (interval.estimate, interval.low, interval.high))
+    # rounded to ``digits`` significant ones but written out (110, not 1.1e+02: a column of mdeg reads at a glance)
+    e, lo, hi = (f"{float(f'{scale * x:.{digits}g}'):g}" for x in (interval.estimate, interval.low, interval.high))
     return f"{e} [{lo}, {hi}]" if digits > 2 else f"{e} [{lo}-{hi}]"
 
 
