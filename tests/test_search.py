@@ -703,3 +703,24 @@ def test_a_search_with_nothing_to_compare_with_misses_no_check_under_the_band():
     assert not SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, {})).band_pending
     assert SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, dict(found))).band_pending
     assert not SearchResult("f", "p", 0, "default", RunConfig(), validation=Validation("full", 1, found, dict(found))).band_pending
+
+
+@pytest.mark.parametrize("algorithm", ["GN_DIRECT_L", "LN_BOBYQA", "GN_CRS2_LM"])
+def test_a_stop_raised_in_the_objective_comes_out_of_nlopt_as_itself(algorithm):
+    """DIRECT-L called the objective again with a raised Share still set, and the search died of a
+    SystemError at its next call into numpy (part A's default search in the cell): the driver keeps the
+    exception, stops NLopt and raises it after."""
+    from optipose.search.driver import optimize
+    from optipose.search.study import Share
+
+    calls = []
+
+    def objective(u, grad=None):
+        calls.append(np.concatenate([u, u]))  # a call into numpy, as the sub-problem makes
+        if len(calls) == 7:
+            raise Share("its share of the time used up")
+        return float(np.sum((u - 0.3) ** 2))
+
+    with pytest.raises(Share, match="share"):
+        optimize(objective, algorithm, np.full(4, 0.5), 200, seed=1)
+    assert len(calls) == 7  # not called again once it raised

@@ -17,6 +17,7 @@ from optipose.search.study import Stop
 __all__ = ["optimize", "local_best", "apart", "SubProblem"]
 
 log = logging.getLogger(__name__)
+_HUGE = 1e300  # what NLopt is told after the objective raised, until it stops
 
 
 def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int | None, local: str | None = None,
@@ -33,7 +34,22 @@ def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int | None,
     opt = nlopt.opt(algorithm_code(algorithm), n)
     opt.set_lower_bounds(np.zeros(n))
     opt.set_upper_bounds(np.ones(n))
-    opt.set_min_objective(fn)
+    pending: list[BaseException] = []
+
+    def guarded(u, grad) -> float:
+        # an exception raised into NLopt does not stop every algorithm at once: DIRECT-L called the objective
+        # again with it still set, and the next call into numpy failed as a SystemError. Keep it, ask NLopt
+        # to stop, and raise it once optimize returns
+        if pending:
+            return _HUGE
+        try:
+            return fn(u, grad)
+        except BaseException as exc:  # noqa: BLE001 - re-raised below, whatever it is (Ctrl-C too)
+            pending.append(exc)
+            opt.force_stop()
+            return _HUGE
+
+    opt.set_min_objective(guarded)
     opt.set_maxeval(int(maxeval))
     if algorithm.startswith(("LN_",)):
         opt.set_initial_step(np.full(n, step))
@@ -58,7 +74,10 @@ def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int | None,
         if isinstance(exc, Stop):
             raise
     except RuntimeError as exc:  # NLopt's generic failure: keep what was found
-        log.warning("NLopt %s stopped: %s", algorithm, exc)
+        if not pending:
+            log.warning("NLopt %s stopped: %s", algorithm, exc)
+    if pending:
+        raise pending[0]
 
 
 def local_best(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int, history: list | None = None):
