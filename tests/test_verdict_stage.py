@@ -73,21 +73,26 @@ def test_racing_several_k_stops_each_at_its_own_look_and_ends_when_all_are_decid
     rng = np.random.default_rng(3)
     calls = []
 
-    def next_draws(i):
-        calls.append(i)
+    def next_draws(i, keys):
+        calls.append((i, keys))
         return {1: _pairs(rng, i, 3.0), 2: PairedDraw(i, *(2 * [_pairs(rng, i, 1.0).hand]))}
 
     verdicts = race_many(next_draws, FAST, min_draws=2, max_draws=6, names={1: dict(k=1), 2: dict(k=2)})
     assert verdicts[1].decision == BUY and verdicts[1].n_draws == 2  # clear at the first look
     assert verdicts[2].decision == TIE and verdicts[2].n_draws == 2  # an exact copy: a tie as soon as it looks
-    assert calls == [0, 1]
+    assert calls == [(0, None), (1, frozenset({1, 2}))]  # before any draw every key; then the undecided ones
 
-    def undecided(i):
-        return {1: _pairs(rng, i, 3.0), 2: _pairs(rng, i, 1.0)}
+    asked = []
+
+    def undecided(i, keys):
+        asked.append(keys)
+        return {key: _pairs(rng, i, 3.0 if key == 1 else 1.0) for key in (keys or (1, 2))}
 
     verdicts = race_many(undecided, replace(FAST, tolerance=0.0), min_draws=2, max_draws=6)
     assert verdicts[1].decision == BUY and verdicts[1].n_draws < 6
     assert verdicts[2].decision == UNDECIDED and verdicts[2].n_draws == 6  # no tie within a zero tolerance: to the budget
+    # once k=1 is bought its layouts are not asked for again, and the race goes on for k=2 alone
+    assert asked[verdicts[1].n_draws:] == [frozenset({2})] * (6 - verdicts[1].n_draws)
 
 
 def test_the_verdict_table_reads_back_as_written(tmp_path):

@@ -407,23 +407,22 @@ def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_
     """Add draws (``next_draw(i)``: the paired draw at position i, the ``draws`` given first) until the
     decision at one of the :func:`looks` is not UNDECIDED, or ``max_draws`` are in, or another draw would end
     past ``seconds`` (at the mean time a draw took so far; then a last look at the draws in). Each look's
-    intervals are at confidence 1 − (1 − ``rules.confidence``) / (looks + 1), which the verdict carries.
-    ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` as :func:`compare_draws` takes them. The
-    verdict carries the seconds a draw took, so an UNDECIDED one says how many minutes more would take."""
-    verdicts = race_many(lambda i: {0: next_draw(i)}, rules, min_draws=min_draws, max_draws=max_draws, seconds=seconds,
+    intervals are at confidence 1 − (1 − ``rules.confidence``) / (looks + 1), which the verdict carries, with the
+    seconds a draw took. ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` for :func:`compare_draws`."""
+    verdicts = race_many(lambda i, keys: {0: next_draw(i)}, rules, min_draws=min_draws, max_draws=max_draws, seconds=seconds,
                          clock=clock, draws={0: list(draws)} if draws else None, names={0: names})  # fmt: skip
     return verdicts[0]
 
 
-def race_many(next_draws: Callable[[int], dict], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
+def race_many(next_draws: Callable[[int, frozenset], dict], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
               seconds: float = math.inf, clock: Callable[[], float] = time.monotonic, draws: dict | None = None,
               names: dict | None = None, passengers: frozenset = frozenset()) -> dict:  # fmt: skip
-    """:func:`race` for several comparisons that share their draws (one draw evaluates every found layout and
-    the hand one): ``next_draws(i)`` gives key → the paired draw at position i (keys: e.g. k), ``draws`` the
-    draws in hand per key, ``names`` per key what :func:`compare_draws` takes. Draws are added until every
-    key's decision is not UNDECIDED (a decided key keeps the verdict of the look that decided it), or the
-    draws or the ``seconds`` end. ``passengers``: keys that ride along without holding the race, compared at
-    the look it ends on. Returns key → :class:`ConfidentVerdict`."""
+    """:func:`race` for comparisons that share their draws: ``next_draws(i, keys)`` gives key → the paired draw at
+    position i for at least the ``keys`` not yet decided (None before any draw: every key; a decided key's
+    layouts need not be evaluated again), ``draws`` the draws in hand per key, ``names`` per key what
+    :func:`compare_draws` takes. Draws are added until every key is decided (keeping the verdict of the look
+    that decided it), or the draws or the ``seconds`` end. ``passengers``: keys that ride along without
+    holding the race, compared at the look it ends on. Returns key → :class:`ConfidentVerdict`."""
     schedule = looks(min_draws, max_draws)
     each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) / (len(schedule) + 1))
     taken = {key: list(v) for key, v in (draws or {}).items()}
@@ -431,7 +430,7 @@ def race_many(next_draws: Callable[[int], dict], rules: Rules = Rules(), *, min_
     done: dict = {}
     start, added = clock(), 0
     while True:
-        n = min((len(v) for v in taken.values()), default=0)
+        n = min((len(taken[key]) for key in (taken.keys() - done.keys() - passengers) or taken), default=0)
         elapsed = clock() - start
         per_draw = elapsed / added if added else math.nan
         out_of_time = bool(added) and elapsed + per_draw > seconds
@@ -445,6 +444,7 @@ def race_many(next_draws: Callable[[int], dict], rules: Rules = Rules(), *, min_
                 riders = {key: compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
                           for key in passengers & taken.keys()}  # fmt: skip
                 return {key: (done | riders)[key] for key in taken}
-        for key, pair in next_draws(n).items():
+        pending = taken.keys() - done.keys() - passengers  # after this look's decisions
+        for key, pair in next_draws(n, frozenset(pending) if taken else None).items():
             taken.setdefault(key, []).append(pair)
         added += 1

@@ -74,17 +74,18 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
 
     def pairs(results: dict[str, EvaluationResult]) -> dict:
         return {key: paired_draw(results[big[f]], validation.found[f], results["hand"], validation.hand[h])
-                for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items()}  # fmt: skip
+                for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items() if big[f] in results}  # fmt: skip
 
     draws = {k: [p] for k, p in pairs(first).items()}
     if config.verdict_draws <= 1:
-        return race_many(lambda i: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer))
+        return race_many(lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer))
     executor = make_executor(jobs)
 
-    def next_draws(i: int) -> dict:
+    def next_draws(i: int, keys) -> dict:
         t0 = time.perf_counter()
+        wanted = [g for g in groups if keys is None or any(k in keys for k in g)]  # a decided k's layout is not evaluated again
         with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans) as evaluator:
-            results = {"hand": evaluator(hand)} | {f"found_k{max(g)}": evaluator(layouts[max(g)]) for g in groups}
+            results = {"hand": evaluator(hand)} | {f"found_k{max(g)}": evaluator(layouts[max(g)]) for g in wanted}
         for name, result in results.items():
             done(i, name, result)
         log.info("verdict draw %d in %.1f s", i, time.perf_counter() - t0)
