@@ -133,7 +133,9 @@ BAND_BUDGETS: dict[str, dict] = {
 # confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, the surrogate's and
 # the selection's clocks shorter; no check under the band, whose noise and brackets the cell's sources stand for.
 # The verdict's draws after the validation's evaluate a share of the protocol's scans each: in a real cell the
-# spread between cell instances rules the intervals, so more draws of fewer scans decide sooner.
+# spread between cell instances rules the intervals, so more draws of fewer scans decide sooner. The clocks are
+# set so that `default` answers in about three minutes on two cores and `quick`, validated on the reduced
+# protocol's 14 scans, in about 30 s (benchmarks/README.md, "Whole commands").
 CELL_BUDGETS: dict[str, dict] = {
     "quick": dict(max_time=12.0, screen_samples=512, validation="reduced", verdict_draws=6, verdict_time=8.0),
     "default": dict(max_time=75.0, screen_samples=1024, select_time=45.0, polish_evals=0, confirm_candidates=0, band="", verdict_scans=20,
