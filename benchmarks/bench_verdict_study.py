@@ -116,7 +116,9 @@ def _folders(outs: str, wanted: set) -> dict[str, Path]:
 
 
 def _mdeg(interval) -> str:
-    return f"{1e3 * interval.estimate:.3g} [{1e3 * interval.low:.3g}, {1e3 * interval.high:.3g}]"
+    from optipose.report.confidence import interval_cell
+
+    return interval_cell(interval)  # "not measured" for an axis a layout does not see
 
 
 def main() -> None:
