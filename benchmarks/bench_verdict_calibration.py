@@ -19,7 +19,7 @@ trials then compares, per k, the hand layout's k-sensor choice (that of the firs
 Trials share the pool's evaluations, so they are not independent draws of the cell. Prints the count of
 trials per decision, case, number of draws and k, and the median point estimate of hand / found in sum.
 
-    .venv/bin/python benchmarks/bench_verdict_calibration.py [--seeds 1-20] [--trials 40] [--draws 1,4,10] [--race 10] [--cell ur10e]
+    .venv/bin/python benchmarks/bench_verdict_calibration.py [--seeds 1-20] [--trials 40] [--draws 1,4,10] [--race 10] [--cell ur10e] [--scans 5]
 """
 
 from __future__ import annotations
@@ -96,13 +96,15 @@ def main() -> None:
     ap.add_argument("--replicates", type=int, default=1000)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/optipose_verdict_cache"))
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--scans", type=int, default=0, help="each draw's scans: this many of the protocol's, drawn per trial and draw (0: all)")
     args = ap.parse_args()
     seeds = _seeds(args.seeds)
     t0 = time.perf_counter()
     results = hand_results(args.part, args.cell, args.objective, seeds, args.cache, args.jobs)
     twins = hand_results(args.part, args.cell, args.objective, seeds, args.cache, args.jobs, twin=True)
     print(f"bench_verdict_calibration: {args.part} hand layout, cell {args.cell}, objective {args.objective}, "
-          f"{len(seeds)} seeds {seeds[0]}..{seeds[-1]} and their twins ({time.perf_counter() - t0:.0f} s to evaluate or read)")  # fmt: skip
+          f"{len(seeds)} seeds {seeds[0]}..{seeds[-1]} and their twins ({time.perf_counter() - t0:.0f} s to evaluate or read)"
+          + (f"; each draw {args.scans} of the scans" if args.scans else ""))  # fmt: skip
     layout = results[seeds[0]].layout
     sources = {"same draws": "same", "own scans": "twin", "other cells": "other"}
     cases = [(f"{what}, {where}", how, better) for what, better in (("copy", 1.0), (f"{args.better:g}x", args.better))
@@ -125,7 +127,11 @@ def main() -> None:
                     found = twin if how == "twin" else errors
 
                     def draw(i: int) -> PairedDraw:
-                        return PairedDraw(hand[i], found[other[i]] / better, errors[hand[i]])
+                        f, h = found[other[i]] / better, errors[hand[i]]
+                        if args.scans:  # a draw of a share of the scans, as a search's verdict draws after the first
+                            rows = np.random.default_rng([trial, i, 0x5CA]).choice(len(h), args.scans, replace=False)
+                            f, h = f[rows], h[rows]
+                        return PairedDraw(hand[i], f, h)
 
                     rules = Rules(seed=trial, replicates=args.replicates)
                     names = dict(k=k, found_name=choice.name, hand_name=choice.name)
