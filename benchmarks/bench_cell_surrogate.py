@@ -71,13 +71,16 @@ def main() -> None:
 
 
 def _layouts(problem, part, n: int, seed: int) -> list[np.ndarray]:
-    """``n`` random feasible three-sensor layouts (18,), then the hand layout."""
+    """``n`` random feasible three-sensor layouts (18,), then the hand layout (the conventional placement for a
+    part without one)."""
+    from optipose.model.baseline import baseline
+
     rng, out = np.random.default_rng(seed), []
     while len(out) < n:
         u = rng.random(6 * SENSORS)
         if problem.score(u).feasible:
             out.append(u)
-    hand = part.layouts["hand"].poses[:SENSORS]
+    hand = baseline(part).poses[:SENSORS]
     return out + [np.concatenate([problem.space.from_pose(T) for T in hand])]
 
 
