@@ -158,10 +158,11 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         blocks.append(Paragraph("the search stopped before its validation: no verdict; the layouts below are its best so far", "verdict mixed"))
     else:
         protocol = "the full protocol" if validation.protocol == "full" else "the REDUCED protocol (14 scans; --budget default for the full one)"
-        verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, result.band_verdicts(), result.unchecked)
+        band = result.band_verdicts()
+        verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, band, result.unchecked)
         if result.confident:  # the verdict on draws decides; the first draw's own lines only where the band's check follows them
             verdict = verdict[:1] + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.hand) + (
-                [Heading("The validation draw alone, statistic by statistic")] + verdict[1:] if result.band_verdicts() else [])
+                [Heading("The validation draw alone, statistic by statistic")] + verdict[1:] if band else [])
         blocks += verdict
         blocks.append(Paragraph(f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "
                                 f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
