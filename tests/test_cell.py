@@ -172,6 +172,19 @@ def test_a_form_deviation_lies_in_its_wavelength_band(part_b_arrays, band):
     assert np.mean(ratios) == pytest.approx(1.0, rel=0.10)
 
 
+def test_the_form_grid_is_the_field_at_its_nodes(part_b_arrays):
+    """The grid the scans' kernel interpolates (each wave a product over the axes) holds at its nodes the
+    sum of cosines :meth:`AsMade.form_exact` gives, whatever the block the product is taken in."""
+    _, v, f, plane = part_b_arrays
+    made = AsMade(Process(form_rms=30e-6, form_wavelengths=(0.004, 0.03)), v, f, plane, 5)
+    grid, first, step = made.form_grid()
+    axes = [first[j] + step[j] * np.arange(grid.shape[j]) for j in range(3)]
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    pick = np.random.default_rng(2).choice(len(nodes), 20000, replace=False)
+    assert np.abs(grid.reshape(-1)[pick] - made.form_exact(nodes[pick])).max() < 1e-9 * 30e-6
+    assert step.max() <= 0.004 / 10 + 1e-12 and grid.std() == pytest.approx(30e-6, rel=0.25)
+
+
 @pytest.fixture(scope="module")
 def box_arrays():
     """A 40 x 30 x 20 mm box: six plane faces of two triangles each."""
