@@ -226,6 +226,18 @@ def test_one_and_two_jobs_give_identical_results(block, block_result):
     pd.testing.assert_frame_equal(parallel.points, block_result.points)
 
 
+def test_an_evaluation_of_some_subsets_gives_their_rows_of_the_whole_one(block, block_result):
+    """A verdict's draw registers only the subsets its choices use: the same rows, bit for bit, their index
+    among every subset kept, and the table chooses among them alone."""
+    with Evaluator(block, _objective(("R", "P", "Y"), 1.0, 1.0), seed=3) as ev:
+        some = ev(block.layouts["hand"], subsets=[(0, 2), (1,)])
+    whole = block_result.per_scan
+    pd.testing.assert_frame_equal(some.per_scan, whole[whole["subset"].isin(["S2", "S1S3"])].reset_index(drop=True))
+    assert sorted(some.per_scan["subset_index"].unique()) == [1, 4]
+    used = {a.name for c in some.table for a in c.axes if a.observable}
+    assert used <= {"S2", "S1S3"} and [c.k for c in some.table] == [1, 2, 3]
+
+
 def test_failed_registrations_are_counted_not_averaged(block):
     obj = _objective(("R",), 1.0, 1.0, max_iterations=1)
     with Evaluator(block, obj, seed=0) as ev:

@@ -118,12 +118,13 @@ def stats_by_key(stats: pd.DataFrame) -> dict:
 def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: StatisticConfig, n_scans: int) -> Choice:
     """The choice of exactly these ``sensors`` (indices): each axis takes its best eligible subset of them.
 
-    by_key : :func:`stats_by_key` of the layout's statistics; n_scans : scans per subset in the protocol.
+    by_key : :func:`stats_by_key` of the layout's statistics (an evaluation of some subsets only: among
+    those); n_scans : scans per subset in the protocol.
     """
     subsets = [s for k in range(1, len(sensors) + 1) for s in combinations(sensors, k)]
     axes, score = [], 0.0
     for axis, weight in zip(AXES, cfg.weights):
-        rows = [(s, by_key[(subset_name(s, names), axis)]) for s in subsets]
+        rows = [(s, by_key[(subset_name(s, names), axis)]) for s in subsets if (subset_name(s, names), axis) in by_key]  # an evaluation of some subsets
         eligible = [(s, r) for s, r in rows if _eligible(r, n_scans)]
         if not eligible:
             seen = any(not r.unobservable for _, r in rows)  # observable, but its registrations failed too often

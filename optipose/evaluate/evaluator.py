@@ -170,20 +170,23 @@ class Evaluator:
         p = self.perturbations
         return [(i, p.rpy[i], p.offset[i], int(p.seeds[i]), str(p.label[i])) for i in range(len(p))]
 
-    def __call__(self, layout: Layout | list[np.ndarray], condition: Condition | None = None) -> EvaluationResult:
+    def __call__(self, layout: Layout | list[np.ndarray], condition: Condition | None = None, subsets=None) -> EvaluationResult:
         """Evaluate a layout (or a list of 4×4 ``T_O_S``, named S1, S2, …), under ``condition`` when given
-        (default: the evaluator's); the workers keep their scanners and reference across conditions."""
-        return self.under(layout, [condition or self.setup.condition])[0]
+        (default: the evaluator's); the workers keep their scanners and reference across conditions.
+        ``subsets``: register only these sensor subsets (tuples of indices; default every one): the result's
+        table then chooses among them alone (a verdict's draw, which needs only the subsets its choices use)."""
+        return self.under(layout, [condition or self.setup.condition], subsets)[0]
 
-    def under(self, layout: Layout | list[np.ndarray], conditions: list[Condition]) -> list[EvaluationResult]:
+    def under(self, layout: Layout | list[np.ndarray], conditions: list[Condition], subsets=None) -> list[EvaluationResult]:
         """One evaluation of ``layout`` per condition, in their order. Conditions that differ only in their
         noise scale (one bracket draw at several noise levels) are scanned together: each orientation is
         cast once for all of them (:func:`optipose.evaluate.worker.run_levels`), and each result is the one
         ``self(layout, condition)`` gives."""
         layout = _as_layout(layout)
-        return [self.result(layout, [raw]) for raw in self.raw(layout, conditions)]
+        return [self.result(layout, [raw]) for raw in self.raw(layout, conditions, subsets=subsets)]
 
-    def raw(self, layout: Layout | list[np.ndarray], conditions: list[Condition], share: tuple[int, int] = (0, 1)) -> list[tuple]:
+    def raw(self, layout: Layout | list[np.ndarray], conditions: list[Condition], share: tuple[int, int] = (0, 1),
+            subsets=None) -> list[tuple]:  # fmt: skip
         """What :meth:`under` makes its results of, per condition in their order: the workers' outputs and
         the wall time (s), of the orientations ``share[0]``, ``share[0] + share[1]``, … only. The shares of
         several calls (other processes') make one result together (:meth:`result`), the one ``under`` gives:
@@ -196,7 +199,7 @@ class Evaluator:
             t0 = time.perf_counter()
             levels = tuple(dict.fromkeys(c.noise_scale for c in group))
             setup = replace(self.setup, condition=group[0])
-            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels), _chunks(tasks, self.jobs))
+            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels, subsets=subsets), _chunks(tasks, self.jobs))
             wall = (time.perf_counter() - t0) / len(levels)
             for n, level in enumerate(levels):
                 out[replace(group[0], noise_scale=level)] = ([o[n] for o in outputs], wall)

@@ -183,7 +183,7 @@ class _Worker:
         cell_zeroed = self.cell is not None and self.setup.cell.cell.calibration.zeroed  # the cell's procedure zeroes it
         if not cell_zeroed and (condition.draw is None or not condition.zeroed):
             return [np.eye(4)] * len(subsets)
-        layout = (np.asarray(poses).tobytes(), tuple(map(str, models)))
+        layout = (np.asarray(poses).tobytes(), tuple(map(str, models)), tuple(subsets))
         if any(r is not self.reference for r in references):  # nominal-scan references: each condition its own
             layout = (*layout, condition)
         key = (*layout, replace(condition, noise_scale=1.0))  # noise-free scans: the noise level does not matter
@@ -212,7 +212,7 @@ class _Worker:
         """The reference of each subset: the part's, or the nominal scan of the subset's sensors."""
         if self.setup.registration.reference != "nominal-scan":
             return [self.reference] * len(subsets)
-        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), self.condition)  # taught with the cell's own brackets
+        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), tuple(subsets), self.condition)  # taught with the cell's own brackets
         if key not in self._nominal:
             self._nominal[key] = self._nominal_references(models, poses, subsets)
         return self._nominal[key]
@@ -249,16 +249,19 @@ def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[l
     return run_levels(setup, layout, tasks, (setup.condition.noise_scale,))[0]
 
 
-def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...]) -> list[tuple]:
+def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...], subsets=None) -> list[tuple]:
     """:func:`run_chunk` under ``setup.condition`` at each noise scale of ``levels`` (its bracket draw, its
     noise scale replaced): each orientation is cast once for all of them. One (rows, point rows, seconds)
-    per level; the casting's seconds are shared out equally."""
+    per level; the casting's seconds are shared out equally. ``subsets``: the sensor subsets to register
+    (index tuples; default every one), each row keeping its index among them all."""
     worker = _STATE.get(setup.token)
     if worker is None:
         _STATE.clear()  # one evaluator's state per process at a time
         worker = _STATE[setup.token] = _Worker(setup)
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
-    subsets = all_subsets(len(poses))
+    every = all_subsets(len(poses))
+    subsets = every if subsets is None else sorted(set(map(tuple, subsets)), key=every.index)
+    numbers = [every.index(s) for s in subsets]
     conditions = [replace(setup.condition, noise_scale=level) for level in levels]
     cells = []  # per level: its references and zeros
     for condition in conditions:
@@ -274,7 +277,8 @@ def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: t
         for condition, level_scans, (references, zeros), (rows, point_rows, timing) in zip(conditions, scans, cells, outputs):
             t1 = time.perf_counter()
             worker.condition = condition
-            rows += _register_subsets(worker, setup, level_scans, seed, subsets, references, zeros, names, i, rpy, offset, label, point_rows)
+            rows += _register_subsets(worker, setup, level_scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label,
+                                      point_rows)  # fmt: skip
             timing["scan"] += cast
             timing["register"] += time.perf_counter() - t1
     return outputs
@@ -302,7 +306,7 @@ def _register(worker, clouds, subset, reference, initial=None, start=None):
     return register(source, reference, worker.setup.registration, matches, start), source
 
 
-def _register_subsets(worker, setup, scans, seed, subsets, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
+def _register_subsets(worker, setup, scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
     cfg = setup.registration
     clouds = _clouds(cfg, scans, seed)
     for j, (scan, cloud) in enumerate(zip(scans, clouds)):
@@ -315,7 +319,7 @@ def _register_subsets(worker, setup, scans, seed, subsets, references, zeros, na
     moments = [_moments(c) for c in clouds]
     T_O_P = part_motion(rpy, setup.centre, offset)
     rows = []
-    for s_index, (subset, reference, zero) in enumerate(zip(subsets, references, zeros)):
+    for s_index, subset, reference, zero in zip(numbers, subsets, references, zeros):
         start = _start(own, subset) if shared and len(subset) > 1 and cfg.subset_start == "combined" else None
         reg, source = _register(worker, clouds, subset, reference, initial, start)
         if shared and len(subset) == 1 and reg.ok and reg.matched is not None:

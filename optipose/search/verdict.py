@@ -81,11 +81,16 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
         return race_many(lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer))
     executor = make_executor(jobs)
 
+    # a draw registers only the subsets the choices use (of the 2^n - 1 a layout has)
+    used = {"hand": _used(validation.hand[h] for _, h in ({k: (k, k) for k in ks} | fewer).values())}
+    used |= {f"found_k{max(g)}": _used(validation.found[k] for k in g if k in ks) for g in groups}
+
     def next_draws(i: int, keys) -> dict:
         t0 = time.perf_counter()
         wanted = [g for g in groups if keys is None or any(k in keys for k in g)]  # a decided k's layout is not evaluated again
         with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans) as evaluator:
-            results = {"hand": evaluator(hand)} | {f"found_k{max(g)}": evaluator(layouts[max(g)]) for g in wanted}
+            results = {"hand": evaluator(hand, subsets=used["hand"])}
+            results |= {f"found_k{max(g)}": evaluator(layouts[max(g)], subsets=used[f"found_k{max(g)}"]) for g in wanted}
         for name, result in results.items():
             done(i, name, result)
         log.info("verdict draw %d in %.1f s", i, time.perf_counter() - t0)
@@ -97,6 +102,11 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
                          seconds=seconds, draws=draws, names=labels, passengers=frozenset(fewer))  # fmt: skip
     finally:
         executor.close()
+
+
+def _used(choices) -> list[tuple[int, ...]] | None:
+    """The sensor subsets (index tuples) the choices' axes use, each once (None: no axis measured, every subset)."""
+    return list(dict.fromkeys(a.subset for c in choices for a in c.axes if a.observable)) or None
 
 
 def _found_name(layout: Layout, choice, big: Layout) -> str:
