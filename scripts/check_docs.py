@@ -95,7 +95,7 @@ def allowed(path: str) -> bool:
     """Where session numbers and commit hashes may stay: the changelog and result data."""
     if path == "CHANGELOG.md" or path == "uv.lock" or path.startswith("benchmarks/results/"):
         return True
-    return path.startswith(("results/reference/", "results/verdict-study/")) and Path(path).name != "README.md"
+    return path.startswith(("results/reference/", "results/verdict-study/", "results/verdict-quick/")) and Path(path).name != "README.md"
 
 
 def check_history(root: Path = ROOT) -> list[str]:
