@@ -236,6 +236,16 @@ def test_an_evaluation_of_some_subsets_gives_their_rows_of_the_whole_one(block, 
     assert sorted(some.per_scan["subset_index"].unique()) == [1, 4]
     used = {a.name for c in some.table for a in c.axes if a.observable}
     assert used <= {"S2", "S1S3"} and [c.k for c in some.table] == [1, 2, 3]
+    # a subset that starts from its sensors' own registrations gets them registered too: the same start
+    combined = _objective(("R", "P"), 1.0, 1.0, subset_start="combined")
+    with Evaluator(block, combined, seed=3) as ev:
+        whole, some = ev(block.layouts["hand"]).per_scan, ev(block.layouts["hand"], subsets=[(2, 0)]).per_scan
+    assert list(dict.fromkeys(some["subset"])) == ["S1", "S3", "S1S3"]
+    pd.testing.assert_frame_equal(some, whole[whole["subset"].isin(["S1", "S3", "S1S3"])].reset_index(drop=True))
+    with Evaluator(block, combined, seed=3) as ev:
+        for bad in ([], [()], [(0, 3)]):
+            with pytest.raises(ValueError, match="subsets"):
+                ev(block.layouts["hand"], subsets=bad)
 
 
 def test_failed_registrations_are_counted_not_averaged(block):

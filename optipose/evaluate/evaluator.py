@@ -79,7 +79,7 @@ class EvaluationResult:
         n_scans = self.per_scan["scan"].nunique()
         lines = [
             f"EvaluationResult(part={self.part!r}, layout={self.layout.name!r} {self.layout.names}, "
-            f"objective={self.objective.name!r}, seed={self.seed}, {n_scans} scans x {2 ** len(self.layout) - 1} subsets, "
+            f"objective={self.objective.name!r}, seed={self.seed}, {n_scans} scans x {self.per_scan['subset'].nunique()} subsets, "
             f"{self.n_failed} failed registrations, wall {self.timings.get('wall', float('nan')):.1f} s)"
         ]
         lines += [f"  {choice!r}" for choice in self.table]
@@ -192,6 +192,11 @@ class Evaluator:
         several calls (other processes') make one result together (:meth:`result`), the one ``under`` gives:
         each scan's noise comes from the seed and its index."""
         layout = _as_layout(layout)
+        if subsets is not None:
+            n = len(layout)
+            subsets = [tuple(sorted(set(map(int, s)))) for s in subsets]
+            if not subsets or not all(s and 0 <= s[0] and s[-1] < n for s in subsets):
+                raise ValueError(f"subsets: non-empty tuples of sensor indices 0..{n - 1}, got {subsets}")
         first, every = share
         tasks = self.tasks()[first::every]
         out = {}

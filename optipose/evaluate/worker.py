@@ -260,7 +260,9 @@ def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: t
         worker = _STATE[setup.token] = _Worker(setup)
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
     every = all_subsets(len(poses))
-    subsets = every if subsets is None else sorted(set(map(tuple, subsets)), key=every.index)
+    if subsets is not None and setup.registration.subset_start == "combined":  # a subset starts from its sensors' own
+        subsets = [*subsets, *((j,) for s in subsets for j in s)]
+    subsets = every if subsets is None else sorted({tuple(sorted(s)) for s in subsets}, key=every.index)
     numbers = [every.index(s) for s in subsets]
     conditions = [replace(setup.condition, noise_scale=level) for level in levels]
     cells = []  # per level: its references and zeros
