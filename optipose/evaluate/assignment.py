@@ -100,12 +100,13 @@ class Choice:
         return f"Choice(k={self.k}, {self.name}: {cells})"
 
 
-def best_choices(stats: pd.DataFrame, names: list[str], cfg: StatisticConfig, n_scans: int) -> list[Choice]:
-    """The best choice for k = 1 … n sensors (Table 1), from :func:`optipose.evaluate.statistics.summarize` output."""
+def best_choices(stats: pd.DataFrame, names: list[str], cfg: StatisticConfig, n_scans: int, evaluated=None) -> list[Choice]:
+    """The best choice for k = 1 … n sensors (Table 1), from :func:`optipose.evaluate.statistics.summarize` output;
+    ``evaluated``: the subset names registered when not every one was (:func:`choose`)."""
     by_key = stats_by_key(stats)
     out = []
     for k in range(1, len(names) + 1):
-        candidates = [choose(c, names, by_key, cfg, n_scans) for c in combinations(range(len(names)), k)]
+        candidates = [choose(c, names, by_key, cfg, n_scans, evaluated) for c in combinations(range(len(names)), k)]
         out.append(min(candidates, key=lambda ch: ch.score))  # first of equals: lowest sensor indices
     return out
 
@@ -115,16 +116,20 @@ def stats_by_key(stats: pd.DataFrame) -> dict:
     return {(r.subset, r.axis): r for r in stats.itertuples(index=False)}
 
 
-def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: StatisticConfig, n_scans: int) -> Choice:
+def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: StatisticConfig, n_scans: int,
+           evaluated=None) -> Choice:  # fmt: skip
     """The choice of exactly these ``sensors`` (indices): each axis takes its best eligible subset of them.
 
-    by_key : :func:`stats_by_key` of the layout's statistics (an evaluation of some subsets only: among
-    those); n_scans : scans per subset in the protocol.
+    by_key : :func:`stats_by_key` of the layout's statistics (a KeyError where one is missing); n_scans : scans
+    per subset in the protocol; evaluated : the subset names an evaluation of some subsets registered (default
+    every one): the choice is among those.
     """
     subsets = [s for k in range(1, len(sensors) + 1) for s in combinations(sensors, k)]
+    if evaluated is not None:
+        subsets = [s for s in subsets if subset_name(s, names) in evaluated]
     axes, score = [], 0.0
     for axis, weight in zip(AXES, cfg.weights):
-        rows = [(s, by_key[(subset_name(s, names), axis)]) for s in subsets if (subset_name(s, names), axis) in by_key]  # an evaluation of some subsets
+        rows = [(s, by_key[(subset_name(s, names), axis)]) for s in subsets]
         eligible = [(s, r) for s, r in rows if _eligible(r, n_scans)]
         if not eligible:
             seen = any(not r.unobservable for _, r in rows)  # observable, but its registrations failed too often
