@@ -5,7 +5,8 @@ The validation's evaluations (the held-out seed) are the first draw. Each furthe
 and the hand one are evaluated with the validation's objective: one evaluator per draw, so both sides get the
 same cell instance (the part as made, the calibration), the same protocol orientations, robot paths and
 scan noise (common random numbers). Each layout keeps the choice the validation made for it (its subset per
-axis); a draw gives that choice's per-scan errors (:func:`optipose.evaluate.confidence.scan_errors`).
+axis); a draw gives that choice's per-scan errors (:func:`optipose.evaluate.confidence.scan_errors`), and
+registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``).
 
 Draws are added (:func:`optipose.evaluate.confidence.race_many`) until every k is BUY, KEEP or TIE, or
 ``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
