@@ -102,7 +102,7 @@ class Choice:
 
 def best_choices(stats: pd.DataFrame, names: list[str], cfg: StatisticConfig, n_scans: int, evaluated=None) -> list[Choice]:
     """The best choice for k = 1 … n sensors (Table 1), from :func:`optipose.evaluate.statistics.summarize` output;
-    ``evaluated``: the subset names registered when not every one was (:func:`choose`)."""
+    ``evaluated``: the subset names the evaluation registered (:func:`choose`; default every one)."""
     by_key = stats_by_key(stats)
     out = []
     for k in range(1, len(names) + 1):
@@ -121,8 +121,8 @@ def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: Statis
     """The choice of exactly these ``sensors`` (indices): each axis takes its best eligible subset of them.
 
     by_key : :func:`stats_by_key` of the layout's statistics (a KeyError where one is missing); n_scans : scans
-    per subset in the protocol; evaluated : the subset names an evaluation of some subsets registered (default
-    every one): the choice is among those.
+    per subset in the protocol; evaluated : the subset names the evaluation registered (default every one): the
+    choice is among those, and each of them needs its statistics.
     """
     subsets = [s for k in range(1, len(sensors) + 1) for s in combinations(sensors, k)]
     if evaluated is not None:

@@ -222,9 +222,7 @@ class Evaluator:
         per_scan = pd.DataFrame(rows).sort_values(["scan", "subset_index"], kind="stable").reset_index(drop=True)
         points = pd.DataFrame(point_rows).sort_values(["scan", "sensor_index"], kind="stable").reset_index(drop=True)
         stats = summarize(per_scan, self.objective.statistic)
-        evaluated = set(per_scan["subset"])
-        every = evaluated if len(evaluated) < 2 ** len(layout) - 1 else None  # an evaluation of some subsets
-        table = best_choices(stats, layout.names, self.objective.statistic, len(self.perturbations), every)
+        table = best_choices(stats, layout.names, self.objective.statistic, len(self.perturbations), set(per_scan["subset"]))
         timings = {k: float(sum(out[2][k] for out in outputs)) for k in ("scan", "register")}
         timings["wall"] = wall
         log_failures(per_scan, self._failure_level)

@@ -262,7 +262,7 @@ def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: t
     every = all_subsets(len(poses))
     if subsets is not None and setup.registration.subset_start == "combined":  # a subset starts from its sensors' own
         subsets = [*subsets, *((j,) for s in subsets for j in s)]
-    subsets = every if subsets is None else sorted({tuple(sorted(s)) for s in subsets}, key=every.index)
+    subsets = every if subsets is None else sorted(set(subsets), key=every.index)  # sorted index tuples (Evaluator.raw)
     numbers = [every.index(s) for s in subsets]
     conditions = [replace(setup.condition, noise_scale=level) for level in levels]
     cells = []  # per level: its references and zeros

@@ -58,8 +58,7 @@ def read_evaluation(folder: Path, config: RunConfig | None = None):
         evaluated = set(per_scan["subset"])  # a verdict's draw registers some subsets only
     with reading(folder / "stats.csv") as path:
         stats = pd.read_csv(path)
-        every = evaluated if len(evaluated) < 2 ** len(layout) - 1 else None
-        table = best_choices(stats, layout.names, objective.statistic, n_scans, every)
+        table = best_choices(stats, layout.names, objective.statistic, n_scans, evaluated)
     with reading(folder / "points.csv") as path:
         points = pd.read_csv(path)
     timings = {k: float(v) for k, v in config.timings.items()}

@@ -2,7 +2,8 @@
 
 The objective records what it sees (a :class:`~optipose.search.study.SurrogateStudy` keeps the history
 and the best), so :func:`optimize` returns nothing; NLopt's own stops end quietly, a
-:class:`~optipose.search.study.Stop` (time up, Ctrl-C) propagates.
+:class:`~optipose.search.study.Stop` (time up, Ctrl-C) or any other exception the objective raises propagates
+once NLopt has returned.
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ import logging
 import numpy as np
 
 from optipose.search.config import algorithm_code
-from optipose.search.study import Stop
 
 __all__ = ["optimize", "local_best", "apart", "SubProblem"]
 
@@ -70,9 +70,8 @@ def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int | None,
         nlopt.srand(int(seed) % (2**31))
     try:
         opt.optimize(np.clip(x0, 0.0, 1.0))
-    except (Stop, nlopt.ForcedStop, nlopt.RoundoffLimited) as exc:
-        if isinstance(exc, Stop):
-            raise
+    except (nlopt.ForcedStop, nlopt.RoundoffLimited):  # what the objective raised (a Stop too) is in pending
+        pass
     except RuntimeError as exc:  # NLopt's generic failure: keep what was found
         if not pending:
             log.warning("NLopt %s stopped: %s", algorithm, exc)
