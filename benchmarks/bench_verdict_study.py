@@ -90,6 +90,7 @@ def holdout(args) -> None:
 def table(args) -> None:
     from optipose.evaluate.confidence import split
     from optipose.io.load import load_result, read_verdicts
+    from optipose.report.confidence import interval_cell  # "not measured" for an axis a layout does not see
 
     print("| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |")
     print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |")
@@ -97,7 +98,7 @@ def table(args) -> None:
         by_k, _ = split(load_result(folder).confident)
         held, _ = split(read_verdicts(folder / "holdout.csv"))
         for k, v in by_k.items():
-            axes = [f"{_mdeg(f.median_deg)} / {_mdeg(h.median_deg)}" for f, h in zip(v.found, v.hand)]
+            axes = [f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.hand)]
             h = held.get(k)
             other = f"{h.decision} {h.score.estimate:.2f}x [{h.score.low:.2f}, {h.score.high:.2f}]" if h else "-"
             s = v.score
@@ -107,18 +108,8 @@ def table(args) -> None:
 
 def _folders(outs: str, wanted: set) -> dict[str, Path]:
     """Part name → its search folder: the first of the comma-separated ``outs`` that holds one, in PARTS' order."""
-    found = {}
-    for out in outs.split(","):
-        for name in PARTS:
-            if name in wanted and name not in found and (Path(out) / name / "verdict.csv").is_file():
-                found[name] = Path(out) / name
-    return {name: found[name] for name in PARTS if name in found}
-
-
-def _mdeg(interval) -> str:
-    from optipose.report.confidence import interval_cell
-
-    return interval_cell(interval)  # "not measured" for an axis a layout does not see
+    held = {name: [Path(out) / name for out in outs.split(",") if (Path(out) / name / "verdict.csv").is_file()] for name in PARTS if name in wanted}
+    return {name: folders[0] for name, folders in held.items() if folders}
 
 
 def main() -> None:
