@@ -121,8 +121,12 @@ class CellModel:
         if self.made is None:
             return np.zeros((len(x), 0))
         p, made = self.process, self.made
+        # cos and sin in float32, as the maps are kept (in float64 they were three quarters of a pose's cell
+        # term): the phase reduced to [−π, π] first, in float64, so that the cast loses ~1e-7 rad, not |phase|·1e-7
         phase = x @ self.k.T
-        form = p.form_rms / np.sqrt(_FORM_FEATURES) * np.hstack([np.cos(phase), np.sin(phase)])
+        phase -= 2 * np.pi * np.round(phase * (0.5 / np.pi))
+        phase = phase.astype(np.float32)
+        form = p.form_rms / np.sqrt(_FORM_FEATURES) * np.hstack([np.cos(phase), np.sin(phase)], dtype=np.float64)
         scale = (x - made.centre) * n * p.scale
         long = int(np.argmax(made.extent[:2]))
         s = 2.0 * (x[:, long] - made.centre[long]) / made.extent[long]
