@@ -83,6 +83,9 @@ for _command in (scan.scan, parts.parts, parts.show, parts.counts, evaluate.eval
 def main(args: list[str] | None = None) -> None:
     """Run the command line; a usage error (an unknown option, a bad or missing value) is one line
     ``optipose: error: ...`` on stderr and exit code 2, as every error a command finds itself."""
+    from optipose.heap import keep_freed_memory
+
+    keep_freed_memory()  # before any work: this process's arrays and its workers' (optipose/heap.py)
     errors = _click_exceptions()
     try:
         code = app(args, prog_name="optipose", standalone_mode=False)
