@@ -3,8 +3,8 @@
 The surrogate and the evaluator make many short-lived arrays of 0.1–10 MB (a few thousand points times a
 few dozen columns). glibc's malloc serves those from ``mmap`` or trims them off the heap's top when they are
 freed, so the next one of the same size is fresh pages from the kernel, zeroed one page fault at a time: on
-part B that was a quarter of a surrogate pose's time and a tenth of a verdict draw's
-(benchmarks/README.md, "bench_heap.py"). Raising both thresholds keeps such arrays on the heap, reused; an
+part B about a fifth of a surrogate pose's time in the cell (a verdict draw's ICP hardly notices;
+benchmarks/README.md, "bench_cell_pose.py"). Raising both thresholds keeps such arrays on the heap, reused; an
 array above the mmap threshold still goes back to the system when it is freed, and at most the trim
 threshold of free heap is kept. Elsewhere than glibc this does nothing.
 """

@@ -235,3 +235,28 @@ def test_a_background_call_that_raises_or_dies_says_so_instead_of_waiting():
     stopped.close()
     with pytest.raises(WorkerError, match="stopped"):
         stopped.result()
+
+
+def test_the_heap_thresholds_reach_this_process_and_the_ones_it_starts_unless_the_user_set_them():
+    # a fresh interpreter each time: mallopt cannot be undone in this one. glibc takes both thresholds and
+    # leaves them in the environment a worker inherits; a threshold the user set wins, and nothing is changed
+    import json
+    import os
+    import platform
+    import subprocess
+    import sys
+
+    from optipose.heap import HEAP_VARIABLES
+
+    code = ("import json, os; from optipose.heap import keep_freed_memory; "
+            "print(json.dumps([keep_freed_memory(), {k: os.environ.get(k) for k in %r}]))" % list(HEAP_VARIABLES))  # fmt: skip
+    plain = {k: v for k, v in os.environ.items() if k not in HEAP_VARIABLES}
+
+    def run(env):
+        return json.loads(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout)
+
+    took, seen = run(plain)
+    assert took is (platform.libc_ver()[0] == "glibc")  # elsewhere it does nothing
+    assert seen == {k: str(v) for k, v in HEAP_VARIABLES.items()}
+    took, seen = run(plain | {"MALLOC_TRIM_THRESHOLD_": "1000"})
+    assert took is False and seen == {"MALLOC_MMAP_THRESHOLD_": None, "MALLOC_TRIM_THRESHOLD_": "1000"}
