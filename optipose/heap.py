@@ -28,11 +28,10 @@ def keep_freed_memory() -> bool:
     alone turns off glibc's own adjustment of the other, so both are set together. True when glibc took them."""
     if any(name in os.environ for name in HEAP_VARIABLES):
         return False
-    os.environ.update({name: str(value) for name, value in HEAP_VARIABLES.items()})
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
+        mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
     except (OSError, AttributeError):  # not glibc: nothing to set
         return False
+    os.environ.update({name: str(value) for name, value in HEAP_VARIABLES.items()})
     return bool(mallopt(_M_MMAP_THRESHOLD, HEAP_VARIABLES["MALLOC_MMAP_THRESHOLD_"])) and bool(
         mallopt(_M_TRIM_THRESHOLD, HEAP_VARIABLES["MALLOC_TRIM_THRESHOLD_"]))
