@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/bench_verdict_study.py run     [--parts part_a,part_b,part_c,bushing,angle,housing]
                                                                [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study] [--report]
     .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2] [--verdict-time 0]
-    .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study]
+                                                               [--draws 30] [--file holdout.csv]
+    .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study] [--file holdout.csv]
 
 ``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
 ``OUT/<part>/`` (with its report under ``--report``: ``scripts/reference.sh`` makes results/reference so); the
@@ -14,7 +15,8 @@ baselines; ``studies/parts/``).
 ``holdout``: per search folder, its found layouts and its baseline evaluated again on a run seed the search never
 used (the search's seed + ``--offset``: another held-out validation seed, other cell instances, other noise),
 choices made there, and the verdict raced as the search's was (:func:`optipose.search.verdict.confident_verdicts`,
-the search's own settings) — into ``OUT/<part>/holdout.csv``. A BUY holds when the held-out verdict is BUY too.
+the search's own settings, or up to ``--draws``) — into ``OUT/<part>/holdout.csv`` (or ``--file``). A BUY holds when
+the held-out verdict is BUY too.
 ``table``: one row per part and k — the search's verdict, hand / found in sum with its interval, the predicted
 median per axis for found and baseline, the draws, and the held-out verdict; as Markdown, for docs/results.md.
 """
@@ -76,13 +78,15 @@ def holdout(args) -> None:
         config = SearchConfig(**{**saved.search, "sensors": tuple(saved.search["sensors"])})
         if args.verdict_time is not None:  # 0: race on draws alone, whatever the machine's load
             config = replace(config, verdict_time=args.verdict_time)
+        if args.draws:  # a longer race than the search's, to settle what its draws left open
+            config = replace(config, verdict_draws=args.draws)
         part = load_part(saved.part_source or saved.part_name)
         seed = int(saved.seed) + args.offset
         first: dict = {}
         t0 = time.perf_counter()
         validation = validate(part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
-        pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / "holdout.csv", index=False)
+        pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / args.file, index=False)
         by_k, _ = split(verdicts)
         print(f"{folder.name} ({time.perf_counter() - t0:.0f} s): " + "; ".join(v.line() for v in by_k.values()), flush=True)
 
@@ -96,7 +100,7 @@ def table(args) -> None:
     print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |")
     for name, folder in _folders(args.out, set(PARTS)).items():
         by_k, _ = split(load_result(folder).confident)
-        held, _ = split(read_verdicts(folder / "holdout.csv"))
+        held, _ = split(read_verdicts(folder / args.file))
         for k, v in by_k.items():
             axes = [f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.hand)]
             h = held.get(k)
@@ -123,6 +127,8 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--report", action="store_true", help="run: write each search's report")
     ap.add_argument("--verdict-time", type=float, default=None, help="holdout: the race's seconds (default: the search's; 0: draws alone)")
+    ap.add_argument("--draws", type=int, default=0, help="holdout: the race's draws at most (default: the search's)")
+    ap.add_argument("--file", default="holdout.csv", help="holdout: the file each folder's verdicts go to; table: the file read")
     ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
     args = ap.parse_args()
     {"run": run, "holdout": holdout, "table": table}[args.what](args)
