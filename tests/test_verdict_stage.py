@@ -53,7 +53,9 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
         v = by_k[k]
         assert v.decision == TIE, v.line()
         assert (v.score.estimate, v.score.low, v.score.high) == (1.0, 1.0, 1.0)
-        assert v.found == v.hand and v.found_name == "".join(f"F{i + 1}" for i in range(k)) and v.hand_name.startswith("S")
+        # the found sensors its axes use (a copy of the hand's: the hand's used ones), the hand's k sensors
+        used = sorted({i for a in validation.hand[k].axes if a.observable for i in a.subset})
+        assert v.found == v.hand and v.found_name == "".join(f"F{i + 1}" for i in used) and v.hand_name.startswith("S")
     # the ideal cell looks first at the validation's draw alone; a real cell waits for three instances
     expected = 1 if cell == "ideal" else 3
     assert {by_k[k].n_draws for k in same} == {expected}
@@ -135,3 +137,28 @@ def test_a_buy_says_which_bracket_to_move_and_which_hand_sensors_stay():
     assert mount_line(buy, found, hand) == "k=2: mount F1 (new), keep S2; S1 freed"
     assert mount_line(replace(buy, decision=TIE), found, hand) == ""
     assert mount_line(replace(buy, found_name="F2", hand_name="S2S3"), found, hand) == "k=2: keep S2; S3 freed"
+
+
+def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
+    # part A's quick triple of 2026-11-27 measured every axis on F1 and F2: its verdict named F1F2F3 and mounted
+    # all three. The name is the sensors the choice's axes use, in the k layout's own names (here inside a
+    # larger layout of four whose first is not the k layout's)
+    from optipose.evaluate.assignment import AxisChoice, Choice
+    from optipose.report.confidence import mount_line
+    from optipose.search.verdict import _found_name
+
+    hand = load_part("part_b").layouts["hand"]
+    poses = [np.eye(4) for _ in range(4)]
+    for i, T in enumerate(poses):
+        T[:3, 3] = [0.1 * (i + 1), 0.0, 0.3]
+    big = Layout(tuple(SensorPose(f"F{i + 1}", T) for i, T in enumerate(poses)), name="found_k4")
+    triple = Layout(tuple(SensorPose(f"F{i + 1}", T) for i, T in enumerate(poses[1:])), name="found_k3")  # big's F2, F3, F4
+    axes = (AxisChoice("roll", (1,), "F2", 1e-4, 2e-4), AxisChoice("pitch", (1, 2), "F2F3", 1e-4, 2e-4),
+            AxisChoice("yaw", (2,), "F3", 1e-4, 2e-4))  # fmt: skip
+    choice = Choice(3, (1, 2, 3), "F2F3F4", axes, 1e-3)
+    assert _found_name(triple, choice, big) == "F1F2"  # big's F2, F3 are the triple's F1, F2; its F3 unused
+    blind = Choice(3, (1, 2, 3), "F2F3F4", tuple(AxisChoice(a, (), "", np.nan, np.nan, "unobservable") for a in ("roll", "pitch", "yaw")), 1e-3)
+    assert _found_name(triple, blind, big) == "F1F2F3"  # nothing measured: the choice's sensors
+    buy = replace(compare_draws([_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=3,
+                                found_name=_found_name(triple, choice, big), hand_name="S1S2S3"), decision=BUY)  # fmt: skip
+    assert mount_line(buy, triple, hand) == "k=3: mount F1, F2 (new); S1, S2, S3 freed"

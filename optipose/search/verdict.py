@@ -111,10 +111,13 @@ def _used(choices) -> list[tuple[int, ...]] | None:
 
 
 def _found_name(layout: Layout, choice, big: Layout) -> str:
-    """The found choice in the k layout's own sensor names (F1 … Fk as its file and the report's poses say),
-    not in those of the larger layout it was evaluated inside."""
+    """The found sensors the choice's axes use, in the k layout's own sensor names (F1 … Fk as its file and the
+    report's poses say, not those of the larger layout it was evaluated inside): a sensor of the k layout that
+    no axis measures on is not one to buy (what a BUY mounts is these, :func:`optipose.report.confidence.mount_line`).
+    The choice's k sensors when no axis is measured."""
     own = {big.names[i]: name for i, name in zip(indices_in(layout, big), layout.names)}
-    return "".join(sorted((own.get(big.names[i], big.names[i]) for i in choice.sensors), key=_natural))
+    used = sorted({i for a in choice.axes if a.observable for i in a.subset}) or choice.sensors
+    return "".join(sorted((own.get(big.names[i], big.names[i]) for i in used), key=_natural))
 
 
 def _natural(name: str) -> tuple:
