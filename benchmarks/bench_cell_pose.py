@@ -52,7 +52,7 @@ def trig() -> None:
     for _ in range(20):
         for name, fn in (("float32", lambda: model.part_columns(x, n)[:, : 2 * _FORM_FEATURES]), ("float64", float64)):
             t0 = time.perf_counter()
-            out = fn()
+            fn()
             walls[name].append(time.perf_counter() - t0)
     new, old = model.part_columns(x, n)[:, : 2 * _FORM_FEATURES], float64()
     a, b = (float(np.median(walls[k])) for k in ("float32", "float64"))

@@ -12,7 +12,6 @@ threshold of free heap is kept. Elsewhere than glibc this does nothing.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 
 __all__ = ["keep_freed_memory", "HEAP_VARIABLES"]
@@ -28,8 +27,8 @@ def keep_freed_memory() -> bool:
     alone turns off glibc's own adjustment of the other, so both are set together. True when glibc took them."""
     if any(name in os.environ for name in HEAP_VARIABLES):
         return False
-    try:
-        mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
+    try:  # the C library this process already has (no ctypes.util.find_library: it runs ldconfig at every start)
+        mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):  # not glibc: nothing to set
         return False
     os.environ.update({name: str(value) for name, value in HEAP_VARIABLES.items()})

@@ -54,7 +54,7 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
         assert v.decision == TIE, v.line()
         assert (v.score.estimate, v.score.low, v.score.high) == (1.0, 1.0, 1.0)
         # the found sensors its axes use (a copy of the hand's: the hand's used ones), the hand's k sensors
-        used = sorted({i for a in validation.hand[k].axes if a.observable for i in a.subset})
+        used = validation.hand[k].used
         assert v.found == v.hand and v.found_name == "".join(f"F{i + 1}" for i in used) and v.hand_name.startswith("S")
     # the ideal cell looks first at the validation's draw alone; a real cell waits for three instances
     expected = 1 if cell == "ideal" else 3

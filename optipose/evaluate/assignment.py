@@ -92,6 +92,11 @@ class Choice:
     score: float
     under: tuple = field(default=(), repr=False, compare=False)
 
+    @property
+    def used(self) -> tuple[int, ...]:
+        """The sensor indices its axes use, ascending (an axis no subset measures uses none)."""
+        return tuple(sorted({i for a in self.axes for i in a.subset}))
+
     def __repr__(self) -> str:
         cells = ", ".join(
             f"{a.axis}={np.rad2deg(a.median):.4f}/{np.rad2deg(a.p75):.4f} deg ({a.name})" if a.observable else f"{a.axis}={a.label}"

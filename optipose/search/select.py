@@ -117,7 +117,7 @@ def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, ref
     pool: Pool = []
     first, maxmin = [], []
     if reference is not None:
-        used = tuple(sorted({i for a in reference.axes for i in a.subset}))
+        used = reference.used
         cfg = study.problem.config
         if not study.problem.objective.conditions.trivial:  # under a band: each statistic asked to hold, first
             maxmin = maxmin_anchored(study.problem, baseline(part).poses, k, until=deadline)  # the clock only as a safety net

@@ -116,8 +116,7 @@ def _found_name(layout: Layout, choice, big: Layout) -> str:
     no axis measures on is not one to buy (what a BUY mounts is these, :func:`optipose.report.confidence.mount_line`).
     The choice's k sensors when no axis is measured."""
     own = {big.names[i]: name for i, name in zip(indices_in(layout, big), layout.names)}
-    used = sorted({i for a in choice.axes if a.observable for i in a.subset}) or choice.sensors
-    return "".join(sorted((own.get(big.names[i], big.names[i]) for i in used), key=_natural))
+    return "".join(sorted((own.get(big.names[i], big.names[i]) for i in choice.used or choice.sensors), key=_natural))
 
 
 def _natural(name: str) -> tuple:
