@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from optipose.evaluate import confidence
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 from optipose.evaluate.confidence import (
     BUY, KEEP, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, looks, paired_draw, paired_draws, race, scan_errors,
@@ -128,6 +129,48 @@ def test_racing_stops_before_a_draw_would_end_past_the_time_budget():
     if verdict.decision == UNDECIDED:
         assert verdict.more_minutes == pytest.approx(verdict.more_draws * 10.0 / 60.0)
         assert f"+{verdict.more_draws}, " in verdict.line() and " min)" in verdict.line()
+
+
+def test_the_race_plans_its_looks_for_the_draws_its_time_holds():
+    rng, now = np.random.default_rng(6), [0.0]
+
+    def slow(i):
+        now[0] += 10.0
+        return _draws(rng, 1, ratio=1.0, start=i)[0]
+
+    # 3 draws take 30 s of 45: the time holds one more, so the looks are at 3 and 4, each at 2.5 %
+    verdict = race(slow, FAST, min_draws=3, max_draws=40, seconds=45.0, clock=lambda: now[0])
+    assert verdict.n_draws == 4 and verdict.confidence == pytest.approx(0.975)
+    # draws slow down after the plan (3, 5, 8, 9) is made: the time ends the race at 5, whose last look
+    # spends the three shares of the looks at 5, 8 and 9
+    now[0], took = 0.0, iter([5.0, 5.0, 5.0, 20.0, 20.0] + [20.0] * 10)
+
+    def slowing(i):
+        now[0] += next(took)
+        return _draws(rng, 1, ratio=1.0, start=i)[0]
+
+    verdict = race(slowing, FAST, min_draws=3, max_draws=40, seconds=45.0, clock=lambda: now[0])
+    assert verdict.n_draws == 5 and verdict.confidence == pytest.approx(1 - 0.05 * 3 / 4)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
+    """Whatever the draws' times and the budgets, the looks a race makes spend at most its 5 % in all."""
+    rng, now, spent = np.random.default_rng(seed), [0.0], []
+
+    def undecided(draws, rules, **names):
+        spent.append(1.0 - rules.confidence)
+        return SimpleNamespace(decision=UNDECIDED)
+
+    monkeypatch.setattr(confidence, "compare_draws", undecided)
+
+    def draw(i):
+        now[0] += float(rng.exponential(rng.choice([1.0, 5.0])))
+        return None
+
+    confidence.race(draw, FAST, min_draws=int(rng.integers(1, 5)), max_draws=int(rng.integers(1, 30)),
+                    seconds=float(rng.choice([np.inf, rng.uniform(1.0, 60.0)])), clock=lambda: now[0])  # fmt: skip
+    assert spent and sum(spent) <= 0.05 + 1e-12
 
 
 def test_the_looks():

@@ -401,14 +401,25 @@ def looks(min_draws: int, max_draws: int) -> tuple[int, ...]:
     return tuple(out + [max_draws])
 
 
+def _planned(n: int, max_draws: int, seconds_left: float, per_draw: float) -> int:
+    """The draws a race plans for at its first look (``n`` draws in): ``max_draws``, or as many as the time
+    left holds at the seconds a draw took (not fewer than ``n``). Set from the clock, never from the draws'
+    errors, so that each look's share of the error rate is fixed before its draws are seen."""
+    if not math.isfinite(seconds_left) or not per_draw > 0:
+        return max_draws
+    return max(n, min(max_draws, n + int(seconds_left // per_draw)))
+
+
 def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
          seconds: float = math.inf, clock: Callable[[], float] = time.monotonic, draws: Sequence[PairedDraw] = (),
          **names) -> ConfidentVerdict:  # fmt: skip
     """Add draws (``next_draw(i)``: the paired draw at position i, the ``draws`` given first) until the
     decision at one of the :func:`looks` is not UNDECIDED, or ``max_draws`` are in, or another draw would end
-    past ``seconds`` (at the mean time a draw took so far; then a last look at the draws in). Each look's
-    intervals are at confidence 1 − (1 − ``rules.confidence``) / (looks + 1), which the verdict carries, with the
-    seconds a draw took. ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` for :func:`compare_draws`."""
+    past ``seconds`` (at the mean time a draw took so far; then a last look at the draws in). The looks are
+    planned at the first: up to ``max_draws``, or to the draws the ``seconds`` left hold at the time a draw took
+    (:func:`_planned`). Each look's intervals are at confidence 1 − (1 − ``rules.confidence``) / looks, and a
+    last look the time forces early spends the shares of the looks it leaves unmade; the verdict carries its
+    confidence, with the seconds a draw took. ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` for :func:`compare_draws`."""
     verdicts = race_many(lambda i, keys: {0: next_draw(i)}, rules, min_draws=min_draws, max_draws=max_draws, seconds=seconds,
                          clock=clock, draws={0: list(draws)} if draws else None, names={0: names})  # fmt: skip
     return verdicts[0]
@@ -423,19 +434,24 @@ def race_many(next_draws: Callable[[int, frozenset], dict], rules: Rules = Rules
     :func:`compare_draws` takes. Draws are added until every key is decided (keeping the verdict of the look
     that decided it), or the draws or the ``seconds`` end. ``passengers``: keys that ride along without
     holding the race, compared at the look it ends on. Returns key → :class:`ConfidentVerdict`."""
-    schedule = looks(min_draws, max_draws)
-    each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) / (len(schedule) + 1))
     taken = {key: list(v) for key, v in (draws or {}).items()}
     names = names or {}
     done: dict = {}
-    start, added = clock(), 0
+    plan: tuple[int, ...] = ()  # the looks, fixed at the first from the draws the time budget holds
+    looked, start, added = 0, clock(), 0
     while True:
         n = min((len(taken[key]) for key in (taken.keys() - done.keys() - passengers) or taken), default=0)
         elapsed = clock() - start
         per_draw = elapsed / added if added else math.nan
         out_of_time = bool(added) and elapsed + per_draw > seconds
-        last = n >= max_draws or out_of_time
-        if n and (n in schedule or last):
+        if n and not plan and (n >= min_draws or n >= max_draws or out_of_time):
+            plan = looks(n, _planned(n, max_draws, seconds - elapsed, per_draw))
+        last = n >= max_draws or out_of_time or bool(plan) and n >= plan[-1]
+        if n and (n in plan or last):
+            # each look spends an equal share of the error rate; the last spends what the plan's unmade looks leave
+            shares = len(plan) - looked if last else 1
+            each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) * shares / len(plan))
+            looked += 1
             for key in taken.keys() - done.keys() - passengers:
                 verdict = compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
                 if verdict.decision != UNDECIDED or last:

@@ -141,8 +141,8 @@ CELL_BUDGETS: dict[str, dict] = {
     # several nominal ones: with 512 poses the screen took k = 1's whole share, docs/method.md, "Budgets"); the
     # verdict's draws of 6 scans each (3 a worker on two cores), so that its few seconds see several
     # times as many cell instances as draws of the reduced protocol's 14 scans would (benchmarks/README.md,
-    # "bench_verdict_draw.py"); at most as many as its seconds can hold, since each look the race plans takes a
-    # share of the error rate
+    # "bench_verdict_draw.py"); the race plans its looks for as many draws as its seconds hold, each look a share
+    # of the error rate
     "quick": dict(max_time=10.0, screen_samples=64, screen_starts=3, validation="reduced", verdict_draws=12, verdict_time=8.0, verdict_scans=6),
     "default": dict(max_time=75.0, screen_samples=1024, select_time=45.0, polish_evals=0, confirm_candidates=0, band="", verdict_scans=20,
                     verdict_time=40.0),
