@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_verdict_study.py run     [--parts part_a,part_b,part_c,bushing,angle,housing]
                                                                [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study] [--report]
+                                                               [--search-config settings.toml]
     .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2] [--verdict-time 0]
                                                                [--draws 30] [--file holdout.csv]
     .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study] [--file holdout.csv]
@@ -48,6 +49,7 @@ def run(args) -> None:
         folder = out / name
         command = [sys.executable, "-m", "optipose", "search", PARTS[name], "--budget", args.budget, "--cell", args.cell,
                    "--seed", str(args.seed), "--jobs", "2", "--out", str(folder)] + ([] if args.report else ["--no-report"])  # fmt: skip
+        command += ["--search-config", str(Path(args.search_config).resolve())] if args.search_config else []
         t0 = time.perf_counter()
         done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
         wall = time.perf_counter() - t0
@@ -126,6 +128,7 @@ def main() -> None:
     ap.add_argument("--offset", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--report", action="store_true", help="run: write each search's report")
+    ap.add_argument("--search-config", default=None, help="run: a TOML of [search] settings over the budget's (optipose search --search-config)")
     ap.add_argument("--verdict-time", type=float, default=None, help="holdout: the race's seconds (default: the search's; 0: draws alone)")
     ap.add_argument("--draws", type=int, default=0, help="holdout: the race's draws at most (default: the search's)")
     ap.add_argument("--file", default="holdout.csv", help="holdout: the file each folder's verdicts go to; table: the file read")

@@ -1,4 +1,4 @@
-"""The verdict with confidence (optipose/evaluate/confidence.py, issue #33) on synthetic per-scan errors:
+"""The verdict with confidence (optipose/evaluate/confidence.py and racing.py, issue #33) on synthetic per-scan errors:
 a layout against itself on the same draws is an exact tie, a BUY needs the interval, racing stops when the
 interval is clear, the intervals cover the true ratio at their nominal rate, and all of it is reproducible."""
 
@@ -10,11 +10,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from optipose.evaluate import confidence
+from optipose.evaluate import racing
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 from optipose.evaluate.confidence import (
-    BUY, KEEP, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, looks, paired_draw, paired_draws, race, scan_errors,
+    BUY, KEEP, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, paired_draw, paired_draws, scan_errors,
 )  # fmt: skip
+from optipose.evaluate.racing import looks, race
 from optipose.evaluate.statistics import FAILED_ERROR
 
 N_SCANS = 77
@@ -162,13 +163,13 @@ def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
         spent.append(1.0 - rules.confidence)
         return SimpleNamespace(decision=UNDECIDED)
 
-    monkeypatch.setattr(confidence, "compare_draws", undecided)
+    monkeypatch.setattr(racing, "compare_draws", undecided)
 
     def draw(i):
         now[0] += float(rng.exponential(rng.choice([1.0, 5.0])))
         return None
 
-    confidence.race(draw, FAST, min_draws=int(rng.integers(1, 5)), max_draws=int(rng.integers(1, 30)),
+    racing.race(draw, FAST, min_draws=int(rng.integers(1, 5)), max_draws=int(rng.integers(1, 30)),
                     seconds=float(rng.choice([np.inf, rng.uniform(1.0, 60.0)])), clock=lambda: now[0])  # fmt: skip
     assert spent and sum(spent) <= 0.05 + 1e-12
 

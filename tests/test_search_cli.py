@@ -76,6 +76,10 @@ def test_search_writes_a_result_folder_that_explains_itself(searched):
         text = (out / "layouts" / f"found_k{k}.toml").read_text()
         assert text.count("[[sensors]]") == k
     assert "found vs. hand" in result.stdout
+    # each found layout and the hand one drawn beside its file, whole PNGs (no temporary left behind)
+    drawn = sorted(p.name for p in (out / "layouts").iterdir() if not p.name.endswith(".toml"))
+    assert drawn == ["found_k1.png", "found_k2.png", "hand.png"]
+    assert all((out / "layouts" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for name in drawn)
 
 
 def test_search_progress_off_a_terminal_counts_each_stage_within_its_budget(searched):

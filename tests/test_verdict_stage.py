@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from optipose.evaluate.confidence import BUY, FEWER, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, race_many, split
+from optipose.evaluate.confidence import BUY, FEWER, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, split
+from optipose.evaluate.racing import race_many
 from optipose.evaluate.objective import load_objective
 from optipose.io.folders import write_csv
 from optipose.io.load import read_verdicts
@@ -162,3 +163,21 @@ def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
     buy = replace(compare_draws([_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=3,
                                 found_name=_found_name(triple, choice, big), hand_name="S1S2S3"), decision=BUY)  # fmt: skip
     assert mount_line(buy, triple, hand) == "k=3: mount F1, F2 (new); S1, S2, S3 freed"
+
+
+def test_answer_time_ends_the_verdict_whatever_the_stages_before_it_took():
+    import time
+
+    from optipose.errors import ConfigError
+    from optipose.search.config import SearchConfig
+    from optipose.search.pipeline import _verdict_seconds
+
+    now = time.monotonic()
+    assert _verdict_seconds(SearchConfig(verdict_time=12.0), now - 100.0) == 12.0  # no answer_time: the verdict's own
+    timed = SearchConfig(verdict_time=12.0, answer_time=23.5)
+    assert _verdict_seconds(timed, now - 20.0) == pytest.approx(3.5, abs=0.1)  # what is left of 23.5 s
+    assert _verdict_seconds(timed, now - 5.0) == 12.0  # never more than verdict_time
+    assert 0 < _verdict_seconds(timed, now - 60.0) < 0.01  # past it: a moment, not "no limit" (0)
+    assert _verdict_seconds(SearchConfig(verdict_time=0.0, answer_time=10.0), now - 4.0) == pytest.approx(6.0, abs=0.1)
+    with pytest.raises(ConfigError, match="answer_time"):
+        SearchConfig(answer_time=-1.0)

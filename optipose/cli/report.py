@@ -54,15 +54,16 @@ def report_command(result_dir: Path, views: bool = True) -> Path:
     return html
 
 
-def write_report_after(folder: Path, console) -> None:
-    """The report at the end of a command; a failure is one warning line, the result folder stays."""
+def write_report_after(folder: Path, console, ready=None) -> None:
+    """The report at the end of a command; a failure is one warning line, the result folder stays. ``ready()``:
+    waits for the layouts' pictures being drawn beside it (:func:`optipose.report.build.write_report`)."""
     import logging
 
     from optipose.report.build import write_report
 
     try:
         with status(console, "writing report.html"):
-            html, _ = write_report(folder)
+            html, _ = write_report(folder, ready=ready)
         console.print(f"report: {html}")
     except Exception as exc:  # a report must never cost the results
         logging.getLogger(__name__).debug("report failed", exc_info=True)

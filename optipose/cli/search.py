@@ -84,12 +84,12 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
         console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
                       f"continue with `optipose search --resume {folder}`")  # fmt: skip
         raise typer.Exit(EXIT_INTERRUPTED) from None
-    if searched.validated:
-        _draw_layouts(folder, the_part, searched.layouts)
+    pictures = _draw_layouts(folder, the_part, searched.layouts, jobs) if searched.validated else None
     # a nominal search that did not check its answer under a band (quick, or `band = ""`) says so: its "better"
     # holds in the simulation's ideal cell only, which is not yet a reason to buy
     unchecked = the_objective.conditions.trivial and the_objective.cell.ideal and searched.band is None and not searched.band_interrupted
     _print_report(Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal)
+    ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:
         console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
                       f"`optipose search --resume {folder}`")  # fmt: skip
@@ -97,7 +97,9 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     if report:
         from optipose.cli.report import write_report_after
 
-        write_report_after(folder, console)
+        write_report_after(folder, console, ready)
+    if ready:
+        ready()
     if searched.band_interrupted:  # the validation above is complete; only its check under the band is missing
         console.print(f"[yellow]interrupted[/] during the check under the band: the verdicts above hold for the nominal cell "
                       f"only (results in {folder}); check them with `optipose robustness {part} --layout "
@@ -242,19 +244,22 @@ def stage_budget(config, stage: str) -> int | None:
     return budgets.get(stage.split(":")[0]) or None
 
 
-def _draw_layouts(folder: Path, part, layouts) -> None:
-    """``layouts/found_k*.png`` beside the TOML files: each found layout drawn as ``optipose show`` does."""
-    import logging
+def _draw_layouts(folder: Path, part, layouts, jobs: int):
+    """``layouts/found_k*.png`` and the baseline's beside their TOML files, drawn as ``optipose show`` does by a
+    thread on ``jobs`` worker processes while this one prints the answer and writes the report; returns the
+    started thread (``join`` waits for the pictures)."""
+    import threading
     from dataclasses import replace
 
-    from optipose.report.views import render_part
+    from optipose.model.baseline import baseline, baseline_label
+    from optipose.report.views import render_layouts
 
-    shown = replace(part, layouts={**part.layouts, **{f"found_k{k}": lay for k, lay in layouts.items()}})
-    for k in layouts:
-        try:
-            render_part(shown, folder / "layouts" / f"found_k{k}.png", f"found_k{k}")
-        except Exception as exc:  # a picture must never cost the results
-            logging.getLogger(__name__).warning("could not draw found_k%d: %s", k, exc)
+    hand = baseline(part)
+    named = {f"found_k{k}": lay for k, lay in layouts.items()} | ({baseline_label(hand): hand} if hand is not None else {})
+    shown = replace(part, layouts={**part.layouts, **named})
+    thread = threading.Thread(target=render_layouts, args=(shown, list(named), folder / "layouts", jobs), daemon=True)
+    thread.start()
+    return thread
 
 
 def _print_report(console, report, part, unchecked: bool = False, ideal: bool = True) -> None:

@@ -22,13 +22,15 @@ log = logging.getLogger(__name__)
 REPORT_HTML, REPORT_MD, FIGURE_DIR = "report.html", "report.md", "report_figures"
 
 
-def write_report(folder: str | Path, views: bool = True) -> tuple[Path, Path]:
+def write_report(folder: str | Path, views: bool = True, ready=None) -> tuple[Path, Path]:
     """Write ``report.html`` and ``report.md`` into a result folder; returns both paths.
 
     views : draw the 3D views (they scan each layout once at its nominal pose: a few seconds per layout).
+    ready : called before the views are taken, last: waits for a search's ``layouts/<name>.png`` being drawn
+        beside the report (a view missing then is drawn here).
     """
     folder = Path(folder)
-    title, blocks = build_blocks(folder, views)
+    title, blocks = build_blocks(folder, views, ready)
     html_path, md_path = folder / REPORT_HTML, folder / REPORT_MD
     write_text(html_path, render_html(title, blocks))
     write_figures(blocks, folder / FIGURE_DIR)
@@ -36,8 +38,8 @@ def write_report(folder: str | Path, views: bool = True) -> tuple[Path, Path]:
     return html_path, md_path
 
 
-def build_blocks(folder: Path, views: bool = True) -> tuple[str, list[Block]]:
-    """The report's title and blocks for the result in ``folder``."""
+def build_blocks(folder: Path, views: bool = True, ready=None) -> tuple[str, list[Block]]:
+    """The report's title and blocks for the result in ``folder`` (``ready``: :func:`write_report`'s)."""
     from optipose.io import load_result
     from optipose.io.results import EvaluationResult, RobustnessResult
 
@@ -46,7 +48,7 @@ def build_blocks(folder: Path, views: bool = True) -> tuple[str, list[Block]]:
         return _evaluation(folder, result, views)
     if isinstance(result, RobustnessResult):
         return _robustness(folder, result, views)
-    return _search(folder, result, views)
+    return _search(folder, result, views, ready)
 
 
 def _part(config):
@@ -139,7 +141,7 @@ def _band_check(result, label: str) -> list[Block]:
     return blocks
 
 
-def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
+def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Block]]:
     from optipose.io.load import load_history, load_selection, load_surrogate_scores
     from optipose.model.baseline import baseline_label
     from optipose.report.layouts import layout_section
@@ -178,7 +180,7 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     layouts = {f"found_k{k}": lay for k, lay in sorted(result.layouts.items())}
     if result.hand is not None:
         layouts[label] = replace(result.hand, name=label)
-    blocks += _views(_part(result.config), layouts, views, folder / "layouts")
+    at = len(blocks)  # the views go here, taken last (their pictures may still be drawn beside this)
     blocks.append(Heading("Poses for the robot program"))
     for name, layout in layouts.items():
         blocks += layout_section(name, layout)
@@ -192,6 +194,9 @@ def _search(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     pairs = surrogate_pairs(load_selection(folder), load_surrogate_scores(folder), result, label)
     blocks += search_blocks(load_history(folder), pairs, label)
     blocks += provenance_blocks(result.config)
+    if ready is not None:
+        ready()
+    blocks[at:at] = _views(_part(result.config), layouts, views, folder / "layouts")
     return title, blocks
 
 

@@ -12,12 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
+from optipose.files import atomic_path
 from optipose.model.layout import Layout
 from optipose.model.sensor import load_sensor
 from optipose.scan.scanner import part_scanner, registered_motion
 from optipose.transforms import transform_points
 
-__all__ = ["render_part", "drawn_mesh"]
+__all__ = ["render_part", "render_layouts", "drawn_mesh"]
 
 # (title, elevation, azimuth, zoomed on the part): whole scene for the heads, close-ups for the points.
 _VIEWS = (
@@ -67,9 +68,40 @@ def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict 
     fig.subplots_adjust(left=0.02, right=0.98, bottom=0.04, top=0.93, wspace=0.05, hspace=0.1)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
+    with atomic_path(out) as tmp:  # never half a picture where the report takes it from
+        fig.savefig(tmp, format="png")
     plt.close(fig)
     return out
+
+
+def render_layouts(part, names: list[str], folder: Path, jobs: int = 1) -> list[Path]:
+    """``folder/<name>.png`` of each of ``part.layouts[name]`` (:func:`render_part`), one picture a task on ``jobs``
+    worker processes (in this process with one). A picture that fails is a warning and left out: a picture must
+    never cost the results."""
+    import logging
+    from functools import partial
+
+    from optipose.evaluate.executors import make_executor
+
+    executor = make_executor(min(max(1, int(jobs)), len(names) or 1))
+    try:
+        drawn = executor.map(partial(_render_named, part, Path(folder)), names)
+    except Exception as exc:  # a worker that died twice: no pictures, the results stand
+        logging.getLogger(__name__).warning("could not draw the layouts: %s", exc)
+        return []
+    finally:
+        executor.close()
+    return [path for path in drawn if path is not None]
+
+
+def _render_named(part, folder: Path, name: str) -> Path | None:
+    try:
+        return render_part(part, folder / f"{name}.png", name)
+    except Exception as exc:
+        import logging
+
+        logging.getLogger(__name__).warning("could not draw %s: %s", name, exc)
+        return None
 
 
 def _kept(mesh, key, make):

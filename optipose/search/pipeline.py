@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 from optipose.errors import OptiposeError, is_interrupt
@@ -112,6 +112,7 @@ def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budg
 
 
 def _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, on_stage) -> SearchReport:
+    started = time.monotonic()  # answer_time counts from here
     band = stage_objective(objective, "band", band=config.band)  # a bad name fails here, before any work
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     if on_stage:  # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
@@ -119,7 +120,7 @@ def _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, 
     with _shared_reference(part, jobs) as folder, _baseline_run(part, objective, config, seed, jobs, folder) as hand_run, \
             _baseline_run(part, band, config, seed, jobs, folder, last=True) as band_run:  # fmt: skip
         study = _study(part, objective, config, sink, resume, on_eval)  # after the hand layout's processes start: they set up beside it
-        return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run)
+        return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run, started)
 
 
 @contextmanager
@@ -154,7 +155,8 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, f
     return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs, reference_dir=folder)
 
 
-def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None, band_run=None) -> SearchReport:
+def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None, band_run=None,
+         started: float | None = None) -> SearchReport:  # fmt: skip
     stage = on_stage or (lambda text: None)
     outcome = run_search(part, objective, config, seed, study)
     _flush(sink, study)
@@ -198,7 +200,8 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
         from optipose.search.verdict import confident_verdicts
 
         stage(f"the verdict with confidence (up to {config.verdict_draws} draws of the cell)")
-        report.confident = confident_verdicts(part, objective, report.layouts, report.validation, first, seed, config, jobs,
+        raced = replace(config, verdict_time=_verdict_seconds(config, started))
+        report.confident = confident_verdicts(part, objective, report.layouts, report.validation, first, seed, raced, jobs,
                                               sink.verdict_draw)  # fmt: skip
         sink.verdict(report.confident)
     if band is None or not report.validation.hand:  # no band, or nothing to compare with: no check
@@ -215,6 +218,15 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
         return report
     sink.band(report.band)
     return report
+
+
+def _verdict_seconds(config, started: float | None) -> float:
+    """The verdict's ``verdict_time`` (0: no limit), ended by ``answer_time`` s after ``started`` when that is set:
+    what is left then, at least a moment (the race adds one draw and looks at what it has)."""
+    if config.answer_time <= 0 or started is None:
+        return config.verdict_time
+    left = max(1e-3, config.answer_time - (time.monotonic() - started))
+    return min(config.verdict_time, left) if config.verdict_time > 0 else left
 
 
 def _study(part, objective, config, sink: ResultSink, resume: bool, on_eval) -> SurrogateStudy:

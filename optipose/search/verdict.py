@@ -8,7 +8,7 @@ scan noise (common random numbers). Each layout keeps the choice the validation 
 axis); a draw gives that choice's per-scan errors (:func:`optipose.evaluate.confidence.scan_errors`), and
 registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``).
 
-Draws are added (:func:`optipose.evaluate.confidence.race_many`) until every k is BUY, KEEP or TIE, or
+Draws are added (:func:`optipose.evaluate.racing.race_many`) until every k is BUY, KEEP or TIE, or
 ``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
 ideal cell a draw differs from the next only in its noise and orientations, which the scans' own spread
 already measures: the first look is at one draw. In a real cell each draw is another instance of the cell,
@@ -24,7 +24,8 @@ import math
 import string
 import time
 
-from optipose.evaluate.confidence import FEWER, Rules, paired_draw, race_many
+from optipose.evaluate.confidence import FEWER, Rules, paired_draw
+from optipose.evaluate.racing import race_many
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 from optipose.evaluate.executors import make_executor
 from optipose.model.baseline import baseline, baseline_label
