@@ -69,15 +69,15 @@ def render_part(part, out: str | Path, layout: str | None = "hand", scans: dict 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out) as tmp:  # never half a picture where the report takes it from
-        fig.savefig(tmp, format="png")
+        fig.savefig(tmp, format=out.suffix.lstrip(".").lower() or "png")
     plt.close(fig)
     return out
 
 
 def render_layouts(part, names: list[str], folder: Path, jobs: int = 1) -> list[Path]:
     """``folder/<name>.png`` of each of ``part.layouts[name]`` (:func:`render_part`), one picture a task on ``jobs``
-    worker processes (in this process with one). A picture that fails is a warning and left out: a picture must
-    never cost the results."""
+    local worker processes (joblib's, which write to this machine's folder; in this process with one). A picture
+    that fails is a warning and left out: a picture must never cost the results."""
     import logging
     from functools import partial
 
