@@ -83,7 +83,7 @@ def render_layouts(part, names: list[str], folder: Path, jobs: int = 1) -> list[
 
     from optipose.evaluate.executors import make_executor
 
-    executor = make_executor(min(max(1, int(jobs)), len(names) or 1))
+    executor = make_executor(jobs)  # the pool the search's evaluations warmed, reused
     try:
         drawn = executor.map(partial(_render_named, part, Path(folder)), names)
     except Exception as exc:  # a worker that died twice: no pictures, the results stand

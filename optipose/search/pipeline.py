@@ -155,8 +155,7 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, f
     return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs, reference_dir=folder)
 
 
-def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band=None, band_run=None,
-         started: float | None = None) -> SearchReport:  # fmt: skip
+def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run, started: float) -> SearchReport:
     stage = on_stage or (lambda text: None)
     outcome = run_search(part, objective, config, seed, study)
     _flush(sink, study)
@@ -220,10 +219,10 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
     return report
 
 
-def _verdict_seconds(config, started: float | None) -> float:
+def _verdict_seconds(config, started: float) -> float:
     """The verdict's ``verdict_time`` (0: no limit), ended by ``answer_time`` s after ``started`` when that is set:
     what is left then, at least a moment (the race adds one draw and looks at what it has)."""
-    if config.answer_time <= 0 or started is None:
+    if config.answer_time <= 0:
         return config.verdict_time
     left = max(1e-3, config.answer_time - (time.monotonic() - started))
     return min(config.verdict_time, left) if config.verdict_time > 0 else left
