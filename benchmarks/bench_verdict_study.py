@@ -4,7 +4,7 @@
                                                                [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study] [--report]
                                                                [--search-config settings.toml]
     .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2] [--verdict-time 0]
-                                                               [--draws 30] [--file holdout.csv]
+                                                               [--draws 30] [--file holdout.csv] [--choices kept]
     .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study] [--file holdout.csv]
 
 ``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
@@ -15,9 +15,11 @@ parts are the shipped A, B, C (hand layouts) and the three of ``scripts/make_stu
 baselines; ``studies/parts/``).
 ``holdout``: per search folder, its found layouts and its baseline evaluated again on a run seed the search never
 used (the search's seed + ``--offset``: another held-out validation seed, other cell instances, other noise),
-choices made there, and the verdict raced as the search's was (:func:`optipose.search.verdict.confident_verdicts`,
-the search's own settings, or up to ``--draws``) — into ``OUT/<part>/holdout.csv`` (or ``--file``). A BUY holds when
-the held-out verdict is BUY too.
+and the verdict raced as the search's was (:func:`optipose.search.verdict.confident_verdicts`, the search's own
+settings, or up to ``--draws``) — into ``OUT/<part>/holdout.csv`` (or ``--file``). ``--choices kept`` (the default)
+keeps each layout's choice (its subset per axis) as the search made it: what a BUY mounts, checked on draws the
+search never saw. ``--choices remade`` makes the choices again on the held-out validation's draw: whether another
+search's validation would choose, and buy, the same. A BUY holds when the held-out verdict is BUY too.
 ``table``: one row per part and k — the search's verdict, hand / found in sum with its interval, the predicted
 median per axis for found and baseline, the draws, and the held-out verdict; as Markdown, for docs/results.md.
 """
@@ -87,6 +89,8 @@ def holdout(args) -> None:
         first: dict = {}
         t0 = time.perf_counter()
         validation = validate(part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__)
+        if args.choices == "kept":  # what the search bought, on the held-out draws
+            validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
         pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / args.file, index=False)
         by_k, _ = split(verdicts)
@@ -131,6 +135,8 @@ def main() -> None:
     ap.add_argument("--search-config", default=None, help="run: a TOML of [search] settings over the budget's (optipose search --search-config)")
     ap.add_argument("--verdict-time", type=float, default=None, help="holdout: the race's seconds (default: the search's; 0: draws alone)")
     ap.add_argument("--draws", type=int, default=0, help="holdout: the race's draws at most (default: the search's)")
+    ap.add_argument("--choices", choices=("kept", "remade"), default="kept",
+                    help="holdout: each layout's subset per axis as the search chose it, or chosen again on the held-out validation")
     ap.add_argument("--file", default="holdout.csv", help="holdout: the file each folder's verdicts go to; table: the file read")
     ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
     args = ap.parse_args()

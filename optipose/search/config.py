@@ -81,7 +81,7 @@ class SearchConfig:
     # and, when above 0, ends by answer_time s after the search started (its surrogate's set-up), whatever the
     # stages before it took: a budget that promises an answer in so many seconds keeps it on a slower machine
     answer_time: float = 0.0
-    verdict_scans: int = 0  # the protocol's scans a draw after the first evaluates, drawn by its seed (0: all)
+    verdict_scans: int = 0  # the protocol's scans a draw after the validation's evaluates, drawn by its seed (0: all)
     verdict_tolerance: float = 0.10
     verdict_confidence: float = 0.95
 

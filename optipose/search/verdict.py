@@ -1,6 +1,7 @@
 """Stage: the verdict with confidence. Found vs. hand per k on paired draws, raced until it is clear.
 
-The validation's evaluations (the held-out seed) are the first draw. Each further draw is one seed of its own
+In the ideal cell the validation's evaluations (the held-out seed) are the first draw; in a real cell they are
+not, since each layout's choice was made on them (:func:`choice_draw_counts`). Each further draw is one seed of its own
 (:func:`optipose.seeds.verdict_seed`, never seen by the search or the validation) on which every found layout
 and the hand one are evaluated with the validation's objective: one evaluator per draw, so both sides get the
 same cell instance (the part as made, the calibration), the same protocol orientations, robot paths and
@@ -12,7 +13,7 @@ Draws are added (:func:`optipose.evaluate.racing.race_many`) until every k is BU
 ``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
 ideal cell a draw differs from the next only in its noise and orientations, which the scans' own spread
 already measures: the first look is at one draw. In a real cell each draw is another instance of the cell,
-whose spread only draws show: the first look is at three, and a draw after the first may evaluate a seeded
+whose spread only draws show: the first look is at three, and a draw may evaluate a seeded
 share of the protocol's scans (``SearchConfig.verdict_scans``): more instances of fewer scans (docs/method.md,
 "The verdict with confidence").
 """
@@ -35,7 +36,7 @@ from optipose.search.records import Validation
 from optipose.search.validate import indices_in, nested_groups
 from optipose.seeds import verdict_seed
 
-__all__ = ["confident_verdicts", "first_look"]
+__all__ = ["choice_draw_counts", "confident_verdicts", "first_look"]
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +44,14 @@ log = logging.getLogger(__name__)
 def first_look(objective) -> int:
     """The draws the first look of the race waits for: one in the ideal cell, three in a real one."""
     return 1 if objective.cell.ideal else 3
+
+
+def choice_draw_counts(objective) -> bool:
+    """Whether the validation's draw, on which each layout's choice (its subset per axis) was made, is the
+    race's first draw: in the ideal cell, where every draw is the one part and calibration and differs only in
+    its noise and orientations; not in a real cell, where the choice fits that draw's instance of the cell (the
+    part as made, the calibration) and flatters it (docs/method.md, "The verdict with confidence")."""
+    return objective.cell.ideal
 
 
 def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: Validation, first: dict[str, EvaluationResult],
@@ -78,8 +87,9 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
         return {key: paired_draw(results[big[f]], validation.found[f], results["hand"], validation.hand[h])
                 for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items() if big[f] in results}  # fmt: skip
 
-    draws = {k: [p] for k, p in pairs(first).items()}
-    if config.verdict_draws <= 1:
+    counted = choice_draw_counts(objective)
+    draws = {k: [p] for k, p in pairs(first).items()} if counted else None
+    if counted and config.verdict_draws <= 1:
         return race_many(lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer))
     executor = make_executor(jobs)
 
@@ -87,8 +97,8 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     used = {"hand": _used(validation.hand[h] for _, h in ({k: (k, k) for k in ks} | fewer).values())}
     used |= {f"found_k{max(g)}": _used(validation.found[k] for k in g if k in ks) for g in groups}
 
-    def next_draws(i: int, keys) -> dict:
-        t0 = time.perf_counter()
+    def next_draws(n: int, keys) -> dict:
+        t0, i = time.perf_counter(), n + (not counted)  # draw i's seed and folder: 0 is the validation's
         wanted = [g for g in groups if keys is None or any(k in keys for k in g)]  # a decided k's layout is not evaluated again
         with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans) as evaluator:
             results = {"hand": evaluator(hand, subsets=used["hand"])}
