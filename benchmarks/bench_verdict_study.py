@@ -6,6 +6,7 @@
     .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2] [--verdict-time 0]
                                                                [--draws 30] [--file holdout.csv] [--choices kept]
     .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study] [--file holdout.csv]
+                                                               [--remade-file holdout-remade.csv]
 
 ``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
 ``OUT/<part>/`` (with its report under ``--report``: ``scripts/reference.sh`` makes results/reference so); the
@@ -21,7 +22,8 @@ keeps each layout's choice (its subset per axis) as the search made it: what a B
 search never saw. ``--choices remade`` makes the choices again on the held-out validation's draw: whether another
 search's validation would choose, and buy, the same. A BUY holds when the held-out verdict is BUY too.
 ``table``: one row per part and k — the search's verdict, hand / found in sum with its interval, the predicted
-median per axis for found and baseline, the draws, and the held-out verdict; as Markdown, for docs/results.md.
+median per axis for found and baseline, the draws, and the held-out verdicts (with their draws; the choices remade in a
+column of their own where ``--remade-file`` is present); as Markdown, for docs/results.md.
 """
 
 from __future__ import annotations
@@ -102,18 +104,21 @@ def table(args) -> None:
     from optipose.io.load import load_result, read_verdicts
     from optipose.report.confidence import interval_cell  # "not measured" for an axis a layout does not see
 
-    print("| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |")
-    print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |")
-    for name, folder in _folders(args.out, set(PARTS)).items():
+    folders = _folders(args.out, set(PARTS))
+    remade = args.remade_file and any((folder / args.remade_file).is_file() for folder in folders.values())
+    print("| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |"
+          + (" held out, choices remade |" if remade else ""))  # fmt: skip
+    print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |" + (" --- |" if remade else ""))
+    for name, folder in folders.items():
         by_k, _ = split(load_result(folder).confident)
-        held, _ = split(read_verdicts(folder / args.file))
+        held = [split(read_verdicts(folder / file))[0] for file in ([args.file] + ([args.remade_file] if remade else []))]
         for k, v in by_k.items():
             axes = [f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.hand)]
-            h = held.get(k)
-            other = f"{h.decision} {h.score.estimate:.2f}x [{h.score.low:.2f}, {h.score.high:.2f}]" if h else "-"
+            others = [f"{h.decision} {h.score.estimate:.2f}x [{h.score.low:.2f}, {h.score.high:.2f}] ({h.n_draws})" if h else "-"
+                      for h in (by.get(k) for by in held)]  # fmt: skip
             s = v.score
             print(f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}] | "
-                  + " | ".join(axes) + f" | {v.n_draws} | {other} |")  # fmt: skip
+                  + " | ".join(axes) + f" | {v.n_draws} | " + " | ".join(others) + " |")  # fmt: skip
 
 
 def _folders(outs: str, wanted: set) -> dict[str, Path]:
@@ -137,6 +142,7 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=0, help="holdout: the race's draws at most (default: the search's)")
     ap.add_argument("--choices", choices=("kept", "remade"), default="kept",
                     help="holdout: each layout's subset per axis as the search chose it, or chosen again on the held-out validation")
+    ap.add_argument("--remade-file", default="holdout-remade.csv", help="table: the held-out verdicts with choices remade, a column where present")
     ap.add_argument("--file", default="holdout.csv", help="holdout: the file each folder's verdicts go to; table: the file read")
     ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
     args = ap.parse_args()
