@@ -307,7 +307,7 @@ def _print_report(console, report, part, unchecked: bool = False, ideal: bool = 
         console.print(_subsets_table(report.validation, label))
         if any(v.ratios() for v in verdicts):
             console.print(_band_table(report.validation, part, label))
-        for line in lines[: len(verdicts)] if band or not confident else ():  # the first draw's own lines, before the band's check
+        for line in lines[: len(verdicts)] if band or not confident else ():  # the validation draw's own lines, before the band's check
             console.print(line, highlight=False)
         if band:
             console.print(_band_table(report.band, part, label, "under the band"))

@@ -162,13 +162,13 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
         protocol = "the full protocol" if validation.protocol == "full" else "the REDUCED protocol (14 scans; --budget default for the full one)"
         band = result.band_verdicts()
         verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, band, result.unchecked)
-        if result.confident:  # the verdict on draws decides; the first draw's own lines only where the band's check follows them
+        if result.confident:  # the verdict on draws decides; the validation draw's own lines only where the band's check follows them
             verdict = verdict[:1] + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.hand) + (
                 [Heading("The validation draw alone, statistic by statistic")] + verdict[1:] if band else [])
         blocks += verdict
         blocks.append(Paragraph(f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "
                                 f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
-                                + ("The table below is that first draw alone." if result.confident else
+                                + ("The table below is that draw alone, on which each layout's subset per axis was chosen." if result.confident else
                                    "A verdict says 'better in sum' from the summed per-axis medians and 75th percentiles, and 'no worse on "
                                    "any axis' only when every one of them is at most the baseline's."), "note"))  # fmt: skip
         blocks.append(Heading("Per axis (the paper's Table 1)"))
