@@ -7,6 +7,7 @@
                                                                [--draws 30] [--file holdout.csv] [--choices kept]
     .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study] [--file holdout.csv]
                                                                [--remade-file holdout-remade.csv]
+    .venv/bin/python benchmarks/bench_verdict_study.py draws   [--out results/reference,results/verdict-study]
 
 ``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
 ``OUT/<part>/`` (with its report under ``--report``: ``scripts/reference.sh`` makes results/reference so); the
@@ -24,6 +25,9 @@ search's validation would choose, and buy, the same. A BUY holds when the held-o
 ``table``: one row per part and k — the search's verdict, hand / found in sum with its interval, the predicted
 median per axis for found and baseline, the draws, and the held-out verdicts (with their draws; the choices remade in a
 column of their own where ``--remade-file`` is present); as Markdown, for docs/results.md.
+``draws``: per search folder and k, hand / found in sum on each draw the search stored — the validation's, where
+the choices of subsets were made, then the verdict's — and the mean over the verdict's: how much the draw a choice
+was made on flatters it.
 """
 
 from __future__ import annotations
@@ -121,6 +125,35 @@ def table(args) -> None:
                   + " | ".join(axes) + f" | {v.n_draws} | " + " | ".join(others) + " |")  # fmt: skip
 
 
+def draws(args) -> None:
+    import tomllib
+
+    import numpy as np
+
+    from optipose.evaluate.confidence import Rules, compare_draws, paired_draw
+    from optipose.evaluate.objective import objective_from_table
+    from optipose.io.load import load_result
+    from optipose.search.validate import nested_groups
+
+    print("| part | k | validation's draw | verdict's draws (mean, range) | draws |")
+    print("| --- | ---: | ---: | --- | ---: |")
+    for name, folder in _folders(args.out, set(PARTS)).items():
+        result = load_result(folder)
+        rules = Rules(replicates=1, statistic=objective_from_table(tomllib.loads(result.config.objective_file)).statistic)
+        big = {k: max(g) for g in nested_groups(result.layouts) for k in g}
+        stored = [folder / "validation"] + sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:]))
+        v = result.validation
+        for k in sorted(k for k in v.found if k in v.hand):
+            ratios = []
+            for d in stored:
+                if (d / f"found_k{big[k]}").is_dir():
+                    pair = paired_draw(load_result(d / f"found_k{big[k]}"), v.found[k], load_result(d / "hand"), v.hand[k])
+                    ratios.append(compare_draws([pair], rules).score.estimate)
+            rest = np.array(ratios[1:])
+            spread = f"{rest.mean():.2f}x ({rest.min():.2f}-{rest.max():.2f})" if len(rest) else "-"
+            print(f"| {name} | {k} | {ratios[0]:.2f}x | {spread} | {len(rest)} |")
+
+
 def _folders(outs: str, wanted: set) -> dict[str, Path]:
     """Part name → its search folder: the first of the comma-separated ``outs`` that holds one, in PARTS' order."""
     held = {name: [Path(out) / name for out in outs.split(",") if (Path(out) / name / "verdict.csv").is_file()] for name in PARTS if name in wanted}
@@ -129,7 +162,7 @@ def _folders(outs: str, wanted: set) -> dict[str, Path]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("run", "holdout", "table"))
+    ap.add_argument("what", choices=("run", "holdout", "table", "draws"))
     ap.add_argument("--parts", default=",".join(PARTS))
     ap.add_argument("--budget", default="default")
     ap.add_argument("--cell", default="ur10e")
@@ -146,7 +179,7 @@ def main() -> None:
     ap.add_argument("--file", default="holdout.csv", help="holdout: the file each folder's verdicts go to; table: the file read")
     ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
     args = ap.parse_args()
-    {"run": run, "holdout": holdout, "table": table}[args.what](args)
+    {"run": run, "holdout": holdout, "table": table, "draws": draws}[args.what](args)
 
 
 if __name__ == "__main__":
