@@ -5,7 +5,7 @@
 # one again on other cell instances, seed 1000, raced on draws alone: with the choices of subsets the search
 # made, and with choices made again there), and the table of all three.
 #
-#   bash scripts/reference.sh            # about 20 min on 2 cores; writes results/reference/
+#   bash scripts/reference.sh            # about 15 min on 2 cores; writes results/reference/
 #
 # What is kept in git: each part's report (report.html is self-contained), its small tables and layouts;
 # not the search caches, the per-scan tables or the figures' source folders (see .gitignore).

@@ -16,8 +16,8 @@
    hand layout's part of it starts with step 2, in ``jobs`` processes of its own (``jobs`` ≥ 2), and is waited
    for before step 3;
 5. the verdict with confidence (:mod:`optipose.search.verdict`): the validation's evaluations are its first
-   draw in the ideal cell (in a real cell the choices were made on them), and further draws of the cell on seeds of their own are raced until every k is BUY, KEEP or TIE,
-   before the check under the band.
+   draw in the ideal cell (in a real cell the choices were made on them), and further draws of the cell on
+   seeds of their own are raced until every k is BUY, KEEP or TIE, before the check under the band.
 
 Every result goes to a :class:`ResultSink` the caller gives (``optipose.io.search.SearchFolder`` writes a
 result folder), so the search itself never touches the file system.

@@ -60,7 +60,8 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     one found sensor against the baseline's largest choice (on the same draws, without holding the race:
     :data:`~optipose.evaluate.confidence.FEWER`).
 
-    first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``);
+    first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``), the
+    race's first draw where :func:`choice_draw_counts`;
     on_draw(i, name, result) : told of each further draw's evaluations as they end. Empty when the part has no
     baseline, the validation has no hand choice, or its evaluations are not per-scan ones (a band objective)."""
     hand = baseline(part)
