@@ -139,11 +139,12 @@ def test_the_race_plans_its_looks_for_the_draws_its_time_holds():
         now[0] += 10.0
         return _draws(rng, 1, ratio=1.0, start=i)[0]
 
-    # 3 draws take 30 s of 45: the time holds one more, so the looks are at 3 and 4, each at 2.5 %
+    # 3 draws take 30 s of 45: the time holds one more, so the looks are at 3 and 4; the one at 3 spends
+    # (3/4)^3 of the 5 %, the last the rest
     verdict = race(slow, FAST, min_draws=3, max_draws=40, seconds=45.0, clock=lambda: now[0])
-    assert verdict.n_draws == 4 and verdict.confidence == pytest.approx(0.975)
+    assert verdict.n_draws == 4 and verdict.confidence == pytest.approx(1 - 0.05 * (1 - (3 / 4) ** 3))
     # draws slow down after the plan (3, 5, 8, 9) is made: the time ends the race at 5, whose last look
-    # spends the three shares of the looks at 5, 8 and 9
+    # spends what the look at 3 left: the shares of the looks at 5, 8 and 9
     now[0], took = 0.0, iter([5.0, 5.0, 5.0, 20.0, 20.0] + [20.0] * 10)
 
     def slowing(i):
@@ -151,7 +152,7 @@ def test_the_race_plans_its_looks_for_the_draws_its_time_holds():
         return _draws(rng, 1, ratio=1.0, start=i)[0]
 
     verdict = race(slowing, FAST, min_draws=3, max_draws=40, seconds=45.0, clock=lambda: now[0])
-    assert verdict.n_draws == 5 and verdict.confidence == pytest.approx(1 - 0.05 * 3 / 4)
+    assert verdict.n_draws == 5 and verdict.confidence == pytest.approx(1 - 0.05 * (1 - (3 / 9) ** 3))
 
 
 @pytest.mark.parametrize("seed", range(20))
@@ -172,6 +173,14 @@ def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
     racing.race(draw, FAST, min_draws=int(rng.integers(1, 5)), max_draws=int(rng.integers(1, 30)),
                     seconds=float(rng.choice([np.inf, rng.uniform(1.0, 60.0)])), clock=lambda: now[0])  # fmt: skip
     assert spent and sum(spent) <= 0.05 + 1e-12
+
+
+def test_the_looks_spend_little_early_and_most_at_the_last():
+    plan = looks(3, 9)
+    shares = np.diff([0.0] + [racing.spent(n, plan) for n in plan])
+    assert plan == (3, 5, 8, 9) and shares.sum() == pytest.approx(1.0)
+    assert np.all(np.diff(shares[:-1]) > 0) and shares[0] < 0.05  # growing; the first look's share 1/27
+    assert racing.spent(8, plan) == pytest.approx((8 / 9) ** 3) and racing.spent(9, plan) == 1.0 == racing.spent(12, plan)
 
 
 def test_the_looks():

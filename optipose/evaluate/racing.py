@@ -1,8 +1,8 @@
 """Racing: paired draws added until a verdict is clear or a budget ends (issue #33).
 
 :func:`race` adds draws until the decision (:func:`optipose.evaluate.confidence.compare_draws`) is not
-UNDECIDED or a budget ends, deciding only at a few :func:`looks`, each at a share of the error rate, planned
-at the first from the draws the time holds; :func:`race_many` does it for several k at once (one draw
+UNDECIDED or a budget ends, deciding only at a few :func:`looks`, planned at the first from the draws the
+time holds, each at the share of the error rate :func:`spent` gives it; :func:`race_many` does it for several k at once (one draw
 evaluates every found layout and the hand one).
 """
 
@@ -15,18 +15,29 @@ from typing import Callable, Sequence
 
 from optipose.evaluate.confidence import UNDECIDED, ConfidentVerdict, PairedDraw, Rules, compare_draws
 
-__all__ = ["looks", "race", "race_many"]
+__all__ = ["SPENDING", "looks", "race", "race_many", "spent"]
+
+# the error rate spent by a share t of the planned draws, α·t^ρ (Kim & DeMets 1987, Biometrika 74:149; Jennison &
+# Turnbull 2000, §7.2): at ρ = 3, close to O'Brien & Fleming's, the early looks spend little, so that a large gap
+# still stops the race early and the last look, where a close one is decided, keeps most of the 5 %
+SPENDING = 3.0
 
 
 def looks(min_draws: int, max_draws: int) -> tuple[int, ...]:
     """The draw counts at which :func:`race` decides: ``min_draws``, then half as many again each time, and
-    ``max_draws``. Each look spends an equal share of the error rate (Bonferroni), so that racing does not buy
-    more often than one fixed comparison."""
+    ``max_draws``. Each look spends its share of the error rate (:func:`spent`), the shares summing to it
+    (Bonferroni), so that racing does not buy more often than one fixed comparison."""
     out, n = [], max(1, min_draws)
     while n < max_draws:
         out.append(n)
         n = max(n + 1, math.ceil(1.5 * n))
     return tuple(out + [max_draws])
+
+
+def spent(n: int, plan: Sequence[int], rho: float = SPENDING) -> float:
+    """The share of the error rate the looks of ``plan`` up to and including the one at ``n`` draws spend:
+    (n / the plan's last) ** ``rho``, 1 from the last on. Fixed by the plan, never by the draws' errors."""
+    return 1.0 if n >= plan[-1] else (n / plan[-1]) ** rho
 
 
 def _planned(n: int, max_draws: int, seconds_left: float, per_draw: float) -> int:
@@ -45,8 +56,8 @@ def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_
     decision at one of the :func:`looks` is not UNDECIDED, or ``max_draws`` are in, or another draw would end
     past ``seconds`` (at the mean time a draw took so far; then a last look at the draws in). The looks are
     planned at the first: up to ``max_draws``, or to the draws the ``seconds`` left hold at the time a draw took
-    (:func:`_planned`). Each look's intervals are at confidence 1 − (1 − ``rules.confidence``) / looks, and a
-    last look the time forces early spends the shares of the looks it leaves unmade; the verdict carries its
+    (:func:`_planned`). Each look's intervals are at confidence 1 − (1 − ``rules.confidence``) · its share
+    (:func:`spent`), and a last look the time forces early spends what the looks it leaves unmade would; the verdict carries its
     confidence, with the seconds a draw took. ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` for :func:`compare_draws`."""
     verdicts = race_many(lambda i, keys: {0: next_draw(i)}, rules, min_draws=min_draws, max_draws=max_draws, seconds=seconds,
                          clock=clock, draws={0: list(draws)} if draws else None, names={0: names})  # fmt: skip
@@ -66,7 +77,7 @@ def race_many(next_draws: Callable[[int, frozenset], dict], rules: Rules = Rules
     names = names or {}
     done: dict = {}
     plan: tuple[int, ...] = ()  # the looks, fixed at the first from the draws the time budget holds
-    looked, start, added = 0, clock(), 0
+    used, start, added = 0.0, clock(), 0  # used: the share of the error rate the looks made have spent
     while True:
         n = min((len(taken[key]) for key in (taken.keys() - done.keys() - passengers) or taken), default=0)
         elapsed = clock() - start
@@ -76,10 +87,10 @@ def race_many(next_draws: Callable[[int, frozenset], dict], rules: Rules = Rules
             plan = looks(n, _planned(n, max_draws, seconds - elapsed, per_draw))
         last = n >= max_draws or out_of_time or bool(plan) and n >= plan[-1]
         if n and (n in plan or last):
-            # each look spends an equal share of the error rate; the last spends what the plan's unmade looks leave
-            shares = len(plan) - looked if last else 1
-            each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) * shares / len(plan))
-            looked += 1
+            # each look spends its share of the error rate; the last spends what the plan's unmade looks leave
+            share = (1.0 if last else spent(n, plan)) - used
+            each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) * share)
+            used += share
             for key in taken.keys() - done.keys() - passengers:
                 verdict = compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
                 if verdict.decision != UNDECIDED or last:
