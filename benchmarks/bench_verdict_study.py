@@ -78,7 +78,7 @@ def holdout(args) -> None:
     from optipose.model.part import load_part
     from optipose.search.config import SearchConfig
     from optipose.search.validate import validate
-    from optipose.search.verdict import confident_verdicts
+    from optipose.search.verdict import choice_draw_counts, confident_verdicts
 
     wanted = set(args.parts.split(","))
     for folder in sorted(_folders(args.out, wanted).values()):
@@ -94,7 +94,10 @@ def holdout(args) -> None:
         seed = int(saved.seed) + args.offset
         first: dict = {}
         t0 = time.perf_counter()
-        validation = validate(part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__)
+        if args.choices == "kept" and not choice_draw_counts(objective):  # the search's choices; the race does not read a validation's draw
+            validation = result.validation
+        else:
+            validation = validate(part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__)
         if args.choices == "kept":  # what the search bought, on the held-out draws
             validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)

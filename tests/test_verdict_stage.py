@@ -67,6 +67,9 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
     fresh = range(1, last) if cell == "ideal" else range(1, last + 1)
     assert sorted({(i, seed) for i, _, seed in draws}) == [(i, verdict_seed(5, i)) for i in fresh]
     assert verdict_seed(5, 0) == validation_seed(5) and len({verdict_seed(5, i) for i in range(4)}) == 4
+    if cell != "ideal":  # the real cell's race never reads the validation's evaluations: without them, the same verdicts
+        again = confident_verdicts(part, objective, layouts, validation, {}, 5, config)
+        assert [v.line() for v in again.values()] == [v.line() for v in verdicts.values()]
 
 
 def _pairs(rng, i, ratio):

@@ -61,16 +61,18 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     :data:`~optipose.evaluate.confidence.FEWER`).
 
     first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``), the
-    race's first draw where :func:`choice_draw_counts`;
+    race's first draw where :func:`choice_draw_counts` (else not read);
     on_draw(i, name, result) : told of each further draw's evaluations as they end. Empty when the part has no
-    baseline, the validation has no hand choice, or its evaluations are not per-scan ones (a band objective)."""
+    baseline, the validation has no hand choice, or the validation's objective is a band's (its evaluations are
+    not per-scan ones), or ``first`` lacks one the race needs."""
     hand = baseline(part)
     ks = [k for k in sorted(validation.found) if k in validation.hand]
     groups = [g for g in nested_groups(layouts) if any(k in ks for k in g)]
     names = ["hand"] + [f"found_k{max(g)}" for g in groups]
-    if hand is None or not ks or not all(isinstance(first.get(n), EvaluationResult) for n in names):
-        return {}
     objective = stage_objective(objective, "validation", config.validation)
+    counted = choice_draw_counts(objective)
+    if hand is None or not ks or not objective.conditions.trivial or counted and not all(isinstance(first.get(n), EvaluationResult) for n in names):
+        return {}
     rules = Rules(tolerance=config.verdict_tolerance, confidence=config.verdict_confidence, seed=int(seed), statistic=objective.statistic)
     label = baseline_label(hand)
     labels = {k: dict(k=k, found_name=_found_name(layouts[k], validation.found[k], layouts[max(g)]),
@@ -88,7 +90,6 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
         return {key: paired_draw(results[big[f]], validation.found[f], results["hand"], validation.hand[h])
                 for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items() if big[f] in results}  # fmt: skip
 
-    counted = choice_draw_counts(objective)
     draws = {k: [p] for k, p in pairs(first).items()} if counted else None
     if counted and config.verdict_draws <= 1:
         return race_many(lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer))
