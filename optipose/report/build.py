@@ -65,21 +65,25 @@ def _part(config):
         return None
 
 
-def _views(part, layouts: dict, enabled: bool, drawn: Path | None = None) -> list[Block]:
-    """The 3D views (part, heads, fans, keep-outs, a nominal scan's points) of each named layout; ``drawn``:
-    a folder where a layout's views may be drawn already (a search's ``layouts/<name>.png``, by the same
-    function, no older than ``<name>.toml``), taken as they are instead of drawn again."""
+def _views(config, layouts: dict, enabled: bool, drawn: Path | None = None) -> list[Block]:
+    """The 3D views (part, heads, fans, keep-outs, a nominal scan's points) of each named layout of the result
+    whose :class:`~optipose.io.config.RunConfig` is ``config``; ``drawn``: a folder where a layout's views may
+    be drawn already (a search's ``layouts/<name>.png``, by the same function, no older than ``<name>.toml``),
+    taken as they are instead of drawn again. The part is loaded only when a view is left to draw."""
     from optipose.report.figures import layout_views
 
     blocks: list[Block] = [Heading("Where the sensors go")]
     if not enabled:
         return blocks + [Paragraph("3D views left out (--no-views)", "note")]
-    if part is None:
-        return blocks + [Paragraph("no 3D views: the part's file could not be loaded from where the result says it was", "note")]
-    shown = replace(part, layouts={**part.layouts, **layouts})
+    pngs = {name: _drawn(drawn, name) for name in layouts}
+    if None in pngs.values():  # a view to draw: the part is needed
+        part = _part(config)
+        if part is None:
+            return blocks + [Paragraph("no 3D views: the part's file could not be loaded from where the result says it was", "note")]
+        shown = replace(part, layouts={**part.layouts, **layouts})
     for name, layout in layouts.items():
         try:
-            png = _drawn(drawn, name) or layout_views(shown, name)
+            png = pngs[name] or layout_views(shown, name)
         except Exception as exc:  # a picture must never cost the report
             log.warning("report: could not draw %s: %s", name, exc)
             blocks.append(Paragraph(f"{name}: no picture ({exc})", "note"))
@@ -196,7 +200,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
     blocks += provenance_blocks(result.config)
     if ready is not None:
         ready()
-    blocks[at:at] = _views(_part(result.config), layouts, views, folder / "layouts")
+    blocks[at:at] = _views(result.config, layouts, views, folder / "layouts")
     return title, blocks
 
 
@@ -218,7 +222,7 @@ def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     blocks.append(Heading("Per axis (the paper's Table 1)"))
     blocks.append(table1_alone(result.table, name, "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses"))
     config = read_config(folder)
-    blocks += _views(_part(config), {name: result.layout}, views)
+    blocks += _views(config, {name: result.layout}, views)
     blocks.append(Heading("Poses for the robot program"))
     blocks += layout_section(name, result.layout)
     blocks.append(Heading("Errors and points"))
@@ -254,7 +258,7 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         blocks += band_blocks(v.layout, v, label)
     blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
     layouts = {(label if n == "hand" else n): replace(lay, name=label if n == "hand" else n) for n, lay in result.layouts.items()}
-    blocks += _views(_part(result.config), layouts, views)
+    blocks += _views(result.config, layouts, views)
     blocks.append(Heading("Poses for the robot program"))
     for name, layout in layouts.items():
         blocks += layout_section(name, layout)
