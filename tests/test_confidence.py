@@ -175,6 +175,17 @@ def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
     assert spent and sum(spent) <= 0.05 + 1e-12
 
 
+def test_an_early_looks_wide_interval_does_not_hang_on_a_few_replicates():
+    """At 99.9 % (a racing look's share) the interval is the 95 % one's, widened by the quantiles' ratio: as
+    steady from one bootstrap seed to the next as the 95 % one, not the one or two most extreme replicates."""
+    draws = _draws(np.random.default_rng(7), 5, ratio=1.3)
+    widths = {c: [np.log(v.score.high / v.score.low) for v in (compare_draws(draws, Rules(confidence=c, seed=s)) for s in range(6))]
+              for c in (0.95, 0.999)}  # fmt: skip
+    for c, w in widths.items():
+        assert np.ptp(w) / np.mean(w) < 0.05, (c, w)
+    assert 2.0 < np.mean(widths[0.999]) / np.mean(widths[0.95]) < 4.0  # wider, by about t(0.9995)/t(0.975) at 4 df
+
+
 def test_the_looks_spend_little_early_and_most_at_the_last():
     plan = looks(3, 9)
     shares = np.diff([0.0] + [racing.spent(n, plan) for n in plan])

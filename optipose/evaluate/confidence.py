@@ -15,7 +15,8 @@ statistics are shrunk towards their mean until their spread is the cells' alone 
 interval's deviations from the estimate (in logs) are then scaled to the variance of a mean of D draws — the
 draws' spread over D, or the scans' own where that is larger — times Student's quantile over the normal
 one, on D − 1 degrees of freedom where the cells vary (the draws' spread exceeds the scans'), else on all
-the scans' (one draw: the scans' alone). Intervals are two-sided at ``confidence``: of the ratio hand /
+the scans' (one draw: the scans' alone). An interval wider than 95 % (a racing look's) is read off the
+replicates at 95 % and widened by the normal quantiles' ratio: the replicates' far tails are too thin to read. Intervals are two-sided at ``confidence``: of the ratio hand /
 found (above 1: found is better) of the score, of each axis's test (the hand layout's score over that
 score with the axis's share, weight · (median + p75), the found layout's: an axis is worse by more than the
 tolerance when found's error on it alone adds more than the tolerance to the hand layout's total;
@@ -54,6 +55,7 @@ BUY, KEEP, TIE, UNDECIDED = "BUY", "KEEP", "TIE", "UNDECIDED"
 FEWER = "fewer"  # the key, among a search's verdicts by k, of one found sensor against the baseline's largest choice
 DECISIONS = (BUY, KEEP, TIE, UNDECIDED)
 _QUANTILES = (0.5, 0.75)  # median and p75, np.median's and np.percentile(75)'s linear interpolation
+_READ = 0.95  # the widest interval read off the bootstrap replicates; a wider one is scaled from it (_interval)
 
 
 @dataclass(frozen=True)
@@ -323,9 +325,14 @@ def _widening(per_draw: list, boot: np.ndarray, rules: Rules, n_scans: list[int]
 
 
 def _interval(point: float, samples: np.ndarray, widen: float, confidence: float, unit=np.exp) -> Interval:
-    """The percentile interval of log ``samples`` about log ``point``, its deviations scaled by ``widen``."""
-    tail = 100.0 * (1.0 - confidence) / 2.0
-    low, high = point + widen * (np.percentile(samples, [tail, 100.0 - tail]) - point)
+    """The percentile interval of log ``samples`` about log ``point``, its deviations scaled by ``widen``.
+    Beyond :data:`_READ` the replicates' own tails are too thin to read (a racing look at 99.9 % would take
+    the one or two most extreme of 2000), so the interval is read at :data:`_READ` and its deviations scaled
+    by the normal quantiles' ratio: the skew of the 95 % interval, the width of the one asked for."""
+    read = min(confidence, _READ)
+    tail = 100.0 * (1.0 - read) / 2.0
+    reach = stats_norm.ppf((1.0 + confidence) / 2.0) / stats_norm.ppf((1.0 + read) / 2.0)
+    low, high = point + widen * reach * (np.percentile(samples, [tail, 100.0 - tail]) - point)
     return Interval(float(unit(point)), float(unit(low)), float(unit(high)))
 
 
