@@ -147,11 +147,12 @@ CELL_BUDGETS: dict[str, dict] = {
     # verdict's draws of 6 scans each (3 a worker on two cores), so that its seconds see several times as many
     # cell instances as draws of the reduced protocol's 14 scans would (benchmarks/README.md,
     # "bench_verdict_draw.py"); the race plans its looks for as many draws as its seconds hold, each look a share
-    # of the error rate. Its seconds are what is left of 23.5 s after the search started, so that with the
-    # start-up, the pictures and the report the answer comes in 30 s on two cores; the verdict, which only more
-    # draws make surer, gets the seconds a search of 10 s found little with (docs/results.md, "quick")
+    # of the error rate. Its seconds are what is left of 23 s after the search started, so that with the
+    # start-up (about 2 s), the pictures and the report (3-4 s) the answer comes in 30 s on two cores with a second
+    # to spare for a shared machine's swings; the verdict, which only more draws make surer, gets the seconds a
+    # search of 10 s found little with (docs/results.md, "quick")
     "quick": dict(max_time=7.0, screen_samples=64, screen_starts=3, validation="reduced", verdict_draws=12, verdict_time=12.0, verdict_scans=6,
-                  answer_time=23.5),
+                  answer_time=23.0),
     "default": dict(max_time=75.0, screen_samples=1024, select_time=45.0, polish_evals=0, confirm_candidates=0, band="", verdict_scans=20,
                     verdict_time=40.0),
     "thorough": dict(band="", verdict_scans=20),
