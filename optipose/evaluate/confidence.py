@@ -16,11 +16,12 @@ interval's deviations from the estimate (in logs) are then scaled to the varianc
 draws' spread over D, or the scans' own where that is larger — times Student's quantile over the normal
 one, on D − 1 degrees of freedom where the cells vary (the draws' spread exceeds the scans'), else on all
 the scans' (one draw: the scans' alone). An interval wider than 95 % (a racing look's) is read off the
-replicates at 95 % and widened by the normal quantiles' ratio: the replicates' far tails are too thin to read. Intervals are two-sided at ``confidence``: of the ratio hand /
-found (above 1: found is better) of the score, of each axis's test (the hand layout's score over that
-score with the axis's share, weight · (median + p75), the found layout's: an axis is worse by more than the
-tolerance when found's error on it alone adds more than the tolerance to the hand layout's total;
-docs/method.md, "The verdict with confidence") and of each axis's median and p75. The decision:
+replicates at 95 % and widened by the normal quantiles' ratio: the replicates' far tails are too thin to
+read. Intervals are two-sided at ``confidence``: of the ratio hand / found (above 1: found is better) of
+the score, of each axis's test (the hand layout's score over that score with the axis's share, weight ·
+(median + p75), the found layout's: an axis is worse by more than the tolerance when found's error on it
+alone adds more than the tolerance to the hand layout's total; docs/method.md, "The verdict with
+confidence") and of each axis's median and p75. The decision:
 
 - KEEP: the score's interval lies below 1 (hand is better), or some axis's test lies below 1 / (1 + tolerance);
 - BUY: the score's interval lies above 1 and no axis's test reaches below 1 / (1 + tolerance);

@@ -71,7 +71,8 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     names = ["hand"] + [f"found_k{max(g)}" for g in groups]
     objective = stage_objective(objective, "validation", config.validation)
     counted = choice_draw_counts(objective)
-    if hand is None or not ks or not objective.conditions.trivial or counted and not all(isinstance(first.get(n), EvaluationResult) for n in names):
+    missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
+    if hand is None or not ks or not objective.conditions.trivial or missing:
         return {}
     rules = Rules(tolerance=config.verdict_tolerance, confidence=config.verdict_confidence, seed=int(seed), statistic=objective.statistic)
     label = baseline_label(hand)
