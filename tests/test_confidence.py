@@ -235,6 +235,13 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
                    hand_name="S1S2S3", reference="conventional")  # fmt: skip
     assert verdict.decision == UNDECIDED and len(verdict.line()) <= 80 and "conventional S1S2S3" in verdict.line()
     assert all(len(line) <= 80 for line in verdict.axis_lines())
+    # one found sensor against the conventional placement's three: the long names fit, the ratio whole
+    for decision, found in {**cases, UNDECIDED: None}.items():
+        draws = [PairedDraw(0, found, hand)] * 2 if found is not None else _draws(rng, 2, extra=0.5)
+        fewer = compare_draws(draws, FAST, k=1, found_name="F1", hand_name="S1S2S3", reference="conventional", hand_k=3)
+        line, s = fewer.fewer_line(), fewer.score
+        assert fewer.decision == decision and len(line) <= 80, line
+        assert "F1 alone" in line and "conventional S1S2S3" in line and f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]" in line
 
 
 def _result(seed, errors, ok, subsets=("S1", "S2", "S1S2")):

@@ -221,17 +221,22 @@ class ConfidentVerdict:
         return [f.axis for f, h in zip(self.found, self.hand) if not_measured(f.median_deg) and not_measured(h.median_deg)]
 
     def fewer_line(self) -> str:
-        """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line, e.g.
-        ``fewer sensors: found F1 alone matches hand S1S2S3 within 10 % (1.02x [0.95, 1.08])``."""
+        """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line of at most 80
+        columns, e.g. ``fewer sensors: found F1 alone matches hand S1S2S3 within 10 % (1.02x [0.95, 1.08])``
+        (shorter where the names are long: ``fewer: F1 alone matches conventional S1S2S3 within 10 % …``)."""
         s = self.score
-        ratio, who = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]", f"found {self.found_name} alone"
-        ref = f"{self.reference} {self.hand_name}"
-        if len(self.unmeasured) == len(self.found):
-            return f"fewer sensors: nothing measured by {who} or {ref}"
-        text = {BUY: f"{who} is better than {ref}: {ratio}", KEEP: f"{who} does not match {ref} ({ratio})",
-                TIE: f"{who} matches {ref} within {100 * self.tolerance:.0f} % ({ratio})"}.get(
-                    self.decision, f"{who} vs {ref}: {ratio}, not settled")  # fmt: skip
-        return "fewer sensors: " + text
+        ratio, ref = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]", f"{self.reference} {self.hand_name}"
+        lines = []
+        for head, who in (("fewer sensors", f"found {self.found_name} alone"), ("fewer sensors", f"{self.found_name} alone"),
+                          ("fewer", f"{self.found_name} alone")):  # fmt: skip
+            if len(self.unmeasured) == len(self.found):
+                text = f"nothing measured by {who} or {ref}"
+            else:
+                text = {BUY: f"{who} is better than {ref}: {ratio}", KEEP: f"{who} does not match {ref} ({ratio})",
+                        TIE: f"{who} matches {ref} within {100 * self.tolerance:.0f} % ({ratio})"}.get(
+                            self.decision, f"{who} vs {ref}: {ratio}, not settled")  # fmt: skip
+            lines.append(f"{head}: {text}")
+        return next((line for line in lines if len(line) <= 80), lines[-1][:80])
 
     def axis_lines(self) -> list[str]:
         """Per axis, found's and hand's predicted median / p75 (mdeg) with intervals, each ≤ 80 columns."""
