@@ -20,7 +20,7 @@ used (the search's seed + ``--offset``: another held-out validation seed, other 
 and the verdict raced as the search's was (:func:`optipose.search.verdict.confident_verdicts`, the search's own
 settings, or up to ``--draws``) — into ``OUT/<part>/holdout.csv`` (or ``--file``). ``--choices kept`` (the default)
 keeps each layout's choice (its subset per axis) as the search made it: what a BUY mounts, checked on draws the
-search never saw. ``--choices remade`` makes the choices again on the held-out validation's draw: whether another
+search never saw (in a real cell without a held-out validation, whose draw the race would not read). ``--choices remade`` makes the choices again on the held-out validation's draw: whether another
 search's validation would choose, and buy, the same. A BUY holds when the held-out verdict is BUY too.
 ``table``: one row per part and k — the search's verdict, hand / found in sum with its interval, the predicted
 median per axis for found and baseline, the draws, and the held-out verdicts (with their draws; the choices remade in a
