@@ -4,6 +4,7 @@ interval is clear, the intervals cover the true ratio at their nominal rate, and
 
 from __future__ import annotations
 
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
@@ -184,6 +185,18 @@ def test_an_early_looks_wide_interval_does_not_hang_on_a_few_replicates():
     for c, w in widths.items():
         assert np.ptp(w) / np.mean(w) < 0.05, (c, w)
     assert 2.0 < np.mean(widths[0.999]) / np.mean(widths[0.95]) < 4.0  # wider, by about t(0.9995)/t(0.975) at 4 df
+
+
+def test_an_interval_widened_past_any_scale_stays_finite():
+    """Two draws of few scans can widen an early look's deviations a thousandfold: the sides stay numbers."""
+    from optipose.evaluate.confidence import _interval
+
+    samples = np.random.default_rng(0).normal(-4.6, 0.25, 2000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        iv = _interval(-4.6, samples, 1443.9, 0.9998)
+        deg = _interval(-4.6, samples, 1443.9, 0.9998, lambda v: np.rad2deg(np.exp(v)))
+    assert 0.0 <= iv.low < iv.estimate < iv.high < np.inf and deg.high < np.inf
 
 
 def test_the_looks_spend_little_early_and_most_at_the_last():

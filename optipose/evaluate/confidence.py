@@ -57,6 +57,7 @@ FEWER = "fewer"  # the key, among a search's verdicts by k, of one found sensor 
 DECISIONS = (BUY, KEEP, TIE, UNDECIDED)
 _QUANTILES = (0.5, 0.75)  # median and p75, np.median's and np.percentile(75)'s linear interpolation
 _READ = 0.95  # the widest interval read off the bootstrap replicates; a wider one is scaled from it (_interval)
+_LOG_BOUND = 600.0  # an interval's sides in logs at most this far out: exp stays finite, in degrees too
 
 
 @dataclass(frozen=True)
@@ -339,6 +340,7 @@ def _interval(point: float, samples: np.ndarray, widen: float, confidence: float
     tail = 100.0 * (1.0 - read) / 2.0
     reach = stats_norm.ppf((1.0 + confidence) / 2.0) / stats_norm.ppf((1.0 + read) / 2.0)
     low, high = point + widen * reach * (np.percentile(samples, [tail, 100.0 - tail]) - point)
+    low, high = np.clip([low, high], -_LOG_BOUND, _LOG_BOUND)  # an unbounded side stays a finite number, not an overflow
     return Interval(float(unit(point)), float(unit(low)), float(unit(high)))
 
 
