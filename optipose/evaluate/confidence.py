@@ -227,16 +227,13 @@ class ConfidentVerdict:
         (shorter where the names are long: ``fewer: F1 alone matches conventional S1S2S3 within 10 % …``)."""
         s = self.score
         ratio, ref = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]", f"{self.reference} {self.hand_name}"
-        lines = []
-        for head, who in (("fewer sensors", f"found {self.found_name} alone"), ("fewer sensors", f"{self.found_name} alone"),
-                          ("fewer", f"{self.found_name} alone")):  # fmt: skip
-            if len(self.unmeasured) == len(self.found):
-                text = f"nothing measured by {who} or {ref}"
-            else:
-                text = {BUY: f"{who} is better than {ref}: {ratio}", KEEP: f"{who} does not match {ref} ({ratio})",
-                        TIE: f"{who} matches {ref} within {100 * self.tolerance:.0f} % ({ratio})"}.get(
-                            self.decision, f"{who} vs {ref}: {ratio}, not settled")  # fmt: skip
-            lines.append(f"{head}: {text}")
+        template = "nothing measured by {who} or {ref}" if len(self.unmeasured) == len(self.found) else {
+            BUY: "{who} is better than {ref}: {ratio}", KEEP: "{who} does not match {ref} ({ratio})",
+            TIE: "{who} matches {ref} within " + f"{100 * self.tolerance:.0f}" + " % ({ratio})"}.get(
+                self.decision, "{who} vs {ref}: {ratio}, not settled")  # fmt: skip
+        lines = [f"{head}: " + template.format(who=who, ref=ref, ratio=ratio)
+                 for head, who in (("fewer sensors", f"found {self.found_name} alone"), ("fewer sensors", f"{self.found_name} alone"),
+                                   ("fewer", f"{self.found_name} alone"))]  # fmt: skip
         return next((line for line in lines if len(line) <= 80), lines[-1][:80])
 
     def axis_lines(self) -> list[str]:
