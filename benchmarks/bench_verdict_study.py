@@ -98,8 +98,8 @@ def holdout(args) -> None:
             validation = result.validation
         else:
             validation = validate(part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__)
-        if args.choices == "kept":  # what the search bought, on the held-out draws
-            validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
+            if args.choices == "kept":  # what the search bought, on the held-out draws (the ideal cell's first)
+                validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
         pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / args.file, index=False)
         by_k, _ = split(verdicts)
