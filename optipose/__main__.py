@@ -1,3 +1,3 @@
-from optipose.cli.app import main
+from optipose.cli import main
 
 main()

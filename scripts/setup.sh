@@ -30,4 +30,7 @@ fi
 # included, would otherwise compile every module it imports from source (benchmarks/README.md, "Start-up").
 uv sync --frozen --extra dev --extra bench -q --compile-bytecode
 .venv/bin/python -m compileall -q optipose >/dev/null
+# The compiled kernels (numba) are cached beside their modules on first use: compiled here, once, so that a
+# fresh clone's first command does not spend its first seconds on them (a second run finds them cached).
+.venv/bin/python scripts/warm_kernels.py
 echo "setup: ready (.venv/bin/optipose)"

@@ -201,6 +201,31 @@ def test_a_worker_that_dies_again_is_one_clear_error(tmp_path):
         executor.close()
 
 
+def _pid(_) -> int:
+    import os
+
+    return os.getpid()
+
+
+def test_stop_workers_ends_the_idle_workers_and_a_later_map_starts_new_ones():
+    """What the ``optipose`` command calls at its end: the loky workers are gone at once (not left to the
+    interpreter's exit), and a map after it still runs, on new workers."""
+    import os
+
+    from optipose.evaluate.executors import stop_workers
+
+    executor = JoblibExecutor(2)
+    before = set(executor.map(_pid, range(8)))
+    stop_workers()
+    for pid in before:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    after = set(executor.map(_pid, range(8)))
+    executor.close()
+    assert after and not after & before and os.getpid() not in after
+    stop_workers()  # none left to stop twice: no error
+
+
 # -- one call in a process of its own ---------------------------------------------------------------------
 def test_a_background_call_answers_from_another_process_with_its_threads_capped():
     import os

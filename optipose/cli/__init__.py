@@ -9,4 +9,9 @@ def main() -> None:
     # imported here, not above, so importing one command module does not build the whole app
     from optipose.cli.app import main as run
 
-    run()
+    try:
+        run()
+    finally:  # the command is done: its idle workers need not finish their own teardown first
+        from optipose.evaluate.executors import stop_workers
+
+        stop_workers()

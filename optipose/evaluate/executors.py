@@ -29,7 +29,7 @@ from typing import Protocol, runtime_checkable
 from optipose.errors import ConfigError, WorkerError
 
 __all__ = ["Executor", "SerialExecutor", "JoblibExecutor", "DaskExecutor", "EXECUTORS", "register_executor", "make_executor",
-           "THREAD_VARIABLES", "thread_env"]  # fmt: skip
+           "THREAD_VARIABLES", "thread_env", "stop_workers"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -112,6 +112,18 @@ class JoblibExecutor:
 
     def __repr__(self) -> str:
         return f"JoblibExecutor(n_jobs={self.n_workers})"
+
+
+def stop_workers() -> None:
+    """Stop the loky workers this process started, at once: for a process that is about to end. At the
+    interpreter's exit loky would wait for each idle worker's own teardown, more than half a second of a
+    command's wall (benchmarks/README.md, "Start-up")."""
+    import sys
+
+    module = sys.modules.get("joblib.externals.loky.reusable_executor")
+    pool = getattr(module, "_executor", None)  # loky's one reusable pool; None when this process started none
+    if pool is not None:
+        pool.shutdown(wait=True, kill_workers=True)
 
 
 class DaskExecutor:
