@@ -11,7 +11,12 @@ def main() -> None:
 
     try:
         run()
-    finally:  # the command is done: its idle workers need not finish their own teardown first
+    finally:  # the command is done: its idle workers need not finish their own teardown first ...
+        import gc
+
         from optipose.evaluate.executors import stop_workers
 
         stop_workers()
+        # ... nor need the interpreter's last collections walk every object the command made (more than half
+        # a second after a search; benchmarks/README.md, "bench_start.py"): the process ends, its memory with it
+        gc.freeze()
