@@ -1,0 +1,71 @@
+"""The draws searches stored, raced again at another confidence: would a laxer reading of "95 %" answer more?
+
+Each BUY or KEEP test reads one side of a two-sided interval, so at the shipped 95 % it is one-sided at 97.5 %
+(:mod:`optipose.evaluate.confidence`). Read one-sided at 95 % (the two-sided 90 % interval), each look decides
+sooner. Per search folder given, its verdict's draws (``verdict/draw-*``) are raced again in their order, with
+the choices the search made, by :func:`optipose.evaluate.racing.race_many` (first look at three, looks planned
+for every stored draw, no clock) at each ``--confidence``: the decision per k and the draw it came at.
+
+    .venv/bin/python benchmarks/bench_verdict_reread.py FOLDER [FOLDER ...] [--confidence 0.95,0.90]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tomllib
+from pathlib import Path
+
+from optipose.evaluate.confidence import Rules, paired_draw
+from optipose.evaluate.objective import objective_from_table
+from optipose.evaluate.racing import race_many
+from optipose.io.load import load_result
+from optipose.search.validate import nested_groups
+
+
+def stored_draws(folder: Path) -> list[dict]:
+    """The folder's verdict draws in order, each k → its paired draw (the search's choices)."""
+    result = load_result(folder)
+    big = {k: max(g) for g in nested_groups(result.layouts) for k in g}
+    v = result.validation
+    ks = [k for k in sorted(v.found) if k in v.hand]
+    draws = []
+    for d in sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:])):
+        hand = load_result(d / "hand")
+        draws.append({k: paired_draw(load_result(d / f"found_k{big[k]}"), v.found[k], hand, v.hand[k])
+                      for k in ks if (d / f"found_k{big[k]}").is_dir()})  # fmt: skip
+    return draws
+
+
+def reraced(folder: Path, confidence: float) -> dict:
+    result = load_result(folder)
+    statistic = objective_from_table(tomllib.loads(result.config.objective_file)).statistic
+    draws = stored_draws(folder)
+
+    def next_draws(i: int, keys) -> dict:
+        return {k: p for k, p in draws[i].items() if keys is None or k in keys} if i < len(draws) else {}
+
+    rules = Rules(confidence=confidence, seed=int(result.config.seed), statistic=statistic)
+    return race_many(next_draws, rules, min_draws=3, max_draws=len(draws))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folders", nargs="+", type=Path)
+    ap.add_argument("--confidence", default="0.95,0.90")
+    args = ap.parse_args()
+    levels = [float(c) for c in args.confidence.split(",")]
+    print("| folder | draws | " + " | ".join(f"two-sided {100 * c:.0f} % (one-sided {100 * (1 + c) / 2:.1f} %)" for c in levels) + " |")
+    print("| --- | ---: |" + " --- |" * len(levels))
+    answered = [0] * len(levels)
+    for folder in args.folders:
+        cells = []
+        for j, c in enumerate(levels):
+            verdicts = reraced(folder, c)
+            answered[j] += any(v.decision != "UNDECIDED" for v in verdicts.values())
+            cells.append(", ".join(f"k={k} {v.decision} ({v.n_draws})" for k, v in sorted(verdicts.items(), key=lambda kv: str(kv[0]))))
+        print(f"| {folder.name} | {len(stored_draws(folder))} | " + " | ".join(cells) + " |")
+    print("answered some k: " + ", ".join(f"{n} of {len(args.folders)} at {100 * c:.0f} %" for n, c in zip(answered, levels)))
+
+
+if __name__ == "__main__":
+    main()
