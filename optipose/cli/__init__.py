@@ -12,11 +12,13 @@ def main() -> None:
     try:
         run()
     finally:  # the command is done: its idle workers need not finish their own teardown first ...
+        import contextlib
         import gc
 
         from optipose.evaluate.executors import stop_workers
 
-        stop_workers()
+        with contextlib.suppress(Exception):  # a pool that will not stop now is stopped at the exit, as before
+            stop_workers()
         # ... nor need the interpreter's last collections walk every object the command made (more than half
         # a second after a search; benchmarks/README.md, "bench_start.py"): the process ends, its memory with it
         gc.freeze()
