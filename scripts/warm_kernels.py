@@ -1,5 +1,5 @@
 """Compile the compiled kernels (numba) once, at set-up: each is cached beside its module on first use, and a
-fresh clone's first command would otherwise spend about 7 s compiling them (benchmarks/README.md, "Start-up").
+fresh clone's first command would otherwise spend some 6 s compiling them (benchmarks/README.md, "bench_start.py").
 
     .venv/bin/python scripts/warm_kernels.py
 

@@ -116,8 +116,8 @@ class JoblibExecutor:
 
 def stop_workers() -> None:
     """Stop the loky workers this process started, at once: for a process that is about to end. At the
-    interpreter's exit loky would wait for each idle worker's own teardown, more than half a second of a
-    command's wall (benchmarks/README.md, "Start-up")."""
+    interpreter's exit loky would wait for each idle worker's own teardown, a few tenths of a second of a
+    command's wall (benchmarks/README.md, "bench_start.py")."""
     import sys
 
     module = sys.modules.get("joblib.externals.loky.reusable_executor")
