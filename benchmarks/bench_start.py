@@ -1,14 +1,16 @@
-"""What a command pays before and after its work: the compiled kernels on a fresh clone's first run, and the
-idle workers at its exit.
+"""What a command pays before and after its work: the compiled kernels on a fresh clone's first run, and its
+end (the idle workers, the interpreter's last collections).
 
 - ``kernels``: ``optipose search part_b --budget quick`` (``--no-report``) with numba's cache in an empty folder
   (``NUMBA_CACHE_DIR``: the kernels compiled on first use, as a fresh clone's first command did before
   ``scripts/setup.sh`` compiled them) against the same with the folder ``scripts/warm_kernels.py`` filled; both
   end their verdict by ``answer_time``, so the compile shows in the draws the verdict got, not in the wall
   alone. Also ``warm_kernels.py`` itself, cold and warm.
-- ``exit``: a child process that evaluates B's hand layout in the paper's cell on 4 scans with two loky workers, then ends, with
-  :func:`optipose.evaluate.executors.stop_workers` (as the ``optipose`` command does at its end) and without:
-  the seconds from the end of its work to the end of the process, interleaved in ``--repeats`` rounds.
+- ``exit``: a child process that evaluates B's hand layout in the paper's cell on 4 scans with two loky workers
+  and writes the report of ``results/reference/part_b`` (in a copy), then ends: as it is, after
+  :func:`optipose.evaluate.executors.stop_workers`, and after that and ``gc.freeze()`` (what the ``optipose``
+  command does at its end, :func:`optipose.cli.main`): the seconds from the end of its work to the end of the
+  process, interleaved in ``--repeats`` rounds.
 
     .venv/bin/python benchmarks/bench_start.py [--repeats 5] [--skip-kernels]
 """
