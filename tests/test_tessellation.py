@@ -53,6 +53,7 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
     key, folder = shared.acquire(mesh.vertices, mesh.faces)
     again, same = shared.acquire(mesh.vertices, mesh.faces)  # a second evaluator of the mesh: the same folder
     assert (again, same) == (key, folder)
+    assert os.path.basename(folder).startswith(f"{shared.PREFIX}{os.getpid()}-")  # named by its process, for sweep()
     mapped = load_reference(folder)
     assert not mapped._tri.flags.writeable
     assert not shared.surface(mesh.vertices, mesh.faces)._tri.flags.writeable  # held here: the surrogate maps it too
@@ -64,6 +65,27 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
     shared.release(key)
     assert not os.path.exists(folder)
     assert shared.surface(mesh.vertices, mesh.faces)._tri.flags.writeable  # held by no one: built
+
+
+def test_a_killed_process_reference_folder_is_swept_and_the_others_are_left(tmp_path):
+    """What a process killed before its exit left (its pid no longer runs) is removed; a live process's folder,
+    an older version's (no pid in its name) and anything else are not."""
+    import os
+    import subprocess
+    import sys
+
+    from optipose.evaluate import shared
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True)
+    dead = tmp_path / f"{shared.PREFIX}{int(gone.stdout)}-ab12"
+    kept = [tmp_path / f"{shared.PREFIX}{os.getpid()}-cd34", tmp_path / f"{shared.PREFIX}ef56", tmp_path / f"{shared.PREFIX}gh-78",
+            tmp_path / "other-1-2"]  # fmt: skip
+    for folder in [dead, *kept]:
+        folder.mkdir()
+        (folder / "tri.npy").write_bytes(b"x")
+    assert shared.sweep(str(tmp_path)) == [str(dead)]
+    assert not dead.exists() and all(folder.is_dir() for folder in kept)
+    assert shared.sweep(str(tmp_path)) == []
 
 
 def test_the_grid_lists_each_face_a_few_times_whatever_the_density():

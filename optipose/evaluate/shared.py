@@ -8,20 +8,26 @@ for every process of the machine. A worker that does not find the folder (a Dask
 machine) builds its own. Evaluators of one mesh in one process share one folder, removed when the last of
 them closes (or, at the latest, when the process exits). A search acquires it before anything else needs it,
 so that its surrogate (:func:`surface`), the hand layout's processes and the validation's workers all map the
-one built.
+one built. A folder is named by the process that made it: a process killed before its exit (SIGKILL, the
+out-of-memory killer) leaves its folder behind, and the next one to make a folder on the machine removes it
+(:func:`sweep`), so that killed runs do not fill the temporary folder (a dense mesh's reference is hundreds of MB).
 """
 
 from __future__ import annotations
 
 import atexit
 import hashlib
+import os
 import shutil
 import tempfile
 import threading
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["acquire", "release", "surface"]
+__all__ = ["acquire", "release", "surface", "sweep", "PREFIX"]
+
+PREFIX = "optipose-reference-"  # then the pid of the process that made the folder, a dash and tempfile's letters
 
 _LOCK = threading.Lock()
 _FOLDERS: dict[str, list] = {}  # mesh key -> [folder, users]
@@ -47,7 +53,8 @@ def acquire(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, str]:
     key = _key(vertices, faces)
     with _LOCK:
         if key not in _FOLDERS:
-            folder = tempfile.mkdtemp(prefix="optipose-reference-")
+            sweep()
+            folder = tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-")
             try:
                 save_reference(SurfaceReference(vertices, faces), folder)
             except BaseException:
@@ -56,6 +63,30 @@ def acquire(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, str]:
             _FOLDERS[key] = [folder, 0]
         _FOLDERS[key][1] += 1
         return key, _FOLDERS[key][0]
+
+
+def sweep(root: str | None = None) -> list[str]:
+    """Remove the reference folders in ``root`` (the temporary folder) whose process is gone: a process killed
+    before its exit could not. A folder of a live process, of another user's or without a pid in its name (an
+    older version's) is left. Returns the folders removed."""
+    removed = []
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{PREFIX}*-*"):
+        pid = folder.name[len(PREFIX) :].split("-", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)) and folder.is_dir():
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(str(folder))
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process of that pid runs (one of another user's counts: it cannot be signalled, but it runs)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: another user's
+        return True
+    return True
 
 
 def release(key: str) -> None:
