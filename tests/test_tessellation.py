@@ -53,7 +53,7 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
     key, folder = shared.acquire(mesh.vertices, mesh.faces)
     again, same = shared.acquire(mesh.vertices, mesh.faces)  # a second evaluator of the mesh: the same folder
     assert (again, same) == (key, folder)
-    assert os.path.basename(folder).startswith(f"{shared.PREFIX}{os.getpid()}-")  # named by its process, for sweep()
+    assert os.path.basename(folder).startswith(f"{shared.PREFIX}{shared._owner(os.getpid())}-")  # named by its process, for sweep()
     mapped = load_reference(folder)
     assert not mapped._tri.flags.writeable
     assert not shared.surface(mesh.vertices, mesh.faces)._tri.flags.writeable  # held here: the surrogate maps it too
@@ -69,17 +69,19 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
 
 def test_a_killed_process_reference_folder_is_swept_and_the_others_are_left(tmp_path):
     """What a process killed before its exit left (its pid no longer runs) is removed; a live process's folder,
-    an older version's (no pid in its name) and anything else are not."""
+    one of another pid namespace (a container sharing the folder), an older version's (no pid in its name) and
+    anything else are not."""
     import os
     import subprocess
     import sys
 
     from optipose.evaluate import shared
 
-    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True)
-    dead = tmp_path / f"{shared.PREFIX}{int(gone.stdout)}-ab12"
-    kept = [tmp_path / f"{shared.PREFIX}{os.getpid()}-cd34", tmp_path / f"{shared.PREFIX}ef56", tmp_path / f"{shared.PREFIX}gh-78",
-            tmp_path / "other-1-2"]  # fmt: skip
+    gone = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True).stdout)
+    dead = tmp_path / f"{shared.PREFIX}{shared._owner(gone)}-ab12"
+    elsewhere = f"{int(shared._owner(0).split('.')[0]) + 1}.{gone}"  # the same pid in another namespace: not ours to judge
+    kept = [tmp_path / f"{shared.PREFIX}{shared._owner(os.getpid())}-cd34", tmp_path / f"{shared.PREFIX}{elsewhere}-ef56",
+            tmp_path / f"{shared.PREFIX}gh56", tmp_path / f"{shared.PREFIX}ij-78", tmp_path / "other-1-2"]  # fmt: skip
     for folder in [dead, *kept]:
         folder.mkdir()
         (folder / "tri.npy").write_bytes(b"x")

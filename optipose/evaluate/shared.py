@@ -27,7 +27,7 @@ import numpy as np
 
 __all__ = ["acquire", "release", "surface", "sweep", "PREFIX"]
 
-PREFIX = "optipose-reference-"  # then the pid of the process that made the folder, a dash and tempfile's letters
+PREFIX = "optipose-reference-"  # then the process's pid namespace and pid (_owner), a dash and tempfile's letters
 
 _LOCK = threading.Lock()
 _FOLDERS: dict[str, list] = {}  # mesh key -> [folder, users]
@@ -54,7 +54,7 @@ def acquire(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, str]:
     with _LOCK:
         if key not in _FOLDERS:
             sweep()
-            folder = tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-")
+            folder = tempfile.mkdtemp(prefix=f"{PREFIX}{_owner(os.getpid())}-")
             try:
                 save_reference(SurfaceReference(vertices, faces), folder)
             except BaseException:
@@ -67,15 +67,25 @@ def acquire(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, str]:
 
 def sweep(root: str | None = None) -> list[str]:
     """Remove the reference folders in ``root`` (the temporary folder) whose process is gone: a process killed
-    before its exit could not. A folder of a live process, of another user's or without a pid in its name (an
-    older version's) is left. Returns the folders removed."""
-    removed = []
-    for folder in Path(root or tempfile.gettempdir()).glob(f"{PREFIX}*-*"):
-        pid = folder.name[len(PREFIX) :].split("-", 1)[0]
+    before its exit could not. A folder of a live process, of another user's, of another pid namespace or
+    without a pid in its name (an older version's) is left. Returns the folders removed."""
+    removed, space = [], _owner(0).split(".")[0]
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{PREFIX}{space}.*-*"):
+        pid = folder.name[len(PREFIX) + len(space) + 1 :].split("-", 1)[0]
         if pid.isdigit() and not _alive(int(pid)) and folder.is_dir():
             shutil.rmtree(folder, ignore_errors=True)
             removed.append(str(folder))
     return removed
+
+
+def _owner(pid: int) -> str:
+    """``<namespace>.<pid>``: a pid means a process only within its pid namespace (a container sharing the
+    temporary folder has its own), so a folder is swept only by a process of the same namespace."""
+    try:
+        space = os.stat("/proc/self/ns/pid").st_ino
+    except OSError:  # no /proc: one namespace
+        space = 0
+    return f"{space}.{pid}"
 
 
 def _alive(pid: int) -> bool:
