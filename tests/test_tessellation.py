@@ -79,7 +79,7 @@ def test_a_killed_process_reference_folder_is_swept_and_the_others_are_left(tmp_
 
     gone = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True).stdout)
     dead = tmp_path / f"{shared.PREFIX}{shared._owner(gone)}-ab12"
-    elsewhere = f"{int(shared._owner(0).split('.')[0]) + 1}.{gone}"  # the same pid in another namespace: not ours to judge
+    elsewhere = f"{shared._namespace() + 1}.{gone}"  # the same pid in another namespace: not ours to judge
     kept = [tmp_path / f"{shared.PREFIX}{shared._owner(os.getpid())}-cd34", tmp_path / f"{shared.PREFIX}{elsewhere}-ef56",
             tmp_path / f"{shared.PREFIX}gh56", tmp_path / f"{shared.PREFIX}ij-78", tmp_path / "other-1-2"]  # fmt: skip
     for folder in [dead, *kept]:

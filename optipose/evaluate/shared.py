@@ -69,9 +69,9 @@ def sweep(root: str | None = None) -> list[str]:
     """Remove the reference folders in ``root`` (the temporary folder) whose process is gone: a process killed
     before its exit could not. A folder of a live process, of another user's, of another pid namespace or
     without a pid in its name (an older version's) is left. Returns the folders removed."""
-    removed, space = [], _owner(0).split(".")[0]
-    for folder in Path(root or tempfile.gettempdir()).glob(f"{PREFIX}{space}.*-*"):
-        pid = folder.name[len(PREFIX) + len(space) + 1 :].split("-", 1)[0]
+    removed, ours = [], f"{PREFIX}{_namespace()}."
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{ours}*-*"):
+        pid = folder.name[len(ours) :].split("-", 1)[0]
         if pid.isdigit() and not _alive(int(pid)) and folder.is_dir():
             shutil.rmtree(folder, ignore_errors=True)
             removed.append(str(folder))
@@ -81,11 +81,15 @@ def sweep(root: str | None = None) -> list[str]:
 def _owner(pid: int) -> str:
     """``<namespace>.<pid>``: a pid means a process only within its pid namespace (a container sharing the
     temporary folder has its own), so a folder is swept only by a process of the same namespace."""
+    return f"{_namespace()}.{pid}"
+
+
+def _namespace() -> int:
+    """This process's pid namespace (its inode; 0 without /proc: one namespace)."""
     try:
-        space = os.stat("/proc/self/ns/pid").st_ino
-    except OSError:  # no /proc: one namespace
-        space = 0
-    return f"{space}.{pid}"
+        return os.stat("/proc/self/ns/pid").st_ino
+    except OSError:
+        return 0
 
 
 def _alive(pid: int) -> bool:
