@@ -22,9 +22,9 @@ from optipose.io.load import load_result
 from optipose.search.validate import nested_groups
 
 
-def stored_draws(folder: Path) -> list[dict]:
-    """The folder's verdict draws in order, each k → its paired draw (the search's choices)."""
-    result = load_result(folder)
+def stored_draws(folder: Path, result) -> list[dict]:
+    """The folder's verdict draws in order, each k → its paired draw (the search's choices; ``result`` the
+    folder's, read back)."""
     big = {k: max(g) for g in nested_groups(result.layouts) for k in g}
     v = result.validation
     ks = [k for k in sorted(v.found) if k in v.hand]
@@ -36,10 +36,9 @@ def stored_draws(folder: Path) -> list[dict]:
     return draws
 
 
-def reraced(folder: Path, confidence: float) -> dict:
-    result = load_result(folder)
+def reraced(result, draws: list[dict], confidence: float) -> dict:
+    """The draws raced again at ``confidence``, as the search raced them but without its clock."""
     statistic = objective_from_table(tomllib.loads(result.config.objective_file)).statistic
-    draws = stored_draws(folder)
 
     def next_draws(i: int, keys) -> dict:
         return {k: p for k, p in draws[i].items() if keys is None or k in keys} if i < len(draws) else {}
@@ -58,12 +57,13 @@ def main() -> None:
     print("| --- | ---: |" + " --- |" * len(levels))
     answered = [0] * len(levels)
     for folder in args.folders:
-        cells = []
+        result = load_result(folder)
+        draws, cells = stored_draws(folder, result), []
         for j, c in enumerate(levels):
-            verdicts = reraced(folder, c)
+            verdicts = reraced(result, draws, c)
             answered[j] += any(v.decision != "UNDECIDED" for v in verdicts.values())
             cells.append(", ".join(f"k={k} {v.decision} ({v.n_draws})" for k, v in sorted(verdicts.items(), key=lambda kv: str(kv[0]))))
-        print(f"| {folder.name} | {len(stored_draws(folder))} | " + " | ".join(cells) + " |")
+        print(f"| {folder.name} | {len(draws)} | " + " | ".join(cells) + " |")
     print("answered some k: " + ", ".join(f"{n} of {len(args.folders)} at {100 * c:.0f} %" for n, c in zip(answered, levels)))
 
 
