@@ -206,6 +206,28 @@ def test_same_seed_same_layout(part_b_problem):
     assert [r.value for r in a.history] == [r.value for r in b.history]
 
 
+def test_quick_in_a_real_cell_runs_every_stage_to_its_evaluations_and_a_seed_gives_its_layouts():
+    # quick's surrogate stages in a real cell are bounded by evaluations, its clock only a safety net: every stage of
+    # every k is reached, none runs past its count, and the same seed gives the same layouts and history
+    from collections import Counter
+
+    from optipose.search.config import config_from_budget
+
+    part, objective = load_part("part_c"), load_objective("paper")
+    assert not objective.cell.ideal
+    cfg = config_from_budget("quick", (1, 2, 3), cell=True)
+    a = run_search(part, objective, cfg, seed=4)
+    stages = Counter(r.stage for r in a.history)
+    for k in (1, 2, 3):
+        assert stages[f"screen:k={k}"] == cfg.screen_samples
+        assert 0 < stages[f"screen-polish:k={k}"] <= cfg.screen_starts * cfg.screen_evals
+        assert 0 < stages[f"greedy:k={k}"] <= cfg.global_evals
+        assert 0 < stages[f"greedy-polish:k={k}"] <= cfg.local_evals + cfg.local_evals // 2
+    b = run_search(part, objective, cfg, seed=4)
+    assert all(np.array_equal(a.found[k].u, b.found[k].u) for k in (1, 2, 3))
+    assert [r.value for r in a.history] == [r.value for r in b.history]
+
+
 def test_results_never_violate_the_constraints(part_b_problem):
     part, objective, cfg = part_b_problem
     problem = SurrogateProblem(part, objective, cfg)
