@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import resource
+import shutil
 import subprocess
 import sys
 import time
@@ -55,6 +56,7 @@ def run(args) -> None:
     rows = []
     for name in args.parts.split(","):
         folder = out / name
+        shutil.rmtree(folder, ignore_errors=True)  # a search's folder holds only what this run writes: no draws or holdouts of an earlier one
         command = [sys.executable, "-m", "optipose", "search", PARTS[name], "--budget", args.budget, "--cell", args.cell,
                    "--seed", str(args.seed), "--jobs", "2", "--out", str(folder)] + ([] if args.report else ["--no-report"])  # fmt: skip
         command += ["--search-config", str(Path(args.search_config).resolve())] if args.search_config else []
