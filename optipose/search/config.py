@@ -135,29 +135,28 @@ BAND_BUDGETS: dict[str, dict] = {
 
 # In a real cell (an objective's cell other than the ideal one) an ICP evaluation costs several nominal ones
 # (the cell's sources move every point; the paper's pipeline removes outliers) and the verdict's draws, not a
-# confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, the surrogate's and
-# the selection's clocks shorter; no check under the band, whose noise and brackets the cell's sources stand for.
-# The verdict's draws after the validation's evaluate a share of the protocol's scans each: in a real cell the
-# spread between cell instances rules the intervals, so more draws of fewer scans decide sooner. The clocks are
-# set so that `default` answers in about three minutes on two cores and `quick`, validated on the reduced
-# protocol's 14 scans, in about 30 s (benchmarks/README.md, "Whole commands").
+# confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, less surrogate search; no
+# check under the band, whose noise and brackets the cell's sources stand for. The verdict's draws after the
+# validation's evaluate a share of the protocol's scans each: in a real cell the spread between cell instances rules
+# the intervals, so more draws of fewer scans decide sooner. The stages end by their evaluations, candidates and
+# draws, whose counts are set so that `default` answers within three minutes on two cores and `quick`, validated on
+# the reduced protocol's 14 scans, within 30 s (benchmarks/README.md, "Whole commands"); their clocks are safety
+# nets for a slower machine, so that on this one a seed gives the same layouts.
 CELL_BUDGETS: dict[str, dict] = {
-    # quick: its surrogate stages end by their evaluations, not by the clock, so that a seed gives the same layouts
-    # whatever the machine's load (the clock, about twice what they take on two cores, is a safety net): a screen of
-    # 64 poses (a cell pose costs the surrogate several nominal ones), its three best polished, then per sensor a
-    # local BOBYQA from the best start and its polish: DIRECT-L's 70 evaluations went to the surrogate's optimistic
-    # corners, and ICP rated the local stage's layouts better (docs/results.md, "quick"). The verdict's draws of 6 scans each (3 a worker on two cores), so that
-    # its seconds see several times as many cell instances as draws of the reduced protocol's 14 scans would
-    # (benchmarks/README.md, "bench_verdict_draw.py"); the race plans its looks for as many draws as its seconds
-    # hold, each look a share of the error rate. Its seconds are what is left of 23 s after the search started, so
-    # that with the start-up (about 2 s), the pictures and the report (3-4 s) the answer comes in 30 s on two cores
-    # with a second to spare for a shared machine's swings
+    # quick: a screen of 64 poses (a cell pose costs the surrogate several nominal ones), its three best polished,
+    # then per sensor a local BOBYQA from the best start and its polish, few enough evaluations that BOBYQA mostly
+    # probes each of the six numbers around its start: DIRECT-L's evaluations went to the surrogate's optimistic
+    # corners, and ICP rated the local stage's layouts better (docs/results.md, "`--budget quick` in the real
+    # cell"). The verdict's draws of 6 scans each (3 a worker on two cores), so that its seconds see several times
+    # as many cell instances as draws of the reduced protocol's 14 scans would (benchmarks/README.md,
+    # "bench_verdict_draw.py"); the race plans its looks for as many draws as its seconds hold, each look a share of
+    # the error rate. Its seconds are what is left of 23 s after the search started, so that with the start-up, the
+    # pictures and the report the answer comes in 30 s on two cores with a second to spare for a shared machine's
+    # swings: the draws, unlike the layouts, are the clock's where the seconds hold fewer than the cap
     "quick": dict(max_time=15.0, screen_samples=64, screen_starts=3, screen_evals=15, global_algorithm="LN_BOBYQA", global_evals=20,
                   local_evals=10, validation="reduced", verdict_draws=12, verdict_time=12.0, verdict_scans=6, answer_time=23.0),
-    # default: its surrogate stages too end by their evaluations (about 75 s on two cores; the clock is a safety net),
-    # the joint stage's 100 where the clock used to stop it; its selection ends by its candidates (the clock a safety
-    # net as well), and its race by its draws: at most 10 of 20 scans, which its 60 s hold with room, so that the
-    # looks are planned for the same draws on every run. A seed then gives the same answer
+    # default: the joint stage's 100 evaluations, where its clock used to stop it; the race at most 10 draws of 20
+    # scans each, which its seconds hold with room, so that the looks are planned for the same draws on every run
     "default": dict(max_time=150.0, joint_evals=100, screen_samples=1024, select_time=45.0, polish_evals=0, confirm_candidates=0, band="",
                     verdict_scans=20, verdict_draws=10, verdict_time=60.0),
     "thorough": dict(band="", verdict_scans=20),
