@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -227,6 +228,23 @@ def test_quick_in_a_real_cell_runs_every_stage_to_its_evaluations_and_a_seed_giv
     b = run_search(part, objective, cfg, seed=4)
     assert all(np.array_equal(a.found[k].u, b.found[k].u) for k in (1, 2, 3))
     assert [r.value for r in a.history] == [r.value for r in b.history]
+    assert a.clock_cut == b.clock_cut == ()  # no clock ended a stage
+
+
+def test_a_clock_that_ends_a_stage_is_recorded_and_said(caplog):
+    # a clock that ends the surrogate's stages before their evaluations makes the layouts the machine's as well as the
+    # seed's: the outcome names the stages it cut, in order, and the search says so in a warning
+    from optipose.search.config import config_from_budget
+
+    part, objective = load_part("part_c"), load_objective("paper")
+    cfg = replace(config_from_budget("quick", (1, 2, 3), cell=True), max_time=0.3)
+    with caplog.at_level("WARNING", logger="optipose.search.surrogate_search"):
+        out = run_search(part, objective, cfg, seed=4)
+    assert out.clock_cut and out.clock_cut[0].endswith("k=1")  # the first k's share is the first to end
+    assert len(set(out.clock_cut)) == len(out.clock_cut)
+    assert all(re.fullmatch(r"(screen|screen-polish|greedy|greedy-polish|joint):k=[123]", stage) for stage in out.clock_cut)
+    assert sum(r.stage == "screen:k=1" for r in out.history) < cfg.screen_samples  # cut before its evaluations
+    assert any("the clock ended the surrogate's" in r.getMessage() and out.clock_cut[0] in r.getMessage() for r in caplog.records)
 
 
 def test_results_never_violate_the_constraints(part_b_problem):

@@ -134,6 +134,9 @@ class SearchOutcome:
     history: list[Evaluation]
     interrupted: bool = False
     seconds: float = 0.0
+    # the stages a clock ended before their evaluations (``SurrogateStudy.cut``): where there are any, the layouts
+    # are the machine's speed's as well as the seed's
+    clock_cut: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

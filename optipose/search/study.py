@@ -44,6 +44,7 @@ class SurrogateStudy:
         self.history: list[Evaluation] = []
         self.callbacks = list(callbacks)
         self.interrupted = False
+        self.cut: list[str] = []  # the stages a clock (the search's or a k's share of it) ended, in order
         self._best: dict[int, tuple[float, np.ndarray]] = {}
         self._deadline = np.inf
         self._share = None  # the clock's own deadline while a share of it runs
@@ -107,6 +108,8 @@ class SurrogateStudy:
 
     def __call__(self, u: np.ndarray, grad=None) -> float:
         if time.monotonic() > self._deadline:
+            if (self._stage or "search") not in self.cut:
+                self.cut.append(self._stage or "search")
             if self._share is not None and time.monotonic() <= self._share:
                 raise Share("this sensor count's share of the time budget used up")
             raise Stop("time budget used up")

@@ -50,12 +50,15 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
         (log.warning if unplaced else log.info)(
             "search stopped: %s%s", why, f"; no layout of {unplaced} sensor(s) yet (raise max_time)" if unplaced else ""
         )
+    if study.cut:  # the layouts are then the machine's speed's as well as the seed's: say so where the user reads
+        log.warning("the clock ended the surrogate's %s before its evaluations: another run of this seed may place other "
+                    "sensors (a larger [search] max_time, with --search-config, gives the seed's own answer)", ", ".join(study.cut))
     found = {}
     for k in ks:
         options = [f for f in (greedy.get(k), joint.get(k), _as_found(study, k)) if f and f.stats]
         if options:
             found[k] = min(options, key=lambda f: f.score)
-    return SearchOutcome(found, greedy, joint, hand, study.history, study.interrupted, time.monotonic() - t0)
+    return SearchOutcome(found, greedy, joint, hand, study.history, study.interrupted, time.monotonic() - t0, tuple(study.cut))
 
 
 def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict) -> None:
