@@ -243,7 +243,10 @@ def test_a_clock_that_ends_a_stage_is_recorded_and_said(caplog):
     assert out.clock_cut and out.clock_cut[0].endswith("k=1")  # the first k's share is the first to end
     assert len(set(out.clock_cut)) == len(out.clock_cut)
     assert all(re.fullmatch(r"(screen|screen-polish|greedy|greedy-polish|joint):k=[123]", stage) for stage in out.clock_cut)
-    assert sum(r.stage == "screen:k=1" for r in out.history) < cfg.screen_samples  # cut before its evaluations
+    counts = {"screen": cfg.screen_samples, "screen-polish": cfg.screen_starts * cfg.screen_evals, "greedy": cfg.global_evals,
+              "greedy-polish": cfg.local_evals + cfg.local_evals // 2, "joint": cfg.joint_evals}  # fmt: skip
+    first = out.clock_cut[0]
+    assert sum(r.stage == first for r in out.history) < counts[first.split(":")[0]]  # cut before its evaluations
     assert any("the clock ended the surrogate's" in r.getMessage() and out.clock_cut[0] in r.getMessage() for r in caplog.records)
 
 
