@@ -108,8 +108,9 @@ class SurrogateStudy:
 
     def __call__(self, u: np.ndarray, grad=None) -> float:
         if time.monotonic() > self._deadline:
-            if (self._stage or "search") not in self.cut:
-                self.cut.append(self._stage or "search")
+            stage = self._stage or "search"
+            if stage not in self.cut:
+                self.cut.append(stage)
             if self._share is not None and time.monotonic() <= self._share:
                 raise Share("this sensor count's share of the time budget used up")
             raise Stop("time budget used up")
