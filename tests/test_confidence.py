@@ -77,6 +77,45 @@ def test_keep_when_hand_is_better_in_sum_or_an_axis_is_worse_beyond_the_toleranc
     assert compare_draws([PairedDraw(0, found, hand)], FAST).decision == BUY
 
 
+def test_a_layout_that_fails_more_registrations_is_not_bought_for_a_better_score():
+    rng = np.random.default_rng(7)
+    hand = [d.hand for d in _draws(rng, 10)]
+    # found 1.6x better on every scan, but its pitch registration fails on 2, 1, 0, 0, 0, 0, 1, 2, 0, 1 of 77 scans
+    # (hand's never): the medians and p75s do not see it, the failed share does
+    counts = (2, 1, 0, 0, 0, 0, 1, 2, 0, 1)
+    draws = []
+    for i, (h, c) in enumerate(zip(hand, counts)):
+        f = h / 1.6
+        f[:c, 1] = FAILED_ERROR
+        draws.append(PairedDraw(i, f, h))
+    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
+    assert verdict.score.low > 1.0  # better in sum with confidence
+    pitch = verdict.axes[1].failed
+    # the interval by hand: the scans' spread (each draw's 0/1 per scan, c(n - c) / (n(n - 1)) over n) exceeds the
+    # draws' here, so Student's t on every scan's degrees of freedom (10 x 76) over the draws' mean of it
+    shares = np.array(counts) / N_SCANS
+    within = np.mean([c * (N_SCANS - c) / (N_SCANS * (N_SCANS - 1)) / N_SCANS for c in counts])
+    assert within > shares.var(ddof=1)
+    half = 1.963087 * np.sqrt(within / len(counts))  # t(0.975, 760)
+    assert pitch.estimate == pytest.approx(shares.mean())
+    assert (pitch.low, pitch.high) == pytest.approx((shares.mean() - half, shares.mean() + half), rel=1e-4)
+    assert pitch.low < 0.01 < pitch.high  # found may fail more than one scan in a hundred: not bought
+    assert verdict.decision == UNDECIDED and verdict.more_draws > 0
+    assert verdict.line() == "k=3: UNDECIDED F1F2F3 1.60x [1.58, 1.60] vs hand S1S2S3; pitch fails +0.9 %"
+    assert all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in (verdict.axes[0], verdict.axes[2]))
+    # found failing 5 of 77 pitch scans on every draw: more than 1 % with confidence, so the hand layout is kept
+    for d in draws:
+        d.found[:5, 1] = FAILED_ERROR
+    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
+    assert verdict.decision == KEEP and "fails 6.5 % more pitch" in verdict.line()
+    # failures beyond a tolerance of 10 %: bought, as on its score alone
+    assert compare_draws(draws, Rules(replicates=400, failures=0.1)).decision == BUY
+    # the same failures on both sides, scan for scan, are no difference at all
+    same = [PairedDraw(d.seed, d.found, np.where(d.found == FAILED_ERROR, FAILED_ERROR, d.found * 1.6)) for d in draws]
+    verdict = compare_draws(same, FAST)
+    assert verdict.decision == BUY and all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in verdict.axes)
+
+
 def test_an_axis_is_worse_by_what_it_adds_to_the_hand_layouts_total():
     """The tolerance is a share of the hand layout's score: an axis of a fiftieth of it may double, one of a
     third may not grow by a third. Checked against the hand computation of the axis's test."""

@@ -187,3 +187,65 @@ def test_answer_time_ends_the_verdict_whatever_the_stages_before_it_took():
     assert _verdict_seconds(SearchConfig(verdict_time=0.0, answer_time=10.0), now - 4.0) == pytest.approx(6.0, abs=0.1)
     with pytest.raises(ConfigError, match="answer_time"):
         SearchConfig(answer_time=-1.0)
+
+
+def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_search_answers_with_it(tmp_path):
+    """In a real cell, a k whose found layout scored worse than the hand's choice on the validation's draw is answered
+    with that choice's own sensors (their names and poses): the verdict pairs the hand's evaluation with itself, an
+    exact TIE that rides along while the other k race, and the result folder reads back with it."""
+    from optipose.evaluate.assignment import AxisChoice, Choice
+    from optipose.io.config import RunConfig
+    from optipose.io.load import load_search
+    from optipose.io.search import SearchFolder
+    from optipose.model.layout import is_part_of
+    from optipose.search.records import Validation
+    from optipose.search.validate import hand_where_better
+
+    part = load_part("part_b")
+    hand = part.layouts["hand"]
+    # by hand: hand's pair S2S3 (indices 1, 2; roll on S3 alone) beat the found pair (2e-3 rad against 3e-3); the
+    # found triple beat hand's triple: only k = 2 is replaced, its subsets restated in the new layout's indices
+    axes = (AxisChoice("roll", (2,), "S3", 1e-4, 2e-4), AxisChoice("pitch", (1, 2), "S2S3", 1e-4, 2e-4),
+            AxisChoice("yaw", (1, 2), "S2S3", 1e-4, 2e-4))  # fmt: skip
+    pair = Choice(2, (1, 2), "S2S3", axes, 2e-3)
+    found_pair = Choice(2, (0, 1), "F1F2", tuple(replace(a, subset=(0, 1), name="F1F2") for a in axes), 3e-3)
+    found_triple = Choice(3, (0, 1, 2), "F1F2F3", tuple(replace(a, subset=(0, 1, 2), name="F1F2F3") for a in axes), 1e-3)
+    triple = Choice(3, (0, 1, 2), "S1S2S3", tuple(replace(a, subset=(0, 1, 2), name="S1S2S3") for a in axes), 2e-3)
+    layouts = {2: _as_found(hand, 2), 3: _as_found(hand, 3)}
+    validation = Validation("reduced", 1, {3: found_triple, 2: found_pair}, {2: pair, 3: triple})
+    answered, v = hand_where_better(layouts, validation, hand)
+    assert answered[3] is layouts[3] and v.found[3] is found_triple
+    assert answered[2].names == ["S2", "S3"] and is_part_of(answered[2], hand) and not is_part_of(layouts[2], hand)
+    assert [np.array_equal(T, hand.poses[i]) for i, T in zip((1, 2), answered[2].poses)] == [True, True]
+    assert v.found[2].sensors == (0, 1) and [a.subset for a in v.found[2].axes] == [(1,), (0, 1), (0, 1)]
+    assert (v.found[2].name, v.found[2].score) == ("S2S3", 2e-3) and v.hand == validation.hand
+
+    # through the real evaluator in the paper's cell: the found layouts are the hand's first k, and k = 1 is answered
+    # with the hand's own single choice
+    objective = load_objective("paper").in_cell("ur10e")
+    config = SearchConfig(validation="reduced", verdict_draws=4, verdict_scans=7)
+    layouts = {k: _as_found(hand, k) for k in (1, 2, 3)}
+    first, names = {}, []
+    validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)
+    worse = replace(validation, found={**validation.found, 1: replace(validation.found[1], score=validation.hand[1].score * 2)})
+    answered, v = hand_where_better(layouts, worse, hand)
+    assert sorted(k for k in answered if is_part_of(answered[k], hand)) == [1]
+    verdicts = confident_verdicts(part, objective, answered, v, first, 5, config, on_draw=lambda i, name, result: names.append(name))
+    by_k, fewer = split(verdicts)
+    one = by_k[1]
+    assert one.decision == TIE and (one.score.estimate, one.score.low, one.score.high) == (1.0, 1.0, 1.0)
+    assert one.found == one.hand and one.found_name == one.hand_name == validation.hand[1].name
+    assert one.line().startswith(f"k=1: TIE keep hand {one.hand_name}: no found layout beat it")
+    assert set(names) == {"hand", "found_k3"}  # the single is not evaluated: its side is the hand's evaluation
+    assert one.n_draws == max(v.n_draws for v in by_k.values())  # it rode along to the race's last look
+    assert fewer.fewer_line().startswith(f"fewer sensors: {one.hand_name} alone")
+
+    # the folder: layouts/found_k1.toml holds the hand's sensor, comparison.csv its choice, both read back
+    sink = SearchFolder(tmp_path)
+    sink.layouts(answered, hand)
+    sink.validation(v)
+    back = load_search(tmp_path, RunConfig(command="search", part_name="part_b", seed=5))
+    assert back.layouts[1].names == [validation.hand[1].name] and back.validation.found[1].name == validation.hand[1].name
+    assert [(a.subset, a.name) for a in back.validation.found[1].axes] == [(a.subset, a.name) for a in v.found[1].axes]
+    assert [a.median for a in back.validation.found[1].axes] == pytest.approx([a.median for a in v.found[1].axes], rel=1e-12)
+    assert back.validation.found[3].name == v.found[3].name

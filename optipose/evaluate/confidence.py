@@ -21,11 +21,18 @@ read. Intervals are two-sided at ``confidence``: of the ratio hand / found (abov
 the score, of each axis's test (the hand layout's score over that score with the axis's share, weight ·
 (median + p75), the found layout's: an axis is worse by more than the tolerance when found's error on it
 alone adds more than the tolerance to the hand layout's total; docs/method.md, "The verdict with
-confidence") and of each axis's median and p75. The decision:
+confidence") and of each axis's median and p75. The quantiles do not see a registration that fails in fewer than
+a quarter of a draw's scans, so each axis also has the share of scans on which found's registration failed less
+hand's (:func:`_failed`: a Student interval over the draws, at least the scans' own spread), which may exceed 0 by
+at most ``Rules.failures`` (one scan in a hundred): a failed registration is a part scanned again or set aside. The
+decision:
 
-- KEEP: the score's interval lies below 1 (hand is better), or some axis's test lies below 1 / (1 + tolerance);
-- BUY: the score's interval lies above 1 and no axis's test reaches below 1 / (1 + tolerance);
-- TIE: the score's and every axis's test's intervals lie within [1 / (1 + tolerance), 1 + tolerance];
+- KEEP: the score's interval lies below 1 (hand is better), or some axis's test lies below 1 / (1 + tolerance),
+  or found fails some axis more often than hand by more than ``failures``;
+- BUY: the score's interval lies above 1, no axis's test reaches below 1 / (1 + tolerance) and no axis's failed
+  share reaches above ``failures``;
+- TIE: the score's and every axis's test's intervals lie within [1 / (1 + tolerance), 1 + tolerance], and every
+  failed share's within ± ``failures``;
 - UNDECIDED: none of these, with how many more draws would settle it (the interval's width ∝ 1/√draws).
 
 Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is one-sided at 97.5 %.
@@ -62,10 +69,12 @@ _LOG_BOUND = 600.0  # an interval's sides in logs at most this far out: exp stay
 
 @dataclass(frozen=True)
 class Rules:
-    """How a verdict is reached: the tolerance an axis may be worse by (0.1: 10 %), the intervals'
-    two-sided confidence, the bootstrap's replicates and seed, and the objective's statistic (its weights)."""
+    """How a verdict is reached: the tolerance an axis may be worse by (0.1: 10 %), the share of an axis's scans
+    the found layout may fail on beyond the hand one's (0.01: one in a hundred), the intervals' two-sided
+    confidence, the bootstrap's replicates and seed, and the objective's statistic (its weights)."""
 
     tolerance: float = 0.10
+    failures: float = 0.01
     confidence: float = 0.95
     replicates: int = 2000
     seed: int = 0
@@ -146,12 +155,14 @@ class AxisError:
 @dataclass(frozen=True)
 class AxisRatio:
     """One axis: its test ``ratio`` (the hand layout's score over that score with this axis's share the
-    found layout's), and hand / found of its median and of its p75."""
+    found layout's), hand / found of its median and of its p75, and ``failed``: the share of scans on which
+    the found layout's registration for the axis failed, less the hand one's (a difference, not a ratio)."""
 
     axis: str
     ratio: Interval
     median: Interval
     p75: Interval
+    failed: Interval = Interval(0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -179,6 +190,7 @@ class ConfidentVerdict:
     seconds_per_draw: float = float("nan")
     reference: str = "hand"
     hand_k: int = 0  # the hand choice's size when it differs from k (fewer found sensors against more hand ones)
+    failures: float = 0.01  # the share of an axis's scans found may fail on beyond hand's (Rules.failures)
 
     @property
     def more_minutes(self) -> float:
@@ -197,9 +209,13 @@ class ConfidentVerdict:
             return text if len(text) <= 80 else f"k={self.k}: nothing measured: {self.found_name} and {ref} see no axis"
         if self.decision == KEEP:
             worse = [a.axis for a in self.axes if a.ratio.high < 1.0 / (1.0 + self.tolerance)]
-            text = f"{head} {ref}; {self.found_name} {ratio}" + (f", worse on {'/'.join(worse)}" if worse else "")
+            fails = [a for a in self.axes if a.failed.low > self.failures]
+            text = (f"{head} {ref}; {self.found_name} {ratio}" + (f", worse on {'/'.join(worse)}" if worse else "")
+                    + "".join(f", fails {100 * a.failed.estimate:.1f} % more {a.axis}" for a in fails[:1]))  # fmt: skip
         elif self.decision == BUY:
             text = f"{head} {self.found_name} {ratio} better than {ref}"
+        elif self.decision == TIE and self.found_name == self.hand_name and (s.low, s.high) == (1.0, 1.0):
+            text = f"{head} keep {ref}: no found layout beat it"  # the search answered with the baseline's own choice
         elif self.decision == TIE:
             text = f"{head} {self.found_name} {ratio} vs {ref}: keep {self.hand_name}"
         else:
@@ -212,8 +228,12 @@ class ConfidentVerdict:
         # undecided: the axis whose interval straddles the tolerance, where it fits
         open_ = [a for a in self.axes if a.ratio.low < 1.0 / (1.0 + self.tolerance) <= a.ratio.high]
         axis = "".join(f"; {a.axis} {a.ratio.estimate:.2f}x [{a.ratio.low:.2f}, {a.ratio.high:.2f}]" for a in open_[:1])
-        axis = axis if self.decision == UNDECIDED else ""
-        fits = [line for line in (f"{text}{axis} ({tail})", f"{text} ({tail})", f"{text}{axis}") if len(line) <= 80]
+        failing = [a for a in self.axes if a.failed.low <= self.failures < a.failed.high]  # found may fail more than allowed
+        fails = "".join(f"; {a.axis} fails {100 * a.failed.estimate:+.1f} %" for a in failing[:1])
+        axis = (axis or fails) if self.decision == UNDECIDED else ""
+        # the failed share is in no table: it goes before the draws to add where both do not fit
+        order = (f"{text}{axis}", f"{text} ({tail})") if axis == fails else (f"{text} ({tail})", f"{text}{axis}")
+        fits = [line for line in (f"{text}{axis} ({tail})", *order) if len(line) <= 80]
         return fits[0] if fits else text[:80]
 
     @property
@@ -231,8 +251,9 @@ class ConfidentVerdict:
             BUY: "{who} is better than {ref}: {ratio}", KEEP: "{who} does not match {ref} ({ratio})",
             TIE: "{who} matches {ref} within " + f"{100 * self.tolerance:.0f}" + " % ({ratio})"}.get(
                 self.decision, "{who} vs {ref}: {ratio}, not settled")  # fmt: skip
+        found = "" if self.found_name in self.hand_name else "found "  # the search answered with one of the baseline's own
         lines = [f"{head}: " + template.format(who=who, ref=ref, ratio=ratio)
-                 for head, who in (("fewer sensors", f"found {self.found_name} alone"), ("fewer sensors", f"{self.found_name} alone"),
+                 for head, who in (("fewer sensors", f"{found}{self.found_name} alone"), ("fewer sensors", f"{self.found_name} alone"),
                                    ("fewer", f"{self.found_name} alone"))]  # fmt: skip
         return next((line for line in lines if len(line) <= 80), lines[-1][:80])
 
@@ -355,46 +376,67 @@ def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int
     c = rules.confidence
     iv = [_interval(point[i], samples[:, i], widen[i], c) for i in range(10)]
     iv += [_interval(point[i], samples[:, i], widen[i], c, lambda v: np.rad2deg(np.exp(v))) for i in range(10, 24)]
-    axes = tuple(AxisRatio(axis, iv[1 + j], iv[4 + j], iv[7 + j]) for j, axis in enumerate(AXES))
+    failed = _failed(draws, c)
+    axes = tuple(AxisRatio(axis, iv[1 + j], iv[4 + j], iv[7 + j], failed[j]) for j, axis in enumerate(AXES))
     found = tuple(AxisError(axis, iv[10 + j], iv[13 + j]) for j, axis in enumerate(AXES))
     hand = tuple(AxisError(axis, iv[16 + j], iv[19 + j]) for j, axis in enumerate(AXES))
-    decision, more = _decide(iv[0], axes, rules.tolerance, len(draws))
+    decision, more = _decide(iv[0], axes, rules.tolerance, rules.failures, len(draws))
     return ConfidentVerdict(
         k=k, decision=decision, found_name=found_name, hand_name=hand_name, score=iv[0], axes=axes, found=found,
         hand=hand, found_score_deg=iv[22], hand_score_deg=iv[23], n_draws=len(draws), n_scans=sum(n_scans),
         tolerance=rules.tolerance, confidence=c, more_draws=more, seconds_per_draw=seconds_per_draw, reference=reference,
-        hand_k=hand_k,
+        hand_k=hand_k, failures=rules.failures,
     )  # fmt: skip
 
 
-def _decide(score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, n: int) -> tuple[str, int | None]:
+def _failed(draws: Sequence[PairedDraw], confidence: float) -> list[Interval]:
+    """Per axis, the share of scans on which found's registration failed (its error the penalty: a failed
+    registration, or an axis its choice does not measure) less hand's, averaged over draws, with a two-sided
+    Student interval at ``confidence``: the draws' spread on D − 1 degrees of freedom where it exceeds the
+    scans' own (the paired per-scan differences' variance over a draw's scans), else the scans' on all of theirs.
+    Exactly [0, 0] where neither layout fails, or both fail on the same scans."""
+    diff = [(d.found >= FAILED_ERROR).astype(float) - (d.hand >= FAILED_ERROR) for d in draws]  # (n, 3) each, in {-1, 0, 1}
+    per = np.stack([x.mean(axis=0) for x in diff])  # (D, 3)
+    within = np.mean([x.var(axis=0, ddof=1) / len(x) if len(x) > 1 else np.zeros(len(AXES)) for x in diff], axis=0)
+    between = per.var(axis=0, ddof=1) if len(draws) > 1 else within
+    df = np.where(between > within, max(len(draws) - 1, 1), max(sum(len(x) - 1 for x in diff), 1))
+    half = stats_t.ppf((1.0 + confidence) / 2.0, df) * np.sqrt(np.maximum(between, within) / len(draws))
+    mean = per.mean(axis=0)
+    return [Interval(float(m), float(max(-1.0, m - h)), float(min(1.0, m + h))) for m, h in zip(mean, half)]
+
+
+def _decide(score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, failures: float, n: int) -> tuple[str, int | None]:
     """The decision from the intervals (module docstring) and, when UNDECIDED, the draws to add."""
     floor, ceiling = 1.0 / (1.0 + tolerance), 1.0 + tolerance
-    if score.high < 1.0 or any(a.ratio.high < floor for a in axes):
+    if score.high < 1.0 or any(a.ratio.high < floor or a.failed.low > failures for a in axes):
         return KEEP, None
-    if score.low > 1.0 and all(a.ratio.low >= floor for a in axes):
+    if score.low > 1.0 and all(a.ratio.low >= floor and a.failed.high <= failures for a in axes):
         return BUY, None
-    if score.within(floor, ceiling) and all(a.ratio.within(floor, ceiling) for a in axes):
+    if score.within(floor, ceiling) and all(a.ratio.within(floor, ceiling) and a.failed.within(-failures, failures) for a in axes):
         return TIE, None
-    return UNDECIDED, _more_draws(score, [a.ratio for a in axes], math.log(ceiling), n)
+    return UNDECIDED, _more_draws(score, axes, math.log(ceiling), failures, n)
 
 
-def _needed(interval: Interval, bound: float, above: bool, n: int) -> float:
-    """Draws at which the interval's side towards ``bound`` (log ratio) clears it at the same estimate, the
-    width ∝ 1/√draws; inf when the estimate itself is on the wrong side."""
-    m = math.log(max(interval.estimate, 1e-300))
-    side = interval.low if above else interval.high
-    half = abs(m - math.log(max(side, 1e-300)))
+def _needed(interval: Interval, bound: float, above: bool, n: int, log: bool = True) -> float:
+    """Draws at which the interval's side towards ``bound`` (a log ratio; with ``log`` False, the interval's own
+    unit) clears it at the same estimate, the width ∝ 1/√draws; inf when the estimate itself is on the wrong side."""
+    at = (lambda v: math.log(max(v, 1e-300))) if log else float
+    m = at(interval.estimate)
+    half = abs(m - at(interval.low if above else interval.high))
     gap = (m - bound) if above else (bound - m)
     if gap <= 0:
         return math.inf
     return n * (half / gap) ** 2 if half > 0 else float(n)
 
 
-def _more_draws(score: Interval, axes: list[Interval], tol: float, n: int) -> int | None:
+def _more_draws(score: Interval, axes: tuple[AxisRatio, ...], tol: float, failures: float, n: int) -> int | None:
     """The fewest draws to add for some decision to be reached at the present estimates (None: none would)."""
-    buy = max([_needed(score, 0.0, True, n)] + [_needed(a, -tol, True, n) for a in axes])
-    keep = min([_needed(score, 0.0, False, n)] + [_needed(a, -tol, False, n) for a in axes])
-    tie = max([max(_needed(i, -tol, True, n), _needed(i, tol, False, n)) for i in [score, *axes]])
+    ratios, failed = [a.ratio for a in axes], [a.failed for a in axes]
+    buy = max([_needed(score, 0.0, True, n)] + [_needed(a, -tol, True, n) for a in ratios]
+              + [_needed(f, failures, False, n, log=False) for f in failed])  # fmt: skip
+    keep = min([_needed(score, 0.0, False, n)] + [_needed(a, -tol, False, n) for a in ratios]
+               + [_needed(f, failures, True, n, log=False) for f in failed])  # fmt: skip
+    tie = max([max(_needed(i, -tol, True, n), _needed(i, tol, False, n)) for i in [score, *ratios]]
+              + [max(_needed(f, -failures, True, n, log=False), _needed(f, failures, False, n, log=False)) for f in failed])  # fmt: skip
     best = min(buy, keep, tie)
     return None if not math.isfinite(best) else max(1, math.ceil(best) - n)

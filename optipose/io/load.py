@@ -49,7 +49,7 @@ def load_result(folder: str | Path):
 def load_search(folder: Path, config: RunConfig | None = None):
     """The :class:`~optipose.io.results.SearchResult` of a search folder."""
     from optipose.io.results import SearchResult
-    from optipose.model.layout import load_layout
+    from optipose.model.layout import is_part_of, load_layout
     from optipose.search.records import Validation
 
     folder = Path(folder)
@@ -59,12 +59,17 @@ def load_search(folder: Path, config: RunConfig | None = None):
     hand = load_layout(baselines[0]) if baselines else None
     found_names = [f"F{i + 1}" for i in range(max(layouts, default=0))]
 
+    def names(k: int) -> list[str]:  # a found choice names the largest layout's sensors; the baseline's own, its sensors
+        return layouts[k].names if k in layouts and is_part_of(layouts[k], hand) else found_names
+
     def validation(path: Path):
         if not path.is_file():
             return None
         with reading(path):
             rows = pd.read_csv(path)
-            found = choices_from_comparison(rows[rows.layout == "found"], found_names)
+            found = {}
+            for k, group in rows[rows.layout == "found"].groupby("k", sort=False):
+                found |= choices_from_comparison(group, names(int(k)))
             hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
             protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
         return Validation(protocol, int(given(config.validation_seed, -1)), found, hand_choices)
@@ -87,6 +92,9 @@ def read_verdicts(path: Path) -> dict:
         rows = pd.read_csv(path, keep_default_na=False, na_values=[""])
         if "hand_k" not in rows:
             rows["hand_k"] = rows["k"]
+        for name, value in (("failed", 0.0), ("failed_low", 0.0), ("failed_high", 0.0), ("failures", 0.01)):  # a folder from before the failures' rule
+            if name not in rows:
+                rows[name] = value
         for (k, hand_k), group in rows.groupby(["k", "hand_k"], sort=True):
             score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
 
@@ -98,14 +106,15 @@ def read_verdicts(path: Path) -> dict:
             out[FEWER if fewer else int(k)] = ConfidentVerdict(
                 k=int(k), decision=str(score["decision"]), found_name=str(score["found"]), hand_name=str(score["hand"]),
                 score=iv(score, "ratio"),
-                axes=tuple(AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio")) for _, r in axes.iterrows()),
+                axes=tuple(AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio"), iv(r, "failed"))
+                           for _, r in axes.iterrows()),  # fmt: skip
                 found=tuple(AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()),
                 hand=tuple(AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()),
                 found_score_deg=iv(score, "found_median_deg"), hand_score_deg=iv(score, "hand_median_deg"),
                 n_draws=int(score["draws"]), n_scans=int(score["scans"]), tolerance=float(score["tolerance"]),
                 confidence=float(score["confidence"]), more_draws=None if more < 0 else more,
                 seconds_per_draw=float(score["seconds_per_draw"]), reference=str(score["reference"]),
-                hand_k=int(hand_k) if fewer else 0,
+                hand_k=int(hand_k) if fewer else 0, failures=float(score["failures"]),
             )  # fmt: skip
     return out
 

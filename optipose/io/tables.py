@@ -145,25 +145,26 @@ def bracket_sensors_frame(sensitivities: dict) -> pd.DataFrame:
 
 
 # the interval columns of ``verdict.csv``: each the estimate, then ``_low`` and ``_high``
-VERDICT_COLUMNS = ("ratio", "median_ratio", "p75_ratio", "found_median_deg", "found_p75_deg", "hand_median_deg", "hand_p75_deg")
+VERDICT_COLUMNS = ("ratio", "median_ratio", "p75_ratio", "failed", "found_median_deg", "found_p75_deg", "hand_median_deg", "hand_p75_deg")
 
 
 def verdict_frame(verdicts: dict) -> pd.DataFrame:
     """The verdicts with confidence (``verdict.csv``): per k a row for the score (axis ``score``: hand / found
     in sum, found's and hand's score in the ``*_median_deg`` columns) and one per axis (hand / found of its
-    share of the score, of its median and p75; each layout's predicted median and p75, degrees), each with its
-    interval (``_low``, ``_high``); the decision and what it rests on repeated on every row. A row whose
+    share of the score, of its median and p75; ``failed``: the share of scans on which found's registration
+    failed less hand's; each layout's predicted median and p75, degrees), each with its interval (``_low``,
+    ``_high``); the decision and what it rests on (``failures``: the share found may fail beyond hand's) repeated on every row. A row whose
     ``hand_k`` exceeds its ``k`` compares fewer found sensors with more hand ones."""
     rows = []
     for v in sorted(verdicts.values(), key=lambda v: (v.hand_k > v.k, v.k)):
         head = {"k": v.k, "hand_k": v.hand_k or v.k, "decision": v.decision, "found": v.found_name, "reference": v.reference, "hand": v.hand_name,
-                "draws": v.n_draws, "scans": v.n_scans, "tolerance": v.tolerance, "confidence": v.confidence,
+                "draws": v.n_draws, "scans": v.n_scans, "tolerance": v.tolerance, "failures": v.failures, "confidence": v.confidence,
                 "more_draws": v.more_draws if v.more_draws is not None else -1, "seconds_per_draw": v.seconds_per_draw}  # fmt: skip
-        empty = {"median_ratio": None, "p75_ratio": None, "found_p75_deg": None, "hand_p75_deg": None}
+        empty = {"median_ratio": None, "p75_ratio": None, "failed": None, "found_p75_deg": None, "hand_p75_deg": None}
         score = {"ratio": v.score, "found_median_deg": v.found_score_deg, "hand_median_deg": v.hand_score_deg, **empty}
         rows.append({**head, "axis": "score", **_intervals(score)})
         for ratio, found, hand in zip(v.axes, v.found, v.hand):
-            cells = {"ratio": ratio.ratio, "median_ratio": ratio.median, "p75_ratio": ratio.p75, "found_median_deg": found.median_deg,
+            cells = {"ratio": ratio.ratio, "median_ratio": ratio.median, "p75_ratio": ratio.p75, "failed": ratio.failed, "found_median_deg": found.median_deg,
                      "found_p75_deg": found.p75_deg, "hand_median_deg": hand.median_deg, "hand_p75_deg": hand.p75_deg}  # fmt: skip
             rows.append({**head, "axis": ratio.axis, **_intervals(cells)})
     return pd.DataFrame(rows)

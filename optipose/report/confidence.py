@@ -77,7 +77,8 @@ def confident_blocks(verdicts: dict, cell: str = "ideal", layouts: dict | None =
     v = ordered[0]
     caption = (f"Predicted median |error| per axis in the {cell} cell (mdeg), each with its {100 * v.confidence:.1f} % interval "
                f"from paired draws of the cell and a bootstrap over scans; {label} / found in sum; BUY needs the interval of "
-               f"the sum above 1 and no axis of the found layout adding more than {100 * v.tolerance:.0f} % to the {label} layout's total.")  # fmt: skip
+               f"the sum above 1, no axis of the found layout adding more than {100 * v.tolerance:.0f} % to the {label} layout's total "
+               f"and none failing its registration on more than {100 * v.failures:g} % of the scans beyond the {label} layout's.")  # fmt: skip
     blocks.append(Table(("k", "verdict", "layout", f"{label} / found", "roll", "pitch", "yaw", "draws"), tuple(rows), caption,
                         anchor="confident-verdict"))  # fmt: skip
     blocks.append(Figure(verdict_intervals(ordered), "verdict_intervals.png",

@@ -83,6 +83,9 @@ class SearchConfig:
     answer_time: float = 0.0
     verdict_scans: int = 0  # the protocol's scans a draw after the validation's evaluates, drawn by its seed (0: all)
     verdict_tolerance: float = 0.10
+    # and found may fail an axis's registration on at most this share of scans more than hand (a failed
+    # registration is a part scanned again: evaluate/confidence.py)
+    verdict_failures: float = 0.01
     verdict_confidence: float = 0.95
 
     def __post_init__(self) -> None:
@@ -93,9 +96,9 @@ class SearchConfig:
         if self.strategy not in ("greedy", "joint", "both"):
             raise ConfigError(f"search strategy must be greedy, joint or both, not '{self.strategy}'")
         if (self.verdict_scans < 0 or self.verdict_draws < 1 or not 0.5 < self.verdict_confidence < 1 or self.verdict_tolerance < 0
-                or self.verdict_time < 0 or self.answer_time < 0):  # fmt: skip
+                or not 0 <= self.verdict_failures < 1 or self.verdict_time < 0 or self.answer_time < 0):  # fmt: skip
             raise ConfigError("search verdict: verdict_draws >= 1, verdict_scans >= 0, 0.5 < verdict_confidence < 1, verdict_tolerance >= 0, "
-                              "verdict_time >= 0, answer_time >= 0")  # fmt: skip
+                              "0 <= verdict_failures < 1, verdict_time >= 0, answer_time >= 0")  # fmt: skip
         for name in (self.global_algorithm, self.local_algorithm, self.polish_algorithm):
             algorithm_code(name)  # raises ConfigError for an unknown name
 

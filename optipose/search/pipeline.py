@@ -184,7 +184,8 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
     sink.surrogate_scores(outcome)
     if outcome.interrupted:
         return report
-    from optipose.search.validate import validate
+    from optipose.search.validate import hand_where_better, validate
+    from optipose.search.verdict import choice_draw_counts
 
     stage(f"validating on the {config.validation} protocol (held-out noise seed)")
     first: dict = {}
@@ -194,6 +195,9 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
         sink.evaluation(name, result)
 
     report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, evaluation, hand_run)
+    if report.validation.hand and not choice_draw_counts(objective):  # a real cell: the baseline's choice where it did better
+        report.layouts, report.validation = hand_where_better(report.layouts, report.validation, hand)
+        sink.layouts(report.layouts, hand)
     sink.validation(report.validation)
     if report.validation.hand:
         from optipose.search.verdict import confident_verdicts

@@ -12,6 +12,7 @@ whatever runs it: the scans' noise comes from the seed and the scan's index, not
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 
@@ -25,7 +26,7 @@ from optipose.search.records import Validation
 from optipose.seeds import validation_seed
 from optipose.model.baseline import baseline
 
-__all__ = ["validate", "BaselineRun", "nested_groups", "indices_in"]
+__all__ = ["validate", "BaselineRun", "nested_groups", "indices_in", "hand_where_better"]
 
 log = logging.getLogger(__name__)
 _NICE = 10  # the hand layout's evaluation takes the cores the search leaves idle, and yields where it wants them
@@ -176,3 +177,26 @@ def nested_groups(layouts: dict[int, Layout]) -> list[list[int]]:
 def indices_in(layout: Layout, big: Layout) -> list[int]:
     """Indices in ``big`` of the poses of ``layout``."""
     return [next(i for i, P in enumerate(big.poses) if np.allclose(T, P)) for T in layout.poses]
+
+
+def hand_where_better(layouts: dict[int, Layout], validation: Validation, hand: Layout) -> tuple[dict[int, Layout], Validation]:
+    """In a real cell, the search's answer for each k whose found layout the baseline's choice of k sensors beat on
+    the validation's draw (a lower score): that choice's own sensors (the baseline's names and poses, in a layout
+    ``found_k<k>``), with the baseline's choice restated in it. There is nothing to buy there, and the verdict
+    pairs the baseline's evaluation with itself: an exact TIE, the baseline's sensors staying in their brackets
+    (docs/method.md, "The verdict with confidence"). In the ideal cell the validation's draw is the race's first
+    and is not also used to choose (:func:`optipose.search.verdict.choice_draw_counts`)."""
+    out, found = dict(layouts), dict(validation.found)
+    for k, h in validation.hand.items():
+        f = found.get(k)
+        if f is None or k not in out or not h.score < f.score:
+            continue
+        new = {old: i for i, old in enumerate(h.sensors)}
+        out[k] = Layout(tuple(hand.sensors[i] for i in h.sensors), name=f"found_k{k}",
+                        description=f"{hand.name}'s {h.name}: no found layout of {k} sensors beat it on the validation's draw")  # fmt: skip
+        found[k] = replace(h, sensors=tuple(range(len(h.sensors))),
+                           axes=tuple(replace(a, subset=tuple(new[i] for i in a.subset)) for a in h.axes))  # fmt: skip
+        log.info("k=%d: %s (%.3f deg) beat the found layout (%.3f deg) on the validation's draw: the search answers with it",
+                 k, h.name, np.rad2deg(h.score), np.rad2deg(f.score))  # fmt: skip
+    return out, replace(validation, found=found)
+

@@ -30,7 +30,7 @@ from optipose.evaluate.racing import race_many
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 from optipose.evaluate.executors import make_executor
 from optipose.model.baseline import baseline, baseline_label
-from optipose.model.layout import Layout
+from optipose.model.layout import Layout, is_part_of
 from optipose.search.objectives import stage_objective
 from optipose.search.records import Validation
 from optipose.search.validate import indices_in, nested_groups
@@ -67,19 +67,23 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     not per-scan ones), or ``first`` lacks one the race needs."""
     hand = baseline(part)
     ks = [k for k in sorted(validation.found) if k in validation.hand]
-    groups = [g for g in nested_groups(layouts) if any(k in ks for k in g)]
+    kept = {k for k in ks if is_part_of(layouts[k], hand)}  # the baseline's own choice: paired with itself
+    groups = [g for g in nested_groups({k: layouts[k] for k in layouts if k not in kept}) if any(k in ks for k in g)]
     names = ["hand"] + [f"found_k{max(g)}" for g in groups]
     objective = stage_objective(objective, "validation", config.validation)
     counted = choice_draw_counts(objective)
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
     if hand is None or not ks or not objective.conditions.trivial or missing:
         return {}
-    rules = Rules(tolerance=config.verdict_tolerance, confidence=config.verdict_confidence, seed=int(seed), statistic=objective.statistic)
+    rules = Rules(tolerance=config.verdict_tolerance, failures=config.verdict_failures, confidence=config.verdict_confidence,
+                  seed=int(seed), statistic=objective.statistic)
     label = baseline_label(hand)
     labels = {k: dict(k=k, found_name=_found_name(layouts[k], validation.found[k], layouts[max(g)]),
                       hand_name=validation.hand[k].name, reference=label)
               for g in groups for k in g if k in ks}  # fmt: skip
+    labels |= {k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label) for k in kept}
     big = {k: f"found_k{max(g)}" for g in groups for k in g}
+    side = {k: ("hand", validation.hand[k]) if k in kept else (big[k], validation.found[k]) for k in ks}  # whose evaluation, which choice
     done = on_draw or (lambda i, name, result: None)
 
     top = max(validation.hand)
@@ -88,8 +92,8 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
         labels[FEWER] = dict(labels[1], hand_name=validation.hand[top].name, hand_k=top)
 
     def pairs(results: dict[str, EvaluationResult]) -> dict:
-        return {key: paired_draw(results[big[f]], validation.found[f], results["hand"], validation.hand[h])
-                for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items() if big[f] in results}  # fmt: skip
+        return {key: paired_draw(results[side[f][0]], side[f][1], results["hand"], validation.hand[h])
+                for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items() if side[f][0] in results}  # fmt: skip
 
     draws = {k: [p] for k, p in pairs(first).items()} if counted else None
     if counted and config.verdict_draws <= 1:
@@ -111,10 +115,13 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
         log.info("verdict draw %d in %.1f s", i, time.perf_counter() - t0)
         return pairs(results)
 
+    # a k answered with the baseline's own choice is an exact TIE from the first draw: it rides along without
+    # holding the race, and when every k is one, the draws go to its predicted error (one look, at the end)
+    riders = frozenset(fewer) | (frozenset(kept) if kept != set(ks) else frozenset())
     try:
         seconds = config.verdict_time if config.verdict_time > 0 else math.inf
-        return race_many(next_draws, rules, min_draws=first_look(objective), max_draws=config.verdict_draws,
-                         seconds=seconds, draws=draws, names=labels, passengers=frozenset(fewer))  # fmt: skip
+        return race_many(next_draws, rules, min_draws=config.verdict_draws if kept == set(ks) else first_look(objective),
+                         max_draws=config.verdict_draws, seconds=seconds, draws=draws, names=labels, passengers=riders)  # fmt: skip
     finally:
         executor.close()
 
