@@ -199,4 +199,3 @@ def hand_where_better(layouts: dict[int, Layout], validation: Validation, hand: 
         log.info("k=%d: %s (%.3f deg) beat the found layout (%.3f deg) on the validation's draw: the search answers with it",
                  k, h.name, np.rad2deg(h.score), np.rad2deg(f.score))  # fmt: skip
     return out, replace(validation, found=found)
-

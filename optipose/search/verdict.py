@@ -7,7 +7,9 @@ and the hand one are evaluated with the validation's objective: one evaluator pe
 same cell instance (the part as made, the calibration), the same protocol orientations, robot paths and
 scan noise (common random numbers). Each layout keeps the choice the validation made for it (its subset per
 axis); a draw gives that choice's per-scan errors (:func:`optipose.evaluate.confidence.scan_errors`), and
-registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``).
+registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``). A k the search answered with
+the hand layout's own choice (:func:`optipose.search.validate.hand_where_better`) is not evaluated: its side is the
+hand layout's evaluation with that choice, an exact TIE that rides along without holding the race.
 
 Draws are added (:func:`optipose.evaluate.racing.race_many`) until every k is BUY, KEEP or TIE, or
 ``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
