@@ -193,7 +193,7 @@ def hand_where_better(layouts: dict[int, Layout], validation: Validation, hand: 
             continue
         new = {old: i for i, old in enumerate(h.sensors)}
         out[k] = Layout(tuple(hand.sensors[i] for i in h.sensors), name=f"found_k{k}",
-                        description=f"{hand.name}'s {h.name}: no found layout of {k} sensors beat it on the validation's draw")  # fmt: skip
+                        description=f"{hand.name}'s {h.name}: no found layout of {k} sensor{'s' * (k > 1)} beat it on the validation's draw")  # fmt: skip
         found[k] = replace(h, sensors=tuple(range(len(h.sensors))),
                            axes=tuple(replace(a, subset=tuple(new[i] for i in a.subset)) for a in h.axes))  # fmt: skip
         log.info("k=%d: %s (%.3f deg) beat the found layout (%.3f deg) on the validation's draw: the search answers with it",
