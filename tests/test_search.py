@@ -250,6 +250,20 @@ def test_a_clock_that_ends_a_stage_is_recorded_and_said(caplog):
     assert any("the clock ended the surrogate's" in r.getMessage() and out.clock_cut[0] in r.getMessage() for r in caplog.records)
 
 
+def test_a_clock_that_stops_the_search_before_any_layout_says_so_once(caplog):
+    # a clock too short for any layout: one warning names what is missing and the stage the clock ended, not two
+    from optipose.search.config import config_from_budget
+
+    part, objective = load_part("part_c"), load_objective("paper")
+    cfg = replace(config_from_budget("quick", (1, 2, 3), cell=True), max_time=1e-6)
+    with caplog.at_level("WARNING", logger="optipose.search.surrogate_search"):
+        out = run_search(part, objective, cfg, seed=4)
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert not out.found and out.clock_cut
+    assert len(said) == 1, said
+    assert "no layout of [1, 2, 3] sensor(s) yet" in said[0] and out.clock_cut[0] in said[0] and "raise max_time" in said[0]
+
+
 def test_results_never_violate_the_constraints(part_b_problem):
     part, objective, cfg = part_b_problem
     problem = SurrogateProblem(part, objective, cfg)

@@ -42,15 +42,16 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
     hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])
     study.measure_against({k: f.stats.level_axis_score for k, f in hand.items()})
     study.start_clock(config.max_time)  # after the hand layout is scored: that first scan also compiles the kernels
-    greedy, joint = {}, {}
+    greedy, joint, unplaced = {}, {}, []
     try:
         _place(study, config, max(ks), hand_u, hand, rng, seed, greedy, joint)
     except Stop as why:
         unplaced = [k for k in ks if study.best(k) is None]
+        cut = f", the clock having ended the surrogate's {', '.join(study.cut)}" if study.cut and unplaced else ""
         (log.warning if unplaced else log.info)(
-            "search stopped: %s%s", why, f"; no layout of {unplaced} sensor(s) yet (raise max_time)" if unplaced else ""
+            "search stopped: %s%s", why, f"; no layout of {unplaced} sensor(s) yet{cut} (raise max_time)" if unplaced else ""
         )
-    if study.cut:  # the layouts are then the machine's speed's as well as the seed's: say so where the user reads
+    if study.cut and not unplaced:  # the layouts are then the machine's speed's as well as the seed's: say so where the user reads
         log.warning("the clock ended the surrogate's %s before its evaluations: another run of this seed may place other "
                     "sensors (a larger [search] max_time, with --search-config, gives the seed's own answer)", ", ".join(study.cut))
     found = {}
