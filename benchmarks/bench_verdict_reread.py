@@ -19,20 +19,23 @@ from optipose.evaluate.confidence import Rules, paired_draw
 from optipose.evaluate.objective import objective_from_table
 from optipose.evaluate.racing import race_many
 from optipose.io.load import load_result
+from optipose.model.layout import is_part_of
 from optipose.search.validate import nested_groups
 
 
 def stored_draws(folder: Path, result) -> list[dict]:
     """The folder's verdict draws in order, each k → its paired draw (the search's choices; ``result`` the
     folder's, read back)."""
-    big = {k: max(g) for g in nested_groups(result.layouts) for k in g}
     v = result.validation
     ks = [k for k in sorted(v.found) if k in v.hand]
+    kept = {k for k in ks if is_part_of(result.layouts[k], result.hand)}  # answered with the hand's own choice: paired with it
+    big = {k: max(g) for g in nested_groups({k: lay for k, lay in result.layouts.items() if k not in kept}) for k in g}
     draws = []
     for d in sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:])):
         hand = load_result(d / "hand")
-        draws.append({k: paired_draw(load_result(d / f"found_k{big[k]}"), v.found[k], hand, v.hand[k])
-                      for k in ks if (d / f"found_k{big[k]}").is_dir()})  # fmt: skip
+        draws.append({k: paired_draw(hand, v.hand[k], hand, v.hand[k]) for k in kept}
+                     | {k: paired_draw(load_result(d / f"found_k{big[k]}"), v.found[k], hand, v.hand[k])
+                        for k in ks if k not in kept and (d / f"found_k{big[k]}").is_dir()})  # fmt: skip
     return draws
 
 

@@ -116,6 +116,24 @@ def test_a_layout_that_fails_more_registrations_is_not_bought_for_a_better_score
     assert verdict.decision == BUY and all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in verdict.axes)
 
 
+def test_a_keep_for_failures_says_why_in_80_columns_and_a_zero_tolerance_still_counts_the_draws_to_add():
+    rng = np.random.default_rng(8)
+    draws = []
+    for i, d in enumerate(_draws(rng, 6)):
+        f = d.hand / np.array([1.6, 1 / 1.5, 1.6])  # worse on pitch beyond the tolerance
+        f[:5, 1] = FAILED_ERROR  # and failing it on 5 of 77 scans where hand never does
+        draws.append(PairedDraw(i, f, d.hand))
+    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3", reference="conventional")
+    line = verdict.line()
+    assert verdict.decision == KEEP and len(line) <= 80, line
+    assert "worse on pitch" in line and "fails 6.5 % more pitch" in line  # the reasons kept, the ratio left out
+    # a tolerance of 0 with no failure on either side: met (its test is <=), and the draws to add come from the rest
+    close = [PairedDraw(d.seed, d.hand / 1.02, d.hand) for d in _draws(np.random.default_rng(9), 3)]
+    strict = compare_draws(close, Rules(replicates=400, tolerance=0.0, failures=0.0))
+    assert all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in strict.axes)
+    assert strict.decision in (BUY, UNDECIDED) and (strict.decision == BUY or strict.more_draws is not None)
+
+
 def test_an_axis_is_worse_by_what_it_adds_to_the_hand_layouts_total():
     """The tolerance is a share of the hand layout's score: an axis of a fiftieth of it may double, one of a
     third may not grow by a third. Checked against the hand computation of the axis's test."""
@@ -141,6 +159,13 @@ def test_racing_stops_when_the_interval_is_clear():
     # an exact copy on the same draws: a tie at the first look
     verdict = race(lambda i: PairedDraw(i, *(2 * [_draws(rng, 1)[0].hand])), FAST, max_draws=40)
     assert verdict.decision == TIE and verdict.n_draws == 3
+
+
+def test_a_race_whose_draws_leave_out_an_undecided_key_says_so_instead_of_waiting_forever():
+    rng = np.random.default_rng(10)
+    draws = _draws(rng, 6, ratio=1.0)
+    with pytest.raises(ValueError, match=r"no paired draw for \['2'\] at position 0"):
+        racing.race_many(lambda i, keys: {1: draws[i]}, FAST, min_draws=3, max_draws=6, draws={1: [], 2: []})
 
 
 def test_racing_an_equal_layout_runs_to_the_budget():

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from optipose.evaluate.confidence import BUY, FEWER, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, split
@@ -117,6 +118,17 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
         assert back[k].line() == v.line() and back[k].axis_lines() == v.axis_lines() and back[k].fewer_line() == v.fewer_line()
         assert back[k].score.low == pytest.approx(v.score.low, rel=1e-12) and back[k].more_draws == v.more_draws
     assert read_verdicts(tmp_path / "none.csv") == {}
+    # a verdict.csv from before the failures' rule: its failed shares and tolerance unknown (NaN), not taken as applied
+    old = pd.read_csv(tmp_path / "verdict.csv").drop(columns=["failed", "failed_low", "failed_high", "failures", "kept"])
+    old.to_csv(tmp_path / "old.csv", index=False)
+    before = read_verdicts(tmp_path / "old.csv")
+    assert all(np.isnan(v.failures) and np.isnan(v.axes[0].failed.high) and not v.kept for v in before.values())
+    assert [v.line() for v in before.values()] == [v.line() for v in back.values()]
+    from optipose.report.confidence import confident_blocks
+    from optipose.report.document import Table
+
+    captions = [[b.caption for b in confident_blocks(v, "ur10e") if isinstance(b, Table)][0] for v in (back, before)]
+    assert "failing its registration on more than 1 %" in captions[0] and "failing" not in captions[1]
 
 
 def test_a_draw_of_fewer_scans_keeps_the_protocols_orientations_in_proportion():
@@ -219,6 +231,26 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     assert [np.array_equal(T, hand.poses[i]) for i, T in zip((1, 2), answered[2].poses)] == [True, True]
     assert v.found[2].sensors == (0, 1) and [a.subset for a in v.found[2].axes] == [(1,), (0, 1), (0, 1)]
     assert (v.found[2].name, v.found[2].score) == ("S2S3", 2e-3) and v.hand == validation.hand
+
+    # the largest found layout replaced: the smaller ones it held keep their choices, restated in the largest left
+    # (here found_k3 = (C, A, B) held found_k1 = A as its F2 and found_k2 = (B, A) as F3F2; in found_k2 A is F2, B F1)
+    poses = [np.eye(4) for _ in range(3)]
+    for i, T in enumerate(poses):
+        T[:3, 3] = [0.05 * (i + 1), 0.0, 0.3]
+    A, B, C = poses
+
+    def lay(*Ts):
+        return Layout(tuple(SensorPose(f"F{i + 1}", T) for i, T in enumerate(Ts)), name=f"found_k{len(Ts)}")
+
+    nested = {1: lay(A), 2: lay(B, A), 3: lay(C, A, B)}
+    one = Choice(1, (1,), "F2", tuple(replace(a, subset=(1,), name="F2") for a in axes), 1e-3)
+    two = Choice(2, (1, 2), "F2F3", tuple(replace(a, subset=s, name=n) for a, s, n in zip(axes, ((1,), (1, 2), (2,)), ("F2", "F2F3", "F3"))), 1e-3)
+    worse = replace(found_triple, score=5e-3)
+    answered, v = hand_where_better(nested, Validation("reduced", 1, {3: worse, 2: two, 1: one}, {3: triple}), hand)
+    assert is_part_of(answered[3], hand) and answered[2] is nested[2] and answered[1] is nested[1]
+    assert (v.found[1].sensors, v.found[1].name, [a.subset for a in v.found[1].axes]) == ((1,), "F2", [(1,), (1,), (1,)])
+    assert (v.found[2].sensors, v.found[2].name) == ((0, 1), "F1F2")
+    assert [(a.subset, a.name) for a in v.found[2].axes] == [((1,), "F2"), ((0, 1), "F1F2"), ((0,), "F1")]
 
     # through the real evaluator in the paper's cell: the found layouts are the hand's first k, and k = 1 is answered
     # with the hand's own single choice

@@ -31,8 +31,8 @@ decision:
   or found fails some axis more often than hand by more than ``failures``;
 - BUY: the score's interval lies above 1, no axis's test reaches below 1 / (1 + tolerance) and no axis's failed
   share reaches above ``failures``;
-- TIE: the score's and every axis's test's intervals lie within [1 / (1 + tolerance), 1 + tolerance], and every
-  failed share's within ± ``failures``;
+- TIE: the score's and every axis's test's intervals lie within [1 / (1 + tolerance), 1 + tolerance], and no
+  failed share reaches above ``failures`` (found failing less is no reason to move a bracket on its own);
 - UNDECIDED: none of these, with how many more draws would settle it (the interval's width ∝ 1/√draws).
 
 Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is one-sided at 97.5 %.
@@ -190,7 +190,8 @@ class ConfidentVerdict:
     seconds_per_draw: float = float("nan")
     reference: str = "hand"
     hand_k: int = 0  # the hand choice's size when it differs from k (fewer found sensors against more hand ones)
-    failures: float = 0.01  # the share of an axis's scans found may fail on beyond hand's (Rules.failures)
+    failures: float = 0.01  # the share of an axis's scans found may fail on beyond hand's (Rules.failures); NaN: not applied
+    kept: bool = False  # the found side is the baseline's own choice, the search's answer where it beat the found layout
 
     @property
     def more_minutes(self) -> float:
@@ -207,24 +208,27 @@ class ConfidentVerdict:
         if len(self.unmeasured) == len(self.found):  # equal because neither measures anything: say that
             text = f"k={self.k}: nothing measured: {self.found_name} and {ref} see no {'/'.join(self.unmeasured)}"
             return text if len(text) <= 80 else f"k={self.k}: nothing measured: {self.found_name} and {ref} see no axis"
-        if self.decision == KEEP:
-            worse = [a.axis for a in self.axes if a.ratio.high < 1.0 / (1.0 + self.tolerance)]
-            fails = [a for a in self.axes if a.failed.low > self.failures]
-            text = (f"{head} {ref}; {self.found_name} {ratio}" + (f", worse on {'/'.join(worse)}" if worse else "")
-                    + "".join(f", fails {100 * a.failed.estimate:.1f} % more {a.axis}" for a in fails[:1]))  # fmt: skip
-        elif self.decision == BUY:
-            text = f"{head} {self.found_name} {ratio} better than {ref}"
-        elif self.decision == TIE and self.found_name == self.hand_name and (s.low, s.high) == (1.0, 1.0):
-            text = f"{head} keep {ref}: no found layout beat it"  # the search answered with the baseline's own choice
-        elif self.decision == TIE:
-            text = f"{head} {self.found_name} {ratio} vs {ref}: keep {self.hand_name}"
-        else:
-            text = f"{head} {self.found_name} {ratio} vs {ref}"
         tail = f"{self.n_draws} draw{'s' if self.n_draws != 1 else ''}"
         if self.decision == UNDECIDED and self.more_draws is not None:
             minutes = self.more_minutes
             took = (f", {minutes:.0f} min" if minutes >= 1 else f", {60 * minutes:.0f} s") if math.isfinite(minutes) else ""
             tail += f"; +{self.more_draws}{took}"
+        if self.decision == KEEP:
+            worse = [a.axis for a in self.axes if a.ratio.high < 1.0 / (1.0 + self.tolerance)]
+            fails = [a for a in self.axes if a.failed.low > self.failures]
+            why = (f", worse on {'/'.join(worse)}" if worse else "") + "".join(
+                f", fails {100 * a.failed.estimate:.1f} % more {a.axis}" for a in fails[:1])
+            # the reasons before the ratio where both do not fit
+            texts = [f"{head} {ref}; {self.found_name} {ratio}{why}", f"{head} {ref}; {self.found_name}{why}", f"{head} {ref}{why}"]
+            text = next((t for t in texts if len(f"{t} ({tail})") <= 80), next((t for t in texts if len(t) <= 80), texts[-1]))
+        elif self.decision == BUY:
+            text = f"{head} {self.found_name} {ratio} better than {ref}"
+        elif self.decision == TIE and self.kept:
+            text = f"{head} keep {ref}: no found layout beat it"  # the search answered with the baseline's own choice
+        elif self.decision == TIE:
+            text = f"{head} {self.found_name} {ratio} vs {ref}: keep {self.hand_name}"
+        else:
+            text = f"{head} {self.found_name} {ratio} vs {ref}"
         # undecided: the axis whose interval straddles the tolerance, where it fits
         open_ = [a for a in self.axes if a.ratio.low < 1.0 / (1.0 + self.tolerance) <= a.ratio.high]
         axis = "".join(f"; {a.axis} {a.ratio.estimate:.2f}x [{a.ratio.low:.2f}, {a.ratio.high:.2f}]" for a in open_[:1])
@@ -251,7 +255,7 @@ class ConfidentVerdict:
             BUY: "{who} is better than {ref}: {ratio}", KEEP: "{who} does not match {ref} ({ratio})",
             TIE: "{who} matches {ref} within " + f"{100 * self.tolerance:.0f}" + " % ({ratio})"}.get(
                 self.decision, "{who} vs {ref}: {ratio}, not settled")  # fmt: skip
-        found = "" if self.found_name in self.hand_name else "found "  # the search answered with one of the baseline's own
+        found = "" if self.kept else "found "  # the search answered with one of the baseline's own
         lines = [f"{head}: " + template.format(who=who, ref=ref, ratio=ratio)
                  for head, who in (("fewer sensors", f"{found}{self.found_name} alone"), ("fewer sensors", f"{self.found_name} alone"),
                                    ("fewer", f"{self.found_name} alone"))]  # fmt: skip
@@ -364,7 +368,7 @@ def _interval(point: float, samples: np.ndarray, widen: float, confidence: float
 
 def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int = 0, found_name: str = "found",
                   hand_name: str = "hand", reference: str = "hand", seconds_per_draw: float = float("nan"),
-                  hand_k: int = 0) -> ConfidentVerdict:  # fmt: skip
+                  hand_k: int = 0, kept: bool = False) -> ConfidentVerdict:  # fmt: skip
     """The verdict on paired draws (one per seed, each the same scans for both layouts)."""
     if not draws:
         raise ValueError("a verdict needs at least one paired draw")
@@ -385,7 +389,7 @@ def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int
         k=k, decision=decision, found_name=found_name, hand_name=hand_name, score=iv[0], axes=axes, found=found,
         hand=hand, found_score_deg=iv[22], hand_score_deg=iv[23], n_draws=len(draws), n_scans=sum(n_scans),
         tolerance=rules.tolerance, confidence=c, more_draws=more, seconds_per_draw=seconds_per_draw, reference=reference,
-        hand_k=hand_k, failures=rules.failures,
+        hand_k=hand_k, failures=rules.failures, kept=kept,
     )  # fmt: skip
 
 
@@ -412,7 +416,7 @@ def _decide(score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, fail
         return KEEP, None
     if score.low > 1.0 and all(a.ratio.low >= floor and a.failed.high <= failures for a in axes):
         return BUY, None
-    if score.within(floor, ceiling) and all(a.ratio.within(floor, ceiling) and a.failed.within(-failures, failures) for a in axes):
+    if score.within(floor, ceiling) and all(a.ratio.within(floor, ceiling) and a.failed.high <= failures for a in axes):
         return TIE, None
     return UNDECIDED, _more_draws(score, axes, math.log(ceiling), failures, n)
 
@@ -424,6 +428,8 @@ def _needed(interval: Interval, bound: float, above: bool, n: int, log: bool = T
     m = at(interval.estimate)
     half = abs(m - at(interval.low if above else interval.high))
     gap = (m - bound) if above else (bound - m)
+    if not log and gap == 0 and half == 0:  # a failed share exactly at its bound, no spread: met already (its test is <=)
+        return float(n)
     if gap <= 0:
         return math.inf
     return n * (half / gap) ** 2 if half > 0 else float(n)
@@ -437,6 +443,6 @@ def _more_draws(score: Interval, axes: tuple[AxisRatio, ...], tol: float, failur
     keep = min([_needed(score, 0.0, False, n)] + [_needed(a, -tol, False, n) for a in ratios]
                + [_needed(f, failures, True, n, log=False) for f in failed])  # fmt: skip
     tie = max([max(_needed(i, -tol, True, n), _needed(i, tol, False, n)) for i in [score, *ratios]]
-              + [max(_needed(f, -failures, True, n, log=False), _needed(f, failures, False, n, log=False)) for f in failed])  # fmt: skip
+              + [_needed(f, failures, False, n, log=False) for f in failed])  # fmt: skip
     best = min(buy, keep, tie)
     return None if not math.isfinite(best) else max(1, math.ceil(best) - n)

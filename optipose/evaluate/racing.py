@@ -100,6 +100,9 @@ def race_many(next_draws: Callable[[int, frozenset], dict], rules: Rules = Rules
                           for key in passengers & taken.keys()}  # fmt: skip
                 return {key: (done | riders)[key] for key in taken}
         pending = taken.keys() - done.keys() - passengers  # after this look's decisions
-        for key, pair in next_draws(n, frozenset(pending) if taken else None).items():
+        given = next_draws(n, frozenset(pending) if taken else None)
+        if not given or pending - given.keys():  # a key no draw comes for would hold the race forever
+            raise ValueError(f"next_draws gave no paired draw for {sorted(map(str, pending - given.keys())) or 'any key'} at position {n}")
+        for key, pair in given.items():
             taken.setdefault(key, []).append(pair)
         added += 1

@@ -92,8 +92,8 @@ def read_verdicts(path: Path) -> dict:
         rows = pd.read_csv(path, keep_default_na=False, na_values=[""])
         if "hand_k" not in rows:
             rows["hand_k"] = rows["k"]
-        for name, value in (("failed", 0.0), ("failed_low", 0.0), ("failed_high", 0.0), ("failures", 0.01)):  # a folder from before the failures' rule
-            if name not in rows:
+        for name, value in (("failed", np.nan), ("failed_low", np.nan), ("failed_high", np.nan), ("failures", np.nan), ("kept", False)):
+            if name not in rows:  # a folder from before the failures' rule (NaN: not applied) and the hand choice's answer
                 rows[name] = value
         for (k, hand_k), group in rows.groupby(["k", "hand_k"], sort=True):
             score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
@@ -114,7 +114,7 @@ def read_verdicts(path: Path) -> dict:
                 n_draws=int(score["draws"]), n_scans=int(score["scans"]), tolerance=float(score["tolerance"]),
                 confidence=float(score["confidence"]), more_draws=None if more < 0 else more,
                 seconds_per_draw=float(score["seconds_per_draw"]), reference=str(score["reference"]),
-                hand_k=int(hand_k) if fewer else 0, failures=float(score["failures"]),
+                hand_k=int(hand_k) if fewer else 0, failures=float(score["failures"]), kept=str(score["kept"]) == "True",
             )  # fmt: skip
     return out
 

@@ -158,7 +158,7 @@ def verdict_frame(verdicts: dict) -> pd.DataFrame:
     rows = []
     for v in sorted(verdicts.values(), key=lambda v: (v.hand_k > v.k, v.k)):
         head = {"k": v.k, "hand_k": v.hand_k or v.k, "decision": v.decision, "found": v.found_name, "reference": v.reference, "hand": v.hand_name,
-                "draws": v.n_draws, "scans": v.n_scans, "tolerance": v.tolerance, "failures": v.failures, "confidence": v.confidence,
+                "draws": v.n_draws, "scans": v.n_scans, "tolerance": v.tolerance, "failures": v.failures, "kept": v.kept, "confidence": v.confidence,
                 "more_draws": v.more_draws if v.more_draws is not None else -1, "seconds_per_draw": v.seconds_per_draw}  # fmt: skip
         empty = {"median_ratio": None, "p75_ratio": None, "failed": None, "found_p75_deg": None, "hand_p75_deg": None}
         score = {"ratio": v.score, "found_median_deg": v.found_score_deg, "hand_median_deg": v.hand_score_deg, **empty}

@@ -74,11 +74,12 @@ def confident_blocks(verdicts: dict, cell: str = "ideal", layouts: dict | None =
         rows.append((f"k={v.k}", v.decision, "found " + v.found_name, f"{v.score.estimate:.2f}x [{v.score.low:.2f}, {v.score.high:.2f}]",
                      *(interval_cell(a.median_deg) for a in v.found), str(v.n_draws)))  # fmt: skip
         rows.append(("", "", f"{label} {v.hand_name}", "", *(interval_cell(a.median_deg) for a in v.hand), ""))
-    v = ordered[0]
+    v = ordered[0]  # its failures NaN: a verdict from before the failures' rule, whose caption leaves it out
     caption = (f"Predicted median |error| per axis in the {cell} cell (mdeg), each with its {100 * v.confidence:.1f} % interval "
                f"from paired draws of the cell and a bootstrap over scans; {label} / found in sum; BUY needs the interval of "
-               f"the sum above 1, no axis of the found layout adding more than {100 * v.tolerance:.0f} % to the {label} layout's total "
-               f"and none failing its registration on more than {100 * v.failures:g} % of the scans beyond the {label} layout's.")  # fmt: skip
+               f"the sum above 1, no axis of the found layout adding more than {100 * v.tolerance:.0f} % to the {label} layout's total"
+               + (f" and none failing its registration on more than {100 * v.failures:g} % of the scans beyond the {label} layout's."
+                  if v.failures == v.failures else "."))  # fmt: skip
     blocks.append(Table(("k", "verdict", "layout", f"{label} / found", "roll", "pitch", "yaw", "draws"), tuple(rows), caption,
                         anchor="confident-verdict"))  # fmt: skip
     blocks.append(Figure(verdict_intervals(ordered), "verdict_intervals.png",

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from optipose.model.layout import is_part_of
 from optipose.report import figures
 from optipose.report.document import Block, Figure, Heading, Paragraph
 
@@ -13,14 +14,16 @@ __all__ = ["search_blocks", "surrogate_pairs"]
 
 def surrogate_pairs(selection: list, surrogate: dict, result, label: str) -> list[tuple[str, int, float, float]]:
     """(layout, k, surrogate deg, ICP deg) per layout ICP looked at: the selection's candidates (reduced or
-    full protocol) and the found and baseline layouts' validation."""
+    full protocol) and the found and baseline layouts' validation (not a k the search answered with the baseline's
+    own choice: the surrogate's score there is the found layout's it replaced)."""
     pairs = [("candidate", r.k, r.surrogate, float(np.rad2deg(r.choice.score)))
              for r in selection if np.isfinite(r.surrogate) and r.origin != "hand"]  # fmt: skip
     validation = result.validation
     if validation is not None:
         for name, choices in (("found", validation.found), ("hand", validation.hand)):
             for k, choice in choices.items():
-                if (name, k) in surrogate:
+                replaced = name == "found" and k in result.layouts and is_part_of(result.layouts[k], result.hand)
+                if (name, k) in surrogate and not replaced:
                     pairs.append((name if name == "found" else label, k, surrogate[(name, k)], float(np.rad2deg(choice.score))))
     return pairs
 

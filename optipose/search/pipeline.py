@@ -195,7 +195,8 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
         sink.evaluation(name, result)
 
     report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, evaluation, hand_run)
-    if report.validation.hand and not choice_draw_counts(objective):  # a real cell: the baseline's choice where it did better
+    # a real cell: the baseline's choice where it did better (under a band the verdict is the band's, not raced)
+    if report.validation.hand and not choice_draw_counts(objective) and objective.conditions.trivial:
         report.layouts, report.validation = hand_where_better(report.layouts, report.validation, hand)
         sink.layouts(report.layouts, hand)
     sink.validation(report.validation)

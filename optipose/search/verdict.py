@@ -9,7 +9,8 @@ scan noise (common random numbers). Each layout keeps the choice the validation 
 axis); a draw gives that choice's per-scan errors (:func:`optipose.evaluate.confidence.scan_errors`), and
 registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``). A k the search answered with
 the hand layout's own choice (:func:`optipose.search.validate.hand_where_better`) is not evaluated: its side is the
-hand layout's evaluation with that choice, an exact TIE that rides along without holding the race.
+hand layout's evaluation with that choice, an exact TIE that rides along without holding the race (when every k is
+one, they are the race, decided at one look at its last draw: the draws go to the hand layout's predicted error).
 
 Draws are added (:func:`optipose.evaluate.racing.race_many`) until every k is BUY, KEEP or TIE, or
 ``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
@@ -83,7 +84,7 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     labels = {k: dict(k=k, found_name=_found_name(layouts[k], validation.found[k], layouts[max(g)]),
                       hand_name=validation.hand[k].name, reference=label)
               for g in groups for k in g if k in ks}  # fmt: skip
-    labels |= {k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label) for k in kept}
+    labels |= {k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True) for k in kept}
     big = {k: f"found_k{max(g)}" for g in groups for k in g}
     side = {k: ("hand", validation.hand[k]) if k in kept else (big[k], validation.found[k]) for k in ks}  # whose evaluation, which choice
     done = on_draw or (lambda i, name, result: None)
