@@ -19,23 +19,17 @@ from optipose.evaluate.confidence import Rules, paired_draw
 from optipose.evaluate.objective import objective_from_table
 from optipose.evaluate.racing import race_many
 from optipose.io.load import load_result
-from optipose.model.layout import is_part_of
-from optipose.search.validate import nested_groups
+from optipose.search.verdict import sides
 
 
 def stored_draws(folder: Path, result) -> list[dict]:
     """The folder's verdict draws in order, each k → its paired draw (the search's choices; ``result`` the
     folder's, read back)."""
-    v = result.validation
-    ks = [k for k in sorted(v.found) if k in v.hand]
-    kept = {k for k in ks if is_part_of(result.layouts[k], result.hand)}  # answered with the hand's own choice: paired with it
-    big = {k: max(g) for g in nested_groups({k: lay for k, lay in result.layouts.items() if k not in kept}) for k in g}
+    v, side = result.validation, sides(result.layouts, result.validation, result.hand)
     draws = []
     for d in sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:])):
-        hand = load_result(d / "hand")
-        draws.append({k: paired_draw(hand, v.hand[k], hand, v.hand[k]) for k in kept}
-                     | {k: paired_draw(load_result(d / f"found_k{big[k]}"), v.found[k], hand, v.hand[k])
-                        for k in ks if k not in kept and (d / f"found_k{big[k]}").is_dir()})  # fmt: skip
+        stored = {n: load_result(d / n) for n in {"hand", *(name for name, _ in side.values())} if (d / n).is_dir()}  # each once
+        draws.append({k: paired_draw(stored[name], choice, stored["hand"], v.hand[k]) for k, (name, choice) in side.items() if name in stored})
     return draws
 
 

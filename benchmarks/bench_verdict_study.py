@@ -33,6 +33,7 @@ was made on flatters it.
 from __future__ import annotations
 
 import argparse
+import functools
 import resource
 import shutil
 import subprocess
@@ -138,21 +139,21 @@ def draws(args) -> None:
     from optipose.evaluate.confidence import Rules, compare_draws, paired_draw
     from optipose.evaluate.objective import objective_from_table
     from optipose.io.load import load_result
-    from optipose.search.validate import nested_groups
+    from optipose.search.verdict import sides
 
     print("| part | k | validation's draw | verdict's draws (mean, range) | draws |")
     print("| --- | ---: | ---: | --- | ---: |")
     for name, folder in _folders(args.out, set(PARTS)).items():
         result = load_result(folder)
         rules = Rules(replicates=1, statistic=objective_from_table(tomllib.loads(result.config.objective_file)).statistic)
-        big = {k: max(g) for g in nested_groups(result.layouts) for k in g}
         stored = [folder / "validation"] + sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:]))
         v = result.validation
-        for k in sorted(k for k in v.found if k in v.hand):
+        loaded = functools.cache(load_result)  # a nested group's evaluation serves each of its k
+        for k, (evaluation, choice) in sides(result.layouts, v, result.hand).items():
             ratios = []
             for d in stored:
-                if (d / f"found_k{big[k]}").is_dir():
-                    pair = paired_draw(load_result(d / f"found_k{big[k]}"), v.found[k], load_result(d / "hand"), v.hand[k])
+                if (d / evaluation).is_dir():
+                    pair = paired_draw(loaded(d / evaluation), choice, loaded(d / "hand"), v.hand[k])
                     ratios.append(compare_draws([pair], rules).score.estimate)
             rest = np.array(ratios[1:])
             spread = f"{rest.mean():.2f}x ({rest.min():.2f}-{rest.max():.2f})" if len(rest) else "-"

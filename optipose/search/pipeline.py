@@ -197,8 +197,10 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
     report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, evaluation, hand_run)
     # a real cell: the baseline's choice where it did better (under a band the verdict is the band's, not raced)
     if report.validation.hand and not choice_draw_counts(objective) and objective.conditions.trivial:
-        report.layouts, report.validation = hand_where_better(report.layouts, report.validation, hand)
-        sink.layouts(report.layouts, hand)
+        answered, report.validation = hand_where_better(report.layouts, report.validation, hand)
+        if answered is not report.layouts:  # some k answered with the hand layout's own sensors: their files
+            report.layouts = answered
+            sink.layouts(report.layouts, hand)
     sink.validation(report.validation)
     if report.validation.hand:
         from optipose.search.verdict import confident_verdicts

@@ -182,27 +182,30 @@ def indices_in(layout: Layout, big: Layout) -> list[int]:
 def hand_where_better(layouts: dict[int, Layout], validation: Validation, hand: Layout) -> tuple[dict[int, Layout], Validation]:
     """In a real cell, the search's answer for each k whose found layout the baseline's choice of k sensors beat on
     the validation's draw (a lower score): that choice's own sensors (the baseline's names and poses, in a layout
-    ``found_k<k>``), with the baseline's choice restated in it. There is nothing to buy there, and the verdict
-    pairs the baseline's evaluation with itself: an exact TIE, the baseline's sensors staying in their brackets
-    (docs/method.md, "The verdict with confidence"). The found layouts that stay keep their choices, restated in
-    the largest of them that holds them where the one they were validated inside was replaced. In the ideal cell the
-    validation's draw is the race's first and is not also used to choose (:func:`optipose.search.verdict.choice_draw_counts`)."""
-    out, found = dict(layouts), dict(validation.found)
+    ``found_k<k>``), with the baseline's choice restated in it (the inputs themselves where no k is replaced).
+    There is nothing to buy there, and the verdict pairs the baseline's evaluation with itself: an exact TIE, the
+    baseline's sensors staying in their brackets (docs/method.md, "The verdict with confidence"). The found layouts
+    that stay keep their choices, restated in the largest of them that holds them where the one they were validated
+    inside was replaced. In the ideal cell the validation's draw is the race's first and is not also used to choose
+    (:func:`optipose.search.verdict.choice_draw_counts`)."""
+    out, found, replaced = dict(layouts), dict(validation.found), set()
     for k, h in validation.hand.items():
         f = found.get(k)
         if f is None or k not in out or not h.score < f.score:
             continue
+        replaced.add(k)
         why = f"{hand.name}'s {h.name}: no found layout of {k} sensor{'s' * (k > 1)} beat it on the validation's draw"
         out[k] = Layout(tuple(hand.sensors[i] for i in h.sensors), name=f"found_k{k}", description=why)
         found[k] = _restated(h, hand, out[k])
         log.info("k=%d: %s (%.3f deg) beat the found layout (%.3f deg) on the validation's draw: the search answers with it",
                  k, h.name, np.rad2deg(h.score), np.rad2deg(f.score))  # fmt: skip
-    replaced = {k for k in found if found[k] is not validation.found[k]}
-    if replaced:  # a choice names the sensors of its group's largest layout, which may have been replaced
-        validated = {k: layouts[max(g)] for g in nested_groups(layouts) for k in g}
-        kept = {k: out[k] for k in out if k not in replaced}
-        now = {k: kept[max(g)] for g in nested_groups(kept) for k in g}
-        found |= {k: _restated(found[k], validated[k], now[k]) for k in kept if k in found and now[k] is not validated[k]}
+    if not replaced:
+        return layouts, validation
+    # a choice names the sensors of its group's largest layout, which may have been replaced
+    validated = {k: layouts[max(g)] for g in nested_groups(layouts) for k in g}
+    kept = {k: out[k] for k in out if k not in replaced}
+    now = {k: kept[max(g)] for g in nested_groups(kept) for k in g}
+    found |= {k: _restated(found[k], validated[k], now[k]) for k in kept if k in found and now[k] is not validated[k]}
     return out, replace(validation, found=found)
 
 

@@ -39,7 +39,7 @@ from optipose.search.records import Validation
 from optipose.search.validate import indices_in, nested_groups
 from optipose.seeds import verdict_seed
 
-__all__ = ["choice_draw_counts", "confident_verdicts", "first_look"]
+__all__ = ["choice_draw_counts", "confident_verdicts", "first_look", "sides"]
 
 log = logging.getLogger(__name__)
 
@@ -69,10 +69,11 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     baseline, the validation has no hand choice, or the validation's objective is a band's (its evaluations are
     not per-scan ones), or ``first`` lacks one the race needs."""
     hand = baseline(part)
-    ks = [k for k in sorted(validation.found) if k in validation.hand]
-    kept = {k for k in ks if is_part_of(layouts[k], hand)}  # the baseline's own choice: paired with itself
-    groups = [g for g in nested_groups({k: layouts[k] for k in layouts if k not in kept}) if any(k in ks for k in g)]
-    names = ["hand"] + [f"found_k{max(g)}" for g in groups]
+    side = sides(layouts, validation, hand)
+    ks = sorted(side)
+    kept = {k for k, (name, _) in side.items() if name == "hand"}
+    evaluated = {name: layouts[int(name.removeprefix("found_k"))] for name, _ in side.values() if name != "hand"}
+    names = ["hand", *evaluated]
     objective = stage_objective(objective, "validation", config.validation)
     counted = choice_draw_counts(objective)
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
@@ -81,12 +82,9 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     rules = Rules(tolerance=config.verdict_tolerance, failures=config.verdict_failures, confidence=config.verdict_confidence,
                   seed=int(seed), statistic=objective.statistic)
     label = baseline_label(hand)
-    labels = {k: dict(k=k, found_name=_found_name(layouts[k], validation.found[k], layouts[max(g)]),
-                      hand_name=validation.hand[k].name, reference=label)
-              for g in groups for k in g if k in ks}  # fmt: skip
-    labels |= {k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True) for k in kept}
-    big = {k: f"found_k{max(g)}" for g in groups for k in g}
-    side = {k: ("hand", validation.hand[k]) if k in kept else (big[k], validation.found[k]) for k in ks}  # whose evaluation, which choice
+    labels = {k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True) if k in kept
+              else dict(k=k, found_name=_found_name(layouts[k], choice, evaluated[name]), hand_name=validation.hand[k].name, reference=label)
+              for k, (name, choice) in side.items()}  # fmt: skip
     done = on_draw or (lambda i, name, result: None)
 
     top = max(validation.hand)
@@ -105,14 +103,15 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
 
     # a draw registers only the subsets the choices use (of the 2^n - 1 a layout has)
     used = {"hand": _used(validation.hand[h] for _, h in ({k: (k, k) for k in ks} | fewer).values())}
-    used |= {f"found_k{max(g)}": _used(validation.found[k] for k in g if k in ks) for g in groups}
+    used |= {name: _used(c for n, c in side.values() if n == name) for name in evaluated}
 
     def next_draws(n: int, keys) -> dict:
         t0, i = time.perf_counter(), n + (not counted)  # draw i's seed and folder: 0 is the validation's
-        wanted = [g for g in groups if keys is None or any(k in keys for k in g)]  # a decided k's layout is not evaluated again
+        # a decided k's layout is not evaluated again
+        wanted = [name for name in evaluated if keys is None or any(side[k][0] == name for k in keys if k in side)]
         with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans) as evaluator:
             results = {"hand": evaluator(hand, subsets=used["hand"])}
-            results |= {f"found_k{max(g)}": evaluator(layouts[max(g)], subsets=used[f"found_k{max(g)}"]) for g in wanted}
+            results |= {name: evaluator(evaluated[name], subsets=used[name]) for name in wanted}
         for name, result in results.items():
             done(i, name, result)
         log.info("verdict draw %d in %.1f s", i, time.perf_counter() - t0)
@@ -127,6 +126,18 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
                          max_draws=config.verdict_draws, seconds=seconds, draws=draws, names=labels, passengers=riders)  # fmt: skip
     finally:
         executor.close()
+
+
+def sides(layouts: dict[int, Layout], validation: Validation, hand: Layout | None) -> dict[int, tuple[str, object]]:
+    """k (each with a found and a hand choice) → the evaluation a draw pairs with the hand layout's for it, and the
+    choice read from it: ``hand`` and the hand's choice for a k the search answered with the hand layout's own
+    sensors (:func:`optipose.search.validate.hand_where_better`), else ``found_k<m>`` (the largest found layout
+    that holds it, evaluated once for its nested group) and its found choice. The one rule the verdict and the
+    benchmarks that read its stored draws pair by."""
+    ks = [k for k in sorted(validation.found) if k in validation.hand]
+    kept = {k for k in ks if is_part_of(layouts[k], hand)}
+    big = {k: max(g) for g in nested_groups({k: lay for k, lay in layouts.items() if k not in kept}) for k in g}
+    return {k: ("hand", validation.hand[k]) if k in kept else (f"found_k{big[k]}", validation.found[k]) for k in ks}
 
 
 def _used(choices) -> list[tuple[int, ...]] | None:
