@@ -36,8 +36,16 @@ step_deg = 1.0
 def study(folder: Path, part: str, seeds: range, name: str):
     from optipose.batch.spec import study_from_table
 
-    table = {"name": name, "grid": {"parts": [part], "tasks": ["evaluate"], "objectives": [str(folder / "bench.toml")],
-                                    "sensors": [1], "seeds": list(seeds)}}  # fmt: skip
+    table = {
+        "name": name,
+        "grid": {
+            "parts": [part],
+            "tasks": ["evaluate"],
+            "objectives": [str(folder / "bench.toml")],
+            "sensors": [1],
+            "seeds": list(seeds),
+        },
+    }
     return study_from_table(table, where=name, base=folder)
 
 
@@ -69,8 +77,10 @@ def main() -> None:
     ap.add_argument("--backends", default="joblib,dask")
     args = ap.parse_args()
 
-    print(f"bench_batch: {args.trials} trials of {args.part} (evaluate, 9 scans, k=1, trial_jobs=1), "
-          f"{os.cpu_count()} cores; load before: {os.getloadavg()[0]:.2f}")  # fmt: skip
+    print(
+        f"bench_batch: {args.trials} trials of {args.part} (evaluate, 9 scans, k=1, trial_jobs=1), "
+        f"{os.cpu_count()} cores; load before: {os.getloadavg()[0]:.2f}"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         (folder / "bench.toml").write_text(PROTOCOL)
@@ -80,11 +90,15 @@ def main() -> None:
                 warm, seconds, per_trial[workers], cpu = measure(backend, workers, folder, args.part, args.trials)
                 rates[workers] = args.trials / seconds * 3600
                 busy = args.trials * per_trial[workers] / (workers * seconds)
-                print(f"  {backend:6s} {workers} worker(s) {seconds:7.1f} s  {rates[workers]:7.0f} trials/h  "
-                      f"trial {per_trial[workers]:5.2f} s in its worker ({cpu:5.2f} s CPU), workers busy {busy:.0%}  (start + warm-up {warm:.1f} s; "
-                      f"load {os.getloadavg()[0]:.2f})")  # fmt: skip
-            print(f"  {backend:6s} 2 workers / 1 worker: {rates[2] / rates[1]:.2f}x trials per hour; a trial took "
-                  f"{per_trial[2] / per_trial[1]:.2f}x as long with 2 workers (1.0 on 2 free cores)")  # fmt: skip
+                print(
+                    f"  {backend:6s} {workers} worker(s) {seconds:7.1f} s  {rates[workers]:7.0f} trials/h  "
+                    f"trial {per_trial[workers]:5.2f} s in its worker ({cpu:5.2f} s CPU), workers busy {busy:.0%}  (start + warm-up {warm:.1f} s; "
+                    f"load {os.getloadavg()[0]:.2f})"
+                )
+            print(
+                f"  {backend:6s} 2 workers / 1 worker: {rates[2] / rates[1]:.2f}x trials per hour; a trial took "
+                f"{per_trial[2] / per_trial[1]:.2f}x as long with 2 workers (1.0 on 2 free cores)"
+            )
     print(f"load after: {os.getloadavg()[0]:.2f}")
 
 

@@ -69,7 +69,9 @@ def evaluate(part_name: str, objective, seed: int, jobs: int, cache: Path) -> tu
     from optipose.model.baseline import baseline
     from optipose.model.part import load_part
 
-    key = hashlib.sha1(json.dumps([part_name, objective.to_dict(), seed], sort_keys=True, default=str).encode()).hexdigest()[:16]
+    key = hashlib.sha1(
+        json.dumps([part_name, objective.to_dict(), seed], sort_keys=True, default=str).encode()
+    ).hexdigest()[:16]
     path = cache / f"{part_name}-{key}.parquet"
     choices = cache / f"{part_name}-{key}.json"
     if path.is_file() and choices.is_file():
@@ -104,9 +106,21 @@ def rows_for(objective, seeds: list[int], jobs: int, cache: Path, parts=PARTS) -
             if p != part:
                 continue
             m, q = figures(pooled, axis, subset)
-            out.append({"part": part[-1].upper(), "k": k, "axis": axis, "subset": subset, "paper_sim": f"{sim_m:g} / {sim_q:g}",
-                        "real_median": real_m, "real_p75": real_q, "ours_median": m, "ours_p75": q,
-                        "ratio_median": m / real_m, "ratio_p75": q / real_q})  # fmt: skip
+            out.append(
+                {
+                    "part": part[-1].upper(),
+                    "k": k,
+                    "axis": axis,
+                    "subset": subset,
+                    "paper_sim": f"{sim_m:g} / {sim_q:g}",
+                    "real_median": real_m,
+                    "real_p75": real_q,
+                    "ours_median": m,
+                    "ours_p75": q,
+                    "ratio_median": m / real_m,
+                    "ratio_p75": q / real_q,
+                }
+            )
     return pd.DataFrame(out), assigned
 
 
@@ -124,8 +138,19 @@ def instance_figures(objective, seeds: list[int], jobs: int, cache: Path, parts=
                 own = figures(runs[s], axis, subset)
                 rest = figures(others[s], axis, subset)
                 for stat, real, mine, pooled in zip(("median", "p75"), (real_m, real_q), own, rest):
-                    out.append({"part": part[-1].upper(), "k": k, "axis": axis, "subset": subset, "stat": stat, "real": real,
-                                "seed": s, "instance": mine, "others": pooled})  # fmt: skip
+                    out.append(
+                        {
+                            "part": part[-1].upper(),
+                            "k": k,
+                            "axis": axis,
+                            "subset": subset,
+                            "stat": stat,
+                            "real": real,
+                            "seed": s,
+                            "instance": mine,
+                            "others": pooled,
+                        }
+                    )
     return pd.DataFrame(out)
 
 
@@ -133,35 +158,53 @@ def print_spread(rows: pd.DataFrame) -> None:
     """Per figure the instances' range beside the real value; then how many figures one instance holds within 2× and 3×
     of the prediction pooled over the other instances (the most a prediction can expect against one real cell)."""
     rows = rows.assign(ratio=rows.instance / rows.others)
-    print("\n| part | k | axis: subset | stat | real | ours, one instance: 10th / 50th / 90th percentile | real's place among them |")
+    print(
+        "\n| part | k | axis: subset | stat | real | ours, one instance: 10th / 50th / 90th percentile | real's place among them |"
+    )
     print("| --- | --- | --- | --- | ---: | --- | ---: |")
     for key, g in rows.groupby(["part", "k", "axis", "subset", "stat"], sort=False):
         lo, mid, hi = np.quantile(g.instance, [0.1, 0.5, 0.9])
         place = np.mean(g.instance < g.real.iloc[0])
-        print(f"| {key[0]} | {key[1]} | {key[2]}: {key[3]} | {key[4]} | {g.real.iloc[0]:g} | {lo:.3f} / {mid:.3f} / {hi:.3f} | {place:.0%} |")
+        print(
+            f"| {key[0]} | {key[1]} | {key[2]}: {key[3]} | {key[4]} | {g.real.iloc[0]:g} | {lo:.3f} / {mid:.3f} / {hi:.3f} | {place:.0%} |"
+        )
     per_seed = rows.groupby("seed").ratio.agg(
-        two=lambda r: int(np.sum((r <= 2) & (r >= 0.5))), three=lambda r: int(np.sum((r <= 3) & (r >= 1 / 3))))
+        two=lambda r: int(np.sum((r <= 2) & (r >= 0.5))), three=lambda r: int(np.sum((r <= 3) & (r >= 1 / 3)))
+    )
     n = len(rows) // rows.seed.nunique()
     inside = rows.groupby(["part", "k", "axis", "subset", "stat"], sort=False).apply(
-        lambda g: g.instance.min() <= g.real.iloc[0] <= g.instance.max(), include_groups=False)
-    print(f"\none instance against the others' pooled prediction, of {n} figures: within 2x {per_seed.two.mean():.1f} on average "
-          f"(per seed {per_seed.two.tolist()}), within 3x {per_seed.three.mean():.1f} ({per_seed.three.tolist()})")
+        lambda g: g.instance.min() <= g.real.iloc[0] <= g.instance.max(), include_groups=False
+    )
+    print(
+        f"\none instance against the others' pooled prediction, of {n} figures: within 2x {per_seed.two.mean():.1f} on average "
+        f"(per seed {per_seed.two.tolist()}), within 3x {per_seed.three.mean():.1f} ({per_seed.three.tolist()})"
+    )
     print(f"real figures inside the instances' range (min to max of {rows.seed.nunique()}): {int(inside.sum())} of {n}")
 
 
-def best_scales(alone: np.ndarray, floor: np.ndarray, real: np.ndarray, groups: list[np.ndarray], factor: float,
-                samples: int = 200_000, starts: int = 40, seed: int = 0) -> tuple[int, np.ndarray]:
+def best_scales(
+    alone: np.ndarray,
+    floor: np.ndarray,
+    real: np.ndarray,
+    groups: list[np.ndarray],
+    factor: float,
+    samples: int = 200_000,
+    starts: int = 40,
+    seed: int = 0,
+) -> tuple[int, np.ndarray]:
     """The largest number of figures within ``factor`` of ``real`` (m,) over scales of the sources: ``alone`` (m, K)
     each source alone, ``floor`` (m,) the ideal cell, ``groups`` (G,) of (m, K) 0/1 masks: which scale factor
     multiplies which source on which figure. Random log-uniform factors in [0.01, 100], the ``starts`` best then each
     refined factor by factor on a grid (coordinate ascent): the best setting found, not a proof that none is better.
     Returns the count and the factors."""
     rng = np.random.default_rng(seed)
+
     def count(f):  # f (n, G) -> (n,)
         scale = np.einsum("ng,gmk->nmk", f, np.stack(groups))
         value = np.sqrt(np.einsum("nmk,mk->nm", scale**2, alone**2) + floor**2)
         r = value / real
         return np.sum((r <= factor) & (r >= 1 / factor), axis=1)
+
     f = 10 ** rng.uniform(-2, 2, (samples, len(groups)))
     c = np.concatenate([count(f[i : i + 20_000]) for i in range(0, samples, 20_000)])
     grid = 10 ** np.linspace(-2, 2, 401)
@@ -183,27 +226,37 @@ def print_bound(out: Path, cell, objective) -> None:
     ideal = pd.read_csv(out / f"table-ideal-{objective.name}.csv")
     names = ["robot", "calibration", "part as made", "material"]
     rows = sources[sources.source == "all"].reset_index(drop=True)
-    alone = np.stack([np.r_[sources[sources.source == n].ours_median, sources[sources.source == n].ours_p75] for n in names], axis=1)
+    alone = np.stack(
+        [np.r_[sources[sources.source == n].ours_median, sources[sources.source == n].ours_p75] for n in names], axis=1
+    )
     alone = np.nan_to_num(alone)  # a source that leaves the axis unseen adds nothing measurable
     floor = np.nan_to_num(np.r_[ideal.ours_median, ideal.ours_p75])
-    alone = np.sqrt(np.clip(alone**2 - floor[:, None] ** 2, 0.0, None))  # each source's own share above the floor all of them hold
+    alone = np.sqrt(
+        np.clip(alone**2 - floor[:, None] ** 2, 0.0, None)
+    )  # each source's own share above the floor all of them hold
     real = np.r_[rows.real_median, rows.real_p75]
     part = np.r_[rows.part, rows.part]
     groups, labels = [], []
     for k, n in enumerate(names):
-        for sel, label in ([(np.ones(len(real), bool), n)] if k < 2 else [(part == x, f"{n} {x}") for x in sorted(set(part))]):
+        for sel, label in (
+            [(np.ones(len(real), bool), n)] if k < 2 else [(part == x, f"{n} {x}") for x in sorted(set(part))]
+        ):
             g = np.zeros_like(alone)
             g[sel, k] = 1.0
             groups.append(g)
             labels.append(label)
     value = np.sqrt((alone**2).sum(axis=1) + floor**2)
     both = np.r_[rows.ours_median, rows.ours_p75]
-    print(f"the sources combined as independent errors against all of them together: median ratio "
-          f"{np.median(value / both):.2f}, 10th-90th percentile {np.quantile(value / both, 0.1):.2f}-{np.quantile(value / both, 0.9):.2f}")
+    print(
+        f"the sources combined as independent errors against all of them together: median ratio "
+        f"{np.median(value / both):.2f}, 10th-90th percentile {np.quantile(value / both, 0.1):.2f}-{np.quantile(value / both, 0.9):.2f}"
+    )
     for factor in (2.0, 2.4, 3.0):
         n, f = best_scales(alone, floor, real, groups, factor)
-        print(f"within {factor:g}x: the most found {n} of {len(real)} real figures, with the factors "
-              + ", ".join(f"{label} {x:.2g}" for label, x in zip(labels, f)))
+        print(
+            f"within {factor:g}x: the most found {n} of {len(real)} real figures, with the factors "
+            + ", ".join(f"{label} {x:.2g}" for label, x in zip(labels, f))
+        )
 
 
 def within(table: pd.DataFrame, factor: float) -> int:
@@ -218,18 +271,22 @@ def print_table(table: pd.DataFrame, title: str) -> None:
     for r in table.itertuples():
         ours = "unobservable" if np.isnan(r.ours_median) else f"{r.ours_median:.3f} / {r.ours_p75:.3f}"
         ratio = "-" if np.isnan(r.ours_median) else f"{r.ratio_median:.2f} / {r.ratio_p75:.2f}"
-        print(f"| {r.part} | {r.k} | {r.axis}: {r.subset} | {r.paper_sim} | {r.real_median:g} / {r.real_p75:g} | {ours} | {ratio} |")
+        print(
+            f"| {r.part} | {r.k} | {r.axis}: {r.subset} | {r.paper_sim} | {r.real_median:g} / {r.real_p75:g} | {ours} | {ratio} |"
+        )
     n = 2 * len(table)
     print(f"\nwithin 2x: {within(table, 2)} of {n} real figures; within 3x: {within(table, 3)} of {n}")
 
 
 def print_assignment(assigned: dict) -> None:
     print("\nour per-axis assignment on the hand layouts: the paper's subset picked in how many seeds")
-    for (p, k, axis, subset) in PAPER:
+    for p, k, axis, subset in PAPER:
         ks = [int(x) for x in k.split(", ")]
         hits = [sum(t[kk - 1].get(axis) == subset for t in assigned[p]) for kk in ks if kk <= len(assigned[p][0])]
         picks = sorted({t[kk - 1].get(axis) for t in assigned[p] for kk in ks if kk <= len(t)})
-        print(f"  {p[-1].upper()} k={k} {axis}: {subset}  {sum(hits)} of {len(hits) * len(assigned[p])} (ours: {', '.join(picks)})")
+        print(
+            f"  {p[-1].upper()} k={k} {axis}: {subset}  {sum(hits)} of {len(hits) * len(assigned[p])} (ours: {', '.join(picks)})"
+        )
 
 
 def source_cells(cell) -> dict:
@@ -239,7 +296,12 @@ def source_cells(cell) -> dict:
     return {
         "robot": Cell(name="robot only", robot=cell.robot),
         "calibration": Cell(name="calibration only", calibration=cell.calibration),
-        "part as made": Cell(name="part as made only", as_made=True, default_process=cell.default_process, process_scale=cell.process_scale),
+        "part as made": Cell(
+            name="part as made only",
+            as_made=True,
+            default_process=cell.default_process,
+            process_scale=cell.process_scale,
+        ),
         "material": Cell(name="material only", material=True),
         "all": cell,
     }
@@ -274,7 +336,9 @@ def main() -> None:
         table.to_csv(a.out / f"table-{cell.name}-{objective.name}.csv", index=False)
     elif a.what == "spread":
         rows = instance_figures(objective.in_cell(cell), seeds, a.jobs, a.cache, parts)
-        print(f"cell '{cell.name}', objective '{objective.name}', seeds {a.seeds}: each seed one cell instance; degrees")
+        print(
+            f"cell '{cell.name}', objective '{objective.name}', seeds {a.seeds}: each seed one cell instance; degrees"
+        )
         print_spread(rows)
         rows.to_csv(a.out / f"spread-{cell.name}-{objective.name}.csv", index=False)
     elif a.what == "bound":
@@ -287,19 +351,27 @@ def main() -> None:
             print(f"{label}: within 2x {within(table, 2)}, within 3x {within(table, 3)} of {2 * len(table)}")
         both = pd.concat(out, ignore_index=True)
         both.to_csv(a.out / f"sources-{cell.name}-{objective.name}.csv", index=False)
-        wide = both.pivot_table(index=["part", "k", "axis", "subset", "real_median"], columns="source", values="ours_median", sort=False)
+        wide = both.pivot_table(
+            index=["part", "k", "axis", "subset", "real_median"], columns="source", values="ours_median", sort=False
+        )
         print("\nmedian |error|, degrees, per source alone and all together\n")
         print(wide[[c for c in source_cells(cell)]].round(4).to_string())
     elif a.what == "fit":
         c = cell.calibration
         for path in [float(x) for x in (a.paths or str(cell.robot.path * 1e3)).split(",")]:
             for f in [float(x) for x in a.factors.split(",")]:
-                scaled = replace(cell, robot=replace(cell.robot, path=path * 1e-3),
-                                 calibration=replace(c, **{k: v * f for k, v in asdict(c).items() if k != "zeroed"}))  # fmt: skip
+                scaled = replace(
+                    cell,
+                    robot=replace(cell.robot, path=path * 1e-3),
+                    calibration=replace(c, **{k: v * f for k, v in asdict(c).items() if k != "zeroed"}),
+                )
                 table, _ = rows_for(objective.in_cell(scaled), seeds, a.jobs, a.cache, ("part_a",))
                 r = np.r_[table.ratio_median, table.ratio_p75]
-                print(f"path {path:g} mm, calibration x{f:g}: mean |log ratio| {np.mean(np.abs(np.log(r))):.3f}, "
-                      f"within 2x {within(table, 2)} of {len(r)}, ratios {np.round(r, 2).tolist()}", flush=True)  # fmt: skip
+                print(
+                    f"path {path:g} mm, calibration x{f:g}: mean |log ratio| {np.mean(np.abs(np.log(r))):.3f}, "
+                    f"within 2x {within(table, 2)} of {len(r)}, ratios {np.round(r, 2).tolist()}",
+                    flush=True,
+                )
     else:
         from optipose.evaluate.evaluator import Evaluator
         from optipose.model.baseline import baseline
@@ -307,8 +379,10 @@ def main() -> None:
 
         part = load_part("part_b")
         times: dict = {"ideal": [], cell.name: []}
-        evaluators = {label: Evaluator(part, objective.in_cell(c), seed=0, jobs=a.jobs, quiet=True)
-                      for label, c in (("ideal", None), (cell.name, cell))}  # fmt: skip
+        evaluators = {
+            label: Evaluator(part, objective.in_cell(c), seed=0, jobs=a.jobs, quiet=True)
+            for label, c in (("ideal", None), (cell.name, cell))
+        }
         for label, ev in evaluators.items():  # warm: workers, compiled kernels, the reference, the part instance
             ev(baseline(part))
         for _ in range(a.repeats):  # interleaved rounds: a load that comes and goes hits both
@@ -319,9 +393,11 @@ def main() -> None:
         for ev in evaluators.values():
             ev.close()
         base, mine = np.median(times["ideal"]), np.median(times[cell.name])
-        print(f"B hand, {objective.name}, --jobs {a.jobs}, median of {a.repeats} after a warm-up: ideal {base:.1f} s, "
-              f"'{cell.name}' {mine:.1f} s: {mine / base:.2f}x (rounds: ideal {np.round(times['ideal'], 1).tolist()}, "
-              f"{cell.name} {np.round(times[cell.name], 1).tolist()})")  # fmt: skip
+        print(
+            f"B hand, {objective.name}, --jobs {a.jobs}, median of {a.repeats} after a warm-up: ideal {base:.1f} s, "
+            f"'{cell.name}' {mine:.1f} s: {mine / base:.2f}x (rounds: ideal {np.round(times['ideal'], 1).tolist()}, "
+            f"{cell.name} {np.round(times[cell.name], 1).tolist()})"
+        )
 
 
 if __name__ == "__main__":

@@ -56,8 +56,10 @@ def trig() -> None:
             walls[name].append(time.perf_counter() - t0)
     new, old = model.part_columns(x, n)[:, : 2 * _FORM_FEATURES], float64()
     a, b = (float(np.median(walls[k])) for k in ("float32", "float64"))
-    print(f"form features at {len(x):,} points x {_FORM_FEATURES} frequencies: float32 {1e3 * a:.2f} ms, float64 {1e3 * b:.2f} ms, "
-          f"ratio {b / a:.1f}x; largest difference {np.abs(new - old).max() / old.std():.1e} of their RMS")  # fmt: skip
+    print(
+        f"form features at {len(x):,} points x {_FORM_FEATURES} frequencies: float32 {1e3 * a:.2f} ms, float64 {1e3 * b:.2f} ms, "
+        f"ratio {b / a:.1f}x; largest difference {np.abs(new - old).max() / old.std():.1e} of their RMS"
+    )
 
 
 def child(poses: int, scans: int, jobs: int) -> None:
@@ -90,7 +92,9 @@ def child(poses: int, scans: int, jobs: int) -> None:
         walls = []
         for i in range(2):  # the first warms the workers up
             t0 = time.perf_counter()
-            with Evaluator(part, objective, seed=verdict_seed(0, i + 1), quiet=True, executor=executor, scans=scans) as ev:
+            with Evaluator(
+                part, objective, seed=verdict_seed(0, i + 1), quiet=True, executor=executor, scans=scans
+            ) as ev:
                 ev(hand), ev(found)
             walls.append(time.perf_counter() - t0)
     finally:
@@ -109,12 +113,17 @@ def heap(poses: int, scans: int, repeats: int, jobs: int) -> None:
         for name, env in (("default", plain), ("raised", raised)):
             done = subprocess.run(command, env=env, capture_output=True, text=True, check=True, cwd=ROOT)
             rows[name].append(json.loads(done.stdout.strip().splitlines()[-1]))
-    med = {name: {key: float(np.median([r[key] for r in rs])) for key in ("pose_ms", "draw_s")} for name, rs in rows.items()}
+    med = {
+        name: {key: float(np.median([r[key] for r in rs])) for key in ("pose_ms", "draw_s")}
+        for name, rs in rows.items()
+    }
     d, r = med["default"], med["raised"]
-    print(f"part_b, {rows['raised'][0]['feasible']} feasible of {poses} poses, median of {repeats}: a surrogate pose "
-          f"{d['pose_ms']:.1f} ms with glibc's thresholds, {r['pose_ms']:.1f} ms raised, ratio {d['pose_ms'] / r['pose_ms']:.2f}x; "
-          f"a draw of {scans} scans (hand + found k=3, {jobs} workers) {d['draw_s']:.2f} s, {r['draw_s']:.2f} s, "
-          f"ratio {d['draw_s'] / r['draw_s']:.2f}x")  # fmt: skip
+    print(
+        f"part_b, {rows['raised'][0]['feasible']} feasible of {poses} poses, median of {repeats}: a surrogate pose "
+        f"{d['pose_ms']:.1f} ms with glibc's thresholds, {r['pose_ms']:.1f} ms raised, ratio {d['pose_ms'] / r['pose_ms']:.2f}x; "
+        f"a draw of {scans} scans (hand + found k=3, {jobs} workers) {d['draw_s']:.2f} s, {r['draw_s']:.2f} s, "
+        f"ratio {d['draw_s'] / r['draw_s']:.2f}x"
+    )
 
 
 def main() -> None:

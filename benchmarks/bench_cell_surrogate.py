@@ -47,11 +47,17 @@ SENSORS = 3
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--parts", default="part_a,part_b,part_c")
-    ap.add_argument("--layouts", type=int, default=50, help="random feasible layouts per part (the hand layout is added)")
+    ap.add_argument(
+        "--layouts", type=int, default=50, help="random feasible layouts per part (the hand layout is added)"
+    )
     ap.add_argument("--cell", default="ur10e")
     ap.add_argument("--seed", type=int, default=0, help="the layouts' draws; ICP runs with seed + 1")
-    ap.add_argument("--icp-seeds", default="", help="ICP seeds, comma-separated (default: seed + 1); the first is the one ranked "
-                    "against, the others (other cell instances) are ranked against it as a ceiling")
+    ap.add_argument(
+        "--icp-seeds",
+        default="",
+        help="ICP seeds, comma-separated (default: seed + 1); the first is the one ranked "
+        "against, the others (other cell instances) are ranked against it as a ceiling",
+    )
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/optipose-bench-cellsurr"))
     ap.add_argument("--icp-only", action="store_true", help="fill the ICP cache, score no surrogate")
@@ -63,8 +69,11 @@ def main() -> None:
         problem = SurrogateProblem(part, load_objective("paper").in_cell("ideal"), SearchConfig())
         layouts = _layouts(problem, part, args.layouts, args.seed)
         seeds = [int(x) for x in args.icp_seeds.split(",")] if args.icp_seeds else [args.seed + 1]
-        print(f"bench_cell_surrogate: {name}, cell {args.cell}, {args.layouts} random feasible {SENSORS}-sensor layouts + the hand "
-              f"layout, layouts seed {args.seed}, ICP seed(s) {', '.join(map(str, seeds))} (reduced protocol)", flush=True)
+        print(
+            f"bench_cell_surrogate: {name}, cell {args.cell}, {args.layouts} random feasible {SENSORS}-sensor layouts + the hand "
+            f"layout, layouts seed {args.seed}, ICP seed(s) {', '.join(map(str, seeds))} (reduced protocol)",
+            flush=True,
+        )
         icp = [_icp(part, objective, problem, layouts, args, s) for s in seeds]
         if not args.icp_only:
             _rank(part, objective, problem, layouts, icp, seeds)
@@ -96,10 +105,17 @@ def _icp(part, objective, problem, layouts, args, seed: int) -> dict:
         with Evaluator(part, reduced, seed=seed, jobs=args.jobs, quiet=True) as evaluator:
             for n, i in enumerate(todo):
                 table = evaluator(problem.space.to_poses(layouts[i])).table
-                np.savez(files[i], u=layouts[i], score=np.rad2deg([c.score for c in table]),
-                         axes=np.rad2deg([[a.median + a.p75 for a in c.axes] for c in table]))  # fmt: skip
+                np.savez(
+                    files[i],
+                    u=layouts[i],
+                    score=np.rad2deg([c.score for c in table]),
+                    axes=np.rad2deg([[a.median + a.p75 for a in c.axes] for c in table]),
+                )
                 if n % 10 == 9:
-                    print(f"  ICP {n + 1} of {len(todo)}, {(time.perf_counter() - t0) / (n + 1):.1f} s per layout", flush=True)
+                    print(
+                        f"  ICP {n + 1} of {len(todo)}, {(time.perf_counter() - t0) / (n + 1):.1f} s per layout",
+                        flush=True,
+                    )
     for i, f in enumerate(files):
         data = np.load(f)
         if not np.allclose(data["u"], layouts[i]):
@@ -112,16 +128,26 @@ def _icp(part, objective, problem, layouts, args, seed: int) -> dict:
 def _models(part, objective, problem) -> dict:
     """The surrogates compared: name → Surrogate (None: the problem's own, the nominal surrogate)."""
     setup = CellSetup.of(objective.cell, part)
-    cell, none = setup.cell, CellSetup(replace(setup.cell, robot=RobotErrors(), calibration=CalibrationErrors(), as_made=False,
-                                                material=False), setup.process.scaled(0.0), MaterialEffects())  # fmt: skip
+    cell, none = (
+        setup.cell,
+        CellSetup(
+            replace(setup.cell, robot=RobotErrors(), calibration=CalibrationErrors(), as_made=False, material=False),
+            setup.process.scaled(0.0),
+            MaterialEffects(),
+        ),
+    )
     alone = {
         "calibration alone": replace(none, cell=replace(none.cell, calibration=cell.calibration)),
         "robot alone": replace(none, cell=replace(none.cell, robot=cell.robot)),
         "part as made alone": replace(none, process=setup.process),
         "material alone": replace(none, effects=setup.effects),
     }
-    make = lambda s: Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), mounting=False, cell=s)
-    return {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)} | {k: make(s) for k, s in alone.items()}
+    make = lambda s: Surrogate(
+        part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), mounting=False, cell=s
+    )
+    return {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)} | {
+        k: make(s) for k, s in alone.items()
+    }
 
 
 def _rank(part, objective, problem, layouts, icp: list[dict], seeds: list[int]) -> None:
@@ -152,8 +178,11 @@ def _line(name: str, score, axes, icp_score, icp_axes, t: float) -> None:
     ok = np.isfinite(icp_axes) & np.isfinite(axes)
     per_axis = " / ".join(f"{spearmanr(axes[ok[:, a], a], icp_axes[ok[:, a], a])[0]:.2f}" for a in range(3))
     factor = np.exp(np.median(np.log(score / icp_score)))
-    print(f"  {name:26s} score {spearmanr(score, icp_score)[0]:5.2f}; roll / pitch / yaw {per_axis}; median factor predicted / ICP "
-          f"{factor:.2f}" + ("" if np.isnan(t) else f"; surrogate {1e3 * t:.0f} ms per layout"), flush=True)
+    print(
+        f"  {name:26s} score {spearmanr(score, icp_score)[0]:5.2f}; roll / pitch / yaw {per_axis}; median factor predicted / ICP "
+        f"{factor:.2f}" + ("" if np.isnan(t) else f"; surrogate {1e3 * t:.0f} ms per layout"),
+        flush=True,
+    )
 
 
 def _predicted(infos, weights) -> tuple[np.ndarray, np.ndarray]:
@@ -163,7 +192,9 @@ def _predicted(infos, weights) -> tuple[np.ndarray, np.ndarray]:
     for layout in infos:
         s_row, a_row = [], []
         for k in range(1, SENSORS + 1):
-            preds = [predicted_stats([layout[i] for i in c], *weights) for c in itertools.combinations(range(SENSORS), k)]
+            preds = [
+                predicted_stats([layout[i] for i in c], *weights) for c in itertools.combinations(range(SENSORS), k)
+            ]
             best = min(preds, key=lambda p: p.score)
             s_row.append(best.score)
             a_row.append(best.axis_score)

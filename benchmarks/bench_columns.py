@@ -50,19 +50,25 @@ def main() -> None:
     rays = {s: dict(counts[s]) for s in strides}
     times = {s: [] for s in strides}
     for r in range(args.repeats):
-        for s in strides[r % len(strides):] + strides[: r % len(strides)]:
+        for s in strides[r % len(strides) :] + strides[: r % len(strides)]:
             t0 = time.perf_counter()
             scan(scanners[s])
             times[s].append(time.perf_counter() - t0)
     total = len(poses) * part.motion.n_profiles * scanners[strides[0]].sensor.points_per_profile
     ref = clouds[min(strides)]
-    print(f"part_b hand layout, 3 sensors, rpy (1.2, -0.8, 0.4) deg, {total:,} primary rays in all, 1 thread, "
-          f"load {os.getloadavg()[0]:.1f}, {args.repeats} interleaved rounds")  # fmt: skip
-    print(f"{'stride':>6} {'primary cast':>13} {'share':>6} {'shadow rays':>12} {'median ms':>10} {'x stride 1':>10}  same points as stride {min(strides)}")
+    print(
+        f"part_b hand layout, 3 sensors, rpy (1.2, -0.8, 0.4) deg, {total:,} primary rays in all, 1 thread, "
+        f"load {os.getloadavg()[0]:.1f}, {args.repeats} interleaved rounds"
+    )
+    print(
+        f"{'stride':>6} {'primary cast':>13} {'share':>6} {'shadow rays':>12} {'median ms':>10} {'x stride 1':>10}  same points as stride {min(strides)}"
+    )
     for s in strides:
         same = all(np.array_equal(a.points, b.points) for a, b in zip(clouds[s], ref))
-        print(f"{s:>6} {rays[s]['primary']:>13,} {rays[s]['primary'] / total:>6.1%} {rays[s]['shadow']:>12,} "
-              f"{1e3 * np.median(times[s]):>10.1f} {np.median(times[s]) / np.median(times[min(strides)]):>10.2f}  {same}")  # fmt: skip
+        print(
+            f"{s:>6} {rays[s]['primary']:>13,} {rays[s]['primary'] / total:>6.1%} {rays[s]['shadow']:>12,} "
+            f"{1e3 * np.median(times[s]):>10.1f} {np.median(times[s]) / np.median(times[min(strides)]):>10.2f}  {same}"
+        )
 
 
 if __name__ == "__main__":

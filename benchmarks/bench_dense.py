@@ -68,7 +68,11 @@ def make_flat(work: Path, edge_mm: float | None) -> tuple[Path, int]:
             mesh = trimesh.Trimesh(v, f, process=False)
         mesh.export(mesh_path)
     toml = (src / "part.toml").read_text()
-    (folder / "part.toml").write_text(re.sub(r'(?m)^mesh = ".*"$', f'mesh = "{mesh_path.name}"', toml).replace('name = "part_b"', f'name = "{name}"', 1))
+    (folder / "part.toml").write_text(
+        re.sub(r'(?m)^mesh = ".*"$', f'mesh = "{mesh_path.name}"', toml).replace(
+            'name = "part_b"', f'name = "{name}"', 1
+        )
+    )
     faces = len(trimesh.load(mesh_path, force="mesh").faces)
     return folder / "part.toml", faces
 
@@ -110,7 +114,9 @@ def main() -> None:
     if args.measure:
         return measure(args.measure, args.timeout)
     args.work.mkdir(parents=True, exist_ok=True)
-    patterns = [p.replace("_", "") for p in args.rows.split(",") if p]  # digits may be grouped with _, as the docs write them
+    patterns = [
+        p.replace("_", "") for p in args.rows.split(",") if p
+    ]  # digits may be grouped with _, as the docs write them
     parts = [("round", round_faces(s), s) for s in SUBDIVISIONS] + [("flat", None, e) for e in EDGES_MM]
     print(f"$ {' '.join(sys.argv)}  (cores: {os.cpu_count()}, load: {os.getloadavg()[0]:.1f})")
     table = []
@@ -130,11 +136,23 @@ def main() -> None:
             if patterns and not any(p in name for p in patterns):
                 continue
             out = args.work / "runs" / f"{kind}_{faces}"
-            argv = [sys.executable, __file__, "--timeout", str(args.timeout), "--measure", *row_command(command, part, out)]
+            argv = [
+                sys.executable,
+                __file__,
+                "--timeout",
+                str(args.timeout),
+                "--measure",
+                *row_command(command, part, out),
+            ]
             env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-            res = json.loads(subprocess.run(argv, capture_output=True, text=True, env=env).stdout.strip().splitlines()[-1])
+            res = json.loads(
+                subprocess.run(argv, capture_output=True, text=True, env=env).stdout.strip().splitlines()[-1]
+            )
             table.append((name, res))
-            print(f"{name:28s} {res['wall_s']:8.1f} s {res['peak_mb']:8.0f} MB  exit {res['exit']} {res['error']}", flush=True)
+            print(
+                f"{name:28s} {res['wall_s']:8.1f} s {res['peak_mb']:8.0f} MB  exit {res['exit']} {res['error']}",
+                flush=True,
+            )
     print("\n| row | wall s | peak MB | exit |\n| --- | --- | --- | --- |")
     for name, res in table:
         print(f"| {name} | {res['wall_s']:.1f} | {res['peak_mb']:.0f} | {res['exit']} |")

@@ -60,8 +60,21 @@ AXES = ("roll", "pitch", "yaw")
 DEG = np.pi / 180
 MM = 1e-3
 UNOBSERVABLE_MDEG = 1000.0  # the surrogate predicts ~3400 mdeg for an axis it cannot see; ICP reports NaN
-FIELDS = ["part", "rung", "knob", "layout", "sensors", "k", "wall_s", "scans", "failed", "iterations", "score_mdeg",
-          *[f"median_{a}_mdeg" for a in AXES], *[f"p75_{a}_mdeg" for a in AXES]]  # fmt: skip
+FIELDS = [
+    "part",
+    "rung",
+    "knob",
+    "layout",
+    "sensors",
+    "k",
+    "wall_s",
+    "scans",
+    "failed",
+    "iterations",
+    "score_mdeg",
+    *[f"median_{a}_mdeg" for a in AXES],
+    *[f"p75_{a}_mdeg" for a in AXES],
+]
 
 
 @dataclass(frozen=True)
@@ -120,28 +133,58 @@ def rungs() -> list[Rung]:
     step = {s: Rung(f"step{s:g}", "scan step", _step(s)) for s in (4.0, 2.0, 1.0)}
     vox = {v: Rung(f"vox{v:g}", "voxel", _reg(voxel_size=v * MM)) for v in (2.0, 1.0, 0.25)}
     it = {n: Rung(f"iter{n}", "ICP iterations", _reg(max_iterations=n)) for n in (5, 10, 20)}
-    tol = {t: Rung(f"tol{t:g}", "ICP tolerance", _reg(tolerance_rotation=t * DEG, tolerance_translation=t * MM)) for t in (1e-3, 1e-4)}
+    tol = {
+        t: Rung(f"tol{t:g}", "ICP tolerance", _reg(tolerance_rotation=t * DEG, tolerance_translation=t * MM))
+        for t in (1e-3, 1e-4)
+    }
     return [
-        Rung("ref", "reference", lambda p, o: (p, o)), Rung("surrogate", "surrogate", None),
-        Rung("proto7", "protocol", _proto(start=2 * DEG, stop=2 * DEG)), Rung("proto14", "protocol", _reduced),
-        Rung("proto21", "protocol", _proto(step=2 * DEG)), Rung("proto35", "protocol", _proto(step=1 * DEG)),
-        Rung("combined", "speed-ups", _reg(subset_start="combined"), "hand"), Rung("shipped", "speed-ups", _shipped, "hand"),
+        Rung("ref", "reference", lambda p, o: (p, o)),
+        Rung("surrogate", "surrogate", None),
+        Rung("proto7", "protocol", _proto(start=2 * DEG, stop=2 * DEG)),
+        Rung("proto14", "protocol", _reduced),
+        Rung("proto21", "protocol", _proto(step=2 * DEG)),
+        Rung("proto35", "protocol", _proto(step=1 * DEG)),
+        Rung("combined", "speed-ups", _reg(subset_start="combined"), "hand"),
+        Rung("shipped", "speed-ups", _shipped, "hand"),
         Rung("stride8", "speed-ups", lambda p, o: (p, replace(o, scan=replace(o.scan, column_stride=8)))),
-        nz[100], nz[400], nz[1600], cols[100], cols[400], cols[1600], step[4.0], step[2.0], step[1.0],
-        vox[2.0], vox[1.0], it[5], it[10], tol[1e-3],
+        nz[100],
+        nz[400],
+        nz[1600],
+        cols[100],
+        cols[400],
+        cols[1600],
+        step[4.0],
+        step[2.0],
+        step[1.0],
+        vox[2.0],
+        vox[1.0],
+        it[5],
+        it[10],
+        tol[1e-3],
         Rung("p2point-sample", "method", _reg(method="point_to_point", reference="cad-sample")),
         Rung("o3d-p2plane", "method", _reg(backend="open3d", reference="cad-sample"), "o3d"),
-        nz[200], nz[800], cols[200], cols[800], vox[0.25], it[20], tol[1e-4],
+        nz[200],
+        nz[800],
+        cols[200],
+        cols[800],
+        vox[0.25],
+        it[20],
+        tol[1e-4],
         Rung("p2plane-sample", "method", _reg(reference="cad-sample")),
-    ]  # fmt: skip
+    ]
 
 
 def reference_objective():
     from optipose.evaluate.objective import load_objective
 
     o = load_objective("paper").in_cell("ideal")
-    return replace(o, scan=replace(o.scan, column_stride=1),
-                   registration=replace(o.registration, subset_start="identity", tolerance_rotation=1e-5 * DEG, tolerance_translation=1e-5 * MM))  # fmt: skip
+    return replace(
+        o,
+        scan=replace(o.scan, column_stride=1),
+        registration=replace(
+            o.registration, subset_start="identity", tolerance_rotation=1e-5 * DEG, tolerance_translation=1e-5 * MM
+        ),
+    )
 
 
 def draw_layouts(part, problem, n: int, seed: int) -> list[tuple[str, list[np.ndarray]]]:
@@ -161,8 +204,19 @@ def draw_layouts(part, problem, n: int, seed: int) -> list[tuple[str, list[np.nd
 
 
 def _row(part, rung, layout_id, poses, wall, score, median, p75, scans=0, failed=0, iterations=float("nan")) -> dict:
-    row = dict(part=part, rung=rung.name, knob=rung.knob, layout=layout_id, sensors=len(poses), k=len(poses),
-               wall_s=f"{wall:.4f}", scans=scans, failed=failed, iterations=f"{iterations:.3f}", score_mdeg=f"{score:.6g}")  # fmt: skip
+    row = dict(
+        part=part,
+        rung=rung.name,
+        knob=rung.knob,
+        layout=layout_id,
+        sensors=len(poses),
+        k=len(poses),
+        wall_s=f"{wall:.4f}",
+        scans=scans,
+        failed=failed,
+        iterations=f"{iterations:.3f}",
+        score_mdeg=f"{score:.6g}",
+    )
     row |= {f"median_{a}_mdeg": f"{m:.6g}" for a, m in zip(AXES, median)}
     return row | {f"p75_{a}_mdeg": f"{q:.6g}" for a, q in zip(AXES, p75)}
 
@@ -213,8 +267,21 @@ def run_rung(rung, part, objective, problem, layouts, done, args, write) -> None
                 c = r.table[len(poses) - 1]
                 med = [1e3 * np.rad2deg(a.median) for a in c.axes]
                 q = [1e3 * np.rad2deg(a.p75) for a in c.axes]
-                write(_row(part.name, rung, i, poses, r.timings["wall"], 1e3 * np.rad2deg(c.score), med, q,
-                           r.n_scans, r.n_failed, float(r.per_scan["iterations"].mean())))  # fmt: skip
+                write(
+                    _row(
+                        part.name,
+                        rung,
+                        i,
+                        poses,
+                        r.timings["wall"],
+                        1e3 * np.rad2deg(c.score),
+                        med,
+                        q,
+                        r.n_scans,
+                        r.n_failed,
+                        float(r.per_scan["iterations"].mean()),
+                    )
+                )
     print(f"  {rung.name:15s} {len(todo):3d} layouts in {time.perf_counter() - t0:6.1f} s", flush=True)
 
 
@@ -234,11 +301,16 @@ def summarize(rows_path: Path, part: str):
         if d.empty:
             continue
         r = ref.loc[d.index]
-        row = {"rung": name, "knob": d["knob"].iloc[0], "layouts": len(d), "time_s": d["wall_s"].median(),
-               "time_ratio": float(np.median(d["wall_s"] / r["wall_s"])),
-               "dscore_med_mdeg": float(np.nanmedian(np.abs(d["score_mdeg"] - r["score_mdeg"]))),
-               "dscore_max_mdeg": float(np.nanmax(np.abs(d["score_mdeg"] - r["score_mdeg"]))),
-               "dscore_rel_med": float(np.nanmedian(np.abs(d["score_mdeg"] / r["score_mdeg"] - 1)))}  # fmt: skip
+        row = {
+            "rung": name,
+            "knob": d["knob"].iloc[0],
+            "layouts": len(d),
+            "time_s": d["wall_s"].median(),
+            "time_ratio": float(np.median(d["wall_s"] / r["wall_s"])),
+            "dscore_med_mdeg": float(np.nanmedian(np.abs(d["score_mdeg"] - r["score_mdeg"]))),
+            "dscore_max_mdeg": float(np.nanmax(np.abs(d["score_mdeg"] - r["score_mdeg"]))),
+            "dscore_rel_med": float(np.nanmedian(np.abs(d["score_mdeg"] / r["score_mdeg"] - 1))),
+        }
         for stat in ("median", "p75"):
             for a in AXES:
                 diff = np.abs(d[f"{stat}_{a}_mdeg"] - r[f"{stat}_{a}_mdeg"]).to_numpy()
@@ -247,7 +319,9 @@ def summarize(rows_path: Path, part: str):
                 row[f"d{stat}_{a}_max"] = float(np.max(diff)) if len(diff) else np.nan
         row["rho_score"] = _rho(spearmanr, d["score_mdeg"], r["score_mdeg"])
         for a in AXES:
-            row[f"rho_{a}"] = _rho(spearmanr, d[f"median_{a}_mdeg"] + d[f"p75_{a}_mdeg"], r[f"median_{a}_mdeg"] + r[f"p75_{a}_mdeg"])
+            row[f"rho_{a}"] = _rho(
+                spearmanr, d[f"median_{a}_mdeg"] + d[f"p75_{a}_mdeg"], r[f"median_{a}_mdeg"] + r[f"p75_{a}_mdeg"]
+            )
         out.append(row)
     return pd.DataFrame(out)
 
@@ -258,16 +332,22 @@ def _rho(spearmanr, x, y) -> float:
 
 
 def print_summary(s) -> None:
-    print(f"{'rung':15s} {'n':>3s} {'t/eval s':>8s} {'x ref':>7s} {'|dS| med':>9s} {'max':>8s} {'rel':>6s} "
-          f"{'|dmed| worst-axis med/max':>26s} {'|dp75| worst-axis med/max':>26s} {'rho S':>6s} {'rho r/p/y':>17s}")  # fmt: skip
+    print(
+        f"{'rung':15s} {'n':>3s} {'t/eval s':>8s} {'x ref':>7s} {'|dS| med':>9s} {'max':>8s} {'rel':>6s} "
+        f"{'|dmed| worst-axis med/max':>26s} {'|dp75| worst-axis med/max':>26s} {'rho S':>6s} {'rho r/p/y':>17s}"
+    )
     for _, r in s.iterrows():
         dm = max(r[f"dmedian_{a}_med"] for a in AXES), max(r[f"dmedian_{a}_max"] for a in AXES)
         dq = max(r[f"dp75_{a}_med"] for a in AXES), max(r[f"dp75_{a}_max"] for a in AXES)
-        print(f"{r['rung']:15s} {r['layouts']:3d} {r['time_s']:8.3f} {r['time_ratio']:7.3f} {r['dscore_med_mdeg']:9.3f} "
-              f"{r['dscore_max_mdeg']:8.2f} {100 * r['dscore_rel_med']:5.1f}% {dm[0]:12.3f} / {dm[1]:11.3f} "
-              f"{dq[0]:12.3f} / {dq[1]:11.3f} {r['rho_score']:6.3f} {r['rho_roll']:5.2f} {r['rho_pitch']:5.2f} {r['rho_yaw']:5.2f}")  # fmt: skip
-    print("(mdeg; |dS| = |score - reference score| over layouts; worst-axis = the largest of roll/pitch/yaw; "
-          "x ref = median over layouts of time / reference time)")
+        print(
+            f"{r['rung']:15s} {r['layouts']:3d} {r['time_s']:8.3f} {r['time_ratio']:7.3f} {r['dscore_med_mdeg']:9.3f} "
+            f"{r['dscore_max_mdeg']:8.2f} {100 * r['dscore_rel_med']:5.1f}% {dm[0]:12.3f} / {dm[1]:11.3f} "
+            f"{dq[0]:12.3f} / {dq[1]:11.3f} {r['rho_score']:6.3f} {r['rho_roll']:5.2f} {r['rho_pitch']:5.2f} {r['rho_yaw']:5.2f}"
+        )
+    print(
+        "(mdeg; |dS| = |score - reference score| over layouts; worst-axis = the largest of roll/pitch/yaw; "
+        "x ref = median over layouts of time / reference time)"
+    )
 
 
 def plot(s, path: Path, part: str) -> None:
@@ -280,8 +360,10 @@ def plot(s, path: Path, part: str) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(15, 6.5))
     floor = {"dscore_med_mdeg": 1e-3, "one_minus_rho": 1e-4}
     s = s.assign(one_minus_rho=1 - s["rho_score"])
-    for ax, col, label in ((axes[0], "dscore_med_mdeg", "median |Δ score| over layouts [mdeg]"),
-                           (axes[1], "one_minus_rho", "1 − Spearman ρ of the score vs the reference")):  # fmt: skip
+    for ax, col, label in (
+        (axes[0], "dscore_med_mdeg", "median |Δ score| over layouts [mdeg]"),
+        (axes[1], "one_minus_rho", "1 − Spearman ρ of the score vs the reference"),
+    ):
         d = s[(s["rung"] != "ref") & np.isfinite(s[col]) & (s["layouts"] >= 5)]
         x, y = d["time_ratio"].to_numpy(), np.maximum(d[col].to_numpy(), floor[col])
         for knob in colors:
@@ -322,7 +404,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0, help="the layouts' draw and every evaluation's noise seed")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--rungs", default="", help="comma-separated rung names (default: all, in ladder order)")
-    ap.add_argument("--max-layouts", type=int, default=0, help="measure only the first N layouts (hand ones first); 0: all")
+    ap.add_argument(
+        "--max-layouts", type=int, default=0, help="measure only the first N layouts (hand ones first); 0: all"
+    )
     ap.add_argument("--o3d-layouts", type=int, default=8, help="layouts (hand ones first) the Open3D rung runs on")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/fidelity"))
     ap.add_argument("--summary-only", action="store_true")
@@ -356,8 +440,11 @@ def measure(args, rows_path: Path) -> None:
     if rows_path.is_file():
         with rows_path.open() as f:
             done = {(r["rung"], r["layout"]) for r in csv.DictReader(f) if r["part"] == args.part}
-    print(f"bench_fidelity: {args.part}, {len(layouts)} layouts ({args.layouts} random single-sensor + hand), seed {args.seed}, "
-          f"--jobs {args.jobs}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; {len(done)} rows already measured", flush=True)  # fmt: skip
+    print(
+        f"bench_fidelity: {args.part}, {len(layouts)} layouts ({args.layouts} random single-sensor + hand), seed {args.seed}, "
+        f"--jobs {args.jobs}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; {len(done)} rows already measured",
+        flush=True,
+    )
     new = not rows_path.is_file()
     with rows_path.open("a", newline="") as f:
         w = csv.DictWriter(f, FIELDS)

@@ -61,7 +61,12 @@ def main() -> None:
     ap.add_argument("--starts", type=int, default=8, help="poses moved by the local search, the best of the sample")
     ap.add_argument("--evals", type=int, default=60, help="surrogate evaluations of each local search")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--icp", type=int, default=0, help="evaluate this many of the best poses of each k and kept set by ICP under the band")
+    ap.add_argument(
+        "--icp",
+        type=int,
+        default=0,
+        help="evaluate this many of the best poses of each k and kept set by ICP under the band",
+    )
     ap.add_argument("--icp-k", default="1,2,3", help="the k to evaluate by ICP")
     ap.add_argument("--icp-kept", default="", help="only these kept sets by ICP, e.g. S2,S1S3 (default: all)")
     ap.add_argument("--jobs", type=int, default=2)
@@ -69,21 +74,29 @@ def main() -> None:
     from scipy.stats import qmc
 
     objective = load_objective(args.objective)
-    print(f"bench_frontier: objective {objective.name}, {args.samples} Sobol poses + {args.starts} local searches of "
-          f"{args.evals}, seed {args.seed}; ratios hand / layout (> 1: better)")  # fmt: skip
-    print(f"{'part':8} {'k':>2} {'kept':>8} {'feasible':>8} {'no worse':>8} {'best min ratio':>14} {'its x1 sum':>10} {'best x1 sum':>11}")
+    print(
+        f"bench_frontier: objective {objective.name}, {args.samples} Sobol poses + {args.starts} local searches of "
+        f"{args.evals}, seed {args.seed}; ratios hand / layout (> 1: better)"
+    )
+    print(
+        f"{'part':8} {'k':>2} {'kept':>8} {'feasible':>8} {'no worse':>8} {'best min ratio':>14} {'its x1 sum':>10} {'best x1 sum':>11}"
+    )
     for name in args.part.split(","):
         t0 = time.perf_counter()
         part = load_part(name)
-        problem = SurrogateProblem(part, objective, config_from_budget("default", (1, 2, 3), band=not objective.conditions.trivial))
+        problem = SurrogateProblem(
+            part, objective, config_from_budget("default", (1, 2, 3), band=not objective.conditions.trivial)
+        )
         hand = baseline(part)
         hand_u = [problem.space.from_pose(T) for T in hand.poses]
         hand_info = [problem.info(u) for u in hand_u]
         points = qmc.Sobol(6, scramble=True, seed=args.seed).random(args.samples)
         problem.prefetch(points)
         for k in range(1, len(hand.poses) + 1):
-            ref = min(itertools.combinations(range(len(hand_info)), k),
-                      key=lambda c: level_stats([hand_info[i] for i in c], objective).max(axis=0).sum())  # fmt: skip
+            ref = min(
+                itertools.combinations(range(len(hand_info)), k),
+                key=lambda c: level_stats([hand_info[i] for i in c], objective).max(axis=0).sum(),
+            )
             target = level_stats([hand_info[i] for i in ref], objective)
             for kept in itertools.combinations(range(len(hand_info)), k - 1):
                 base = [hand_info[i] for i in kept]
@@ -97,7 +110,9 @@ def main() -> None:
 
                 scored = [(r, u) for u in points if (r := ratios(u)) is not None]
                 order = sorted(range(len(scored)), key=lambda i: -scored[i][0][0])[: args.starts]
-                starts = [scored[i][1] for i in order] + [np.clip(u, 0.0, 1.0) for u in hand_u]  # and from each hand sensor
+                starts = [scored[i][1] for i in order] + [
+                    np.clip(u, 0.0, 1.0) for u in hand_u
+                ]  # and from each hand sensor
                 for j, start in enumerate(starts):  # move the best few to maximise the smallest ratio
                     seen = []
 
@@ -114,16 +129,27 @@ def main() -> None:
                 top = int(np.argmax(mins))
                 ok = mins >= 1.0
                 kept_names = "".join(hand.names[i] for i in kept) or "-"
-                print(f"{name:8} {k:>2} {kept_names:>8} {len(scored):>8} {int(ok.sum()):>8} {mins[top]:>14.2f} "
-                      f"{sums[top]:>10.2f} {sums[ok].max() if ok.any() else float('nan'):>11.2f}")  # fmt: skip
+                print(
+                    f"{name:8} {k:>2} {kept_names:>8} {len(scored):>8} {int(ok.sum()):>8} {mins[top]:>14.2f} "
+                    f"{sums[top]:>10.2f} {sums[ok].max() if ok.any() else float('nan'):>11.2f}"
+                )
                 wanted = not args.icp_kept or kept_names in args.icp_kept.split(",")
                 if args.icp and str(k) in args.icp_k.split(",") and wanted:
                     icp_check(part, objective, problem, hand, kept, k, scored, args)
-        print(f"{name:8} hand's best by the surrogate: " + ", ".join(
-            f"k={k} {''.join(hand.names[i] for i in min(itertools.combinations(range(len(hand_info)), k), key=lambda c: level_stats([hand_info[i] for i in c], objective).max(axis=0).sum()))}"
-            for k in range(1, len(hand.poses) + 1)) + f"; {time.perf_counter() - t0:.0f} s")  # fmt: skip
-    print("no worse: poses (of those feasible) predicted no worse on every statistic at every level; best min ratio: the")
-    print("largest smallest ratio over the 12 statistics; its x1 sum: that layout's sum ratio at the preset's noise; best x1")
+        print(
+            f"{name:8} hand's best by the surrogate: "
+            + ", ".join(
+                f"k={k} {''.join(hand.names[i] for i in min(itertools.combinations(range(len(hand_info)), k), key=lambda c: level_stats([hand_info[i] for i in c], objective).max(axis=0).sum()))}"
+                for k in range(1, len(hand.poses) + 1)
+            )
+            + f"; {time.perf_counter() - t0:.0f} s"
+        )
+    print(
+        "no worse: poses (of those feasible) predicted no worse on every statistic at every level; best min ratio: the"
+    )
+    print(
+        "largest smallest ratio over the 12 statistics; its x1 sum: that layout's sum ratio at the preset's noise; best x1"
+    )
     print("sum: the largest sum ratio at the preset's noise among the no-worse ones")
 
 
@@ -145,8 +171,10 @@ def icp_check(part, objective, problem, hand, kept: tuple[int, ...], k: int, sco
     t0 = time.perf_counter()
     with make_evaluator(part, objective, seed=args.seed + 1, jobs=args.jobs, quiet=True) as evaluator:
         reference = next(c for c in evaluator(hand).table if c.k == k)
-        print(f"  ICP under the band, seed {args.seed + 1}, full protocol: the hand layout's best choice of {k}: {reference.name}"
-              + (f"; the pose in place {free + 1}" if k > 1 else ""))  # fmt: skip
+        print(
+            f"  ICP under the band, seed {args.seed + 1}, full protocol: the hand layout's best choice of {k}: {reference.name}"
+            + (f"; the pose in place {free + 1}" if k > 1 else "")
+        )
         for j, (predicted, u) in enumerate(picks):
             if k == 1:
                 layout, sensors = Layout((SensorPose("F1", problem.space.to_pose(u)),), name=f"frontier{j}"), (0,)
@@ -157,10 +185,14 @@ def icp_check(part, objective, problem, hand, kept: tuple[int, ...], k: int, sco
             result = evaluator(layout)
             v = Verdict(k, choice_of(result, sensors), reference)
             gaps = v.worse
-            levels = "  ".join(f"{label.split(',')[0]} {ratio:.2f}{'' if ok else '*'}" for label, ratio, ok in v.levels())
+            levels = "  ".join(
+                f"{label.split(',')[0]} {ratio:.2f}{'' if ok else '*'}" for label, ratio, ok in v.levels()
+            )
             worst = max((g.found / g.reference for g in gaps), default=float("nan"))
-            print(f"  pose {j}: surrogate smallest ratio {predicted[0]:.2f}, x1 sum {predicted[1]:.2f}; ICP hand / layout {levels}; "
-                  f"worse on {len(gaps)} of {6 * len(v.levels())} statistics (at most {worst:.2f}x)")  # fmt: skip
+            print(
+                f"  pose {j}: surrogate smallest ratio {predicted[0]:.2f}, x1 sum {predicted[1]:.2f}; ICP hand / layout {levels}; "
+                f"worse on {len(gaps)} of {6 * len(v.levels())} statistics (at most {worst:.2f}x)"
+            )
     print(f"  ({time.perf_counter() - t0:.0f} s; * = worse on some statistic at that level)")
 
 

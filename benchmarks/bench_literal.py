@@ -31,8 +31,10 @@ def main() -> None:
     layout = part.layouts["hand"]
     objective = load_objective("paper-literal")
     objective = reduced_objective(objective) if args.protocol == "reduced" else objective
-    print(f"part_b hand layout, objective paper-literal ({args.protocol} protocol), --jobs {args.jobs}, "
-          f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")  # fmt: skip
+    print(
+        f"part_b hand layout, objective paper-literal ({args.protocol} protocol), --jobs {args.jobs}, "
+        f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}"
+    )
     results, walls = {}, {}
     for backend in ("fast", "open3d"):
         obj = replace(objective, registration=replace(objective.registration, backend=backend))
@@ -47,11 +49,15 @@ def main() -> None:
             results[backend] = ev(layout)
             walls[backend] = time.perf_counter() - t0
         r = results[backend]
-        print(f"{backend:>7}: {walls[backend]:.1f} s wall, registration {r.timings['register']:.1f} CPU-s, "
-              f"{r.n_failed} failed of {len(r.per_scan)}")  # fmt: skip
+        print(
+            f"{backend:>7}: {walls[backend]:.1f} s wall, registration {r.timings['register']:.1f} CPU-s, "
+            f"{r.n_failed} failed of {len(r.per_scan)}"
+        )
     fast, o3d = results["fast"], results["open3d"]
-    print(f"compiled / Open3D: {walls['open3d'] / walls['fast']:.2f}x faster wall, "
-          f"{o3d.timings['register'] / fast.timings['register']:.2f}x in registration CPU-s")  # fmt: skip
+    print(
+        f"compiled / Open3D: {walls['open3d'] / walls['fast']:.2f}x faster wall, "
+        f"{o3d.timings['register'] / fast.timings['register']:.2f}x in registration CPU-s"
+    )
     errors = ["err_roll", "err_pitch", "err_yaw"]
     diff = np.rad2deg(np.abs(fast.per_scan[errors].to_numpy() - o3d.per_scan[errors].to_numpy())) * 1e3
     print(f"per-scan estimates: largest difference {diff.max():.4f} mdeg, median {np.median(diff):.6f} mdeg")
@@ -61,7 +67,9 @@ def main() -> None:
             m = np.rad2deg([x.median, x.p75, y.median, y.p75]) * 1e3
             rel = np.abs(m[:2] - m[2:]) / np.maximum(m[2:], 1e-12)
             worst = max(worst, rel.max())
-            print(f"  k={a.k} {x.axis:5}: compiled {m[0]:.3f} / {m[1]:.3f} ({x.name}), Open3D {m[2]:.3f} / {m[3]:.3f} ({y.name}) mdeg")
+            print(
+                f"  k={a.k} {x.axis:5}: compiled {m[0]:.3f} / {m[1]:.3f} ({x.name}), Open3D {m[2]:.3f} / {m[3]:.3f} ({y.name}) mdeg"
+            )
     print(f"largest difference of a Table 1 median or p75: {100 * worst:.2f} %")
 
 

@@ -23,10 +23,14 @@ from optipose.model.layout import Layout, SensorPose, load_layout
 from optipose.model.part import load_part
 from optipose.model.sensor import load_sensor
 
-F1 = np.array([[-0.383_022_221_559, 0.663_413_948_169, 0.642_787_609_687, 0.014_444_444_072],
-               [0.866_025_403_784, 0.5, -0.0, 0.004_080_000_091],
-               [-0.321_393_804_843, 0.556_670_399_226, -0.766_044_443_119, -0.002_792_000_008],
-               [0.0, 0.0, 0.0, 1.0]])  # fmt: skip
+F1 = np.array(
+    [
+        [-0.383_022_221_559, 0.663_413_948_169, 0.642_787_609_687, 0.014_444_444_072],
+        [0.866_025_403_784, 0.5, -0.0, 0.004_080_000_091],
+        [-0.321_393_804_843, 0.556_670_399_226, -0.766_044_443_119, -0.002_792_000_008],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
 AXES = ("roll", "pitch", "yaw")
 
 
@@ -35,7 +39,9 @@ def main() -> None:
     ap.add_argument("--part", default="part_b")
     ap.add_argument("--objective", default="paper")
     ap.add_argument("--layout", default=None, help="a layout TOML (default: B's F1 and hand S3)")
-    ap.add_argument("--sensor", type=int, action="append", help="sensor index of --layout to measure alone (repeatable)")
+    ap.add_argument(
+        "--sensor", type=int, action="append", help="sensor index of --layout to measure alone (repeatable)"
+    )
     ap.add_argument("--scales", default="1,2,3,5")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=2)
@@ -49,8 +55,13 @@ def main() -> None:
         sensors = [SensorPose("F1", F1), part.layouts["hand"].sensors[2]]
     model = load_sensor(part.sensor)
     scales = [float(s) for s in args.scales.split(",")]
-    print(f"bench_noise_voxels: {args.part}, objective {objective.name}, seed {args.seed}; mdeg over the protocol's scans")
-    print(f"{'sensor':8} {'voxels':>8} {'noise x':>7} {'points':>7}  " + "  ".join(f"{a + ' med / mean':>18}" for a in AXES))
+    print(
+        f"bench_noise_voxels: {args.part}, objective {objective.name}, seed {args.seed}; mdeg over the protocol's scans"
+    )
+    print(
+        f"{'sensor':8} {'voxels':>8} {'noise x':>7} {'points':>7}  "
+        + "  ".join(f"{a + ' med / mean':>18}" for a in AXES)
+    )
     for pose in sensors:
         for voxel in (objective.registration.voxel_size, 0.0):
             for scale in scales if voxel > 0 else (scales[0], scales[-1]):
@@ -62,7 +73,9 @@ def main() -> None:
                 err = np.rad2deg(rows[[f"err_{a}" for a in AXES]].to_numpy()) * 1e3
                 cells = "  ".join(f"{np.median(np.abs(e)):8.2f} / {e.mean():+7.2f}" for e in err.T)
                 label = f"{voxel * 1e3:g} mm" if voxel > 0 else "none"
-                print(f"{pose.name:8} {label:>8} {scale:>7g} {rows.n_points.mean():7.0f}  {cells}   ({time.perf_counter() - t0:.0f} s)")
+                print(
+                    f"{pose.name:8} {label:>8} {scale:>7g} {rows.n_points.mean():7.0f}  {cells}   ({time.perf_counter() - t0:.0f} s)"
+                )
 
 
 if __name__ == "__main__":

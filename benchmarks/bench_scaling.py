@@ -69,9 +69,18 @@ def rung(axis: str, value: float) -> dict:
         rows, points, timing = run_chunk(ev.setup, layout, tasks)
         per = (time.perf_counter() - t1) / len(tasks)
     n_points = sum(r["n_points"] for r in points) / len(tasks)
-    return {"axis": axis, "value": value, "faces": len(part.mesh.faces), "setup_s": setup, "per_orientation_s": per,
-            "scan_s": timing["scan"] / len(tasks), "register_s": timing["register"] / len(tasks), "points": n_points,
-            "registrations": len(rows) / len(tasks), "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}  # fmt: skip
+    return {
+        "axis": axis,
+        "value": value,
+        "faces": len(part.mesh.faces),
+        "setup_s": setup,
+        "per_orientation_s": per,
+        "scan_s": timing["scan"] / len(tasks),
+        "register_s": timing["register"] / len(tasks),
+        "points": n_points,
+        "registrations": len(rows) / len(tasks),
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
 
 
 def main() -> None:
@@ -88,11 +97,15 @@ def main() -> None:
         "length": [12, 30, 60, 120, 300],
         "sensors": [1, 2, 3, 4, 5, 6],
     }
-    print(f"bench_scaling: part B, reduced protocol (14 orientations), one process, {os.cpu_count()} cores, "
-          f"load {os.getloadavg()[0]:.1f}")  # fmt: skip
+    print(
+        f"bench_scaling: part B, reduced protocol (14 orientations), one process, {os.cpu_count()} cores, "
+        f"load {os.getloadavg()[0]:.1f}"
+    )
     for axis in args.axes.split(","):
-        print(f"\n{axis:>8} {'faces':>9} {'set-up s':>9} {'s/orient.':>10} {'scan':>7} {'register':>9} {'points':>9} "
-              f"{'regs':>5} {'peak MB':>8}  growth vs first (time, memory)")  # fmt: skip
+        print(
+            f"\n{axis:>8} {'faces':>9} {'set-up s':>9} {'s/orient.':>10} {'scan':>7} {'register':>9} {'points':>9} "
+            f"{'regs':>5} {'peak MB':>8}  growth vs first (time, memory)"
+        )
         first = None
         for value in values[axis]:
             out = subprocess.run([sys.executable, __file__, "--rung", axis, str(value)], capture_output=True, text=True)
@@ -101,9 +114,12 @@ def main() -> None:
                 continue
             r = json.loads(out.stdout.strip().splitlines()[-1])
             first = first or r
-            print(f"{value:>8g} {r['faces']:>9} {r['setup_s']:>9.2f} {r['per_orientation_s']:>10.3f} {r['scan_s']:>7.3f} "
-                  f"{r['register_s']:>9.3f} {r['points']:>9.0f} {r['registrations']:>5.0f} {r['peak_mb']:>8.0f}  "
-                  f"{r['per_orientation_s'] / first['per_orientation_s']:.2f}x, {r['peak_mb'] / first['peak_mb']:.2f}x", flush=True)  # fmt: skip
+            print(
+                f"{value:>8g} {r['faces']:>9} {r['setup_s']:>9.2f} {r['per_orientation_s']:>10.3f} {r['scan_s']:>7.3f} "
+                f"{r['register_s']:>9.3f} {r['points']:>9.0f} {r['registrations']:>5.0f} {r['peak_mb']:>8.0f}  "
+                f"{r['per_orientation_s'] / first['per_orientation_s']:.2f}x, {r['peak_mb'] / first['peak_mb']:.2f}x",
+                flush=True,
+            )
     print(f"\nload at the end {os.getloadavg()[0]:.1f}")
 
 

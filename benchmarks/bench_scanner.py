@@ -112,8 +112,10 @@ class NaiveScanner:
             cand = np.flatnonzero(keep)
             start = location[cand] + _SHADOW_OFFSET * normal[cand]
             blocked = self.scene.run(
-                start.astype(np.float32), (receiver_O - back - start).astype(np.float32),
-                dists=np.ones(len(cand), np.float32), query="OCCLUDED",
+                start.astype(np.float32),
+                (receiver_O - back - start).astype(np.float32),
+                dists=np.ones(len(cand), np.float32),
+                query="OCCLUDED",
             )
             keep[cand[np.asarray(blocked) != -1]] = False
             col, z, intensity = col[keep], z[keep], intensity[keep]
@@ -144,8 +146,12 @@ class EngeomScanner:
 
         s = scanner.sensor
         line = LaserProfile(
-            emitter_z=-s.apex_z, detector_y=-s.baseline, detector_z=s.reference_distance,
-            volume_width=2 * float(s.half_width(0.0)), volume_z_min=s.z_near, volume_z_max=s.z_far,
+            emitter_z=-s.apex_z,
+            detector_y=-s.baseline,
+            detector_z=s.reference_distance,
+            volume_width=2 * float(s.half_width(0.0)),
+            volume_z_min=s.z_near,
+            volume_z_max=s.z_far,
             resolution=s.points_per_profile,
         )
         self.sensor = PanningLaserProfile(line, motion.step, motion.n_profiles)
@@ -181,7 +187,7 @@ def run_interleaved(tasks: dict, repeats: int) -> tuple[dict[str, np.ndarray], d
         tasks[name]()
     wall, cpu = {name: [] for name in names}, {name: [] for name in names}
     for r in range(repeats):
-        for name in names[r % len(names):] + names[: r % len(names)]:
+        for name in names[r % len(names) :] + names[: r % len(names)]:
             c0, t0 = time.process_time(), time.perf_counter()
             tasks[name]()
             wall[name].append(time.perf_counter() - t0)
@@ -251,8 +257,12 @@ def report(args, scanner, n_rays, times, cpu, counts, peak_mb) -> None:
         pose = name.split()[-1]
         ratio = np.median(t) / np.median(times[f"scanner {pose}"])
         table.add_row(
-            name, f"{1e3 * np.median(t):.1f}", f"{1e3 * t.min():.0f}–{1e3 * t.max():.0f}",
-            f"{1e3 * np.median(cpu[name]):.0f}", f"{n_rays / np.median(t) / 1e6:.2f}", f"{counts[name]:,}",
+            name,
+            f"{1e3 * np.median(t):.1f}",
+            f"{1e3 * t.min():.0f}–{1e3 * t.max():.0f}",
+            f"{1e3 * np.median(cpu[name]):.0f}",
+            f"{n_rays / np.median(t) / 1e6:.2f}",
+            f"{counts[name]:,}",
             f"{ratio:.2f}x",
         )
     console.print(table)

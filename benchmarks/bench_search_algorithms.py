@@ -146,9 +146,16 @@ def summary(all_runs: dict[str, dict[str, list[dict]]], evals: int) -> list[str]
         for label in labels:
             ratios[label].append(float(np.median([r["curve"][-1] for r in runs[label]])) / best_known)
     width = max(len(p) for p in all_runs) + 2
-    head = f"{'algorithm':<20}" + "".join(f"{p:>{width}}" for p in all_runs) + f"{'rank@' + str(early):>10}{'rank@' + str(evals):>10}"
-    lines = [f"Summary: median best @{evals} / best of all runs on that problem (1.00 = best found); mean rank over problems",
-             head, "-" * len(head)]  # fmt: skip
+    head = (
+        f"{'algorithm':<20}"
+        + "".join(f"{p:>{width}}" for p in all_runs)
+        + f"{'rank@' + str(early):>10}{'rank@' + str(evals):>10}"
+    )
+    lines = [
+        f"Summary: median best @{evals} / best of all runs on that problem (1.00 = best found); mean rank over problems",
+        head,
+        "-" * len(head),
+    ]
     for label in labels:
         cells = "".join(f"{x:>{width}.2f}" for x in ratios[label])
         lines.append(f"{label:<20}{cells}{np.mean(ranks[label][0]):>10.2f}{np.mean(ranks[label][1]):>10.2f}")
@@ -158,14 +165,28 @@ def summary(all_runs: dict[str, dict[str, list[dict]]], evals: int) -> list[str]
 def write_csv(path: Path, all_runs, checkpoints) -> None:
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["problem", "algorithm", "seed", "evals_done"] + [f"best_at_{c}" for c in checkpoints]
-                   + ["infeasible_frac", "first_feasible_eval", "wall_s", "new_poses"])  # fmt: skip
+        w.writerow(
+            ["problem", "algorithm", "seed", "evals_done"]
+            + [f"best_at_{c}" for c in checkpoints]
+            + ["infeasible_frac", "first_feasible_eval", "wall_s", "new_poses"]
+        )
         for problem, runs in all_runs.items():
             for label, rs in runs.items():
                 for seed, r in enumerate(rs):
                     best = [f"{r['curve'][c - 1]:.6g}" for c in checkpoints]
-                    w.writerow([problem, label, seed, r["evals_done"], *best, f"{r['infeasible']:.4f}",
-                                r["first_feasible"] or "", f"{r['wall_s']:.3f}", r["new_poses"]])  # fmt: skip
+                    w.writerow(
+                        [
+                            problem,
+                            label,
+                            seed,
+                            r["evals_done"],
+                            *best,
+                            f"{r['infeasible']:.4f}",
+                            r["first_feasible"] or "",
+                            f"{r['wall_s']:.3f}",
+                            r["new_poses"],
+                        ]
+                    )
 
 
 def plot(path: Path, all_runs, evals: int, seeds: int) -> None:
@@ -175,7 +196,9 @@ def plot(path: Path, all_runs, evals: int, seeds: int) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 2, figsize=(12, 8.5), constrained_layout=True)
-    colours = dict(zip([a[0] for a in ALGORITHMS], ["black", "tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"]))
+    colours = dict(
+        zip([a[0] for a in ALGORITHMS], ["black", "tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple"])
+    )
     x = np.arange(1, evals + 1)
     for ax, (problem, runs) in zip(axes.flat, all_runs.items()):
         for label, rs in runs.items():
@@ -220,16 +243,25 @@ def main() -> None:
 
     objective = load_objective("paper").in_cell("ideal")
     checkpoints = tuple(c for c in CHECKPOINTS if c < args.evals) + (args.evals,)
-    print(f"bench_search_algorithms: --evals {args.evals} --seeds {args.seeds}, objective 'paper', "
-          f"optipose at {_revision()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")  # fmt: skip
+    print(
+        f"bench_search_algorithms: --evals {args.evals} --seeds {args.seeds}, objective 'paper', "
+        f"optipose at {_revision()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}"
+    )
     t0 = time.perf_counter()
     all_runs = {}
     for part_name, k in PROBLEMS:
         name = f"{part_name} k={k} ({6 * k} var)"
         all_runs[name] = run_problem(part_name, k, objective, args.evals, args.seeds)
         print()
-        print("\n".join(table(f"{name}: best feasible score (deg) after n evaluations, median of {args.seeds} seeds",
-                              all_runs[name], checkpoints)))  # fmt: skip
+        print(
+            "\n".join(
+                table(
+                    f"{name}: best feasible score (deg) after n evaluations, median of {args.seeds} seeds",
+                    all_runs[name],
+                    checkpoints,
+                )
+            )
+        )
     print()
     print("\n".join(summary(all_runs, args.evals)))
     print(f"\ntotal {time.perf_counter() - t0:.0f} s, load {os.getloadavg()[0]:.1f}")

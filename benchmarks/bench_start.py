@@ -68,8 +68,10 @@ def kernels() -> None:
         warm, _ = timed([*search, "--out", f"{out}/warm"], env)
         draws = {name: _draws(Path(out) / name) for name in ("cold", "warm")}
     print(f"warm_kernels.py: {warm_script[0]:.1f} s with an empty cache, {warm_script[1]:.1f} s with it filled")
-    print(f"search part_b --budget quick --no-report: {cold:.1f} s and {draws['cold']} verdict draws with an empty cache, "
-          f"{warm:.1f} s and {draws['warm']} draws with the cache warm_kernels.py filled")  # fmt: skip
+    print(
+        f"search part_b --budget quick --no-report: {cold:.1f} s and {draws['cold']} verdict draws with an empty cache, "
+        f"{warm:.1f} s and {draws['warm']} draws with the cache warm_kernels.py filled"
+    )
 
 
 def _draws(folder: Path) -> int:
@@ -81,11 +83,15 @@ def exits(repeats: int) -> None:
     waits: dict[str, list[float]] = {"neither": [], "stop": [], "both": []}
     for _ in range(repeats):
         for mode in waits:
-            proc = subprocess.run([str(PYTHON), "-c", CHILD, mode], cwd=ROOT, capture_output=True, text=True, check=True)
+            proc = subprocess.run(
+                [str(PYTHON), "-c", CHILD, mode], cwd=ROOT, capture_output=True, text=True, check=True
+            )
             waits[mode].append(time.time() - float(proc.stdout.split()[-1]))
     neither, stop, both = (float(np.median(waits[m])) for m in waits)
-    print(f"end of the work to the end of the process (two idle loky workers, a report written), median of {repeats}: "
-          f"as it is {neither:.2f} s, stop_workers {stop:.2f} s, and gc.freeze {both:.2f} s, ratio {neither / both:.1f}x")  # fmt: skip
+    print(
+        f"end of the work to the end of the process (two idle loky workers, a report written), median of {repeats}: "
+        f"as it is {neither:.2f} s, stop_workers {stop:.2f} s, and gc.freeze {both:.2f} s, ratio {neither / both:.1f}x"
+    )
 
 
 def main() -> None:

@@ -51,9 +51,16 @@ def main() -> None:
     ap.add_argument("--sensors", type=int, default=1, help="sensors per layout")
     ap.add_argument("--layouts", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--noise-scale", type=float, default=1.0, help="nominal objective: the sensor noise sigma times this")
+    ap.add_argument(
+        "--noise-scale", type=float, default=1.0, help="nominal objective: the sensor noise sigma times this"
+    )
     ap.add_argument("--draws", type=int, default=None, help="band objective: bracket draws per noise level")
-    ap.add_argument("--protocol", choices=("reduced", "full"), default="reduced", help="ICP on the selection's 14 scans or the full protocol")
+    ap.add_argument(
+        "--protocol",
+        choices=("reduced", "full"),
+        default="reduced",
+        help="ICP on the selection's 14 scans or the full protocol",
+    )
     ap.add_argument("--no-mounting", action="store_true", help="band objective: brackets exact (the noise band alone)")
     ap.add_argument("--icp-cache", type=Path, default=None, help="keep the ICP figures here (.npz) and reuse them")
     args = ap.parse_args()
@@ -62,23 +69,33 @@ def main() -> None:
     if args.draws is not None:
         objective = replace(objective, conditions=replace(objective.conditions, mounting_draws=args.draws))
     if args.no_mounting:
-        objective = replace(objective, conditions=replace(objective.conditions, mounting_translation=0.0, mounting_rotation=0.0))
+        objective = replace(
+            objective, conditions=replace(objective.conditions, mounting_translation=0.0, mounting_rotation=0.0)
+        )
     band = not objective.conditions.trivial
     problem = SurrogateProblem(part, objective, SearchConfig())
     layouts = _layouts(problem, part, args.sensors, args.layouts, args.seed)
     n_hand = len(layouts) - args.layouts
-    print(f"bench_surrogate_ranking: {args.part}, objective {objective.name}, {args.layouts} random feasible "
-          f"{args.sensors}-sensor layouts + {n_hand} hand-placed, seed {args.seed}"
-          + ("" if band else f", noise x{args.noise_scale:g}"))
+    print(
+        f"bench_surrogate_ranking: {args.part}, objective {objective.name}, {args.layouts} random feasible "
+        f"{args.sensors}-sensor layouts + {n_hand} hand-placed, seed {args.seed}"
+        + ("" if band else f", noise x{args.noise_scale:g}")
+    )
     t0 = time.perf_counter()
     infos = [[problem.surrogate.info(T) for T in problem.space.to_poses(u)] for u in layouts]
     t_info = time.perf_counter() - t0
     icp, t_icp = _icp(part, objective, problem, layouts, args, band)
-    scores = _band_models(part, objective, problem, layouts, infos) if band else _nominal_models(part, objective, problem, layouts, infos, args.noise_scale)
+    scores = (
+        _band_models(part, objective, problem, layouts, infos)
+        if band
+        else _nominal_models(part, objective, problem, layouts, infos, args.noise_scale)
+    )
     for label, (icp_score, icp_axes) in icp.items():
         print(f"-- against ICP, {label}")
         for name, stats in scores[label].items():
-            _report(name, np.array([s.score for s in stats]), np.array([s.axis_score for s in stats]), icp_score, icp_axes)
+            _report(
+                name, np.array([s.score for s in stats]), np.array([s.axis_score for s in stats]), icp_score, icp_axes
+            )
     n = len(layouts)
     print(f"time per layout: surrogate scans {1e3 * t_info / n:.0f} ms, ICP {args.protocol} protocol {t_icp / n:.2f} s")
 
@@ -99,7 +116,9 @@ def _icp(part, objective, problem, layouts, args, band: bool) -> tuple[dict, flo
     path = args.icp_cache
     if path is not None and path.is_file():
         data = np.load(path, allow_pickle=False)
-        return {str(label): (data[f"score{i}"], data[f"axes{i}"]) for i, label in enumerate(data["labels"])}, float(data["seconds"])
+        return {str(label): (data[f"score{i}"], data[f"axes{i}"]) for i, label in enumerate(data["labels"])}, float(
+            data["seconds"]
+        )
     reduced = objective if args.protocol == "full" else reduced_objective(objective)
     k, t0 = args.sensors, time.perf_counter()
     rows: dict = {}
@@ -112,13 +131,17 @@ def _icp(part, objective, problem, layouts, args, band: bool) -> tuple[dict, flo
                     at = robust_result([(c, r) for c, r in result.results if c.noise_scale == scale], reduced)
                     _add(rows, f"noise x{scale:g} (worst over its draws)", at.table[k - 1])
     else:
-        with Evaluator(part, reduced, seed=args.seed + 1, condition=Condition(args.noise_scale), quiet=True) as evaluator:
+        with Evaluator(
+            part, reduced, seed=args.seed + 1, condition=Condition(args.noise_scale), quiet=True
+        ) as evaluator:
             for u in layouts:
                 _add(rows, f"noise x{args.noise_scale:g}", evaluator(problem.space.to_poses(u)).table[k - 1])
     seconds = time.perf_counter() - t0
     out = {label: (np.rad2deg(np.array(s)), np.rad2deg(np.array(a))) for label, (s, a) in rows.items()}
     if path is not None:
-        arrays = {f"score{i}": s for i, (s, _) in enumerate(out.values())} | {f"axes{i}": a for i, (_, a) in enumerate(out.values())}
+        arrays = {f"score{i}": s for i, (s, _) in enumerate(out.values())} | {
+            f"axes{i}": a for i, (_, a) in enumerate(out.values())
+        }
         np.savez(path, labels=np.array(list(out)), seconds=seconds, **arrays)
     return out, seconds
 
@@ -131,7 +154,10 @@ def _add(rows: dict, label: str, choice) -> None:
 
 def _nominal_models(part, objective, problem, layouts, infos, scale: float) -> dict:
     plain = Surrogate(part, voxel=objective.registration.voxel_size, turns=np.zeros((0, 3)))
-    noise_only = [predicted_stats([plain.info(T) for T in problem.space.to_poses(u)], *problem.weights, noise_scales=(scale,)) for u in layouts]
+    noise_only = [
+        predicted_stats([plain.info(T) for T in problem.space.to_poses(u)], *problem.weights, noise_scales=(scale,))
+        for u in layouts
+    ]
     bias = [predicted_stats(i, *problem.weights, noise_scales=(scale,)) for i in infos]
     return {f"noise x{scale:g}": {"noise only": noise_only, "noise + voxel bias": bias}}
 
@@ -145,7 +171,10 @@ def _band_models(part, objective, problem, layouts, infos) -> dict:
     models = [("voxel bias alone", bare_infos, None), ("with the noise bias term", infos, None)]
     models += [("with the noise bias and the mounting term", infos, mounting)] if mounting else []
     out = {}
-    for label, levels in [("the robust score (worst over the band)", scales), *[(f"noise x{s:g} (worst over its draws)", (s,)) for s in scales]]:
+    for label, levels in [
+        ("the robust score (worst over the band)", scales),
+        *[(f"noise x{s:g} (worst over its draws)", (s,)) for s in scales],
+    ]:
         out[label] = {
             name: [predicted_stats(i, *problem.weights, noise_scales=tuple(levels), mounting=m) for i in model_infos]
             for name, model_infos, m in models
@@ -160,11 +189,18 @@ def _band_models(part, objective, problem, layouts, infos) -> dict:
 def _report(name: str, score: np.ndarray, axes: np.ndarray, icp: np.ndarray, icp_axes: np.ndarray) -> None:
     ok = np.isfinite(icp_axes)
     rho = spearmanr(score, icp)[0]
-    per_axis = ", ".join(f"{a} {spearmanr(axes[ok[:, j], j], icp_axes[ok[:, j], j])[0]:.2f}" for j, a in enumerate(AXES))
-    factor = ", ".join(f"{a} {np.exp(np.median(np.abs(np.log(axes[ok[:, j], j] / icp_axes[ok[:, j], j])))):.2f}x" for j, a in enumerate(AXES))
+    per_axis = ", ".join(
+        f"{a} {spearmanr(axes[ok[:, j], j], icp_axes[ok[:, j], j])[0]:.2f}" for j, a in enumerate(AXES)
+    )
+    factor = ", ".join(
+        f"{a} {np.exp(np.median(np.abs(np.log(axes[ok[:, j], j] / icp_axes[ok[:, j], j])))):.2f}x"
+        for j, a in enumerate(AXES)
+    )
     ranks = np.argsort(np.argsort(icp))
-    print(f"  {name}: Spearman rho score {rho:.2f}; per axis {per_axis}; median factor off ICP per axis {factor}; "
-          f"its best is ICP rank {int(ranks[np.argmin(score)]) + 1} of {len(icp)}")
+    print(
+        f"  {name}: Spearman rho score {rho:.2f}; per axis {per_axis}; median factor off ICP per axis {factor}; "
+        f"its best is ICP rank {int(ranks[np.argmin(score)]) + 1} of {len(icp)}"
+    )
 
 
 if __name__ == "__main__":

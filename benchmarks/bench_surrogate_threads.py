@@ -69,9 +69,11 @@ def main() -> None:
         for p in spinners:
             p.join()
     one, default = np.median(times["one thread"]), np.median(times["default"])
-    print(f"{a.part}, cell {a.cell}, {a.busy} busy processes beside it, median of {a.rounds} rounds of {a.poses} poses: "
-          f"one BLAS thread {one * 1e3:.0f} ms a pose, the default {default * 1e3:.0f} ms: {default / one:.2f}x "
-          f"(rounds: one {np.round(np.array(times['one thread']) * 1e3).tolist()}, default {np.round(np.array(times['default']) * 1e3).tolist()})")
+    print(
+        f"{a.part}, cell {a.cell}, {a.busy} busy processes beside it, median of {a.rounds} rounds of {a.poses} poses: "
+        f"one BLAS thread {one * 1e3:.0f} ms a pose, the default {default * 1e3:.0f} ms: {default / one:.2f}x "
+        f"(rounds: one {np.round(np.array(times['one thread']) * 1e3).tolist()}, default {np.round(np.array(times['default']) * 1e3).tolist()})"
+    )
 
 
 if __name__ == "__main__":

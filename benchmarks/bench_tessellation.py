@@ -59,7 +59,9 @@ def run(part: str, mesh: str, jobs: int, out: Path) -> dict:
     """One evaluation in a child process; its tree's memory sampled from when the mesh is built."""
     import psutil
 
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, part, mesh, str(jobs), str(out)], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CHILD, part, mesh, str(jobs), str(out)], stdout=subprocess.PIPE, text=True
+    )
     assert proc.stdout.readline().startswith("READY")
     root, rss, pss = psutil.Process(proc.pid), 0, 0
     while proc.poll() is None:
@@ -103,9 +105,11 @@ def reference_only(part: str, edge_mm: float) -> None:
     done.set()
     sampler.join()
     kept = me.memory_info().rss - resident
-    print(f"{part} at {edge_mm} mm edges, {len(f)} faces: built in {wall:.1f} s, peak +{peak[0] / 2**20:.0f} MB "
-          f"({peak[0] / len(f):.0f} B a face), resident +{kept / 2**20:.0f} MB ({kept / len(f):.0f} B a face), "
-          f"grid {len(reference._grid_faces) / len(f):.1f} entries a face")  # fmt: skip
+    print(
+        f"{part} at {edge_mm} mm edges, {len(f)} faces: built in {wall:.1f} s, peak +{peak[0] / 2**20:.0f} MB "
+        f"({peak[0] / len(f):.0f} B a face), resident +{kept / 2**20:.0f} MB ({kept / len(f):.0f} B a face), "
+        f"grid {len(reference._grid_faces) / len(f):.1f} entries a face"
+    )
 
 
 def main() -> None:
@@ -125,11 +129,15 @@ def main() -> None:
     first = results[args.meshes[0]]
     mdeg = lambda rad: np.rad2deg(rad) * 1e3  # noqa: E731
     for mesh, r in results.items():
-        print(f"\n{mesh}: {r['faces']} faces, wall {r['wall']:.1f} s, peak RSS {r['rss'] / 2**20:.0f} MB, PSS {r['pss'] / 2**20:.0f} MB")
+        print(
+            f"\n{mesh}: {r['faces']} faces, wall {r['wall']:.1f} s, peak RSS {r['rss'] / 2**20:.0f} MB, PSS {r['pss'] / 2**20:.0f} MB"
+        )
         worst = 0.0
         for a, b in zip(first["table"], r["table"]):
-            cells = ", ".join(f"{x.axis} {mdeg(x.median):.4f}/{mdeg(x.p75):.4f} ({x.name})" if x.observable else f"{x.axis} {x.label}"
-                              for x in b.axes)  # fmt: skip
+            cells = ", ".join(
+                f"{x.axis} {mdeg(x.median):.4f}/{mdeg(x.p75):.4f} ({x.name})" if x.observable else f"{x.axis} {x.label}"
+                for x in b.axes
+            )
             print(f"  k={b.k} {b.name} score {mdeg(b.score):.4f}: {cells}")
             same = a.sensors == b.sensors and all(x.subset == y.subset for x, y in zip(a.axes, b.axes))
             if not same:
@@ -140,8 +148,10 @@ def main() -> None:
             worst = max(worst, abs(b.score / a.score - 1))
         cols = ["err_roll", "err_pitch", "err_yaw"]
         d = mdeg(np.abs(first["per_scan"][cols].to_numpy() - r["per_scan"][cols].to_numpy())).max(axis=1)
-        print(f"  against {args.meshes[0]}: {int((d > 0.01).sum())} of {len(d)} registrations moved by over 0.01 mdeg "
-              f"(largest {d.max():.3f} mdeg); largest relative change of a Table 1 statistic {100 * worst:.3f} %")  # fmt: skip
+        print(
+            f"  against {args.meshes[0]}: {int((d > 0.01).sum())} of {len(d)} registrations moved by over 0.01 mdeg "
+            f"(largest {d.max():.3f} mdeg); largest relative change of a Table 1 statistic {100 * worst:.3f} %"
+        )
 
 
 if __name__ == "__main__":

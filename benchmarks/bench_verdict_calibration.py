@@ -49,7 +49,9 @@ def _seeds(text: str) -> list[int]:
     return [int(s) for s in text.split(",")]
 
 
-def hand_results(part_name: str, cell: str, objective: str, seeds: list[int], cache: Path, jobs: int, twin: bool = False) -> dict:
+def hand_results(
+    part_name: str, cell: str, objective: str, seeds: list[int], cache: Path, jobs: int, twin: bool = False
+) -> dict:
     """The hand layout's EvaluationResult per seed, each read from ``cache`` or evaluated and written there.
     ``twin``: in the cell instance of the seed (the part as made, the calibration: drawn from the evaluator's
     seed) but with the scans' own draws (noise, robot path, set orientation: drawn from each scan's seed) of
@@ -62,7 +64,9 @@ def hand_results(part_name: str, cell: str, objective: str, seeds: list[int], ca
         path = cache / f"{part_name}-{cell}-{objective}-seed{seed}{'-twin' if twin else ''}.pkl"
         if not path.exists():
             t0 = time.perf_counter()
-            with Evaluator(part, load_objective(objective).in_cell(cell), seed=seed, jobs=jobs, quiet=True) as evaluator:
+            with Evaluator(
+                part, load_objective(objective).in_cell(cell), seed=seed, jobs=jobs, quiet=True
+            ) as evaluator:
                 if twin:
                     other = perturbations(evaluator.objective.protocol, seed + TWIN)
                     evaluator.perturbations = replace(evaluator.perturbations, seeds=other.seeds)
@@ -97,20 +101,32 @@ def main() -> None:
     ap.add_argument("--replicates", type=int, default=1000)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/optipose_verdict_cache"))
     ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--scans", type=int, default=0, help="each draw's scans: this many of the protocol's, drawn per trial and draw (0: all)")
+    ap.add_argument(
+        "--scans",
+        type=int,
+        default=0,
+        help="each draw's scans: this many of the protocol's, drawn per trial and draw (0: all)",
+    )
     args = ap.parse_args()
     seeds = _seeds(args.seeds)
     t0 = time.perf_counter()
     results = hand_results(args.part, args.cell, args.objective, seeds, args.cache, args.jobs)
     twins = hand_results(args.part, args.cell, args.objective, seeds, args.cache, args.jobs, twin=True)
-    print(f"bench_verdict_calibration: {args.part} hand layout, cell {args.cell}, objective {args.objective}, "
-          f"{len(seeds)} seeds {seeds[0]}..{seeds[-1]} and their twins ({time.perf_counter() - t0:.0f} s to evaluate or read)"
-          + (f"; each draw {args.scans} of the scans" if args.scans else ""))  # fmt: skip
+    print(
+        f"bench_verdict_calibration: {args.part} hand layout, cell {args.cell}, objective {args.objective}, "
+        f"{len(seeds)} seeds {seeds[0]}..{seeds[-1]} and their twins ({time.perf_counter() - t0:.0f} s to evaluate or read)"
+        + (f"; each draw {args.scans} of the scans" if args.scans else "")
+    )
     layout = results[seeds[0]].layout
     sources = {"same draws": "same", "own scans": "twin", "other cells": "other"}
-    cases = [(f"{what}, {where}", how, better) for what, better in (("copy", 1.0), (f"{args.better:g}x", args.better))
-             for where, how in sources.items()]  # fmt: skip
-    print(f"{'case':23} {'draws':>6} {'k':>2} {'BUY':>6} " + " ".join(f"{d:>4}" for d in DECISIONS[1:3]) + " UNDEC  ratio")
+    cases = [
+        (f"{what}, {where}", how, better)
+        for what, better in (("copy", 1.0), (f"{args.better:g}x", args.better))
+        for where, how in sources.items()
+    ]
+    print(
+        f"{'case':23} {'draws':>6} {'k':>2} {'BUY':>6} " + " ".join(f"{d:>4}" for d in DECISIONS[1:3]) + " UNDEC  ratio"
+    )
     spread = []
     for k in range(1, len(layout) + 1):
         choice = results[seeds[0]].table[k - 1]  # the hand's k-sensor choice, held fixed over draws
@@ -145,11 +161,16 @@ def main() -> None:
                     used.append(verdict.n_draws)
                 label = str(n_draws) if n_draws > 0 else f"{np.mean(used):.1f}r"
                 rest = " ".join(f"{counts[d]:>4}" for d in DECISIONS[1:])
-                print(f"{name:23} {label:>6} {k:>2} {counts[BUY]:>3}/{args.trials:<2} {rest:>4}  {np.median(ratios):.2f}", flush=True)
+                print(
+                    f"{name:23} {label:>6} {k:>2} {counts[BUY]:>3}/{args.trials:<2} {rest:>4}  {np.median(ratios):.2f}",
+                    flush=True,
+                )
     print(f"the hand's score from seed to seed, sd of its log: {'; '.join(spread)}")
-    print(f"({args.trials} trials per row, each a verdict on paired draws picked from the pool by the trial's seed; 'r': "
-          f"racing up to {args.race} draws, their mean number; the found side is the hand layout's own per-scan errors, divided "
-          f"by {args.better:g} in the '{args.better:g}x' rows; {time.perf_counter() - t0:.0f} s)")  # fmt: skip
+    print(
+        f"({args.trials} trials per row, each a verdict on paired draws picked from the pool by the trial's seed; 'r': "
+        f"racing up to {args.race} draws, their mean number; the found side is the hand layout's own per-scan errors, divided "
+        f"by {args.better:g} in the '{args.better:g}x' rows; {time.perf_counter() - t0:.0f} s)"
+    )
 
 
 if __name__ == "__main__":

@@ -52,11 +52,15 @@ def form(part) -> None:
             grid, first, step = made.form_grid()
         else:
             axes = [first[j] + step[j] * np.arange(grid.shape[j]) for j in range(3)]
-            exact = made.form_exact(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)).reshape(grid.shape)
+            exact = made.form_exact(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)).reshape(
+                grid.shape
+            )
         times[name] = time.perf_counter() - t0
-    print(f"form grid of part_b as made ({process.name}, {grid.size:,} nodes): product {times['product']:.3f} s, "
-          f"cosines {times['cosines']:.3f} s, ratio {times['cosines'] / times['product']:.0f}x, "
-          f"largest difference {np.abs(grid - exact).max():.1e} m of an RMS {exact.std():.1e} m")  # fmt: skip
+    print(
+        f"form grid of part_b as made ({process.name}, {grid.size:,} nodes): product {times['product']:.3f} s, "
+        f"cosines {times['cosines']:.3f} s, ratio {times['cosines'] / times['product']:.0f}x, "
+        f"largest difference {np.abs(grid - exact).max():.1e} m of an RMS {exact.std():.1e} m"
+    )
 
 
 def draw(part, scans: int, repeats: int, jobs: int) -> None:
@@ -70,18 +74,24 @@ def draw(part, scans: int, repeats: int, jobs: int) -> None:
             for name in walls:
                 subsets = {"every subset": (None, None), "used subsets": (HAND_USED, FOUND_USED)}[name]
                 t0 = time.perf_counter()
-                with Evaluator(part, objective, seed=verdict_seed(0, i + 1), quiet=True, executor=executor, scans=scans) as ev:
+                with Evaluator(
+                    part, objective, seed=verdict_seed(0, i + 1), quiet=True, executor=executor, scans=scans
+                ) as ev:
                     results[name] = (ev(hand, subsets=subsets[0]), ev(found, subsets=subsets[1]))
                 if i:
                     walls[name].append(time.perf_counter() - t0)
-            for (whole, some) in zip(results["every subset"], results["used subsets"]):
-                rows = whole.per_scan[whole.per_scan["subset_index"].isin(some.per_scan["subset_index"])].reset_index(drop=True)
+            for whole, some in zip(results["every subset"], results["used subsets"]):
+                rows = whole.per_scan[whole.per_scan["subset_index"].isin(some.per_scan["subset_index"])].reset_index(
+                    drop=True
+                )
                 assert rows.equals(some.per_scan), "the used subsets' rows differ from the whole evaluation's"
     finally:
         executor.close()
     every, used = (float(np.median(walls[n])) for n in walls)
-    print(f"a draw of {scans} scans, hand + found k=3, {jobs} workers, median of {repeats}: every subset {every:.2f} s, "
-          f"used subsets {used:.2f} s, ratio {every / used:.2f}x; the used rows identical")  # fmt: skip
+    print(
+        f"a draw of {scans} scans, hand + found k=3, {jobs} workers, median of {repeats}: every subset {every:.2f} s, "
+        f"used subsets {used:.2f} s, ratio {every / used:.2f}x; the used rows identical"
+    )
 
 
 def main() -> None:

@@ -35,8 +35,12 @@ def _pairs(choice) -> list:
 
 def _ratios(a, b) -> np.ndarray:
     """b's statistic over a's, per level, axis and statistic (levels, 3, 2)."""
-    return np.array([[[getattr(y, s) / getattr(x, s) for s in STATS] for x, y in zip(ca.axes, cb.axes)]
-                     for (_, ca), (_, cb) in zip(_pairs(a), _pairs(b))])  # fmt: skip
+    return np.array(
+        [
+            [[getattr(y, s) / getattr(x, s) for s in STATS] for x, y in zip(ca.axes, cb.axes)]
+            for (_, ca), (_, cb) in zip(_pairs(a), _pairs(b))
+        ]
+    )
 
 
 def main() -> None:
@@ -66,9 +70,15 @@ def main() -> None:
             margin = float(np.median(np.max(ratios.reshape(len(ordered), -1), axis=1)))  # per pair: the largest
             print(f"{name:8} {k:>2} {passes:>4}/{len(ordered):<3} {spread:>7.2f} {margin:>7.2f}")
         print(f"{name:8} {len(seeds)} evaluations of {layout.name} in {took:.0f} s")
-    print("passes: ordered seed pairs (i, j) where seed j's choice is no worse than seed i's on every statistic at every")
-    print("level (the search's test of a found layout against the hand one); spread: a statistic's typical factor between")
-    print("two seeds (exp of the median |ln(j / i)|); margin: the median over pairs of the largest ratio j / i, i.e. how much")
+    print(
+        "passes: ordered seed pairs (i, j) where seed j's choice is no worse than seed i's on every statistic at every"
+    )
+    print(
+        "level (the search's test of a found layout against the hand one); spread: a statistic's typical factor between"
+    )
+    print(
+        "two seeds (exp of the median |ln(j / i)|); margin: the median over pairs of the largest ratio j / i, i.e. how much"
+    )
     print("better than the hand layout on every statistic a layout must be to pass the test half the time")
 
 

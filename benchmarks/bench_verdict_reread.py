@@ -28,8 +28,16 @@ def stored_draws(folder: Path, result) -> list[dict]:
     v, side = result.validation, sides(result.layouts, result.validation, result.hand)
     draws = []
     for d in sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:])):
-        stored = {n: load_result(d / n) for n in {"hand", *(name for name, _ in side.values())} if (d / n).is_dir()}  # each once
-        draws.append({k: paired_draw(stored[name], choice, stored["hand"], v.hand[k]) for k, (name, choice) in side.items() if name in stored})
+        stored = {
+            n: load_result(d / n) for n in {"hand", *(name for name, _ in side.values())} if (d / n).is_dir()
+        }  # each once
+        draws.append(
+            {
+                k: paired_draw(stored[name], choice, stored["hand"], v.hand[k])
+                for k, (name, choice) in side.items()
+                if name in stored
+            }
+        )
     return draws
 
 
@@ -50,7 +58,11 @@ def main() -> None:
     ap.add_argument("--confidence", default="0.95,0.90")
     args = ap.parse_args()
     levels = [float(c) for c in args.confidence.split(",")]
-    print("| folder | draws | " + " | ".join(f"two-sided {100 * c:.0f} % (one-sided {100 * (1 + c) / 2:.1f} %)" for c in levels) + " |")
+    print(
+        "| folder | draws | "
+        + " | ".join(f"two-sided {100 * c:.0f} % (one-sided {100 * (1 + c) / 2:.1f} %)" for c in levels)
+        + " |"
+    )
     print("| --- | ---: |" + " --- |" * len(levels))
     answered = [0] * len(levels)
     for folder in args.folders:
@@ -59,9 +71,16 @@ def main() -> None:
         for j, c in enumerate(levels):
             verdicts = reraced(result, draws, c)
             answered[j] += any(v.decision != "UNDECIDED" for v in verdicts.values())
-            cells.append(", ".join(f"k={k} {v.decision} ({v.n_draws})" for k, v in sorted(verdicts.items(), key=lambda kv: str(kv[0]))))
+            cells.append(
+                ", ".join(
+                    f"k={k} {v.decision} ({v.n_draws})" for k, v in sorted(verdicts.items(), key=lambda kv: str(kv[0]))
+                )
+            )
         print(f"| {folder.name} | {len(draws)} | " + " | ".join(cells) + " |")
-    print("answered some k: " + ", ".join(f"{n} of {len(args.folders)} at {100 * c:.0f} %" for n, c in zip(answered, levels)))
+    print(
+        "answered some k: "
+        + ", ".join(f"{n} of {len(args.folders)} at {100 * c:.0f} %" for n, c in zip(answered, levels))
+    )
 
 
 if __name__ == "__main__":

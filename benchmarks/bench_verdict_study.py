@@ -46,9 +46,13 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 PARTS = {
-    "part_a": "part_a", "part_b": "part_b", "part_c": "part_c",
-    "bushing": "studies/parts/bushing/part.toml", "angle": "studies/parts/angle/part.toml", "housing": "studies/parts/housing/part.toml",
-}  # fmt: skip
+    "part_a": "part_a",
+    "part_b": "part_b",
+    "part_c": "part_c",
+    "bushing": "studies/parts/bushing/part.toml",
+    "angle": "studies/parts/angle/part.toml",
+    "housing": "studies/parts/housing/part.toml",
+}
 
 
 def run(args) -> None:
@@ -57,9 +61,26 @@ def run(args) -> None:
     rows = []
     for name in args.parts.split(","):
         folder = out / name
-        shutil.rmtree(folder, ignore_errors=True)  # a search's folder holds only what this run writes: no draws or holdouts of an earlier one
-        command = [sys.executable, "-m", "optipose", "search", PARTS[name], "--budget", args.budget, "--cell", args.cell,
-                   "--seed", str(args.seed), "--jobs", "2", "--out", str(folder)] + ([] if args.report else ["--no-report"])  # fmt: skip
+        shutil.rmtree(
+            folder, ignore_errors=True
+        )  # a search's folder holds only what this run writes: no draws or holdouts of an earlier one
+        command = [
+            sys.executable,
+            "-m",
+            "optipose",
+            "search",
+            PARTS[name],
+            "--budget",
+            args.budget,
+            "--cell",
+            args.cell,
+            "--seed",
+            str(args.seed),
+            "--jobs",
+            "2",
+            "--out",
+            str(folder),
+        ] + ([] if args.report else ["--no-report"])
         command += ["--search-config", str(Path(args.search_config).resolve())] if args.search_config else []
         t0 = time.perf_counter()
         done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
@@ -97,16 +118,23 @@ def holdout(args) -> None:
         seed = int(saved.seed) + args.offset
         first: dict = {}
         t0 = time.perf_counter()
-        if args.choices == "kept" and not choice_draw_counts(objective):  # the search's choices; the race does not read a validation's draw
+        if args.choices == "kept" and not choice_draw_counts(
+            objective
+        ):  # the search's choices; the race does not read a validation's draw
             validation = result.validation
         else:
-            validation = validate(part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__)
+            validation = validate(
+                part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__
+            )
             if args.choices == "kept":  # what the search bought, on the held-out draws (the ideal cell's first)
                 validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
         pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / args.file, index=False)
         by_k, _ = split(verdicts)
-        print(f"{folder.name} ({time.perf_counter() - t0:.0f} s): " + "; ".join(v.line() for v in by_k.values()), flush=True)
+        print(
+            f"{folder.name} ({time.perf_counter() - t0:.0f} s): " + "; ".join(v.line() for v in by_k.values()),
+            flush=True,
+        )
 
 
 def table(args) -> None:
@@ -116,19 +144,32 @@ def table(args) -> None:
 
     folders = _folders(args.out, set(PARTS))
     remade = args.remade_file and any((folder / args.remade_file).is_file() for folder in folders.values())
-    print("| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |"
-          + (" held out, choices remade |" if remade else ""))  # fmt: skip
+    print(
+        "| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |"
+        + (" held out, choices remade |" if remade else "")
+    )
     print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |" + (" --- |" if remade else ""))
     for name, folder in folders.items():
         by_k, _ = split(load_result(folder).confident)
-        held = [split(read_verdicts(folder / file))[0] for file in ([args.file] + ([args.remade_file] if remade else []))]
+        held = [
+            split(read_verdicts(folder / file))[0] for file in ([args.file] + ([args.remade_file] if remade else []))
+        ]
         for k, v in by_k.items():
             axes = [f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.hand)]
-            others = [f"{h.decision} {h.score.estimate:.2f}x [{h.score.low:.2f}, {h.score.high:.2f}] ({h.n_draws})" if h else "-"
-                      for h in (by.get(k) for by in held)]  # fmt: skip
+            others = [
+                f"{h.decision} {h.score.estimate:.2f}x [{h.score.low:.2f}, {h.score.high:.2f}] ({h.n_draws})"
+                if h
+                else "-"
+                for h in (by.get(k) for by in held)
+            ]
             s = v.score
-            print(f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}] | "
-                  + " | ".join(axes) + f" | {v.n_draws} | " + " | ".join(others) + " |")  # fmt: skip
+            print(
+                f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}] | "
+                + " | ".join(axes)
+                + f" | {v.n_draws} | "
+                + " | ".join(others)
+                + " |"
+            )
 
 
 def draws(args) -> None:
@@ -145,7 +186,9 @@ def draws(args) -> None:
     print("| --- | ---: | ---: | --- | ---: |")
     for name, folder in _folders(args.out, set(PARTS)).items():
         result = load_result(folder)
-        rules = Rules(replicates=1, statistic=objective_from_table(tomllib.loads(result.config.objective_file)).statistic)
+        rules = Rules(
+            replicates=1, statistic=objective_from_table(tomllib.loads(result.config.objective_file)).statistic
+        )
         stored = [folder / "validation"] + sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:]))
         v = result.validation
         loaded = functools.cache(load_result)  # a nested group's evaluation serves each of its k
@@ -162,7 +205,11 @@ def draws(args) -> None:
 
 def _folders(outs: str, wanted: set) -> dict[str, Path]:
     """Part name → its search folder: the first of the comma-separated ``outs`` that holds one, in PARTS' order."""
-    held = {name: [Path(out) / name for out in outs.split(",") if (Path(out) / name / "verdict.csv").is_file()] for name in PARTS if name in wanted}
+    held = {
+        name: [Path(out) / name for out in outs.split(",") if (Path(out) / name / "verdict.csv").is_file()]
+        for name in PARTS
+        if name in wanted
+    }
     return {name: folders[0] for name, folders in held.items() if folders}
 
 
@@ -176,13 +223,32 @@ def main() -> None:
     ap.add_argument("--offset", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--report", action="store_true", help="run: write each search's report")
-    ap.add_argument("--search-config", default=None, help="run: a TOML of [search] settings over the budget's (optipose search --search-config)")
-    ap.add_argument("--verdict-time", type=float, default=None, help="holdout: the race's seconds (default: the search's; 0: draws alone)")
+    ap.add_argument(
+        "--search-config",
+        default=None,
+        help="run: a TOML of [search] settings over the budget's (optipose search --search-config)",
+    )
+    ap.add_argument(
+        "--verdict-time",
+        type=float,
+        default=None,
+        help="holdout: the race's seconds (default: the search's; 0: draws alone)",
+    )
     ap.add_argument("--draws", type=int, default=0, help="holdout: the race's draws at most (default: the search's)")
-    ap.add_argument("--choices", choices=("kept", "remade"), default="kept",
-                    help="holdout: each layout's subset per axis as the search chose it, or chosen again on the held-out validation")
-    ap.add_argument("--remade-file", default="holdout-remade.csv", help="table: the held-out verdicts with choices remade, a column where present")
-    ap.add_argument("--file", default="holdout.csv", help="holdout: the file each folder's verdicts go to; table: the file read")
+    ap.add_argument(
+        "--choices",
+        choices=("kept", "remade"),
+        default="kept",
+        help="holdout: each layout's subset per axis as the search chose it, or chosen again on the held-out validation",
+    )
+    ap.add_argument(
+        "--remade-file",
+        default="holdout-remade.csv",
+        help="table: the held-out verdicts with choices remade, a column where present",
+    )
+    ap.add_argument(
+        "--file", default="holdout.csv", help="holdout: the file each folder's verdicts go to; table: the file read"
+    )
     ap.add_argument("--out", default=str(ROOT / "results" / "verdict-study"))
     args = ap.parse_args()
     {"run": run, "holdout": holdout, "table": table, "draws": draws}[args.what](args)

@@ -51,7 +51,9 @@ def reading(path: str | Path) -> Iterator[Path]:
         raise
     except FileNotFoundError:
         raise ConfigError(f"{path}: missing (the folder is incomplete)") from None
-    except Exception as exc:  # pyarrow's ArrowInvalid and OSError, pandas' ParserError, zipfile's BadZipFile, KeyError, ...
+    except (
+        Exception
+    ) as exc:  # pyarrow's ArrowInvalid and OSError, pandas' ParserError, zipfile's BadZipFile, KeyError, ...
         text = str(exc).strip().splitlines()
         reason = text[0][:120] if text else type(exc).__name__
         reason = f"no {reason}" if isinstance(exc, KeyError) else reason  # a column or key it should have

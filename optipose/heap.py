@@ -33,4 +33,5 @@ def keep_freed_memory() -> bool:
         return False
     os.environ.update({name: str(value) for name, value in HEAP_VARIABLES.items()})
     return bool(mallopt(_M_MMAP_THRESHOLD, HEAP_VARIABLES["MALLOC_MMAP_THRESHOLD_"])) and bool(
-        mallopt(_M_TRIM_THRESHOLD, HEAP_VARIABLES["MALLOC_TRIM_THRESHOLD_"]))
+        mallopt(_M_TRIM_THRESHOLD, HEAP_VARIABLES["MALLOC_TRIM_THRESHOLD_"])
+    )

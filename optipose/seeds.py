@@ -10,7 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["derived_seed", "selection_seed", "validation_seed", "nominal_reference_seed", "group_seed", "mounting_seed", "zeroing_seed", "verdict_seed"]
+__all__ = [
+    "derived_seed",
+    "selection_seed",
+    "validation_seed",
+    "nominal_reference_seed",
+    "group_seed",
+    "mounting_seed",
+    "zeroing_seed",
+    "verdict_seed",
+]
 
 _SELECTION = 0x5E1EC7
 _VALIDATION = 0x7A11D

@@ -22,8 +22,14 @@ FENCE = re.compile(r"^(```|~~~)")
 
 def doc_files(root: Path = ROOT) -> list[Path]:
     """The pages whose links are checked: README.md, docs/*.md, ARCHITECTURE.md, CHANGELOG.md, benchmarks/README.md."""
-    names = ["README.md", "ARCHITECTURE.md", "CHANGELOG.md", "benchmarks/README.md", "results/README.md",
-             "results/reference/README.md"]  # fmt: skip
+    names = [
+        "README.md",
+        "ARCHITECTURE.md",
+        "CHANGELOG.md",
+        "benchmarks/README.md",
+        "results/README.md",
+        "results/reference/README.md",
+    ]
     files = [root / n for n in names if (root / n).is_file()]
     return files + sorted((root / "docs").glob("*.md"))
 
@@ -95,12 +101,17 @@ def allowed(path: str) -> bool:
     """Where session numbers and commit hashes may stay: the changelog and result data."""
     if path == "CHANGELOG.md" or path == "uv.lock" or path.startswith("benchmarks/results/"):
         return True
-    return path.startswith(("results/reference/", "results/verdict-study/", "results/verdict-quick/")) and Path(path).name != "README.md"
+    return (
+        path.startswith(("results/reference/", "results/verdict-study/", "results/verdict-quick/"))
+        and Path(path).name != "README.md"
+    )
 
 
 def check_history(root: Path = ROOT) -> list[str]:
     """``git grep -nE HISTORY_PATTERN`` outside the allowed places (tracked and staged files)."""
-    run = subprocess.run(["git", "grep", "--untracked", "-nIE", HISTORY_PATTERN], cwd=root, capture_output=True, text=True)
+    run = subprocess.run(
+        ["git", "grep", "--untracked", "-nIE", HISTORY_PATTERN], cwd=root, capture_output=True, text=True
+    )
     if run.returncode not in (0, 1):
         return [f"git grep failed: {run.stderr.strip()}"]
     hits = [line for line in run.stdout.splitlines() if not allowed(line.split(":", 1)[0])]

@@ -31,8 +31,12 @@ def variants():
     noisy = replace(paper, conditions=ConditionsConfig(noise_scales=(5.0,)))
     shaken = replace(paper, protocol=replace(paper.protocol, kind="random", count=40, range_offset=(1e-3, 1e-3, 1e-3)))
     coarse = replace(paper, registration=replace(paper.registration, voxel_size=1e-3))
-    return [("the nominal objective, held-out seed", paper), ("sensor noise 5x the preset", noisy),
-            ("40 random orientations in +-2 deg, +-1 mm offsets", shaken), ("1 mm voxels instead of 0.5 mm", coarse)]
+    return [
+        ("the nominal objective, held-out seed", paper),
+        ("sensor noise 5x the preset", noisy),
+        ("40 random orientations in +-2 deg, +-1 mm offsets", shaken),
+        ("1 mm voxels instead of 0.5 mm", coarse),
+    ]
 
 
 def main() -> None:

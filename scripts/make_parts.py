@@ -120,11 +120,15 @@ def _u_outline() -> list:
     w2, h, t, ri = C_WIDTH_MM / 2, C_HEIGHT_MM, C_SHEET_MM, C_BEND_INNER_RADIUS_MM
     ro, c = ri + t, w2 - ri - t  # outer radius; |y| of the bend centres
     return [
-        *_arc((c, ro), ro, -90.0, 0.0), (w2, h), (w2 - t, h),
+        *_arc((c, ro), ro, -90.0, 0.0),
+        (w2, h),
+        (w2 - t, h),
         *_arc((c, ro), ri, 0.0, -90.0),
-        *_arc((-c, ro), ri, -90.0, -180.0), (-w2 + t, h), (-w2, h),
+        *_arc((-c, ro), ri, -90.0, -180.0),
+        (-w2 + t, h),
+        (-w2, h),
         *_arc((-c, ro), ro, 180.0, 270.0),
-    ]  # fmt: skip
+    ]
 
 
 def build_part_c():

@@ -46,7 +46,9 @@ def build_bushing():
     from manifold3d import Manifold
 
     (fd, fh), (hd, hh), r = BUSH_FLANGE, BUSH_HUB, BUSH_FLANGE[0] / 2
-    body = Manifold.cylinder(fh, fd / 2, fd / 2, mp.HOLE_SEGMENTS) + Manifold.cylinder(fh + hh, hd / 2, hd / 2, mp.HOLE_SEGMENTS)
+    body = Manifold.cylinder(fh, fd / 2, fd / 2, mp.HOLE_SEGMENTS) + Manifold.cylinder(
+        fh + hh, hd / 2, hd / 2, mp.HOLE_SEGMENTS
+    )
     body -= mp._hole(0.0, 0.0, -1.0, fh + hh + 2.0, BUSH_BORE)
     for a in np.deg2rad([45.0, 135.0, 225.0, 315.0]):
         body -= mp._hole(BUSH_BOLTS[1] / 2 * np.cos(a), BUSH_BOLTS[1] / 2 * np.sin(a), -1.0, fh + 2.0, BUSH_BOLTS[0])
@@ -58,7 +60,15 @@ def _angle_outline() -> list:
     w2, t, ri, up = ANGLE_BASE / 2, ANGLE_SHEET, ANGLE_RADIUS, ANGLE_UP
     ro = ri + t
     c = (-w2 + ro, ro)  # the bend's centre
-    return [(w2, 0.0), (w2, t), (c[0], t), *mp._arc(c, ri, 270.0, 180.0), (-w2 + t, up), (-w2, up), *mp._arc(c, ro, 180.0, 270.0)]
+    return [
+        (w2, 0.0),
+        (w2, t),
+        (c[0], t),
+        *mp._arc(c, ri, 270.0, 180.0),
+        (-w2 + t, up),
+        (-w2, up),
+        *mp._arc(c, ro, 180.0, 270.0),
+    ]
 
 
 def build_angle():
@@ -67,8 +77,12 @@ def build_angle():
     body = mp._extrude_yz(_angle_outline(), 0.0, ANGLE_LENGTH)
     for x in (15.0, 45.0):
         body -= mp._hole(x, 8.0, -1.0, ANGLE_SHEET + 2.0, ANGLE_HOLE)
-    cutter = Manifold.cylinder(ANGLE_SHEET + 2.0, ANGLE_HOLE / 2, ANGLE_HOLE / 2, mp.HOLE_SEGMENTS).rotate((-90.0, 0.0, 0.0))
-    return body - cutter.translate((ANGLE_LENGTH / 2, -ANGLE_BASE / 2 - 1.0, 22.0))  # its axis along y, through the upright
+    cutter = Manifold.cylinder(ANGLE_SHEET + 2.0, ANGLE_HOLE / 2, ANGLE_HOLE / 2, mp.HOLE_SEGMENTS).rotate(
+        (-90.0, 0.0, 0.0)
+    )
+    return body - cutter.translate(
+        (ANGLE_LENGTH / 2, -ANGLE_BASE / 2 - 1.0, 22.0)
+    )  # its axis along y, through the upright
 
 
 def build_housing():
@@ -77,7 +91,9 @@ def build_housing():
     body -= mp._box((L / 2 - pl / 2, -pw / 2, H - pd), (L / 2 + pl / 2, pw / 2, H + 1.0))
     from manifold3d import Manifold
 
-    body += Manifold.cylinder(pd - 4.0, HOUSING_BOSS / 2, HOUSING_BOSS / 2, mp.HOLE_SEGMENTS).translate((L / 2 + 10.0, 0.0, H - pd))
+    body += Manifold.cylinder(pd - 4.0, HOUSING_BOSS / 2, HOUSING_BOSS / 2, mp.HOLE_SEGMENTS).translate(
+        (L / 2 + 10.0, 0.0, H - pd)
+    )
     d, inset = HOUSING_HOLE
     for x in (inset, L - inset):
         for y in (-W / 2 + inset, W / 2 - inset):
@@ -86,13 +102,28 @@ def build_housing():
 
 
 PARTS = {
-    "bushing": (build_bushing, "milled-aluminium-ra1.6", "milled", "milled aluminium flanged bushing: a D50 x 10 mm flange "
-                "under a D30 x 22 mm hub, a D16 bore, four D6.6 bolt holes on a D40 circle"),
-    "angle": (build_angle, "smooth-steel", "bent-sheet", "bent 2 mm steel sheet angle: a 60 x 50 mm base and a 35 mm "
-              "upright bent at 90 deg (inner radius 2 mm), two D8.5 holes in the base, one in the upright"),
-    "housing": (build_housing, "black-pla", "fdm", "FDM-printed PLA housing: a 70 x 45 x 24 mm block, a 50 x 29 x 14 mm "
-                "pocket open at the top, a D10 boss standing in it, four D3.4 corner holes"),
-}  # fmt: skip
+    "bushing": (
+        build_bushing,
+        "milled-aluminium-ra1.6",
+        "milled",
+        "milled aluminium flanged bushing: a D50 x 10 mm flange "
+        "under a D30 x 22 mm hub, a D16 bore, four D6.6 bolt holes on a D40 circle",
+    ),
+    "angle": (
+        build_angle,
+        "smooth-steel",
+        "bent-sheet",
+        "bent 2 mm steel sheet angle: a 60 x 50 mm base and a 35 mm "
+        "upright bent at 90 deg (inner radius 2 mm), two D8.5 holes in the base, one in the upright",
+    ),
+    "housing": (
+        build_housing,
+        "black-pla",
+        "fdm",
+        "FDM-printed PLA housing: a 70 x 45 x 24 mm block, a 50 x 29 x 14 mm "
+        "pocket open at the top, a D10 boss standing in it, four D3.4 corner holes",
+    ),
+}
 
 
 def part_toml(name: str, mesh) -> str:
@@ -102,12 +133,12 @@ def part_toml(name: str, mesh) -> str:
     centre = (lo + hi) / 2
     return (
         f"# {name}: a part of the verdict study, built by scripts/make_study_parts.py (no hand layout: the\n"
-        f"# conventional placement is the baseline).\n\n[part]\nname = \"{name}\"\n"
-        f"description = \"{description}\"\nmesh = \"{name}.stl\"\nunits = \"m\"\nmaterial = \"{material}\"\n"
-        f"process = \"{process}\"\nsensor = \"keyence-lj-x8080\"\nscan_length_mm = {hi[0] - lo[0]:.1f}\nscan_step_mm = 0.5\n"
+        f'# conventional placement is the baseline).\n\n[part]\nname = "{name}"\n'
+        f'description = "{description}"\nmesh = "{name}.stl"\nunits = "m"\nmaterial = "{material}"\n'
+        f'process = "{process}"\nsensor = "keyence-lj-x8080"\nscan_length_mm = {hi[0] - lo[0]:.1f}\nscan_step_mm = 0.5\n'
         f"rotation_centre_mm = [{centre[0]:.2f}, {centre[1]:.2f}, {centre[2]:.2f}]\n\n"
-        f"[[keepout]]\nname = \"flange\"\nmin_mm = [{lo[0] - 20:.1f}, -40.0, -50.0]\nmax_mm = [{hi[0] + 20:.1f}, 40.0, 0.0]\n"
-    )  # fmt: skip
+        f'[[keepout]]\nname = "flange"\nmin_mm = [{lo[0] - 20:.1f}, -40.0, -50.0]\nmax_mm = [{hi[0] + 20:.1f}, 40.0, 0.0]\n'
+    )
 
 
 def main(argv: list[str]) -> None:
@@ -118,7 +149,9 @@ def main(argv: list[str]) -> None:
         mesh = mp.to_trimesh(build())
         mesh.export(folder / f"{name}.stl")
         (folder / "part.toml").write_text(part_toml(name, mesh))
-        print(f"{folder / (name + '.stl')}: {len(mesh.faces)} faces, watertight {mesh.is_watertight}, {mesh.volume * 1e9:.1f} mm^3")
+        print(
+            f"{folder / (name + '.stl')}: {len(mesh.faces)} faces, watertight {mesh.is_watertight}, {mesh.volume * 1e9:.1f} mm^3"
+        )
 
 
 if __name__ == "__main__":

@@ -23,14 +23,20 @@ def cells(choice) -> str:
 
 
 def main(folders: list[str]) -> None:
-    print("| part | k | layout | roll (mdeg) | pitch (mdeg) | yaw (mdeg) | score (mdeg) | hand / found | every axis no worse |")
+    print(
+        "| part | k | layout | roll (mdeg) | pitch (mdeg) | yaw (mdeg) | score (mdeg) | hand / found | every axis no worse |"
+    )
     print("| --- | --- | --- | --- | --- | --- | ---: | ---: | --- |")
     for folder in folders:
         result = load_result(folder)
         for v in result.verdicts():
-            print(f"| {result.part} | {v.k} | found {v.found.name} | {cells(v.found)} | {mdeg(v.found.score):.3f} | "
-                  f"{v.ratio:.2f}x | {'yes' if v.no_worse else 'no'} |")  # fmt: skip
-            print(f"| {result.part} | {v.k} | hand {v.reference.name} | {cells(v.reference)} | {mdeg(v.reference.score):.3f} |  |  |")
+            print(
+                f"| {result.part} | {v.k} | found {v.found.name} | {cells(v.found)} | {mdeg(v.found.score):.3f} | "
+                f"{v.ratio:.2f}x | {'yes' if v.no_worse else 'no'} |"
+            )
+            print(
+                f"| {result.part} | {v.k} | hand {v.reference.name} | {cells(v.reference)} | {mdeg(v.reference.score):.3f} |  |  |"
+            )
         lines = result.verdict_lines()
         if lines and lines[-1].startswith("one found sensor"):
             print(f"<!-- {result.part}: {lines[-1]} -->")
@@ -51,8 +57,16 @@ def band(folders: list[str]) -> None:
     print("| condition | " + " | ".join(f"{part} k={v.k}" for part, v in columns) + " |")
     print("| --- |" + " ---: |" * len(columns))
     for row in zip(*(v.levels() for _, v in columns)):
-        print(f"| {row[0][0]} | " + " | ".join(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row) + " |")
-    print("| **worst over the band** | " + " | ".join(f"**{v.ratio:.2f}{'' if v.no_worse else '*'}**" for _, v in columns) + " |")
+        print(
+            f"| {row[0][0]} | "
+            + " | ".join(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row)
+            + " |"
+        )
+    print(
+        "| **worst over the band** | "
+        + " | ".join(f"**{v.ratio:.2f}{'' if v.no_worse else '*'}**" for _, v in columns)
+        + " |"
+    )
 
 
 if __name__ == "__main__":

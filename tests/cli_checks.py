@@ -19,7 +19,9 @@ confirm_candidates = 0
 
 
 def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "optipose", *args], capture_output=True, text=True, cwd=cwd, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "optipose", *args], capture_output=True, text=True, cwd=cwd, timeout=120
+    )
 
 
 def assert_one_line_error(result, fragment):

@@ -32,14 +32,18 @@ from optipose.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = REPO / "studies" / "tiny-protocol.toml"
-RESULTS = ["sensors_used", "score_deg"] + [f"{a}_{s}" for a in ("roll", "pitch", "yaw") for s in ("median_deg", "p75_deg", "subset")]
+RESULTS = ["sensors_used", "score_deg"] + [
+    f"{a}_{s}" for a in ("roll", "pitch", "yaw") for s in ("median_deg", "p75_deg", "subset")
+]
 
 
 def _study_file(folder: Path, parts: list[str], sensors=(1, 2), seeds=(0, 1)) -> Path:
     (folder / "broken.stl").write_text("this is not an stl file\n")
     path = folder / "study.toml"
-    path.write_text(f'name = "t"\n[grid]\nparts = {parts!r}\ntasks = ["evaluate"]\nobjectives = ["{TINY}"]\n'
-                    f"sensors = {list(sensors)!r}\nseeds = {list(seeds)!r}\n".replace("'", '"'))  # fmt: skip
+    path.write_text(
+        f'name = "t"\n[grid]\nparts = {parts!r}\ntasks = ["evaluate"]\nobjectives = ["{TINY}"]\n'
+        f"sensors = {list(sensors)!r}\nseeds = {list(seeds)!r}\n".replace("'", '"')
+    )
     return path
 
 
@@ -50,8 +54,17 @@ def study(tmp_path_factory):
 
 # -- the study file ---------------------------------------------------------------------------------------
 def test_a_grid_is_every_combination_and_budgets_belong_to_searches(tmp_path):
-    spec = study_from_table({"grid": {"parts": ["part_a", "part_b"], "tasks": ["search", "evaluate"], "sensors": [1, 3],
-                                      "budgets": ["quick", "default"], "seeds": [0, 7]}})  # fmt: skip
+    spec = study_from_table(
+        {
+            "grid": {
+                "parts": ["part_a", "part_b"],
+                "tasks": ["search", "evaluate"],
+                "sensors": [1, 3],
+                "budgets": ["quick", "default"],
+                "seeds": [0, 7],
+            }
+        }
+    )
     # 2 parts x 2 k x 2 seeds x (2 budgets for search + 1 for evaluate)
     assert len(spec.trials) == 2 * 2 * 2 * 3
     assert {t.budget for t in spec.trials if t.task == "evaluate"} == {""}
@@ -134,7 +147,9 @@ def test_complete_rows_are_the_evaluators_own_answer(serial_index):
 
     result = evaluate(load_part("part_c"), objective=str(TINY), seed=1, jobs=1)
     for k in (1, 2):
-        row = serial_index[(serial_index.part == "part_c") & (serial_index.sensors == k) & (serial_index.seed == 1)].iloc[0]
+        row = serial_index[
+            (serial_index.part == "part_c") & (serial_index.sensors == k) & (serial_index.seed == 1)
+        ].iloc[0]
         choice = result.table[k - 1]
         assert row.sensors_used == choice.name
         assert row.score_deg == pytest.approx(np.rad2deg(choice.score), rel=1e-12)
@@ -169,11 +184,21 @@ def test_the_summary_groups_trials_per_part_and_setting(serial_index):
 
 def test_the_study_command_prints_the_table_and_refuses_other_folders(serial, tmp_path):
     folder, index = serial
-    shown = subprocess.run([sys.executable, "-m", "optipose", "study", folder], capture_output=True, text=True, timeout=120,
-                           env={**os.environ, "COLUMNS": "120"})  # fmt: skip
+    shown = subprocess.run(
+        [sys.executable, "-m", "optipose", "study", folder],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "COLUMNS": "120"},
+    )
     assert shown.returncode == 0, shown.stderr
     rows = [line.split() for line in shown.stdout.splitlines() if line.strip().startswith(("part_c", "broken"))]
-    assert [(r[0], r[3], r[4]) for r in rows] == [("part_c", "1", "2/2"), ("part_c", "2", "2/2"), ("broken", "1", "0/2"), ("broken", "2", "0/2")]
+    assert [(r[0], r[3], r[4]) for r in rows] == [
+        ("part_c", "1", "2/2"),
+        ("part_c", "2", "2/2"),
+        ("broken", "1", "0/2"),
+        ("broken", "2", "0/2"),
+    ]
     score = index[(index.part == "part_c") & (index.sensors == 1)].score_deg.median()
     assert rows[0][5] == f"{1e3 * score:.2f}"  # mdeg, the median over the seeds
     page = (Path(folder) / "study.html").read_text()  # the study report: the table above, then one row per trial
@@ -182,11 +207,19 @@ def test_the_study_command_prints_the_table_and_refuses_other_folders(serial, tm
     assert page.index("Per part and setting") < page.index('id="trials"') and f">{1e3 * score:.2f}<" in page
     assert trials.count("<tr") == len(index) + 1 and all(f'href="#trial-{key}"' in trials for key in index.key)
     assert all(f'<details id="trial-{key}">' in page for key in index.key)  # each with all of its columns
-    other = subprocess.run([sys.executable, "-m", "optipose", "study", tmp_path], capture_output=True, text=True, timeout=120)
-    assert other.returncode == 2 and other.stderr.startswith("optipose: error:") and "not an optipose study" in other.stderr
+    other = subprocess.run(
+        [sys.executable, "-m", "optipose", "study", tmp_path], capture_output=True, text=True, timeout=120
+    )
+    assert (
+        other.returncode == 2
+        and other.stderr.startswith("optipose: error:")
+        and "not an optipose study" in other.stderr
+    )
     # `optipose report` on a study folder writes the same study report
     (Path(folder) / "study.html").unlink()
-    made = subprocess.run([sys.executable, "-m", "optipose", "report", folder], capture_output=True, text=True, timeout=120)
+    made = subprocess.run(
+        [sys.executable, "-m", "optipose", "report", folder], capture_output=True, text=True, timeout=120
+    )
     assert made.returncode == 0, made.stderr
     assert (Path(folder) / "study.html").read_text() == page and (Path(folder) / "study.md").is_file()
 
@@ -210,13 +243,25 @@ class _DyingPool(SerialPool):
 
 
 def test_a_dead_worker_costs_its_trial_one_retry_then_it_fails(tmp_path):
-    spec = study_from_table({"grid": {"parts": ["part_c"], "tasks": ["evaluate"], "objectives": [str(TINY)], "sensors": [1], "seeds": [0, 1, 2]}})
+    spec = study_from_table(
+        {
+            "grid": {
+                "parts": ["part_c"],
+                "tasks": ["evaluate"],
+                "objectives": [str(TINY)],
+                "sensors": [1],
+                "seeds": [0, 1, 2],
+            }
+        }
+    )
     once, twice, fine = (t.key for t in spec.trials)
     pool = _DyingPool(tmp_path / "t", {once: 1, twice: 2})
     index = run_study(spec, tmp_path / "t", pool).frame().set_index("key")
     assert pool.runs == {once: 2, twice: 2, fine: 1}
     assert (index.loc[once, "state"], index.loc[fine, "state"]) == ("complete", "complete")
-    assert index.loc[twice, "state"] == "failed" and index.loc[twice, "error"].startswith("worker died: BrokenProcessPool")
+    assert index.loc[twice, "state"] == "failed" and index.loc[twice, "error"].startswith(
+        "worker died: BrokenProcessPool"
+    )
     assert sorted(p.name for p in (tmp_path / "t" / "trials").iterdir()) == sorted([once, fine])
 
 
@@ -229,9 +274,15 @@ def _sigint_as_in_a_terminal() -> None:
 
 
 def _batch(*args, **kw):
-    return subprocess.Popen([sys.executable, "-m", "optipose", "batch", *map(str, args)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=_sigint_as_in_a_terminal, **kw)  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-m", "optipose", "batch", *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=_sigint_as_in_a_terminal,
+        **kw,
+    )
 
 
 def _wait_for_complete(folder: Path, proc, n: int, timeout: float = 240.0) -> pd.DataFrame:
@@ -272,8 +323,12 @@ def test_a_killed_study_resumes_without_redoing_or_duplicating_trials(tmp_path, 
     before = _finished_trials(folder)
     assert 1 <= len(before) < 6, "the study should have been stopped part-way"
 
-    resumed = subprocess.run([sys.executable, "-m", "optipose", "batch", study_file, "--out", folder, "--resume", "--jobs", "1"],
-                             capture_output=True, text=True, timeout=600)  # fmt: skip
+    resumed = subprocess.run(
+        [sys.executable, "-m", "optipose", "batch", study_file, "--out", folder, "--resume", "--jobs", "1"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert resumed.returncode == 0, resumed.stderr
     index = read_index(folder)
     assert len(index) == 6 and index.key.is_unique and (index.state == "complete").all()
@@ -295,15 +350,28 @@ def test_a_killed_study_resumes_without_redoing_or_duplicating_trials(tmp_path, 
         ('name = "t"\n[grid]\nparts = ["part_c"]\nsensors = []\n', [], "grid.sensors is empty"),
         ('name = "t"\n[grid]\nparts = ["part_q"]\n', [], "unknown part 'part_q'"),
         ('name = "t"\n[grid\n', [], "study file"),
-        ('name = "t"\n[grid]\nparts = ["part_c"]\n', ["--backend", "dask", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask scheduler"),
+        (
+            'name = "t"\n[grid]\nparts = ["part_c"]\n',
+            ["--backend", "dask", "--scheduler", "tcp://127.0.0.1:9"],
+            "cannot reach the Dask scheduler",
+        ),
         ('name = "t"\n[grid]\nparts = ["part_c"]\n', ["--backend", "spark"], "unknown back-end 'spark'"),
-        ('name = "t"\n[grid]\nparts = ["part_c"]\n', ["--scheduler", "tcp://127.0.0.1:9"], "--scheduler needs --backend dask"),
+        (
+            'name = "t"\n[grid]\nparts = ["part_c"]\n',
+            ["--scheduler", "tcp://127.0.0.1:9"],
+            "--scheduler needs --backend dask",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_nothing_is_written(tmp_path, text, args, fragment):
     (tmp_path / "s.toml").write_text(text)
-    result = subprocess.run([sys.executable, "-m", "optipose", "batch", "s.toml", "--out", "out", *args],
-                            capture_output=True, text=True, cwd=tmp_path, timeout=120)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-m", "optipose", "batch", "s.toml", "--out", "out", *args],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert lines[0].startswith("optipose: error:") and fragment in lines[0], lines[0]
@@ -314,8 +382,13 @@ def test_an_existing_study_is_not_overwritten_without_resume(tmp_path):
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "index.parquet").write_bytes(b"old")
     (tmp_path / "s.toml").write_text('name = "t"\n[grid]\nparts = ["part_c"]\n')
-    result = subprocess.run([sys.executable, "-m", "optipose", "batch", "s.toml", "--out", "out"],
-                            capture_output=True, text=True, cwd=tmp_path, timeout=120)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-m", "optipose", "batch", "s.toml", "--out", "out"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
     assert result.returncode == 2 and "--resume" in result.stderr and "Traceback" not in result.stderr
     assert (tmp_path / "out" / "index.parquet").read_bytes() == b"old"
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["index.parquet"]
@@ -337,10 +410,18 @@ def test_search_and_robustness_trials_report_their_folders(tmp_path):
     from optipose.model.part import load_part
 
     band = tmp_path / "band.toml"  # the 6-scan protocol under two noise levels
-    band.write_text(TINY.read_text().replace('name = "tiny"', 'name = "band"') + "\n[conditions]\nnoise_scale = [1.0, 3.0]\n")
-    spec = study_from_table({"trials": [{"part": "part_c", "task": "search", "sensors": 1, "budget": "quick", "seed": 3},
-                                        {"part": "part_c", "task": "robustness", "objective": "band.toml", "sensors": 2}]},
-                            base=tmp_path)  # fmt: skip
+    band.write_text(
+        TINY.read_text().replace('name = "tiny"', 'name = "band"') + "\n[conditions]\nnoise_scale = [1.0, 3.0]\n"
+    )
+    spec = study_from_table(
+        {
+            "trials": [
+                {"part": "part_c", "task": "search", "sensors": 1, "budget": "quick", "seed": 3},
+                {"part": "part_c", "task": "robustness", "objective": "band.toml", "sensors": 2},
+            ]
+        },
+        base=tmp_path,
+    )
     index = run_study(spec, tmp_path / "t", SerialPool()).frame().set_index("task")
     assert (index.state == "complete").all(), index.error
 
@@ -361,8 +442,12 @@ def test_search_and_robustness_trials_report_their_folders(tmp_path):
 
 def test_no_report_leaves_the_study_without_its_report(tmp_path):
     study_file = _study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0,))
-    done = subprocess.run([sys.executable, "-m", "optipose", "batch", study_file, "--out", tmp_path / "out", "--no-report"],
-                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-m", "optipose", "batch", study_file, "--out", tmp_path / "out", "--no-report"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "out" / "index.parquet").is_file() and not (tmp_path / "out" / "study.html").exists()
 
@@ -385,14 +470,18 @@ def test_a_ctrl_c_a_trial_kept_to_itself_still_stops_the_study(tmp_path, monkeyp
                 raise SystemError("returned a result with an exception set") from exc
         return SimpleNamespace(outcome=SimpleNamespace(interrupted=False), band_interrupted=True, validated=True)
 
-    monkeypatch.setattr(trial_module, "cap_threads", lambda threads: None)  # this process's thread caps stay as they are
+    monkeypatch.setattr(
+        trial_module, "cap_threads", lambda threads: None
+    )  # this process's thread caps stay as they are
     if how == "numba":
         monkeypatch.setitem(trial_module.TASK_RUNNERS, "evaluate", interrupted)
     else:
         import optipose.search.pipeline as pipeline
 
         monkeypatch.setattr(pipeline, "run", interrupted)
-    spec = TrialSpec("part_c", "evaluate" if how == "numba" else "search", "paper", 1, "" if how == "numba" else "quick", 0)
+    spec = TrialSpec(
+        "part_c", "evaluate" if how == "numba" else "search", "paper", 1, "" if how == "numba" else "quick", 0
+    )
     with pytest.raises(KeyboardInterrupt):
         trial_module.run_trial(spec, str(tmp_path), Plan(workers=1, trial_jobs=1, threads=1))
     assert not any((tmp_path / "trials").iterdir())  # nothing half-written stays behind
@@ -420,7 +509,11 @@ def test_a_ctrl_c_a_trial_swallowed_whole_still_stops_the_study(tmp_path, monkey
         signal.signal(signal.SIGINT, signal.default_int_handler)
         errors.note_interrupts()
         with pytest.raises(KeyboardInterrupt):
-            run_study(load_study(_study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0, 1))), tmp_path / "out", SerialPool())
+            run_study(
+                load_study(_study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0, 1))),
+                tmp_path / "out",
+                SerialPool(),
+            )
     finally:
         signal.signal(signal.SIGINT, before)
     index = read_index(tmp_path / "out")

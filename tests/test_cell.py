@@ -14,7 +14,14 @@ import trimesh
 from cli_checks import assert_one_line_error, run
 from optipose.cell.asmade import AsMade, Process
 from optipose.cell.config import CELLS_DIR, IDEAL, Cell, load_cell, load_process, process_names
-from optipose.cell.robot import CalibrationErrors, RobotErrors, calibrated_poses, gauss_markov, orientation_error, path_draw
+from optipose.cell.robot import (
+    CalibrationErrors,
+    RobotErrors,
+    calibrated_poses,
+    gauss_markov,
+    orientation_error,
+    path_draw,
+)
 from optipose.cell.scans import CellSetup, LiveCell
 from optipose.errors import ConfigError
 from optipose.evaluate.compare import Verdict
@@ -92,13 +99,18 @@ def _zero_file(tmp_path, scale=0.0):
     return path
 
 
-@pytest.mark.parametrize("which", ["Cell()", "ideal", "cells/ideal.toml", "zero file, part cad", "zero file, fdm scaled by 0"])
+@pytest.mark.parametrize(
+    "which", ["Cell()", "ideal", "cells/ideal.toml", "zero file, part cad", "zero file, fdm scaled by 0"]
+)
 def test_every_source_at_zero_is_the_ideal_cell_exactly(plain_part, ideal_errors, tmp_path, which):
     part = plain_part
-    cell = {"Cell()": lambda: Cell(name="zero"), "ideal": lambda: load_cell("ideal"),
-            "cells/ideal.toml": lambda: load_cell(CELLS_DIR / "ideal.toml"),
-            "zero file, part cad": lambda: load_cell(_zero_file(tmp_path, 1.0)),
-            "zero file, fdm scaled by 0": lambda: load_cell(_zero_file(tmp_path, 0.0))}[which]()  # fmt: skip
+    cell = {
+        "Cell()": lambda: Cell(name="zero"),
+        "ideal": lambda: load_cell("ideal"),
+        "cells/ideal.toml": lambda: load_cell(CELLS_DIR / "ideal.toml"),
+        "zero file, part cad": lambda: load_cell(_zero_file(tmp_path, 1.0)),
+        "zero file, fdm scaled by 0": lambda: load_cell(_zero_file(tmp_path, 0.0)),
+    }[which]()
     if which.startswith("zero file"):  # every source asked for, every magnitude nought
         assert cell.as_made and cell.material and not cell.ideal
         if "fdm" in which:
@@ -143,7 +155,9 @@ def test_a_form_deviation_has_the_rms_asked_for(part_b_arrays):
     mesh, v, f, plane = part_b_arrays
     rms, band = 50e-6, (0.010, 0.040)
     points, _ = trimesh.sample.sample_surface(mesh, 20000, seed=3)
-    draws = [_form(AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, plane, seed), points) for seed in range(8)]
+    draws = [
+        _form(AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, plane, seed), points) for seed in range(8)
+    ]
     # over the part's surface, several parts as made: within 10 %
     assert np.sqrt(np.mean(np.square(draws))) == pytest.approx(rms, rel=0.10)
     # one draw over a region many wavelengths across: the RMS over space the model promises
@@ -216,8 +230,11 @@ def test_the_face_term_moves_each_plane_as_one_by_the_sigma_asked(box_arrays):
 def test_a_part_instance_is_its_seed_whatever_the_layout(box_arrays):
     mesh, v, f, _ = box_arrays
     process = load_process("fdm")
-    setup = CellSetup(Cell(as_made=True, calibration=CalibrationErrors(sensor_rotation=0.1 * DEG, frame_translation=1e-4)),
-                      process, MaterialEffects())  # fmt: skip
+    setup = CellSetup(
+        Cell(as_made=True, calibration=CalibrationErrors(sensor_rotation=0.1 * DEG, frame_translation=1e-4)),
+        process,
+        MaterialEffects(),
+    )
     x, face = trimesh.sample.sample_surface(mesh, 2000, seed=2)
     n = mesh.face_normals[face]
     centre = np.zeros(3)
@@ -273,8 +290,12 @@ def test_the_orientation_error_has_its_sigma():
     assert e.std(axis=0) == pytest.approx([sigma] * 3, rel=0.05)
     assert np.all(orientation_error(RobotErrors(), rng) == 0)
     # in a live cell: the robot sets the command plus the error, the same for the same scan seed
-    live = LiveCell(CellSetup(Cell(robot=RobotErrors(orientation=sigma)), Process(), MaterialEffects()),
-                    *_mesh_arrays(trimesh.creation.box((0.01, 0.01, 0.01)))[:2], np.zeros(3), seed=0)  # fmt: skip
+    live = LiveCell(
+        CellSetup(Cell(robot=RobotErrors(orientation=sigma)), Process(), MaterialEffects()),
+        *_mesh_arrays(trimesh.creation.box((0.01, 0.01, 0.01)))[:2],
+        np.zeros(3),
+        seed=0,
+    )
     rpy = np.array([1.0, 0.0, -0.4]) * DEG
     assert np.array_equal(live.rpy(rpy, 17), live.rpy(rpy, 17))
     assert not np.array_equal(live.rpy(rpy, 17), live.rpy(rpy, 18))
@@ -283,10 +304,17 @@ def test_the_orientation_error_has_its_sigma():
 
 def test_the_calibration_spreads_each_sensor_and_the_frame_by_their_sigmas():
     st, sr = 0.15e-3, 0.1 * DEG
-    T = np.array([[0, 1, 0, 0.03], [np.sqrt(0.5), 0, np.sqrt(0.5), -0.023],
-                  [np.sqrt(0.5), 0, -np.sqrt(0.5), 0.015], [0, 0, 0, 1.0]])  # fmt: skip
-    own = calibrated_poses(CalibrationErrors(sensor_translation=st, sensor_rotation=sr), [T] * 4000, np.zeros(3),
-                           np.random.default_rng(7))  # fmt: skip
+    T = np.array(
+        [
+            [0, 1, 0, 0.03],
+            [np.sqrt(0.5), 0, np.sqrt(0.5), -0.023],
+            [np.sqrt(0.5), 0, -np.sqrt(0.5), 0.015],
+            [0, 0, 0, 1.0],
+        ]
+    )
+    own = calibrated_poses(
+        CalibrationErrors(sensor_translation=st, sensor_rotation=sr), [T] * 4000, np.zeros(3), np.random.default_rng(7)
+    )
     errors = [invert_T(T) @ P for P in own]  # in the sensor's frame
     assert np.std([e[:3, 3] for e in errors], axis=0) == pytest.approx([st] * 3, rel=0.06)
     assert np.std([matrix_to_rpy(e[:3, :3]) for e in errors], axis=0) == pytest.approx([sr] * 3, rel=0.06)
@@ -320,19 +348,31 @@ def flat():
     points = np.einsum("ij,ijk->ik", bary, mesh.vertices[mesh.faces[face]])
     points[:, 2] = 0.01  # on the face's plane exactly
     T_O_S = np.array([[0, 1, 0, 0.0], [1, 0, 0, 0.0], [0, 0, -1, 0.06], [0, 0, 0, 1.0]])
-    scan = Scan(points, profile, np.zeros(m, np.int32), np.ones(m, np.float32), np.zeros((0, 3200)), T_O_S,
-                face=face, T_O_P=np.eye(4))  # fmt: skip
+    scan = Scan(
+        points,
+        profile,
+        np.zeros(m, np.int32),
+        np.ones(m, np.float32),
+        np.zeros((0, 3200)),
+        T_O_S,
+        face=face,
+        T_O_P=np.eye(4),
+    )
     return mesh, scan, np.asarray(mesh.face_normals, float), np.arange(n_profiles) * step, step
 
 
-def _perturbed(flat, effects=MaterialEffects(), process=Process(), robot=RobotErrors(), apex=-np.inf, scan_seed=3, seed=0):
+def _perturbed(
+    flat, effects=MaterialEffects(), process=Process(), robot=RobotErrors(), apex=-np.inf, scan_seed=3, seed=0
+):
     """The flat scan at two noise levels (the second its points offset) through a live cell; the moves of
     the first level's points, the live cell, and the second level's moves."""
     mesh, scan, normals, shifts, step = flat
     v, f, _ = _mesh_arrays(mesh)
     cell = Cell(robot=robot, as_made=not process.exact, material=not effects.none)
     live = LiveCell(CellSetup(cell, process, effects), v, f, np.zeros(3), seed)
-    noisy = dataclasses.replace(scan, points=scan.points + 1e-6 * np.random.default_rng(1).normal(size=scan.points.shape))
+    noisy = dataclasses.replace(
+        scan, points=scan.points + 1e-6 * np.random.default_rng(1).normal(size=scan.points.shape)
+    )
     out = live.perturb([[scan], [noisy]], [normals], [apex], shifts, scan.T_O_P, step, scan_seed)
     return out[0][0].points - scan.points, live, out[1][0].points - noisy.points
 
@@ -455,10 +495,13 @@ BAD_CELLS = {
     "negative.toml": ("[robot]\npath_mm = -0.01\n", "path_mm must be a number >= 0"),
     "unknown_key.toml": ("[robot]\npath_cm = 0.01\n", "unknown key(s) path_cm"),
     "unknown_table.toml": ("[robots]\npath_mm = 0.01\n", "unknown key(s) robots"),
-    "not_a_number.toml": ("[calibration]\nsensor_rotation_deg = \"0.1\"\n", "sensor_rotation_deg must be a number"),
+    "not_a_number.toml": ('[calibration]\nsensor_rotation_deg = "0.1"\n', "sensor_rotation_deg must be a number"),
     "syntax.toml": ("[robot\npath_mm = 0.01\n", "cell file"),
-    "process.toml": ("[part]\nas_made = true\ndefault_process = \"cast-iron\"\n", "unknown manufacturing process 'cast-iron'"),
-    "flag.toml": ("[part]\nas_made = \"yes\"\n", "must be true or false"),
+    "process.toml": (
+        '[part]\nas_made = true\ndefault_process = "cast-iron"\n',
+        "unknown manufacturing process 'cast-iron'",
+    ),
+    "flag.toml": ('[part]\nas_made = "yes"\n', "must be true or false"),
     "correlation.toml": ("[robot]\npath_correlation_mm = 0\n", "path_correlation_mm must be > 0"),
 }
 
@@ -469,7 +512,9 @@ def bad_files(tmp_path_factory):
     for name, (text, _) in BAD_CELLS.items():
         (d / name).write_text(text)
     mesh = load_part("part_b").source.parent / "part_b.stl"
-    (d / "part.toml").write_text(f'[part]\nmesh = "{mesh}"\nunits = "m"\nmaterial = "black-pla"\nprocess = "cast-iron"\n')
+    (d / "part.toml").write_text(
+        f'[part]\nmesh = "{mesh}"\nunits = "m"\nmaterial = "black-pla"\nprocess = "cast-iron"\n'
+    )
     return d
 
 
@@ -486,10 +531,12 @@ def _commands(d) -> dict[str, list[str]]:
 
 CLI_CASES = [
     *((name, fragment) for name, (_, fragment) in BAD_CELLS.items()),
-    ("nosuch", "unknown cell 'nosuch'"), ("missing.toml", "cell file not found"),
-    ("search nosuch", "unknown cell 'nosuch'"), ("robustness nosuch", "unknown cell 'nosuch'"),
+    ("nosuch", "unknown cell 'nosuch'"),
+    ("missing.toml", "cell file not found"),
+    ("search nosuch", "unknown cell 'nosuch'"),
+    ("robustness nosuch", "unknown cell 'nosuch'"),
     ("part process", "unknown manufacturing process 'cast-iron'"),
-]  # fmt: skip
+]
 AS_A_USER = ("nosuch", "syntax.toml", "part process")  # also run as a user would: a fresh interpreter each
 
 
@@ -532,12 +579,18 @@ def test_bad_process_presets_are_one_config_error(tmp_path, monkeypatch):
     from optipose.cell import config
 
     presets = tmp_path / "processes.toml"
-    presets.write_text('[neg]\nform_rms_mm = -1\n[band]\nform_wavelengths_mm = [40.0, 10.0]\n'
-                       '[word]\nface_offset_mm = "a lot"\n[other]\nwarp_cm = 1\n')  # fmt: skip
+    presets.write_text(
+        "[neg]\nform_rms_mm = -1\n[band]\nform_wavelengths_mm = [40.0, 10.0]\n"
+        '[word]\nface_offset_mm = "a lot"\n[other]\nwarp_cm = 1\n'
+    )
     monkeypatch.setattr(config, "_PROCESSES", presets)
-    for name, fragment in [("neg", "form_rms_mm must be a number >= 0"), ("band", "0 < low <= high"),
-                           ("word", "face_offset_mm must be a number"), ("other", "unknown key(s) warp_cm"),
-                           ("nosuch", "unknown manufacturing process 'nosuch'")]:  # fmt: skip
+    for name, fragment in [
+        ("neg", "form_rms_mm must be a number >= 0"),
+        ("band", "0 < low <= high"),
+        ("word", "face_offset_mm must be a number"),
+        ("other", "unknown key(s) warp_cm"),
+        ("nosuch", "unknown manufacturing process 'nosuch'"),
+    ]:
         with pytest.raises(ConfigError) as info:
             load_process(name)
         assert fragment in str(info.value) and "\n" not in str(info.value)

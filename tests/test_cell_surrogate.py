@@ -110,8 +110,12 @@ def test_a_source_at_zero_magnitude_adds_nothing_and_independent_sources_add():
         "robot": dict(cell=replace(base, robot=RobotErrors(SIGMA, SIGMA, 0.03, 1e-3, SIGMA))),
         "material": dict(cell=base, effects=MaterialEffects(speckle=SIGMA, subsurface_bias=SIGMA)),
     }
-    every = dict(cell=replace(base, calibration=sources["calibration"]["cell"].calibration, robot=sources["robot"]["cell"].robot),
-                 effects=sources["material"]["effects"])  # fmt: skip
+    every = dict(
+        cell=replace(
+            base, calibration=sources["calibration"]["cell"].calibration, robot=sources["robot"]["cell"].robot
+        ),
+        effects=sources["material"]["effects"],
+    )
     each = sum(_terms(**kw)[0] - alone for kw in sources.values()) + alone
     assert _terms(**every)[0] == pytest.approx(each, rel=1e-4)
 
@@ -133,7 +137,9 @@ def test_the_ideal_cell_is_todays_surrogate_exactly(part_b):
         assert all(np.array_equal(getattr(x, f), getattr(y, f)) for f in ("H", "A", "G", "A_turns", "N_turns"))
     for noise in ((1.0,), (1.0, 5.0)):
         p, q = predicted_stats(a, noise_scales=noise), predicted_stats(b, noise_scales=noise)
-        assert np.array_equal(p.median_deg, q.median_deg) and np.array_equal(p.p75_deg, q.p75_deg) and p.score == q.score
+        assert (
+            np.array_equal(p.median_deg, q.median_deg) and np.array_equal(p.p75_deg, q.p75_deg) and p.score == q.score
+        )
 
 
 def test_the_search_problem_scores_under_its_objectives_cell(part_b):
@@ -141,7 +147,10 @@ def test_the_search_problem_scores_under_its_objectives_cell(part_b):
     from optipose.search.problem import SurrogateProblem
 
     paper = load_objective("paper").in_cell("ideal")
-    ideal, real = SurrogateProblem(part_b, paper, SearchConfig()), SurrogateProblem(part_b, paper.in_cell("ur10e"), SearchConfig())
+    ideal, real = (
+        SurrogateProblem(part_b, paper, SearchConfig()),
+        SurrogateProblem(part_b, paper.in_cell("ur10e"), SearchConfig()),
+    )
     assert ideal.surrogate.cell is None and real.surrogate.cell is not None
     hand = np.concatenate([ideal.space.from_pose(T) for T in part_b.layouts["hand"].poses])
     # the cell's errors are orders of magnitude above the ideal cell's (docs/cell.md)
@@ -150,10 +159,15 @@ def test_the_search_problem_scores_under_its_objectives_cell(part_b):
 
 def test_a_zeroed_cell_takes_off_what_a_fixed_source_does_at_the_nominal_orientation():
     # the one turn is the nominal orientation again: a rigid calibration error zeroed there leaves nothing
-    cell = replace(_cell(sensor_rotation=SIGMA, frame_rotation=SIGMA), calibration=CalibrationErrors(0.0, SIGMA, 0.0, SIGMA, zeroed=True))
+    cell = replace(
+        _cell(sensor_rotation=SIGMA, frame_rotation=SIGMA),
+        calibration=CalibrationErrors(0.0, SIGMA, 0.0, SIGMA, zeroed=True),
+    )
     var, _ = _terms(cell)
     assert np.abs(var).max() < 1e-6 * SIGMA**2
-    assert load_cell("ur10e").calibration.zeroed is False  # the paper's cell is not zeroed: the term is the un-zeroed one
+    assert (
+        load_cell("ur10e").calibration.zeroed is False
+    )  # the paper's cell is not zeroed: the term is the un-zeroed one
 
 
 def test_the_form_fields_features_carry_its_rms_at_every_point():
@@ -163,7 +177,9 @@ def test_the_form_fields_features_carry_its_rms_at_every_point():
 
     box = trimesh.creation.box((0.04, 0.04, 0.01))
     process = Process(name="milled", form_rms=3e-6, form_wavelengths=(0.01, 0.06))
-    model = CellModel(CellSetup(_cell(), process, MaterialEffects()), box.vertices, box.faces, np.zeros(3), np.zeros(1), np.inf)
+    model = CellModel(
+        CellSetup(_cell(), process, MaterialEffects()), box.vertices, box.faces, np.zeros(3), np.zeros(1), np.inf
+    )
     x = np.array([[0.0, 0.0, 0.005], [0.0, 0.0, 0.005], [2.0, 0.0, 0.005]])
     form = model.part_columns(x, np.tile([0.0, 0.0, 1.0], (3, 1)))[:, :-4]  # the scale and warp columns are zero here
     assert (form**2).sum(axis=1) == pytest.approx(np.full(3, 3e-6**2))

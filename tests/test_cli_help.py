@@ -20,7 +20,9 @@ COMMANDS = ["scan", "parts", "show", "counts", "evaluate", "search", "robustness
 
 def _help(*command: str, columns: int = 80) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": str(columns)}
-    return subprocess.run([sys.executable, "-m", "optipose", *command, "--help"], capture_output=True, text=True, timeout=60, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "optipose", *command, "--help"], capture_output=True, text=True, timeout=60, env=env
+    )
 
 
 def _declared(command: str | None) -> list[str]:
@@ -84,7 +86,7 @@ def test_no_arguments_shows_the_help():
         (["parts", "extra"], "extra"),
         (["no-such-command"], "no-such-command"),
     ],
-)  # fmt: skip
+)
 def test_a_usage_error_is_one_line_and_exit_2(args, fragment):
     result = run(*args)
     assert_one_line_error(result, fragment)
@@ -100,8 +102,10 @@ def _plain_console() -> tuple[Console, io.StringIO]:
 def test_progress_off_a_terminal_is_whole_lines_per_stage_and_every_few_seconds():
     from optipose.cli.progress import StageProgress, plain_line
 
-    assert plain_line("part_b", "screen:k=2", "1200/4096 evaluations", "best k=2: 0.780 mdeg", 41.2) == \
-        "part_b: screen:k=2 1200/4096 evaluations, best k=2: 0.780 mdeg, 41 s"  # fmt: skip
+    assert (
+        plain_line("part_b", "screen:k=2", "1200/4096 evaluations", "best k=2: 0.780 mdeg", 41.2)
+        == "part_b: screen:k=2 1200/4096 evaluations, best k=2: 0.780 mdeg, 41 s"
+    )
     console, out = _plain_console()
     now = [0.0]
     with StageProgress(console, "part_b", "evaluations", every=10.0, clock=lambda: now[0]) as progress:
@@ -133,7 +137,10 @@ def test_progress_off_a_terminal_is_whole_lines_per_stage_and_every_few_seconds(
 def test_progress_on_a_terminal_never_shows_a_count_past_its_total():
     from optipose.cli.progress import StageProgress, count_text
 
-    assert count_text(70, 70, "evaluations") == "70/70 evaluations" and count_text(71, 70, "evaluations") == "71 evaluations"
+    assert (
+        count_text(70, 70, "evaluations") == "70/70 evaluations"
+        and count_text(71, 70, "evaluations") == "71 evaluations"
+    )
     console = Console(file=io.StringIO(), force_terminal=True, width=80)
     with StageProgress(console, "part_b", "evaluations") as progress:
         progress.stage("greedy:k=1", 3)
@@ -153,8 +160,10 @@ def test_a_spinner_off_a_terminal_is_a_line_at_its_start_and_end():
     now = [5.0]
     with status(console, "part_b: hand under 4 conditions, a text wider than the console", clock=lambda: now[0]):
         now[0] += 12.4
-    assert out.getvalue().splitlines() == ["part_b: hand under 4 conditions, a text wider than the console",
-                                           "part_b: hand under 4 conditions, a text wider than the console done, 12 s"]  # fmt: skip
+    assert out.getvalue().splitlines() == [
+        "part_b: hand under 4 conditions, a text wider than the console",
+        "part_b: hand under 4 conditions, a text wider than the console done, 12 s",
+    ]
 
 
 def test_each_search_stage_budget_bounds_its_evaluations():
@@ -178,4 +187,6 @@ def test_progress_off_a_terminal_says_a_stage_without_counts_still_runs():
         progress.stage("validating on the full protocol (held-out noise seed)", detail="")
         time.sleep(1.0)  # an ICP stage: nothing is counted, the heartbeat prints
     lines = out.getvalue().splitlines()
-    assert len(lines) >= 3 and all(line.startswith("part_b: validating on the full protocol (held-out noise seed), ") for line in lines)
+    assert len(lines) >= 3 and all(
+        line.startswith("part_b: validating on the full protocol (held-out noise seed), ") for line in lines
+    )

@@ -39,16 +39,26 @@ def test_the_shipped_objectives_and_the_trivial_band(part_b):
     assert load_objective("paper").in_cell("ideal").conditions.trivial
     robust = load_objective("robust").conditions
     assert robust.noise_scales == (1.0, 5.0) and robust.mounting_draws == 2 and not robust.trivial
-    assert robust.mounting_translation == pytest.approx(0.2e-3) and robust.mounting_rotation == pytest.approx(np.deg2rad(0.1))
+    assert robust.mounting_translation == pytest.approx(0.2e-3) and robust.mounting_rotation == pytest.approx(
+        np.deg2rad(0.1)
+    )
     assert len(conditions(robust)) == 4 and conditions(robust)[0].label == "noise x1, mounting draw 0"
     assert conditions(ConditionsConfig()) == [Condition()] and Condition().nominal
 
 
-@pytest.mark.parametrize("table, message", [
-    ({"noise": [1]}, "unknown key"), ({"noise_scale": [0.0]}, "positive"), ({"noise_scale": []}, "positive"),
-    ({"mounting_rotation_deg": -1}, ">= 0"), ({"mounting_draws": 0}, ">= 1"), ({"aggregate": "mean"}, "quantile"),
-    ({"aggregate": 1.5}, "quantile"), ({"noise_scale": ["x"]}, "numbers"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "table, message",
+    [
+        ({"noise": [1]}, "unknown key"),
+        ({"noise_scale": [0.0]}, "positive"),
+        ({"noise_scale": []}, "positive"),
+        ({"mounting_rotation_deg": -1}, ">= 0"),
+        ({"mounting_draws": 0}, ">= 1"),
+        ({"aggregate": "mean"}, "quantile"),
+        ({"aggregate": 1.5}, "quantile"),
+        ({"noise_scale": ["x"]}, "numbers"),
+    ],
+)
 def test_bad_conditions_are_refused_naming_the_key(table, message):
     with pytest.raises(ConfigError, match=message):
         conditions_from_table(table, "robust.toml [conditions]")
@@ -74,7 +84,9 @@ def test_one_cast_gives_every_noise_level_exactly_as_a_scanner_of_that_noise(par
     noisier = part_scanner(part_b, sensor=replace(sensor, noise_sigma=sensor.noise_sigma * 5.0), threads=1)
     for level, alone in zip(levels, (scanner, noisier)):
         for a, b in zip(level, alone.scan_many(poses, part_b.motion, PartPose(rpy, part_b.rotation_centre), rng=9)):
-            assert np.array_equal(a.points, b.points) and np.array_equal(a.raw, b.raw) and np.array_equal(a.face, b.face)
+            assert (
+                np.array_equal(a.points, b.points) and np.array_equal(a.raw, b.raw) and np.array_equal(a.face, b.face)
+            )
     assert not np.array_equal(levels[0][0].points, levels[1][0].points)  # the noise differs, the hits do not
     assert np.array_equal(levels[0][0].face, levels[1][0].face)
 
@@ -97,11 +109,15 @@ def test_mounting_draws_are_reproducible_within_the_tolerance_and_differ_per_sen
     cond = Condition(1.0, 0, 0.2e-3, np.deg2rad(0.1))
     E = mounting_error(cond, 7, 0)
     assert np.array_equal(E, mounting_error(cond, 7, 0))  # the seed, the draw and the sensor decide it
-    assert not np.array_equal(E, mounting_error(cond, 7, 1)) and not np.array_equal(E, mounting_error(replace(cond, draw=1), 7, 0))
+    assert not np.array_equal(E, mounting_error(cond, 7, 1)) and not np.array_equal(
+        E, mounting_error(replace(cond, draw=1), 7, 0)
+    )
     assert not np.array_equal(E, mounting_error(cond, 8, 0))
     for sensor in range(20):
         E = mounting_error(cond, 7, sensor)
-        assert np.all(np.abs(E[:3, 3]) <= 0.2e-3) and np.all(np.abs(matrix_to_rpy(E[:3, :3])) <= np.deg2rad(0.1) + 1e-12)
+        assert np.all(np.abs(E[:3, 3]) <= 0.2e-3) and np.all(
+            np.abs(matrix_to_rpy(E[:3, :3])) <= np.deg2rad(0.1) + 1e-12
+        )
     assert np.array_equal(mounting_error(Condition(), 7, 0), np.eye(4))
 
 
@@ -112,7 +128,8 @@ def test_a_cloud_rebuilt_with_another_pose_is_what_the_raw_profiles_give(part_b)
     scan = scanner.scan(T_true, part_b.motion, PartPose(centre=part_b.rotation_centre), rng=3)
     shifts = part_b.motion.offsets()
     assert np.array_equal(rebuilt_with(scan, T_true, shifts).points, scan.points) or np.allclose(
-        rebuilt_with(scan, T_true, shifts).points, scan.points, atol=1e-12)  # fmt: skip
+        rebuilt_with(scan, T_true, shifts).points, scan.points, atol=1e-12
+    )
     rebuilt = rebuilt_with(scan, T_drawn, shifts)
     from_raw, _, _ = profiles_to_points(scan.raw, scanner.sensor, T_drawn, shifts)  # the device's own route
     key = lambda p: p[np.lexsort(np.round(p, 9).T)]  # noqa: E731
@@ -126,8 +143,10 @@ def test_a_cloud_built_with_the_drawn_pose_is_the_scan_rebuilt_with_it(part_b):
     T_drawn = part_b.layouts["hand"].poses[1]
     T_true = T_drawn @ mounting_error(Condition(1.0, 0, 0.2e-3, np.deg2rad(0.1)), 4, 1)
     scanner, rpy = part_scanner(part_b, threads=1), np.deg2rad([-1.2, 0.4, 2.0])
-    true, = scanner.scan_levels([T_true], part_b.motion, (5.0,), PartPose(rpy, part_b.rotation_centre), rng=8)[0]
-    built, = scanner.scan_levels([T_true], part_b.motion, (5.0,), PartPose(rpy, part_b.rotation_centre), rng=8, built=[T_drawn])[0]
+    (true,) = scanner.scan_levels([T_true], part_b.motion, (5.0,), PartPose(rpy, part_b.rotation_centre), rng=8)[0]
+    (built,) = scanner.scan_levels(
+        [T_true], part_b.motion, (5.0,), PartPose(rpy, part_b.rotation_centre), rng=8, built=[T_drawn]
+    )[0]
     rebuilt = rebuilt_with(true, T_drawn, part_b.motion.offsets())
     assert np.array_equal(built.T_O_S, T_drawn) and np.array_equal(built.face, true.face)
     assert np.abs(built.points - rebuilt.points).max() < 1e-12
@@ -139,8 +158,16 @@ def test_the_zeroed_cell_takes_the_constant_bias_off(part_b):
     # rigidly (and sheared along the scan), so without zeroing every scan would be off by about that much;
     # noise-free master-part scans at the nominal orientation measure what the bracket adds there and
     # zeroing takes it off: at that orientation the cell reports what a cell with exact brackets reports
-    objective = replace(_short(load_objective("paper").in_cell("ideal"), ("R",)), protocol=replace(
-        load_objective("paper").in_cell("ideal").protocol, sequences=("R",), start=-np.deg2rad(2.0), stop=np.deg2rad(2.0), step=np.deg2rad(2.0)))  # fmt: skip
+    objective = replace(
+        _short(load_objective("paper").in_cell("ideal"), ("R",)),
+        protocol=replace(
+            load_objective("paper").in_cell("ideal").protocol,
+            sequences=("R",),
+            start=-np.deg2rad(2.0),
+            stop=np.deg2rad(2.0),
+            step=np.deg2rad(2.0),
+        ),
+    )
     layout = _one_sensor(part_b)
     cond = Condition(1e-6, 0, 0.0, np.deg2rad(0.2))
     with Evaluator(part_b, objective, seed=2, condition=cond) as evaluator:
@@ -153,14 +180,29 @@ def test_the_zeroed_cell_takes_the_constant_bias_off(part_b):
     exact_errors = np.rad2deg(exact[["err_roll", "err_pitch", "err_yaw"]].abs().to_numpy())
     # at the master's orientation the cell reports what an exact cell does, up to the difference between a
     # noise-free master scan and a quantised one (the exact cell's own error there is that size, ~1 mdeg)
-    assert np.abs(errors[at_zero] - exact_errors[at_zero]).max() < 2 * max(exact_errors[at_zero].max(), 1e-4) < tilt / 50
+    assert (
+        np.abs(errors[at_zero] - exact_errors[at_zero]).max() < 2 * max(exact_errors[at_zero].max(), 1e-4) < tilt / 50
+    )
     assert errors.max() < tilt / 5  # what is left at +-2 deg is the distortion's change, far below the bias
 
 
 def test_a_layout_better_at_one_noise_level_only_loses_the_robust_choice():
     def stats(s1, s2):  # per sensor (median, p75) on every axis; the pair no better than its best sensor
-        rows = [{"subset": name, "axis": a, "median": m, "p75": p, "mean": m, "max": p, "n_ok": 14, "n_failed": 0,
-                 "unobservable": False} for name, (m, p) in (("S1", s1), ("S2", s2), ("S1S2", (9, 9))) for a in ("roll", "pitch", "yaw")]  # fmt: skip
+        rows = [
+            {
+                "subset": name,
+                "axis": a,
+                "median": m,
+                "p75": p,
+                "mean": m,
+                "max": p,
+                "n_ok": 14,
+                "n_failed": 0,
+                "unobservable": False,
+            }
+            for name, (m, p) in (("S1", s1), ("S2", s2), ("S1S2", (9, 9)))
+            for a in ("roll", "pitch", "yaw")
+        ]
         return pd.DataFrame(rows)
 
     nominal, noisy = stats((1.0, 1.5), (2.0, 2.5)), stats((10.0, 12.0), (3.0, 3.5))  # S1 wins only at the nominal noise
@@ -177,18 +219,37 @@ def test_layouts_are_compared_per_noise_level_over_its_bracket_draws():
     from optipose.evaluate.robust import by_level
 
     def stats(roll):  # one sensor, roll (median, p75) as given, pitch and yaw 1
-        rows = [{"subset": "S1", "axis": a, "median": m, "p75": p, "mean": m, "max": p, "n_ok": 14, "n_failed": 0,
-                 "unobservable": False} for a, (m, p) in zip(("roll", "pitch", "yaw"), (roll, (1, 1), (1, 1)))]  # fmt: skip
+        rows = [
+            {
+                "subset": "S1",
+                "axis": a,
+                "median": m,
+                "p75": p,
+                "mean": m,
+                "max": p,
+                "n_ok": 14,
+                "n_failed": 0,
+                "unobservable": False,
+            }
+            for a, (m, p) in zip(("roll", "pitch", "yaw"), (roll, (1, 1), (1, 1)))
+        ]
         return pd.DataFrame(rows)
 
-    band = [(Condition(1.0, 0), stats((1, 2))), (Condition(1.0, 1), stats((3, 1))), (Condition(5.0, 0), stats((5, 6))),
-            (Condition(5.0, 1), stats((4, 7)))]  # fmt: skip
+    band = [
+        (Condition(1.0, 0), stats((1, 2))),
+        (Condition(1.0, 1), stats((3, 1))),
+        (Condition(5.0, 0), stats((5, 6))),
+        (Condition(5.0, 1), stats((4, 7))),
+    ]
     results = [(c, SimpleNamespace(stats=frame)) for c, frame in band]
     levels = by_level(results, "worst")
-    assert [label for label, _ in levels] == ["noise x1, worst of 2 bracket draws", "noise x5, worst of 2 bracket draws"]
+    assert [label for label, _ in levels] == [
+        "noise x1, worst of 2 bracket draws",
+        "noise x5, worst of 2 bracket draws",
+    ]
     roll = [frame.loc[frame.axis == "roll", ["median", "p75"]].to_numpy().tolist() for _, frame in levels]
     assert roll == [[[3, 2]], [[5, 7]]]  # each statistic the worst of its level's draws, the levels apart
-    (label, _), = by_level(results[:1], "worst")
+    ((label, _),) = by_level(results[:1], "worst")
     assert label == "noise x1, bracket draw 0"
 
 
@@ -215,8 +276,19 @@ def test_robustness_puts_a_layout_beside_the_hand_one_under_every_condition(tmp_
     s2 = replace(part_b.layouts["hand"], sensors=part_b.layouts["hand"].sensors[1:2], name="only_s2")
     write_layout(s2, tmp_path / "only_s2.toml")
     out = tmp_path / "run"
-    args = ["robustness", "part_b", "--layout", tmp_path / "only_s2.toml", "--objective", tmp_path / "band.toml", "--out", out]
-    result = subprocess.run([sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=600)
+    args = [
+        "robustness",
+        "part_b",
+        "--layout",
+        tmp_path / "only_s2.toml",
+        "--objective",
+        tmp_path / "band.toml",
+        "--out",
+        out,
+    ]
+    result = subprocess.run(
+        [sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=600
+    )
     assert result.returncode == 0, result.stderr
     rows = pd.read_csv(out / "robustness.csv")
     assert list(dict.fromkeys(rows["layout"])) == ["hand", "only_s2"] and set(rows["k"]) == {1}
@@ -258,5 +330,7 @@ def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():
     assert search_objective(replace(paper, conditions=band)).conditions.noise_scales == (1.0, 5.0)
     nominal, banded = config_from_budget("default", (1, 2, 3)), config_from_budget("default", (1, 2, 3), band=True)
     assert nominal.polish_evals > 0 and banded.polish_evals == 0 and banded.confirm_candidates == 0
-    assert config_from_budget("default", (1,), {"polish_evals": 12}, band=True).polish_evals == 12  # the user's word last
+    assert (
+        config_from_budget("default", (1,), {"polish_evals": 12}, band=True).polish_evals == 12
+    )  # the user's word last
     assert config_from_budget("quick", (1,), band=True) == config_from_budget("quick", (1,))

@@ -14,8 +14,17 @@ import pytest
 from optipose.evaluate import racing
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 from optipose.evaluate.confidence import (
-    BUY, KEEP, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, paired_draw, paired_draws, scan_errors,
-)  # fmt: skip
+    BUY,
+    KEEP,
+    TIE,
+    UNDECIDED,
+    PairedDraw,
+    Rules,
+    compare_draws,
+    paired_draw,
+    paired_draws,
+    scan_errors,
+)
 from optipose.evaluate.racing import looks, race
 from optipose.evaluate.statistics import FAILED_ERROR
 
@@ -235,8 +244,14 @@ def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
         now[0] += float(rng.exponential(rng.choice([1.0, 5.0])))
         return None
 
-    racing.race(draw, FAST, min_draws=int(rng.integers(1, 5)), max_draws=int(rng.integers(1, 30)),
-                    seconds=float(rng.choice([np.inf, rng.uniform(1.0, 60.0)])), clock=lambda: now[0])  # fmt: skip
+    racing.race(
+        draw,
+        FAST,
+        min_draws=int(rng.integers(1, 5)),
+        max_draws=int(rng.integers(1, 30)),
+        seconds=float(rng.choice([np.inf, rng.uniform(1.0, 60.0)])),
+        clock=lambda: now[0],
+    )
     assert spent and sum(spent) <= 0.05 + 1e-12
 
 
@@ -244,8 +259,13 @@ def test_an_early_looks_wide_interval_does_not_hang_on_a_few_replicates():
     """At 99.9 % (a racing look's share) the interval is the 95 % one's, widened by the quantiles' ratio: as
     steady from one bootstrap seed to the next as the 95 % one, not the one or two most extreme replicates."""
     draws = _draws(np.random.default_rng(7), 5, ratio=1.3)
-    widths = {c: [np.log(v.score.high / v.score.low) for v in (compare_draws(draws, Rules(confidence=c, seed=s)) for s in range(6))]
-              for c in (0.95, 0.999)}  # fmt: skip
+    widths = {
+        c: [
+            np.log(v.score.high / v.score.low)
+            for v in (compare_draws(draws, Rules(confidence=c, seed=s)) for s in range(6))
+        ]
+        for c in (0.95, 0.999)
+    }
     for c, w in widths.items():
         assert np.ptp(w) / np.mean(w) < 0.05, (c, w)
     assert 2.0 < np.mean(widths[0.999]) / np.mean(widths[0.95]) < 4.0  # wider, by about t(0.9995)/t(0.975) at 4 df
@@ -268,7 +288,9 @@ def test_the_looks_spend_little_early_and_most_at_the_last():
     shares = np.diff([0.0] + [racing.spent(n, plan) for n in plan])
     assert plan == (3, 5, 8, 9) and shares.sum() == pytest.approx(1.0)
     assert np.all(np.diff(shares[:-1]) > 0) and shares[0] < 0.05  # growing; the first look's share 1/27
-    assert racing.spent(8, plan) == pytest.approx((8 / 9) ** 3) and racing.spent(9, plan) == 1.0 == racing.spent(12, plan)
+    assert racing.spent(8, plan) == pytest.approx((8 / 9) ** 3) and racing.spent(9, plan) == 1.0 == racing.spent(
+        12, plan
+    )
 
 
 def test_the_looks():
@@ -308,8 +330,15 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
         assert verdict.decision == decision
         line = verdict.line()
         assert len(line) <= 80 and line.startswith(f"k=3: {decision}") and "F1F2F3" in line and "S1S2S3" in line
-    verdict = race(lambda i: _draws(rng, 1, start=i)[0], FAST, max_draws=4, k=3, found_name="F1F2F3",
-                   hand_name="S1S2S3", reference="conventional")  # fmt: skip
+    verdict = race(
+        lambda i: _draws(rng, 1, start=i)[0],
+        FAST,
+        max_draws=4,
+        k=3,
+        found_name="F1F2F3",
+        hand_name="S1S2S3",
+        reference="conventional",
+    )
     assert verdict.decision == UNDECIDED and len(verdict.line()) <= 80 and "conventional S1S2S3" in verdict.line()
     assert all(len(line) <= 80 for line in verdict.axis_lines())
     # one found sensor against the conventional placement's three: the long names fit, the ratio whole
@@ -318,20 +347,37 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
         fewer = compare_draws(draws, FAST, k=1, found_name="F1", hand_name="S1S2S3", reference="conventional", hand_k=3)
         line, s = fewer.fewer_line(), fewer.score
         assert fewer.decision == decision and len(line) <= 80, line
-        assert "F1 alone" in line and "conventional S1S2S3" in line and f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]" in line
+        assert (
+            "F1 alone" in line
+            and "conventional S1S2S3" in line
+            and f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]" in line
+        )
 
 
 def _result(seed, errors, ok, subsets=("S1", "S2", "S1S2")):
-    rows = [{"scan": s, "subset": name, "ok": bool(ok[s]), "err_roll": -errors[s], "err_pitch": 2 * errors[s],
-             "err_yaw": 3 * errors[s]} for s in range(len(errors)) for name in subsets]  # fmt: skip
+    rows = [
+        {
+            "scan": s,
+            "subset": name,
+            "ok": bool(ok[s]),
+            "err_roll": -errors[s],
+            "err_pitch": 2 * errors[s],
+            "err_yaw": 3 * errors[s],
+        }
+        for s in range(len(errors))
+        for name in subsets
+    ]
     per_scan = pd.DataFrame(rows).sample(frac=1.0, random_state=0)  # any row order
     return SimpleNamespace(seed=seed, n_scans=len(errors), per_scan=per_scan)
 
 
 def test_scan_errors_take_each_axis_from_its_subset():
     errors, ok = np.array([1e-4, 2e-4, 3e-4]), np.array([True, False, True])
-    axes = (AxisChoice("roll", (0,), "S1", 0.0, 0.0), AxisChoice("pitch", (0, 1), "S1S2", 0.0, 0.0),
-            AxisChoice("yaw", (), "", np.nan, np.nan, UNOBSERVABLE))  # fmt: skip
+    axes = (
+        AxisChoice("roll", (0,), "S1", 0.0, 0.0),
+        AxisChoice("pitch", (0, 1), "S1S2", 0.0, 0.0),
+        AxisChoice("yaw", (), "", np.nan, np.nan, UNOBSERVABLE),
+    )
     choice = Choice(2, (0, 1), "S1S2", axes, 0.0)
     out = scan_errors(_result(1, errors, ok), choice)
     np.testing.assert_array_equal(out[:, 0], [1e-4, FAILED_ERROR, 3e-4])
@@ -350,11 +396,19 @@ def test_scan_errors_take_each_axis_from_its_subset():
 def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
     # a sphere: every axis unobservable for found and hand alike, the penalty on every scan of every draw
     blind = np.full((20, 3), UNOBSERVABLE_PENALTY)
-    verdict = compare_draws([PairedDraw(i, blind, blind) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2")
+    verdict = compare_draws(
+        [PairedDraw(i, blind, blind) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
+    )
     assert verdict.unmeasured == ["roll", "pitch", "yaw"]
     assert verdict.line() == "k=2: nothing measured: F1F2 and hand S1S2 see no roll/pitch/yaw"
-    wide = compare_draws([PairedDraw(i, blind, blind) for i in range(2)], FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3",
-                         reference="conventional")  # fmt: skip
+    wide = compare_draws(
+        [PairedDraw(i, blind, blind) for i in range(2)],
+        FAST,
+        k=3,
+        found_name="F1F2F3",
+        hand_name="S1S2S3",
+        reference="conventional",
+    )
     assert wide.line() == "k=3: nothing measured: F1F2F3 and conventional S1S2S3 see no roll/pitch/yaw"
     assert len(wide.line()) <= 80
     from optipose.report.confidence import interval_cell
@@ -363,6 +417,8 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
     # one axis measured: the usual line, and that axis's cell a number
     seen = blind.copy()
     seen[:, 0] = np.deg2rad(0.01)
-    verdict = compare_draws([PairedDraw(i, seen, seen) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2")
+    verdict = compare_draws(
+        [PairedDraw(i, seen, seen) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
+    )
     assert verdict.unmeasured == ["pitch", "yaw"] and verdict.line().startswith("k=2: TIE")
     assert interval_cell(verdict.found[0].median_deg) != "not measured"

@@ -26,8 +26,14 @@ SHIPPED = ("part_a", "part_b", "part_c")
 
 def sphere_part(subdivisions: int, length: float = 0.02) -> Part:
     mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=R)
-    return Part(name="sphere", mesh=mesh, material="black-pla", sensor="keyence-lj-x8080", motion=ScanMotion(length),
-                rotation_centre=np.zeros(3))  # fmt: skip
+    return Part(
+        name="sphere",
+        mesh=mesh,
+        material="black-pla",
+        sensor="keyence-lj-x8080",
+        motion=ScanMotion(length),
+        rotation_centre=np.zeros(3),
+    )
 
 
 def head_at(model: CollisionModel, corner_lo: np.ndarray) -> np.ndarray:
@@ -104,7 +110,9 @@ def test_supporting_faces_by_climbing_equal_the_definition(which):
         mesh = trimesh.creation.icosphere(subdivisions=4, radius=R)
     elif which == "part_b 2 mm":
         base = load_part("part_b").mesh
-        mesh = trimesh.Trimesh(*trimesh.remesh.subdivide_to_size(base.vertices, base.faces, max_edge=2e-3), process=False)
+        mesh = trimesh.Trimesh(
+            *trimesh.remesh.subdivide_to_size(base.vertices, base.faces, max_edge=2e-3), process=False
+        )
     else:  # the scanner's own mesh: the part with its keep-outs
         scanner = part_scanner(load_part(which))
         mesh = trimesh.Trimesh(scanner.vertices, scanner.faces, process=False)
@@ -136,7 +144,9 @@ def test_a_dense_meshs_hull_is_shared_through_a_file(tmp_path, monkeypatch):
     (written,) = tmp_path.glob("optipose-hull-*.npz")
     assert machine._WRITTEN == [written]
     monkeypatch.setattr(convex, "_compute", lambda mesh: pytest.fail("computed again"))
-    again = hull_arrays(trimesh.Trimesh(mesh.vertices.copy(), mesh.faces.copy(), process=False))  # another process's mesh
+    again = hull_arrays(
+        trimesh.Trimesh(mesh.vertices.copy(), mesh.faces.copy(), process=False)
+    )  # another process's mesh
     assert np.array_equal(again[0], vertices) and np.array_equal(again[1], faces)
     machine._remove_written()
     assert not written.exists()

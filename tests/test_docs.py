@@ -31,7 +31,7 @@ def test_no_session_numbers_or_commit_hashes_outside_the_changelog():
 def test_slugs_are_github_s():
     assert check_docs.slug("The assignment: the paper's Table 1") == "the-assignment-the-papers-table-1"
     assert check_docs.slug("`bench_scanner.py` — the virtual scanner") == "bench_scannerpy--the-virtual-scanner"
-    assert check_docs.slug("How finely \"no worse\" can be told") == "how-finely-no-worse-can-be-told"
+    assert check_docs.slug('How finely "no worse" can be told') == "how-finely-no-worse-can-be-told"
 
 
 def test_a_broken_link_is_found(tmp_path):

@@ -23,8 +23,10 @@ DEG = np.pi / 180
 
 
 def _objective(sequences=("R",), start=-1.0, stop=1.0, step=1.0, **registration):
-    table = {"protocol": {"sequences": list(sequences), "start_deg": start, "stop_deg": stop, "step_deg": step},
-             "registration": registration}  # fmt: skip
+    table = {
+        "protocol": {"sequences": list(sequences), "start_deg": start, "stop_deg": stop, "step_deg": step},
+        "registration": registration,
+    }
     return objective_from_table(table)
 
 
@@ -82,7 +84,9 @@ def test_paper_objective_is_the_papers_protocol():
 
 
 def test_random_protocol_and_offsets():
-    obj = objective_from_table({"protocol": {"kind": "random", "count": 5, "range_deg": [1, 0, 0], "offsets_mm": [[0, 0, 0], [1, 0, 0]]}})
+    obj = objective_from_table(
+        {"protocol": {"kind": "random", "count": 5, "range_deg": [1, 0, 0], "offsets_mm": [[0, 0, 0], [1, 0, 0]]}}
+    )
     p = perturbations(obj.protocol, seed=1)
     assert len(p) == 10 and np.all(np.abs(p.rpy[:, 0]) <= 1 * DEG) and np.all(p.rpy[:, 1:] == 0)
     np.testing.assert_allclose(p.offset[1] - p.offset[0], [1e-3, 0, 0])
@@ -124,7 +128,9 @@ def test_voxel_down_is_the_unique_and_bincount_centroid_bit_for_bit():
     cell = np.floor(points / 0.5e-3).astype(np.int64)
     cell -= cell.min(axis=0)
     dims = cell.max(axis=0) + 1
-    _, inverse, counts = np.unique((cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2], return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(
+        (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2], return_inverse=True, return_counts=True
+    )
     sums = np.stack([np.bincount(inverse, points[:, j], len(counts)) for j in range(3)], axis=1)
     np.testing.assert_array_equal(voxel_down(points, 0.5e-3), sums / counts[:, None])
 
@@ -139,7 +145,9 @@ def _tilted_scan(block, rpy_deg, spacing=0.7e-3, noise=5e-6):
 def test_nearest_answers_what_closest_does(block, surface, guess):
     scan = _tilted_scan(block, [0.6, -0.4, 0.8])
     if guess == "previous step":
-        _, _, ids = surface.closest(transform_points(part_motion(np.array([0.3, 0.2, -0.5]) * DEG, block.rotation_centre), scan))
+        _, _, ids = surface.closest(
+            transform_points(part_motion(np.array([0.3, 0.2, -0.5]) * DEG, block.rotation_centre), scan)
+        )
     else:
         ids = None
     q, n, ids = surface.nearest(scan, ids)
@@ -160,9 +168,11 @@ def test_a_plate_leaves_yaw_and_in_plane_translation_unobservable():
 
 def test_a_box_corner_observes_everything():
     rng = np.random.default_rng(1)
-    faces = [(np.column_stack([rng.uniform(0, 0.02, 300), rng.uniform(0, 0.02, 300), np.zeros(300)]), [0, 0, 1.0]),
-             (np.column_stack([np.zeros(300), rng.uniform(0, 0.02, 300), rng.uniform(0, 0.02, 300)]), [1.0, 0, 0]),
-             (np.column_stack([rng.uniform(0, 0.02, 300), np.zeros(300), rng.uniform(0, 0.02, 300)]), [0, 1.0, 0])]  # fmt: skip
+    faces = [
+        (np.column_stack([rng.uniform(0, 0.02, 300), rng.uniform(0, 0.02, 300), np.zeros(300)]), [0, 0, 1.0]),
+        (np.column_stack([np.zeros(300), rng.uniform(0, 0.02, 300), rng.uniform(0, 0.02, 300)]), [1.0, 0, 0]),
+        (np.column_stack([rng.uniform(0, 0.02, 300), np.zeros(300), rng.uniform(0, 0.02, 300)]), [0, 1.0, 0]),
+    ]
     points = np.vstack([f[0] for f in faces])
     normals = np.vstack([np.tile(f[1], (300, 1)) for f in faces])
     assert not unobservable_axes(information_matrix(points, normals), 0.02).any()
@@ -176,7 +186,11 @@ def test_evaluator_flags_a_plate_seen_from_above(tmp_path):
     with Evaluator(part, _objective(("R", "Y"), -1.0, 1.0, 2.0), seed=0) as ev:
         result = ev(part.layouts["hand"])
     stats = result.stats.set_index("axis")
-    assert stats.loc["yaw", "unobservable"] and not stats.loc["roll", "unobservable"] and not stats.loc["pitch", "unobservable"]
+    assert (
+        stats.loc["yaw", "unobservable"]
+        and not stats.loc["roll", "unobservable"]
+        and not stats.loc["pitch", "unobservable"]
+    )
     assert not result.table[0].axes[2].observable and result.table[0].axes[0].observable
     assert result.per_scan["unobservable_x"].all() and result.per_scan["unobservable_y"].all()
     from optipose.cli.evaluate import table1
@@ -201,7 +215,11 @@ def test_scanned_rotations_come_back_per_axis(block_result):
     # x_O is the scan direction: faces across it are edge-on to the laser plane, so x is the weak one
     assert np.abs(full[["err_y", "err_z"]].to_numpy()).max() < 20e-6 and np.abs(full["err_x"]).max() < 0.5e-3
     counts = block_result.points
-    assert len(counts) == 9 and (counts["n_points"] > counts["n_points_down"]).all() and (counts["n_points_down"] > 100).all()
+    assert (
+        len(counts) == 9
+        and (counts["n_points"] > counts["n_points_down"]).all()
+        and (counts["n_points_down"] > 100).all()
+    )
 
 
 def test_every_subset_is_registered_and_table1_has_one_row_per_k(block_result):
@@ -262,8 +280,19 @@ def _stats(values: dict) -> pd.DataFrame:
     rows = []
     for subset, per_axis in values.items():
         for axis, (median, p75) in zip(("roll", "pitch", "yaw"), per_axis):
-            rows.append({"subset": subset, "axis": axis, "median": median, "p75": p75, "mean": median, "max": p75,
-                         "n_ok": 77, "n_failed": 0, "unobservable": np.isnan(median)})  # fmt: skip
+            rows.append(
+                {
+                    "subset": subset,
+                    "axis": axis,
+                    "median": median,
+                    "p75": p75,
+                    "mean": median,
+                    "max": p75,
+                    "n_ok": 77,
+                    "n_failed": 0,
+                    "unobservable": np.isnan(median),
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -271,11 +300,17 @@ def test_assignment_picks_each_axis_its_subset_like_table1():
     names = ["S1", "S2", "S3"]
     assert [subset_name(s, names) for s in all_subsets(3)] == ["S1", "S2", "S3", "S1S2", "S1S3", "S2S3", "S1S2S3"]
     nan = float("nan")
-    stats = _stats({
-        "S1": [(3, 4), (5, 6), (1, 2)], "S2": [(9, 9), (9, 9), (nan, nan)], "S3": [(4, 5), (2, 3), (8, 9)],
-        "S1S2": [(2, 3), (4, 5), (3, 4)], "S1S3": [(2, 9), (3, 4), (2, 3)], "S2S3": [(5, 6), (1, 1), (7, 8)],
-        "S1S2S3": [(1, 2), (2, 3), (2, 3)],
-    })  # fmt: skip
+    stats = _stats(
+        {
+            "S1": [(3, 4), (5, 6), (1, 2)],
+            "S2": [(9, 9), (9, 9), (nan, nan)],
+            "S3": [(4, 5), (2, 3), (8, 9)],
+            "S1S2": [(2, 3), (4, 5), (3, 4)],
+            "S1S3": [(2, 9), (3, 4), (2, 3)],
+            "S2S3": [(5, 6), (1, 1), (7, 8)],
+            "S1S2S3": [(1, 2), (2, 3), (2, 3)],
+        }
+    )
     one, two, three = best_choices(stats, names, StatisticConfig(), 77)
     assert (one.name, [a.name for a in one.axes]) == ("S1", ["S1", "S1", "S1"])
     assert (one.sensors, [a.subset for a in one.axes]) == ((0,), [(0,), (0,), (0,)])  # by index
@@ -315,7 +350,7 @@ def test_cli_evaluate_writes_results_and_rejects_bad_input(tmp_path, monkeypatch
     for name in ("per_scan.csv", "per_scan.parquet", "stats.csv", "table1.csv", "points.csv", "config.toml"):
         assert (latest / name).is_file(), name
     config = (latest / "config.toml").read_text()
-    assert 'seed = 1' in config and "tiny" in config and "numpy" in config
+    assert "seed = 1" in config and "tiny" in config and "numpy" in config
     bad = runner.invoke(app, ["evaluate", "part_b", "--objective", "nonexistent"])
     assert bad.exit_code == 2 and "unknown objective" in bad.output and "Traceback" not in bad.output
 

@@ -14,7 +14,14 @@ import trimesh
 
 from optipose.errors import ConfigError
 from optipose.evaluate.evaluator import Evaluator
-from optipose.evaluate.executors import EXECUTORS, DaskExecutor, JoblibExecutor, SerialExecutor, make_executor, register_executor
+from optipose.evaluate.executors import (
+    EXECUTORS,
+    DaskExecutor,
+    JoblibExecutor,
+    SerialExecutor,
+    make_executor,
+    register_executor,
+)
 from optipose.evaluate.objective import objective_from_table
 from optipose.evaluate.worker import sensor_groups
 from optipose.seeds import group_seed
@@ -46,7 +53,9 @@ def plate():
 
 @pytest.fixture(scope="module")
 def objective():
-    return objective_from_table({"protocol": {"sequences": ["R", "P"], "start_deg": -1.0, "stop_deg": 1.0, "step_deg": 1.0}})
+    return objective_from_table(
+        {"protocol": {"sequences": ["R", "P"], "start_deg": -1.0, "stop_deg": 1.0, "step_deg": 1.0}}
+    )
 
 
 def _layout(*sensors: str | None) -> Layout:
@@ -118,7 +127,12 @@ def test_a_given_executor_is_used_and_left_open(plate, objective, serial):
     with Evaluator(plate, objective, seed=2, executor=executor) as ev:
         result = ev(_layout(None, None))
         tasks = ev.tasks()
-    assert [[t[0] for t in chunk] for chunk in executor.chunks] == [[0, 4], [1, 5], [2], [3]]  # 2 per worker, interleaved
+    assert [[t[0] for t in chunk] for chunk in executor.chunks] == [
+        [0, 4],
+        [1, 5],
+        [2],
+        [3],
+    ]  # 2 per worker, interleaved
     assert [t[0] for t in tasks] == [0, 1, 2, 3, 4, 5]
     assert not executor.closed  # the caller's to close
     pd.testing.assert_frame_equal(result.per_scan, serial.per_scan, check_exact=True)
@@ -273,12 +287,16 @@ def test_the_heap_thresholds_reach_this_process_and_the_ones_it_starts_unless_th
 
     from optipose.heap import HEAP_VARIABLES
 
-    code = ("import json, os; from optipose.heap import keep_freed_memory; "
-            "print(json.dumps([keep_freed_memory(), {k: os.environ.get(k) for k in %r}]))" % list(HEAP_VARIABLES))  # fmt: skip
+    code = (
+        "import json, os; from optipose.heap import keep_freed_memory; "
+        "print(json.dumps([keep_freed_memory(), {k: os.environ.get(k) for k in %r}]))" % list(HEAP_VARIABLES)
+    )
     plain = {k: v for k, v in os.environ.items() if k not in HEAP_VARIABLES}
 
     def run(env):
-        return json.loads(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout)
+        return json.loads(
+            subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+        )
 
     glibc = platform.libc_ver()[0] == "glibc"  # elsewhere it does nothing
     took, seen = run(plain)

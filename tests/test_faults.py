@@ -29,16 +29,23 @@ FAST_CHECK = {"OPTIPOSE_SCHEDULER_TIMEOUT": "2"}  # the check's default is 10 s 
 
 
 def run(*args, env: dict | None = None, timeout: float = 120):
-    return subprocess.run([sys.executable, "-m", "optipose", *args], capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, **(env or {})})  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "optipose", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **(env or {})},
+    )
 
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("faults")
     (d / "short.toml").write_text(SHORT)
-    (d / "study.toml").write_text('name = "f"\n[grid]\nparts = ["part_b"]\ntasks = ["evaluate"]\nobjectives = ["short.toml"]\n'
-                                  "sensors = [1]\nseeds = [0, 1, 2]\n")  # fmt: skip
+    (d / "study.toml").write_text(
+        'name = "f"\n[grid]\nparts = ["part_b"]\ntasks = ["evaluate"]\nobjectives = ["short.toml"]\n'
+        "sensors = [1]\nseeds = [0, 1, 2]\n"
+    )
     return d
 
 
@@ -110,7 +117,7 @@ def _closed_port() -> int:
         ("banner", "it answered 'SSH-2.0-'"),
         ("tls", "cannot reach the Dask scheduler at tls://127.0.0.1:"),  # no TLS settings in Dask's config here
     ],
-)  # fmt: skip
+)
 def test_a_scheduler_that_is_not_one_is_one_line_before_the_study_folder(files, request, address, fragment):
     ports = {"silent": "silent_port", "http": "http_port", "banner": "banner_port"}
     if address == "tls":
@@ -121,7 +128,17 @@ def test_a_scheduler_that_is_not_one_is_one_line_before_the_study_folder(files, 
         address = f"tcp://127.0.0.1:{_closed_port()}"
     out = files / f"never-{abs(hash(address))}"
     t0 = time.monotonic()
-    result = run("batch", str(files / "study.toml"), "--backend", "dask", "--scheduler", address, "--out", str(out), env=FAST_CHECK)
+    result = run(
+        "batch",
+        str(files / "study.toml"),
+        "--backend",
+        "dask",
+        "--scheduler",
+        address,
+        "--out",
+        str(out),
+        env=FAST_CHECK,
+    )
     seconds = time.monotonic() - t0
     assert_one_line_error(result, fragment)
     assert not out.exists()  # refused before the study folder is made
@@ -134,7 +151,9 @@ def test_the_check_accepts_a_real_scheduler_and_says_what_a_dashboard_is():
     from optipose.batch.scheduler import check_scheduler, split_address
     from optipose.errors import ConfigError
 
-    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=":0") as cluster:
+    with LocalCluster(
+        n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=":0"
+    ) as cluster:
         address = cluster.scheduler_address
         assert check_scheduler(address, timeout=5) == address
         assert check_scheduler(address.removeprefix("tcp://"), timeout=5) == address  # HOST:PORT is tcp://
@@ -149,8 +168,12 @@ def test_the_check_accepts_a_real_scheduler_and_says_what_a_dashboard_is():
 
 # -- a cluster that loses its workers -------------------------------------------------------------------------
 def _dask(*args: str, log: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_" + args[0], *args[1:]], stdout=subprocess.DEVNULL,
-                            stderr=log.open("w"), start_new_session=True)  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_" + args[0], *args[1:]],
+        stdout=subprocess.DEVNULL,
+        stderr=log.open("w"),
+        start_new_session=True,
+    )
 
 
 def _stop(process: subprocess.Popen) -> None:
@@ -171,15 +194,38 @@ def test_a_cluster_without_workers_stops_the_study_in_one_line_and_keeps_what_fi
     # a scheduler and one single-threaded worker; the worker is killed once the index has a complete trial,
     # and the study (--no-workers-after 4) ends in one line with that trial still complete, its folder there
     port = _closed_port()
-    scheduler = _dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard", log=tmp_path / "scheduler.log")
+    scheduler = _dask(
+        "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard", log=tmp_path / "scheduler.log"
+    )
     worker = None
     try:
         address = f"tcp://127.0.0.1:{port}"
-        worker = _dask("worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard", log=tmp_path / "worker.log")
+        worker = _dask(
+            "worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard", log=tmp_path / "worker.log"
+        )
         out = tmp_path / "study"
-        batch = subprocess.Popen([sys.executable, "-m", "optipose", "batch", str(files / "study.toml"), "--backend", "dask",
-                                  "--scheduler", address, "--out", str(out), "--no-workers-after", "4", "--no-report"],
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, **FAST_CHECK})  # fmt: skip
+        batch = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "optipose",
+                "batch",
+                str(files / "study.toml"),
+                "--backend",
+                "dask",
+                "--scheduler",
+                address,
+                "--out",
+                str(out),
+                "--no-workers-after",
+                "4",
+                "--no-report",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, **FAST_CHECK},
+        )
         deadline = time.monotonic() + 120
         while not _complete(out) and batch.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -204,11 +250,25 @@ def test_a_cluster_without_workers_stops_the_study_in_one_line_and_keeps_what_fi
 def test_a_scheduler_without_workers_is_one_line_before_the_study_folder(files):
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=":0") as cluster:
+    with LocalCluster(
+        n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", dashboard_address=":0"
+    ) as cluster:
         out = files / "no-workers"
-        result = run("batch", str(files / "study.toml"), "--backend", "dask", "--scheduler", cluster.scheduler_address,
-                     "--out", str(out), "--no-workers-after", "2")  # fmt: skip
-    assert_one_line_error(result, f"no Dask worker at {cluster.scheduler_address} for 2 s: the study stopped (start workers with")
+        result = run(
+            "batch",
+            str(files / "study.toml"),
+            "--backend",
+            "dask",
+            "--scheduler",
+            cluster.scheduler_address,
+            "--out",
+            str(out),
+            "--no-workers-after",
+            "2",
+        )
+    assert_one_line_error(
+        result, f"no Dask worker at {cluster.scheduler_address} for 2 s: the study stopped (start workers with"
+    )
     assert not out.exists()
 
 
@@ -227,15 +287,20 @@ def test_no_workers_for_a_while_stops_or_waits_as_the_user_chose():
         assert said == []
         now[0] = 160.0
         if policy == "stop":
-            with pytest.raises(NoWorkers, match=r"^no Dask worker at tcp://h:1 for 60 s: the study stopped \(start workers with `dask worker tcp://h:1`\)$"):
+            with pytest.raises(
+                NoWorkers,
+                match=r"^no Dask worker at tcp://h:1 for 60 s: the study stopped \(start workers with `dask worker tcp://h:1`\)$",
+            ):
                 watch.check(0)
             continue
         watch.check(0)
         now[0] = 500.0
         watch.check(0)  # said once, not at every count
         watch.check(1)
-        assert said == ["no Dask worker at tcp://h:1 for 60 s: waiting for workers (--no-workers wait; Ctrl-C stops, --resume continues)",
-                        "the Dask cluster at tcp://h:1 has 1 worker(s) again: the study goes on"]  # fmt: skip
+        assert said == [
+            "no Dask worker at tcp://h:1 for 60 s: waiting for workers (--no-workers wait; Ctrl-C stops, --resume continues)",
+            "the Dask cluster at tcp://h:1 has 1 worker(s) again: the study goes on",
+        ]
     with pytest.raises(ConfigError, match="--no-workers maybe: use stop or wait"):
         WorkerWatch("", "maybe")
 
@@ -295,7 +360,7 @@ def test_leftovers_of_a_dead_worker_are_removed_when_the_study_succeeds(files, t
         ["batch", "{d}/study.toml", "--out", "{out}"],
         ["report", "/sys"],
     ],
-)  # fmt: skip
+)
 def test_an_output_that_cannot_be_written_is_refused_before_the_work(files, args):
     # /sys is read-only even for root (whom a chmod-ed folder would not stop)
     t0 = time.monotonic()
@@ -308,7 +373,9 @@ def test_an_output_that_cannot_be_written_is_refused_before_the_work(files, args
 @pytest.fixture(scope="module")
 def evaluation(files):
     out = files / "evaluation"
-    result = run("evaluate", "part_b", "--objective", str(files / "short.toml"), "--seed", "5", "--out", str(out), "--no-report")
+    result = run(
+        "evaluate", "part_b", "--objective", str(files / "short.toml"), "--seed", "5", "--out", str(out), "--no-report"
+    )
     assert result.returncode == 0, result.stderr
     return out
 
@@ -321,7 +388,7 @@ def evaluation(files):
         ("points.csv", "garbage"),
         ("config.toml", "garbage"),
     ],
-)  # fmt: skip
+)
 def test_a_damaged_result_file_is_one_line_naming_it(files, evaluation, tmp_path, name, damage):
     import shutil
 
@@ -353,7 +420,9 @@ def test_search_resume_with_a_damaged_cache_is_one_line_and_keeps_it(tmp_path):
     from optipose.model.part import load_part
     from optipose.search.config import config_from_budget
 
-    SearchFolder(tmp_path).start(load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1)
+    SearchFolder(tmp_path).start(
+        load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1
+    )
     garbage = b"PK\x03\x04" + np.random.default_rng(4).bytes(200)
     (tmp_path / "cache.npz").write_bytes(garbage)
     assert_one_line_error(run("search", "--resume", str(tmp_path), "--no-report"), f"{tmp_path}/cache.npz: damaged")
@@ -369,7 +438,16 @@ def test_a_part_in_inches_is_loaded_with_its_units_for_the_report_views(files, t
     block.apply_scale(1 / 0.0254)
     block.export(tmp_path / "inches.stl")
     out = tmp_path / "result"
-    result = run("evaluate", str(tmp_path / "inches.stl"), "--units", "in", "--objective", str(files / "short.toml"), "--out", str(out))
+    result = run(
+        "evaluate",
+        str(tmp_path / "inches.stl"),
+        "--units",
+        "in",
+        "--objective",
+        str(files / "short.toml"),
+        "--out",
+        str(out),
+    )
     assert result.returncode == 0, result.stderr
     from optipose.io.folders import read_config
 
@@ -384,13 +462,19 @@ def test_a_verdict_on_failed_registrations_says_so_instead_of_ranking():
     from optipose.evaluate.compare import Verdict, bought
 
     def choice(name, failed=()):
-        axes = tuple(AxisChoice(a, (), "", float("nan"), float("nan"), FAILED) if a in failed else AxisChoice(a, (0,), name, 1e-6, 2e-6)
-                     for a in ("roll", "pitch", "yaw"))  # fmt: skip
+        axes = tuple(
+            AxisChoice(a, (), "", float("nan"), float("nan"), FAILED)
+            if a in failed
+            else AxisChoice(a, (0,), name, 1e-6, 2e-6)
+            for a in ("roll", "pitch", "yaw")
+        )
         return Choice(1, (0,), name, axes, 3e-6)
 
     found_failed = Verdict(1, choice("F1", ("roll", "pitch")), choice("S1"))
     assert found_failed.failed == (("roll", "pitch"), ())
-    assert found_failed.line().startswith("k=1: no verdict: the registrations of found F1 failed on roll, pitch in over a tenth")
+    assert found_failed.line().startswith(
+        "k=1: no verdict: the registrations of found F1 failed on roll, pitch in over a tenth"
+    )
     assert found_failed.line().endswith("keep S1 until they succeed") and not bought(found_failed)
     hand_failed = Verdict(1, choice("F1"), choice("S1", ("yaw",)))
     assert "those of hand S1 on yaw" in hand_failed.line() and "keep" not in hand_failed.line()
@@ -415,5 +499,7 @@ def test_a_mesh_that_is_not_a_solid_is_warned_in_one_line(tmp_path, caplog):
         load_mesh(tmp_path / "flipped.stl", "m")
         load_mesh(tmp_path / "open.stl", "m")
     lines = [r.getMessage() for r in caplog.records]
-    assert len(lines) == 2 and all("not a closed solid" in line and "export the part as a closed solid" in line for line in lines)
+    assert len(lines) == 2 and all(
+        "not a closed solid" in line and "export the part as a closed solid" in line for line in lines
+    )
     assert "faces not consistently oriented" in lines[0] and "open: some edges have one face" in lines[1]

@@ -33,7 +33,9 @@ def test_unique_rows_fall_back_to_sorting_when_two_rows_hash_alike(monkeypatch):
 
     keys = np.random.default_rng(1).integers(0, 4, size=(400, 2))
     want = trimesh.grouping.unique_rows(keys, keep_order=True)
-    monkeypatch.setattr(pd.util, "hash_array", lambda column: np.zeros(len(column), dtype=np.uint64))  # every row collides
+    monkeypatch.setattr(
+        pd.util, "hash_array", lambda column: np.zeros(len(column), dtype=np.uint64)
+    )  # every row collides
     first, inverse = unique_rows(keys)
     assert np.array_equal(first, want[0]) and np.array_equal(inverse, want[1])
 
@@ -42,7 +44,9 @@ def _fin() -> trimesh.Trimesh:
     """A box with a fin: one edge in three faces."""
     box = trimesh.creation.box()
     a, b = box.faces[0][:2]
-    return trimesh.Trimesh(np.vstack([box.vertices, [[2.0, 2.0, 2.0]]]), np.vstack([box.faces, [[a, b, 8]]]), process=False)
+    return trimesh.Trimesh(
+        np.vstack([box.vertices, [[2.0, 2.0, 2.0]]]), np.vstack([box.faces, [[a, b, 8]]]), process=False
+    )
 
 
 def _flipped() -> trimesh.Trimesh:
@@ -57,12 +61,18 @@ def test_closed_and_wound_are_trimeshs(which):
     mesh = {
         "sphere": lambda: trimesh.creation.icosphere(3),
         "box": trimesh.creation.box,
-        "open": lambda: trimesh.Trimesh(trimesh.creation.icosphere(2).vertices, trimesh.creation.icosphere(2).faces[1:]),
+        "open": lambda: trimesh.Trimesh(
+            trimesh.creation.icosphere(2).vertices, trimesh.creation.icosphere(2).faces[1:]
+        ),
         "flipped face": _flipped,
         "fin": _fin,
-        "two bodies": lambda: trimesh.util.concatenate([trimesh.creation.box(), trimesh.creation.box().apply_translation([3, 0, 0])]),
+        "two bodies": lambda: trimesh.util.concatenate(
+            [trimesh.creation.box(), trimesh.creation.box().apply_translation([3, 0, 0])]
+        ),
     }.get(which, lambda: load_part(which).mesh)()
-    fresh = trimesh.Trimesh(mesh.vertices.copy(), mesh.faces.copy(), process=False)  # trimesh's own answer, not a cached one
+    fresh = trimesh.Trimesh(
+        mesh.vertices.copy(), mesh.faces.copy(), process=False
+    )  # trimesh's own answer, not a cached one
     assert closed_and_wound(mesh.faces, len(mesh.vertices)) == (fresh.is_watertight, fresh.is_winding_consistent)
 
 
@@ -107,7 +117,9 @@ def test_a_dense_non_convex_mesh_gives_qhull_only_its_corners(monkeypatch):
     mesh.merge_vertices()
     given = []
     qhull = trimesh.convex.convex_hull
-    monkeypatch.setattr(trimesh.convex, "convex_hull", lambda points, **k: given.append(len(points)) or qhull(points, **k))
+    monkeypatch.setattr(
+        trimesh.convex, "convex_hull", lambda points, **k: given.append(len(points)) or qhull(points, **k)
+    )
     vertices, _ = hull_arrays(mesh)
     want = np.asarray(qhull(np.asarray(mesh.vertices), repair=False).vertices)
     assert given[0] < 0.2 * len(mesh.vertices)  # the flat patches' vertices are not given to qhull
@@ -117,7 +129,9 @@ def test_a_dense_non_convex_mesh_gives_qhull_only_its_corners(monkeypatch):
 def _locally_convex(mesh) -> bool:
     faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
     around = grouping.vertex_faces(faces, len(mesh.vertices))
-    return convex._locally_convex(np.asarray(mesh.vertices, float), faces, np.ascontiguousarray(mesh.face_normals), *around, convex._TOL)
+    return convex._locally_convex(
+        np.asarray(mesh.vertices, float), faces, np.ascontiguousarray(mesh.face_normals), *around, convex._TOL
+    )
 
 
 def test_a_dent_makes_a_mesh_not_convex():
@@ -134,7 +148,9 @@ def test_a_dent_makes_a_mesh_not_convex():
 def test_supporting_faces_on_a_finer_cube_map_equal_the_definition(monkeypatch):
     monkeypatch.setattr(hull, "_PER_CELL", 1)  # 2,562 hull vertices: a map of 20 cells a side
     mesh = trimesh.creation.icosphere(subdivisions=4, radius=0.03)
-    bumped = mesh.vertices * (1 + 0.05 * np.sin(9 * mesh.vertices[:, :1] / 0.03) * np.sin(9 * mesh.vertices[:, 1:2] / 0.03))  # not convex: some faces are off the hull
+    bumped = mesh.vertices * (
+        1 + 0.05 * np.sin(9 * mesh.vertices[:, :1] / 0.03) * np.sin(9 * mesh.vertices[:, 1:2] / 0.03)
+    )  # not convex: some faces are off the hull
     mesh = trimesh.Trimesh(bumped, mesh.faces, process=False)
     _, normals, offsets, _, _ = shared_planes(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64))
     got = hull.supporting_faces(mesh, normals, offsets)
@@ -186,13 +202,17 @@ def test_bodies_are_trimeshs_body_count(which):
         mesh = trimesh.Trimesh(np.vstack([two.vertices, [[9.0, 9.0, 9.0]]]), two.faces, process=False)
     else:
         mesh = load_part(which).mesh
-    assert bodies(mesh.faces, len(mesh.vertices)) == trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).body_count
+    assert (
+        bodies(mesh.faces, len(mesh.vertices)) == trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).body_count
+    )
 
 
 def test_the_hull_graph_is_every_edge_once_each_way():
     mesh = trimesh.creation.icosphere(subdivisions=2)
     faces = np.asarray(mesh.faces, np.int64)
     indptr, neighbours = hull._neighbours(faces, *grouping.vertex_faces(faces, len(mesh.vertices)))
-    got = {(v, int(w)) for v in range(len(mesh.vertices)) for w in neighbours[indptr[v]:indptr[v + 1]]}
+    got = {(v, int(w)) for v in range(len(mesh.vertices)) for w in neighbours[indptr[v] : indptr[v + 1]]}
     want = {(int(a), int(b)) for a, b in mesh.edges_unique} | {(int(b), int(a)) for a, b in mesh.edges_unique}
-    assert got == want and all(np.all(np.diff(neighbours[indptr[v]:indptr[v + 1]]) > 0) for v in range(len(mesh.vertices)))
+    assert got == want and all(
+        np.all(np.diff(neighbours[indptr[v] : indptr[v + 1]]) > 0) for v in range(len(mesh.vertices))
+    )

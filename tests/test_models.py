@@ -28,7 +28,7 @@ def test_lj_x8080_geometry_by_hand():
 def test_user_sensor_preset_from_toml(tmp_path):
     path = tmp_path / "mine.toml"
     path.write_text(
-        '[my-sensor]\nreference_distance_mm = 100\nz_half_range_mm = 10\nwidth_near_mm = 20\n'
+        "[my-sensor]\nreference_distance_mm = 100\nz_half_range_mm = 10\nwidth_near_mm = 20\n"
         "width_reference_mm = 22\nwidth_far_mm = 24\npoints_per_profile = 800\nbaseline_mm = 40\n"
     )
     s = load_sensor(path)
@@ -41,7 +41,10 @@ def test_user_sensor_preset_from_toml(tmp_path):
     "body, message",
     [
         ("[s]\nreference_distance_mm = 100\n", "missing"),
-        ("[s]\nreference_distance_mm = 5\nz_half_range_mm = 10\nwidth_near_mm = 1\nwidth_reference_mm = 1\nwidth_far_mm = 2\n", "reference_distance"),
+        (
+            "[s]\nreference_distance_mm = 5\nz_half_range_mm = 10\nwidth_near_mm = 1\nwidth_reference_mm = 1\nwidth_far_mm = 2\n",
+            "reference_distance",
+        ),
         ("[s]\ncolour = 'red'\n", "unknown key"),
         ("[a]\nx=1\n[b]\nx=2\n", "exactly one"),
     ],
@@ -62,7 +65,13 @@ def test_measured_material_table_interpolates_and_drops_out(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "body", ["aoi_deg,intensity\n0,1\n", "aoi_deg,intensity\n10,1\n5,0.5\n", "angle,value\n0,1\n10,1\n", "aoi_deg,intensity\n0,1\n95,0\n"]
+    "body",
+    [
+        "aoi_deg,intensity\n0,1\n",
+        "aoi_deg,intensity\n10,1\n5,0.5\n",
+        "angle,value\n0,1\n10,1\n",
+        "aoi_deg,intensity\n0,1\n95,0\n",
+    ],
 )
 def test_bad_material_tables(tmp_path, body):
     path = tmp_path / "bad.csv"

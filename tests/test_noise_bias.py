@@ -19,10 +19,14 @@ from optipose.transforms import make_T, rpy_to_matrix
 # a single sensor found by the nominal quick search on part B (seed 0): a grazing view of few voxels whose
 # error at 5x the preset's noise ICP measured at 35.7 mdeg in sum against hand S3's 9.7 (docs/conditions.md,
 # "Noise through the voxels"); at the preset's noise it is the better of the two
-F1 = np.array([[-0.383_022_221_559, 0.663_413_948_169, 0.642_787_609_687, 0.014_444_444_072],
-               [0.866_025_403_784, 0.5, -0.0, 0.004_080_000_091],
-               [-0.321_393_804_843, 0.556_670_399_226, -0.766_044_443_119, -0.002_792_000_008],
-               [0.0, 0.0, 0.0, 1.0]])  # fmt: skip
+F1 = np.array(
+    [
+        [-0.383_022_221_559, 0.663_413_948_169, 0.642_787_609_687, 0.014_444_444_072],
+        [0.866_025_403_784, 0.5, -0.0, 0.004_080_000_091],
+        [-0.321_393_804_843, 0.556_670_399_226, -0.766_044_443_119, -0.002_792_000_008],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +43,9 @@ def test_a_grid_of_its_own_is_the_grid_at_o_moved_by_its_origin():
     np.testing.assert_array_equal(voxel_down(p, 1e-3, np.zeros(3)), voxel_down(p, 1e-3))
     rng = np.random.default_rng(2)
     points, origin = rng.normal(scale=5e-3, size=(5000, 3)), rng.random(3) * 0.5e-3
-    np.testing.assert_allclose(voxel_down(points, 0.5e-3, origin), voxel_down(points - origin, 0.5e-3) + origin, atol=1e-15)
+    np.testing.assert_allclose(
+        voxel_down(points, 0.5e-3, origin), voxel_down(points - origin, 0.5e-3) + origin, atol=1e-15
+    )
 
 
 def test_a_scans_grid_origin_is_seeded_and_within_one_voxel():
@@ -50,7 +56,9 @@ def test_a_scans_grid_origin_is_seeded_and_within_one_voxel():
 
 
 def test_voxel_grid_is_a_checked_key_of_the_objective():
-    assert load_objective("paper").in_cell("ideal").registration.voxel_grid == "part"  # the paper's figures stand as they were
+    assert (
+        load_objective("paper").in_cell("ideal").registration.voxel_grid == "part"
+    )  # the paper's figures stand as they were
     assert load_objective("robust").registration.voxel_grid == "random"
     with pytest.raises(ConfigError, match="voxel_grid"):
         objective_from_table({"registration": {"voxel_grid": "diagonal"}}, "bad.toml")
@@ -83,7 +91,9 @@ def infos(part_b):
     nominal = Surrogate(part_b, turns=turns)
     banded = Surrogate(part_b, turns=turns, noise_band=5.0)
     S3 = part_b.layouts["hand"].poses[2]
-    return {(name, band): s.info(T) for name, T in (("F1", F1), ("S3", S3)) for band, s in ((1.0, nominal), (5.0, banded))}
+    return {
+        (name, band): s.info(T) for name, T in (("F1", F1), ("S3", S3)) for band, s in ((1.0, nominal), (5.0, banded))
+    }
 
 
 def _score(info, scale):
@@ -93,7 +103,9 @@ def _score(info, scale):
 def test_without_a_band_there_is_no_noise_bias_term(infos):
     assert infos["F1", 1.0].G_noise is None and infos["F1", 5.0].G_noise is not None
     for name in ("F1", "S3"):  # the same scan, the same voxel bias: only the term differs
-        assert np.array_equal(infos[name, 1.0].G, infos[name, 5.0].G) and np.array_equal(infos[name, 1.0].H, infos[name, 5.0].H)
+        assert np.array_equal(infos[name, 1.0].G, infos[name, 5.0].G) and np.array_equal(
+            infos[name, 1.0].H, infos[name, 5.0].H
+        )
 
 
 def test_the_noise_bias_term_turns_the_ranking_at_five_times_the_noise_as_icp_does(infos):
@@ -129,19 +141,31 @@ def test_the_search_gives_the_surrogate_the_bands_top(part_b):
     from optipose.search.problem import SurrogateProblem
 
     assert SurrogateProblem(part_b, load_objective("robust"), SearchConfig()).surrogate.noise_band == 5.0
-    assert SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig()).surrogate.noise_band == 1.0
+    assert (
+        SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig()).surrogate.noise_band == 1.0
+    )
 
 
 # -- hand-anchored candidates ---------------------------------------------------------------------------
-_STATED = predicted_stats([SensorInfo(np.eye(6), 1, 1)])  # a stage's layouts carry a prediction; these tests never read it
+_STATED = predicted_stats(
+    [SensorInfo(np.eye(6), 1, 1)]
+)  # a stage's layouts carry a prediction; these tests never read it
 
 
 def _outcome(problem, sensors):
     from optipose.search.records import Found, SearchOutcome
 
     found = {1: Found(1, "greedy", problem.space.from_pose(F1), [F1], 0.0, _STATED)}
-    found |= {len(sensors) + 1: Found(len(sensors) + 1, "greedy", np.concatenate([problem.space.from_pose(T) for T in [F1, *sensors]]),
-                                      [F1, *sensors], 0.0, _STATED)}  # fmt: skip
+    found |= {
+        len(sensors) + 1: Found(
+            len(sensors) + 1,
+            "greedy",
+            np.concatenate([problem.space.from_pose(T) for T in [F1, *sensors]]),
+            [F1, *sensors],
+            0.0,
+            _STATED,
+        )
+    }
     return SearchOutcome(found, {}, {}, {}, [])
 
 
@@ -172,8 +196,11 @@ def test_anchored_layouts_keep_the_used_hand_sensors_in_their_places(part_b):
 def test_a_kept_sensor_is_measured_exactly_as_in_the_hand_layout(part_b):
     # same index, same seed: the same noise, bracket errors and grid, so its subsets' errors are identical
     objective = load_objective("robust")
-    objective = replace(objective, protocol=replace(reduced_objective(objective).protocol, sequences=("R", "P")),
-                        conditions=replace(objective.conditions, noise_scales=(5.0,), mounting_draws=1))  # fmt: skip
+    objective = replace(
+        objective,
+        protocol=replace(reduced_objective(objective).protocol, sequences=("R", "P")),
+        conditions=replace(objective.conditions, noise_scales=(5.0,), mounting_draws=1),
+    )
     hand = part_b.layouts["hand"]
     mixed = replace(hand, sensors=[*hand.sensors[:2], replace(hand.sensors[2], name="F1", T_O_S=F1)])
     from optipose.evaluate.robust import make_evaluator
@@ -183,8 +210,12 @@ def test_a_kept_sensor_is_measured_exactly_as_in_the_hand_layout(part_b):
     rows_a, rows_b = a.results[0][1].per_scan, b.results[0][1].per_scan
     err = ["err_roll", "err_pitch", "err_yaw"]
     for subset in ("S1", "S2", "S1S2"):
-        np.testing.assert_array_equal(rows_a[rows_a.subset == subset][err].to_numpy(), rows_b[rows_b.subset == subset][err].to_numpy())
-    assert not np.array_equal(rows_a[rows_a.subset == "S3"][err].to_numpy(), rows_b[rows_b.subset == "F1"][err].to_numpy())
+        np.testing.assert_array_equal(
+            rows_a[rows_a.subset == subset][err].to_numpy(), rows_b[rows_b.subset == subset][err].to_numpy()
+        )
+    assert not np.array_equal(
+        rows_a[rows_a.subset == "S3"][err].to_numpy(), rows_b[rows_b.subset == "F1"][err].to_numpy()
+    )
 
 
 def test_the_refinement_places_the_found_sensor_for_the_kept_ones(part_b):
@@ -218,11 +249,15 @@ def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
     from optipose.search.config import SearchConfig
     from optipose.search.problem import SurrogateProblem
 
-    problem = SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig(hand_margin=1.0, hand_weight=1.0))
+    problem = SurrogateProblem(
+        part_b, load_objective("paper").in_cell("ideal"), SearchConfig(hand_margin=1.0, hand_weight=1.0)
+    )
     stats = replace(_STATED, axis_score=np.array([1.0, 2.0, 3.0]), level_axis_score=np.array([[1.0, 2.0, 3.0]]))
     one = problem.with_targets({1: np.array([[1.0, 1.0, 4.0]])})
     assert one.shortfall(1, stats) == pytest.approx(1.0)
-    band = replace(_STATED, axis_score=np.array([5.0, 5.0, 5.0]), level_axis_score=np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]]))
+    band = replace(
+        _STATED, axis_score=np.array([5.0, 5.0, 5.0]), level_axis_score=np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]])
+    )
     targets = problem.with_targets({1: np.array([[1.0, 1.0, 1.0], [6.0, 6.0, 6.0]])})
     assert targets.shortfall(1, band) == pytest.approx(1.0)  # pitch at the first level, though 5 < 6 at the worst
 
@@ -276,8 +311,12 @@ def test_the_maxmin_layouts_keep_hand_sensors_and_hold_each_statistic_best(part_
     hand_info = [problem.info(problem.space.from_pose(T)) for T in hand]
 
     def smallest(infos):
-        level = lambda xs: predicted_stats(xs, noise_scales=(1.0, 5.0), mounting=problem.band["mounting"]).level_axis_stats  # noqa: E731
-        target = min((level([hand_info[i] for i in c]) for c in [(0, 1), (0, 2), (1, 2)]), key=lambda t: t.max(axis=0).sum())
+        level = lambda xs: (
+            predicted_stats(xs, noise_scales=(1.0, 5.0), mounting=problem.band["mounting"]).level_axis_stats
+        )  # noqa: E731
+        target = min(
+            (level([hand_info[i] for i in c]) for c in [(0, 1), (0, 2), (1, 2)]), key=lambda t: t.max(axis=0).sum()
+        )
         return float(np.min(target / level(infos)))
 
     (found,) = maxmin_anchored(problem, hand, 2, n=1, evals=10)

@@ -136,7 +136,9 @@ def _distance_to_surface(mesh, points: np.ndarray, tol: float = 1e-5) -> np.ndar
     tri = mesh.triangles  # (f, 3, 3)
     lo, hi = tri.min(axis=1) - tol, tri.max(axis=1) + tol
     near = np.all((points[:, None, :] >= lo) & (points[:, None, :] <= hi), axis=2)  # (n, f)
-    plane = np.abs(np.einsum("nk,fk->nf", points, mesh.face_normals) - np.einsum("fk,fk->f", tri[:, 0], mesh.face_normals))
+    plane = np.abs(
+        np.einsum("nk,fk->nf", points, mesh.face_normals) - np.einsum("fk,fk->f", tri[:, 0], mesh.face_normals)
+    )
     return np.where(near, plane, np.inf).min(axis=1)
 
 
@@ -197,11 +199,17 @@ def test_empty_stl_is_a_mesh_error(tmp_path):
         ("[part]\nmesh = 'part_b.stl'\ncolour = 'red'\n", "unknown key"),
         ("[part]\nmesh = 'part_b.stl'\nmaterial = 'unobtainium'\n", "unknown material"),
         ("[part]\nmesh = 'part_b.stl'\nrotation_centre_mm = [1, 2]\n", "3 numbers"),
-        ("[part]\nmesh = 'part_b.stl'\n[[keepout]]\nname = 'f'\nmin_mm = [0, 0, 0]\nmax_mm = [1, -1, 1]\n", "min < max"),
-        ("[part]\nmesh = 'part_b.stl'\n[layouts.hand]\n[[layouts.hand.sensors]]\nname = 'S1'\n"
-         "T_O_S = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]\n", "reflection"),
+        (
+            "[part]\nmesh = 'part_b.stl'\n[[keepout]]\nname = 'f'\nmin_mm = [0, 0, 0]\nmax_mm = [1, -1, 1]\n",
+            "min < max",
+        ),
+        (
+            "[part]\nmesh = 'part_b.stl'\n[layouts.hand]\n[[layouts.hand.sensors]]\nname = 'S1'\n"
+            "T_O_S = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]\n",
+            "reflection",
+        ),
     ],
-)  # fmt: skip
+)
 def test_broken_part_files_are_config_errors(tmp_path, text, message):
     shutil.copy(PARTS_DIR / "part_b" / "part_b.stl", tmp_path / "part_b.stl")
     (tmp_path / "part.toml").write_text(text)
@@ -222,8 +230,15 @@ LOOK_DOWN = np.array([[0.0, 1, 0, 0], [1, 0, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]
 def _block_part(length: float = 0.060, keepouts=()) -> Part:
     """A 60 x 40 x 20 mm block, x 0..60 mm, y ±20 mm, z 0..20 mm, scanned over ``length``."""
     mesh = trimesh.creation.box(bounds=[[0.0, -0.020, 0.0], [0.060, 0.020, 0.020]])
-    return Part("block", mesh, "white-diffuse", "keyence-lj-x8080", ScanMotion(length, 0.0005),
-                np.array([0.03, 0.0, 0.01]), list(keepouts))  # fmt: skip
+    return Part(
+        "block",
+        mesh,
+        "white-diffuse",
+        "keyence-lj-x8080",
+        ScanMotion(length, 0.0005),
+        np.array([0.03, 0.0, 0.01]),
+        list(keepouts),
+    )
 
 
 def _looking_down_at(x: float, y: float, z: float) -> np.ndarray:
@@ -284,8 +299,13 @@ def test_sat_agrees_with_a_linear_program_on_random_poses(parts):
         nv = len(hull.vertices)
         A = np.zeros((4, nv + 3))
         A[:3, :nv], A[:3, nv:], A[3, :nv] = hull.vertices.T, -R, 1.0
-        lp = linprog(np.zeros(nv + 3), A_eq=A, b_eq=np.r_[centre, 1.0],
-                     bounds=[(0, None)] * nv + [(-h, h) for h in half], method="highs")  # fmt: skip
+        lp = linprog(
+            np.zeros(nv + 3),
+            A_eq=A,
+            b_eq=np.r_[centre, 1.0],
+            bounds=[(0, None)] * nv + [(-h, h) for h in half],
+            method="highs",
+        )
         assert (lp.status == 0) == (_sat_gap(hull, centre, R, half) < 0)
 
 
@@ -302,7 +322,9 @@ def test_show_writes_a_png_and_counts_match_a_scan(tmp_path, parts):
     assert [r["points"] for r in rows] == expected
 
 
-@pytest.mark.parametrize("name, size_mm", [("bushing", (50.0, 50.0, 32.0)), ("angle", (60.0, 50.0, 35.0)), ("housing", (70.0, 45.0, 24.0))])
+@pytest.mark.parametrize(
+    "name, size_mm", [("bushing", (50.0, 50.0, 32.0)), ("angle", (60.0, 50.0, 35.0)), ("housing", (70.0, 45.0, 24.0))]
+)
 def test_the_study_parts_are_built_as_their_files_say(tmp_path, name, size_mm):
     """The verdict study's parts (scripts/make_study_parts.py): rebuilt byte for byte as shipped in studies/parts,
     one watertight body of the stated size, a process and a material the cell knows, the conventional baseline."""

@@ -33,8 +33,14 @@ CASES = [(name, method) for name in BACKENDS for method in get_backend(name).met
 def _config(name: str, method: str, **changes):
     # a step of 1e-5° whatever the paper objective says: point-to-point ICP crawls (each step ~0.8 of the
     # last), and 1e-4° (ample for point-to-plane's Gauss-Newton steps) stopped it 2.8e-4° short of the turn
-    cfg = replace(load_objective("paper").in_cell("ideal").registration, backend=name, method=method, max_iterations=500,
-                  tolerance_rotation=np.deg2rad(1e-5), tolerance_translation=1e-8)  # fmt: skip
+    cfg = replace(
+        load_objective("paper").in_cell("ideal").registration,
+        backend=name,
+        method=method,
+        max_iterations=500,
+        tolerance_rotation=np.deg2rad(1e-5),
+        tolerance_translation=1e-8,
+    )
     return replace(cfg, **changes)
 
 
@@ -48,7 +54,12 @@ def block() -> trimesh.Trimesh:
         j = (i + 1) % 6
         faces += [(i, j + 6, j), (i, i + 6, j + 6)]  # outward: the profile runs counter-clockwise in x-z
     mesh = trimesh.Trimesh(vertices, faces, process=False)
-    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0 and mesh.area == pytest.approx(2 * 600e-6 + 120e-3 * 30e-3)
+    assert (
+        mesh.is_watertight
+        and mesh.is_winding_consistent
+        and mesh.volume > 0
+        and mesh.area == pytest.approx(2 * 600e-6 + 120e-3 * 30e-3)
+    )
     return mesh
 
 
@@ -72,7 +83,10 @@ def turned(cloud) -> np.ndarray:
 @pytest.fixture(scope="module")
 def recovered(surface, turned) -> dict:
     """Every back-end and method once on the turned cloud (Open3D against a 0.25 mm sample)."""
-    return {(name, method): register(turned, surface, _config(name, method, reference_spacing=0.25e-3)) for name, method in CASES}
+    return {
+        (name, method): register(turned, surface, _config(name, method, reference_spacing=0.25e-3))
+        for name, method in CASES
+    }
 
 
 # -- the contract -----------------------------------------------------------------------------------------
@@ -127,7 +141,9 @@ def test_a_cloud_out_of_reach_fails_with_a_reason(surface, cloud, name, method):
 # -- cross-checks between back-ends --------------------------------------------------------------------------
 @pytest.mark.parametrize("method, degrees", [("point_to_plane", 3e-3), ("point_to_point", 0.03)])
 def test_fast_and_open3d_agree(recovered, method, degrees):
-    fast, o3d = (matrix_to_rpy(invert_T(recovered[(name, method)].T_target_source)[:3, :3]) for name in ("fast", "open3d"))
+    fast, o3d = (
+        matrix_to_rpy(invert_T(recovered[(name, method)].T_target_source)[:3, :3]) for name in ("fast", "open3d")
+    )
     np.testing.assert_allclose(np.rad2deg(fast), np.rad2deg(RPY), rtol=0, atol=1e-4)  # the exact surface
     np.testing.assert_allclose(np.rad2deg(o3d), np.rad2deg(fast), rtol=0, atol=degrees)
 
@@ -181,7 +197,9 @@ def test_a_sampled_references_tracker_answers_the_kd_trees_nearest_points_at_eve
             np.testing.assert_array_equal(n, truth[1])
             if i and steps[i - 1] <= 1e-7:  # settled: nearly every point keeps a margin, which lets steps skip it
                 assert (track.margin > 0).mean() > 0.9
-            step = part_motion(rng.normal(scale=size / 0.02, size=3), CENTRE, rng.normal(scale=size, size=3))  # ~size at the block
+            step = part_motion(
+                rng.normal(scale=size / 0.02, size=3), CENTRE, rng.normal(scale=size, size=3)
+            )  # ~size at the block
             T = step @ T
 
 
@@ -215,8 +233,11 @@ def test_the_fitness_stop_runs_open3ds_point_to_point_icp(block, turned):
     fraction and RMSE unchanged, or the iteration cap): the same pose as Open3D's ICP against the same sample."""
     reference = SampledReference(*sample_surface(block.vertices, block.faces, 0.5e-3, seed=1))
     for cap in (8, 60):
-        cfg = replace(_config("fast", "point_to_point", reference="cad-sample", reference_spacing=0.5e-3),
-                      stop="fitness", max_iterations=cap)  # fmt: skip
+        cfg = replace(
+            _config("fast", "point_to_point", reference="cad-sample", reference_spacing=0.5e-3),
+            stop="fitness",
+            max_iterations=cap,
+        )
         fast, o3d = register(turned, reference, cfg), register(turned, reference, replace(cfg, backend="open3d"))
         assert fast.ok and o3d.ok and (fast.iterations == cap) == (cap == 8)
         np.testing.assert_allclose(fast.T_target_source, o3d.T_target_source, rtol=0, atol=1e-9)
@@ -305,7 +326,9 @@ def test_combined_start_adds_the_clouds_quadratic_models():
     np.testing.assert_allclose(rotvec, [a, b, 0.0], atol=1e-5)
     np.testing.assert_allclose(T[:3, 3], 0.0, atol=1e-9)
     T3 = part_motion(np.array([0.3, -0.2, 0.5]) * DEG, CENTRE)
-    np.testing.assert_allclose(combined_start([(T3, np.diag([1.0, 2, 3, 4, 5, 6]), np.array([0.05, -0.02, 0.01]))]), T3, atol=1e-12)
+    np.testing.assert_allclose(
+        combined_start([(T3, np.diag([1.0, 2, 3, 4, 5, 6]), np.array([0.05, -0.02, 0.01]))]), T3, atol=1e-12
+    )
 
 
 def test_combined_start_moves_each_model_to_a_common_origin():

@@ -22,8 +22,16 @@ from optipose.model.collision import DEFAULT_MARGIN, clearance, heads_clearance
 from optipose.model.part import PARTS_DIR, load_part
 
 CHROMIUM = Path("/usr/bin/chromium")
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync"]  # fmt: skip
+FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 SMALL = """[search]
 global_evals = 25
 local_evals = 8
@@ -39,17 +47,22 @@ start_deg = -2.0
 stop_deg = 2.0
 step_deg = 4.0
 """
-BAND = SHORT.replace('"short"', '"short-band"') + """[conditions]
+BAND = (
+    SHORT.replace('"short"', '"short-band"')
+    + """[conditions]
 noise_scale = [1.0, 5.0]
 mounting_translation_mm = 0.2
 mounting_rotation_deg = 0.1
 mounting_draws = 1
 """
+)
 
 
 def run(*args, columns: int = 80):
     env = {**os.environ, "COLUMNS": str(columns)}
-    return subprocess.run([sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=900, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=900, env=env
+    )
 
 
 @pytest.fixture(scope="module")
@@ -58,14 +71,41 @@ def results(tmp_path_factory):
     pair against part B's hand layout under a band, and an evaluation: each writes its report."""
     d = tmp_path_factory.mktemp("report")
     # the search checks its answer under the band too (the default budget's stage, here on the short protocol)
-    for name, text in (("small.toml", SMALL + f'band = "{d / "band.toml"}"\n'), ("short.toml", SHORT), ("band.toml", BAND)):
+    for name, text in (
+        ("small.toml", SMALL + f'band = "{d / "band.toml"}"\n'),
+        ("short.toml", SHORT),
+        ("band.toml", BAND),
+    ):
         (d / name).write_text(text)
     shutil.copy(PARTS_DIR / "part_b" / "part_b.stl", d / "block.stl")
-    search = run("search", d / "block.stl", "--sensors", "1,2", "--budget", "quick", "--search-config", d / "small.toml",
-                 "--objective", d / "short.toml", "--seed", 1, "--out", d / "search")  # fmt: skip
+    search = run(
+        "search",
+        d / "block.stl",
+        "--sensors",
+        "1,2",
+        "--budget",
+        "quick",
+        "--search-config",
+        d / "small.toml",
+        "--objective",
+        d / "short.toml",
+        "--seed",
+        1,
+        "--out",
+        d / "search",
+    )
     assert search.returncode == 0, search.stderr
-    robust = run("robustness", "part_b", "--layout", d / "search" / "layouts" / "found_k2.toml", "--objective", d / "band.toml",
-                 "--no-brackets", "--out", d / "robustness")  # fmt: skip (the brackets' 13 evaluations: see the unit test)
+    robust = run(
+        "robustness",
+        "part_b",
+        "--layout",
+        d / "search" / "layouts" / "found_k2.toml",
+        "--objective",
+        d / "band.toml",
+        "--no-brackets",
+        "--out",
+        d / "robustness",
+    )  # the brackets' 13 evaluations: see the unit test
     assert robust.returncode == 0, robust.stderr
     evaluation = run("evaluate", "part_b", "--objective", d / "short.toml", "--out", d / "evaluate")
     assert evaluation.returncode == 0, evaluation.stderr
@@ -100,8 +140,12 @@ def test_a_bare_stl_search_is_compared_with_the_conventional_placement(results):
 def test_a_robustness_folder_gives_its_verdicts_as_a_search_does(results):
     result = load_result(results["robustness"])
     verdicts = result.verdicts()  # a list, as a search's; each names its layout
-    assert isinstance(verdicts, list) and [v.layout for v in verdicts] == [name for name in result.layouts if name != "hand"]
-    assert all(v.reference is result.choices[("hand", v.k)] and v.found is result.choices[(v.layout, v.k)] for v in verdicts)
+    assert isinstance(verdicts, list) and [v.layout for v in verdicts] == [
+        name for name in result.layouts if name != "hand"
+    ]
+    assert all(
+        v.reference is result.choices[("hand", v.k)] and v.found is result.choices[(v.layout, v.k)] for v in verdicts
+    )
 
 
 @pytest.mark.parametrize("spec", ["part_b", "bare part_a.stl"])
@@ -142,7 +186,12 @@ def test_the_report_says_the_verdicts_of_the_result(results):
         assert html.escape(line) in text and line in md
     for line in result.verdict_lines():  # checked under a band, the first draw's lines stay beside it
         assert html.escape(line) in text and line in md
-    assert text.index("Verdict") < text.index("Table 1") < text.index("Under the band of a real cell") < text.index("Where the sensors go")
+    assert (
+        text.index("Verdict")
+        < text.index("Table 1")
+        < text.index("Under the band of a real cell")
+        < text.index("Where the sensors go")
+    )
     for v in result.band_verdicts().values():  # each k's verdict under the band, and its table per level
         assert html.escape("under the band: " + v.line("conventional")) in text
         assert f"found (k={v.k}) at every condition of the band" in md
@@ -176,20 +225,70 @@ def test_the_bracket_tables_show_each_layout_with_all_its_sensors_in_mdeg_and_um
     from optipose.report.robustness import bracket_blocks
 
     common = {"tolerance_mm": 0.2, "tolerance_deg": 0.1, "draws": 2, "n_scans": 14, "reduced_protocol": True}
-    axes = pd.DataFrame([
-        {"layout": "hand", "k": 1, "axis": "roll", "subset": "S1", "unit": "deg", "perfect_median_deg": 0.001, "perfect_p75_deg": 0.002,
-         "mounted_median_deg": 0.003, "mounted_p75_deg": 0.004, "worst_abs_bias": 0.05, **common},
-        {"layout": "hand", "k": 2, "axis": "roll", "subset": "S1S2", "unit": "deg", "perfect_median_deg": 0.0005, "perfect_p75_deg": 0.0007,
-         "mounted_median_deg": 0.0011, "mounted_p75_deg": 0.0013, "worst_abs_bias": 0.02, **common},
-        {"layout": "hand", "k": 2, "axis": "x", "subset": "S1S2", "unit": "m", "perfect_median_deg": np.nan, "perfect_p75_deg": np.nan,
-         "mounted_median_deg": np.nan, "mounted_p75_deg": np.nan, "worst_abs_bias": 25e-6, **common},
-    ])  # fmt: skip
-    sensors = pd.DataFrame([{"layout": "hand", "k": 2, "sensor": "S2", "sensor_index": 1, "rank": 1, "change_roll_deg": 0.0004,
-                             "change_pitch_deg": -0.0001, "change_yaw_deg": 0.0, "score_change_deg": 0.0003}])  # fmt: skip
+    axes = pd.DataFrame(
+        [
+            {
+                "layout": "hand",
+                "k": 1,
+                "axis": "roll",
+                "subset": "S1",
+                "unit": "deg",
+                "perfect_median_deg": 0.001,
+                "perfect_p75_deg": 0.002,
+                "mounted_median_deg": 0.003,
+                "mounted_p75_deg": 0.004,
+                "worst_abs_bias": 0.05,
+                **common,
+            },
+            {
+                "layout": "hand",
+                "k": 2,
+                "axis": "roll",
+                "subset": "S1S2",
+                "unit": "deg",
+                "perfect_median_deg": 0.0005,
+                "perfect_p75_deg": 0.0007,
+                "mounted_median_deg": 0.0011,
+                "mounted_p75_deg": 0.0013,
+                "worst_abs_bias": 0.02,
+                **common,
+            },
+            {
+                "layout": "hand",
+                "k": 2,
+                "axis": "x",
+                "subset": "S1S2",
+                "unit": "m",
+                "perfect_median_deg": np.nan,
+                "perfect_p75_deg": np.nan,
+                "mounted_median_deg": np.nan,
+                "mounted_p75_deg": np.nan,
+                "worst_abs_bias": 25e-6,
+                **common,
+            },
+        ]
+    )
+    sensors = pd.DataFrame(
+        [
+            {
+                "layout": "hand",
+                "k": 2,
+                "sensor": "S2",
+                "sensor_index": 1,
+                "rank": 1,
+                "change_roll_deg": 0.0004,
+                "change_pitch_deg": -0.0001,
+                "change_yaw_deg": 0.0,
+                "score_change_deg": 0.0003,
+            }
+        ]
+    )
     blocks = bracket_blocks(axes, sensors, "hand")
     spread, ranking = [b for b in blocks if hasattr(b, "rows")]
-    assert spread.rows == (("hand", "2", "roll", "S1S2", "0.500", "0.700", "1.100", "1.300", "20.000", "mdeg"),
-                           ("hand", "2", "x", "S1S2", "", "", "", "", "25.0", "µm"))  # fmt: skip
+    assert spread.rows == (
+        ("hand", "2", "roll", "S1S2", "0.500", "0.700", "1.100", "1.300", "20.000", "mdeg"),
+        ("hand", "2", "x", "S1S2", "", "", "", "", "25.0", "µm"),
+    )
     assert ranking.rows == (("hand", "2", "S2", "+0.400", "-0.100", "+0.000", "+0.300", "1"),)
     assert "±0.2 mm and ±0.1°" in blocks[1].text
 
@@ -197,7 +296,10 @@ def test_the_bracket_tables_show_each_layout_with_all_its_sensors_in_mdeg_and_um
 def test_a_study_table_links_each_trials_report(results, tmp_path):
     from optipose.report.study import study_report
 
-    rows = [{"part": "block", "k": 2, "score_mdeg": 1.25, "state": "complete"}, {"part": "part_b", "k": 3, "score_mdeg": 0.5, "state": "failed"}]
+    rows = [
+        {"part": "block", "k": 2, "score_mdeg": 1.25, "state": "complete"},
+        {"part": "part_b", "k": 3, "score_mdeg": 0.5, "state": "failed"},
+    ]
     page, md = study_report(rows, [results["search"], None], tmp_path / "study")
     text = page.read_text()
     assert text.count("<tr>") == 3 and 'class="sortable"' in text
@@ -213,8 +315,9 @@ def browser():
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p, tempfile.TemporaryDirectory() as profile:
-        context = p.chromium.launch_persistent_context(profile, executable_path=str(CHROMIUM), args=FLAGS, headless=True,
-                                                       viewport={"width": 1280, "height": 900})  # fmt: skip
+        context = p.chromium.launch_persistent_context(
+            profile, executable_path=str(CHROMIUM), args=FLAGS, headless=True, viewport={"width": 1280, "height": 900}
+        )
         yield context
         context.close()
 
@@ -230,11 +333,23 @@ def _open(browser, path: Path):
     return page, errors, requests
 
 
-@pytest.mark.parametrize("kind, tables", [
-    ("search", ["Table 1", "found vs. conventional per k", "R (the middle of the measuring range)", "points per scan", "search settings"]),
-    ("robustness", ["Table 1", "score per condition", "R (the middle of the measuring range)"]),
-    ("evaluate", ["Table 1", "points per scan"]),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "kind, tables",
+    [
+        (
+            "search",
+            [
+                "Table 1",
+                "found vs. conventional per k",
+                "R (the middle of the measuring range)",
+                "points per scan",
+                "search settings",
+            ],
+        ),
+        ("robustness", ["Table 1", "score per condition", "R (the middle of the measuring range)"]),
+        ("evaluate", ["Table 1", "points per scan"]),
+    ],
+)
 def test_the_report_opens_offline_in_chromium_and_shows_everything(results, browser, kind, tables, tmp_path):
     path = results[kind] / "report.html"
     source = path.read_text()
@@ -266,7 +381,9 @@ def test_a_study_table_sorts_in_the_browser(results, browser, tmp_path):
     rows = [{"trial": n, "score_mdeg": s} for n, s in (("a", 3.0), ("b", 1.0), ("c", 2.0))]
     page_path, _ = study_report(rows, [results["search"], None, None], tmp_path)
     page, errors, _ = _open(browser, page_path)
-    column = lambda: page.evaluate("() => Array.from(document.querySelectorAll('tbody tr')).map(r => r.cells[0].innerText)")  # noqa: E731
+    column = lambda: page.evaluate(
+        "() => Array.from(document.querySelectorAll('tbody tr')).map(r => r.cells[0].innerText)"
+    )  # noqa: E731
     assert column() == ["a", "b", "c"]
     page.click("th:nth-child(2)")
     assert column() == ["b", "c", "a"]
@@ -283,18 +400,41 @@ def _index_rows() -> list[dict]:
     for task, k, seed in itertools.product(("evaluate", "search"), (1, 2), range(3)):
         budget = "thorough" if task == "search" else ""
         part = "part_b" if task == "search" else "/data/meshes/part_c.stl"
-        row = {"key": f"{Path(part).stem}-{task}-robust-k{k}-{budget}-s{seed}".replace("--", "-"), "part": part, "task": task,
-               "objective": "robust", "sensors": k, "budget": budget, "seed": seed, "state": "complete", "error": "",
-               "started": "2026-11-24T23:09:01.155+00:00", "finished": "2026-11-24T23:19:01.155+00:00", "seconds": 600.2,
-               "cpu_seconds": 1190.5, "worker": "node-17.cluster:123456", "sensors_used": "S1S2S3"[: 2 * k],
-               "score_deg": 0.00123 * (seed + 1) / k}  # fmt: skip
+        row = {
+            "key": f"{Path(part).stem}-{task}-robust-k{k}-{budget}-s{seed}".replace("--", "-"),
+            "part": part,
+            "task": task,
+            "objective": "robust",
+            "sensors": k,
+            "budget": budget,
+            "seed": seed,
+            "state": "complete",
+            "error": "",
+            "started": "2026-11-24T23:09:01.155+00:00",
+            "finished": "2026-11-24T23:19:01.155+00:00",
+            "seconds": 600.2,
+            "cpu_seconds": 1190.5,
+            "worker": "node-17.cluster:123456",
+            "sensors_used": "S1S2S3"[: 2 * k],
+            "score_deg": 0.00123 * (seed + 1) / k,
+        }
         for axis in ("roll", "pitch", "yaw"):
             row |= {f"{axis}_median_deg": 0.0002 * (seed + 1), f"{axis}_p75_deg": 0.0004, f"{axis}_subset": "S1"}
         if task == "search":
-            row |= {"hand_score_deg": 0.002, "ratio": 1.5 + seed, "no_worse": seed != 1, "band_ratio": 1.2, "band_no_worse": True}
+            row |= {
+                "hand_score_deg": 0.002,
+                "ratio": 1.5 + seed,
+                "no_worse": seed != 1,
+                "band_ratio": 1.2,
+                "band_no_worse": True,
+            }
         rows.append(row)
-    rows[1] = {**{c: None for c in rows[1]}, **{c: rows[1][c] for c in ("key", "part", "task", "objective", "sensors", "budget", "seed")},
-               "state": "failed", "error": "MeshError: part_c.stl: mesh has no triangles"}  # fmt: skip
+    rows[1] = {
+        **{c: None for c in rows[1]},
+        **{c: rows[1][c] for c in ("key", "part", "task", "objective", "sensors", "budget", "seed")},
+        "state": "failed",
+        "error": "MeshError: part_c.stl: mesh has no triangles",
+    }
     return rows
 
 
@@ -318,7 +458,9 @@ def test_a_study_page_shows_the_summary_first_then_one_short_row_per_trial_in_md
     text = page.read_text()
     assert text.index("Per part and setting") < text.index('id="trials"')  # the table the terminal prints, first
     summary = text[text.index("Per part and setting") : text.index('id="trials"')]
-    assert summary.count("<tr>") == 1 + 4 and ">1.23<" in summary and ">0/3 1F<" not in summary and ">2/3 1F<" in summary
+    assert (
+        summary.count("<tr>") == 1 + 4 and ">1.23<" in summary and ">0/3 1F<" not in summary and ">2/3 1F<" in summary
+    )
     trials = text[text.index('id="trials"') :]
     trials = trials[: trials.index("</table>")]
     assert re.findall(r"<th[^>]*>([^<]*)</th>", trials) == [h for h, _ in TRIAL_COLUMNS] + ["report"]
@@ -329,7 +471,10 @@ def test_a_study_page_shows_the_summary_first_then_one_short_row_per_trial_in_md
         assert f'href="#trial-{row["key"]}"' in trials and f'<details id="trial-{row["key"]}">' in text
     details = text[text.index(f'<details id="trial-{rows[0]["key"]}">') :]
     details = details[: details.index("</details>")]
-    assert all(f">{c.replace('_deg', '_mdeg')}<" in details for c in rows[0]) and f">{1e3 * rows[0]['score_deg']:.4g}<" in details
+    assert (
+        all(f">{c.replace('_deg', '_mdeg')}<" in details for c in rows[0])
+        and f">{1e3 * rows[0]['score_deg']:.4g}<" in details
+    )
     assert "MeshError: part_c.stl: mesh has no triangles" in text
     assert f"[{rows[0]['key']}](#trial-{rows[0]['key']})" in md.read_text()
 
@@ -339,7 +484,9 @@ def test_a_study_page_fits_1280_pixels_and_unfolds_a_trial(browser, tmp_path):
     page_path, _ = _study_page(tmp_path, rows)
     page, errors, requests = _open(browser, page_path)
     assert requests == [page_path.as_uri()]
-    widths = page.evaluate("() => [document.documentElement.scrollWidth, document.querySelector('#trials').getBoundingClientRect().right]")
+    widths = page.evaluate(
+        "() => [document.documentElement.scrollWidth, document.querySelector('#trials').getBoundingClientRect().right]"
+    )
     assert max(widths) <= 1280, widths  # no column out of sight
     key = rows[4]["key"]
     opened = f"() => document.getElementById('trial-{key}').open"

@@ -19,17 +19,22 @@ from optipose.search.records import Validation
 def _choice(sensors, names, per_axis_mdeg):
     """A Choice of sensor indices with (median, p75) per axis in millidegrees, every axis on all of them."""
     name = "".join(names[i] for i in sensors)
-    axes = tuple(AxisChoice(a, tuple(sensors), name, np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3))
-                 for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg))  # fmt: skip
-    return Choice(len(sensors), tuple(sensors), name, axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3)))
+    axes = tuple(
+        AxisChoice(a, tuple(sensors), name, np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3))
+        for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg)
+    )
+    return Choice(
+        len(sensors), tuple(sensors), name, axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3))
+    )
 
 
 F, S = ["F1", "F2", "F3"], ["S1", "S2", "S3"]
 VALIDATION = Validation(
-    "full", 1234,
+    "full",
+    1234,
     found={3: _choice((0, 1, 2), F, [(0.05, 0.1)] * 3), 1: _choice((0,), F, [(0.1, 0.2), (0.1, 0.25), (0.05, 0.1)])},
     hand={1: _choice((0,), S, [(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)]), 3: _choice((0, 1, 2), S, [(0.1, 0.2)] * 3)},
-)  # fmt: skip
+)
 
 
 def test_the_verdict_names_every_worse_axis_and_what_to_keep():
@@ -37,15 +42,26 @@ def test_the_verdict_names_every_worse_axis_and_what_to_keep():
     # by hand: hand 3 + 5 + 0.1 + 0.2 + 0.1 + 0.2 = 8.6 mdeg, found 0.1 + 0.2 + 0.1 + 0.25 + 0.05 + 0.1 = 0.8
     assert one.ratio == pytest.approx(8.6 / 0.8) and not one.no_worse
     assert [(g.axis, g.statistic) for g in one.worse] == [("pitch", "p75")]
-    assert one.line() == ("k=1: found F1 10.75x better in sum than hand S1, but worse on pitch p75 0.250 vs 0.200 mdeg: "
-                          "keep S1 if no axis may get worse")  # fmt: skip
-    assert three.no_worse and three.line() == "k=3: found F1F2F3 2.00x better in sum than hand S1S2S3, no worse on any axis"
-    assert VALIDATION.verdict_lines()[-1] == "one found sensor beats the hand-placed S1S2S3 in sum (0.800 vs 0.900 mdeg)"
+    assert one.line() == (
+        "k=1: found F1 10.75x better in sum than hand S1, but worse on pitch p75 0.250 vs 0.200 mdeg: "
+        "keep S1 if no axis may get worse"
+    )
+    assert (
+        three.no_worse
+        and three.line() == "k=3: found F1F2F3 2.00x better in sum than hand S1S2S3, no worse on any axis"
+    )
+    assert (
+        VALIDATION.verdict_lines()[-1] == "one found sensor beats the hand-placed S1S2S3 in sum (0.800 vs 0.900 mdeg)"
+    )
 
 
 def test_a_found_layout_worse_in_sum_says_keep_and_a_bare_part_gets_no_verdict():
-    pair = Validation("full", 1, found={2: _choice((0, 1), F, [(0.5, 0.6), (0.1, 0.2), (0.1, 0.2)])},
-                      hand={2: _choice((0, 1), S, [(0.4, 0.5), (0.1, 0.2), (0.1, 0.2)])})  # fmt: skip
+    pair = Validation(
+        "full",
+        1,
+        found={2: _choice((0, 1), F, [(0.5, 0.6), (0.1, 0.2), (0.1, 0.2)])},
+        hand={2: _choice((0, 1), S, [(0.4, 0.5), (0.1, 0.2), (0.1, 0.2)])},
+    )
     (line,) = pair.verdict_lines()
     assert line.startswith("k=2: found F1F2 1.13x worse in sum than hand S1S2 and worse on roll median 0.500 vs 0.400")
     assert line.endswith(": keep S1S2")
@@ -63,7 +79,9 @@ def test_a_found_layout_that_ties_the_hand_one_is_not_bought():
     assert tie.no_worse and tie.tie and not bought(tie)
     assert tie.line() == "k=3: found F1F2F3 ties hand S1S2S3 on every axis: keep S1S2S3"
     assert verdict_headline(tie) == "k=3: KEEP hand S1S2S3: found F1F2F3 ties it on every axis"
-    better = Verdict(3, _choice((0, 1, 2), F, [(0.1, 0.2), (0.05, 0.1), (0.1, 0.25)]), hand)  # yaw p75 better, the rest equal
+    better = Verdict(
+        3, _choice((0, 1, 2), F, [(0.1, 0.2), (0.05, 0.1), (0.1, 0.25)]), hand
+    )  # yaw p75 better, the rest equal
     assert better.no_worse and not better.tie and bought(better)
 
 
@@ -81,7 +99,10 @@ def test_dominance_excess_and_rank_agree():
 
 
 def _layout(name, n, prefix):
-    return Layout(tuple(SensorPose(f"{prefix}{i + 1}", np.eye(4) + np.diag([0, 0, 0, 0]) + _shift(i)) for i in range(n)), name=name)
+    return Layout(
+        tuple(SensorPose(f"{prefix}{i + 1}", np.eye(4) + np.diag([0, 0, 0, 0]) + _shift(i)) for i in range(n)),
+        name=name,
+    )
 
 
 def _shift(i):
@@ -91,8 +112,16 @@ def _shift(i):
 
 
 def test_a_search_folder_reads_back_with_the_same_verdicts(tmp_path):
-    write_config(tmp_path, {"command": "search", "part": {"name": "part_x", "source": ""}, "seed": 7, "budget": "quick",
-                            "validation_seed": 1234})  # fmt: skip
+    write_config(
+        tmp_path,
+        {
+            "command": "search",
+            "part": {"name": "part_x", "source": ""},
+            "seed": 7,
+            "budget": "quick",
+            "validation_seed": 1234,
+        },
+    )
     sink = SearchFolder(tmp_path)
     sink.layouts({1: _layout("found_k1", 1, "F"), 3: _layout("found_k3", 3, "F")}, _layout("hand", 3, "S"))
     sink.validation(VALIDATION)
@@ -114,7 +143,12 @@ def test_an_evaluation_folder_reads_back_with_the_same_table(tmp_path):
     from optipose.model.part import load_part
 
     objective = load_objective("paper").in_cell("ideal")
-    objective = replace(objective, protocol=replace(objective.protocol, sequences=("R", "P"), step=objective.protocol.stop - objective.protocol.start))
+    objective = replace(
+        objective,
+        protocol=replace(
+            objective.protocol, sequences=("R", "P"), step=objective.protocol.stop - objective.protocol.start
+        ),
+    )
     part = load_part("part_b")
     result = evaluate(part, replace(part.layouts["hand"], sensors=part.layouts["hand"].sensors[:2]), objective, seed=3)
     write_config(tmp_path, {})  # overwritten by write_evaluation
@@ -129,19 +163,42 @@ def test_config_toml_reads_back_once_as_a_typed_record(tmp_path):
     from optipose.io.config import BandCheck, RunConfig, run_config
     from optipose.io.folders import RESULT_FORMAT, read_config
 
-    write_config(tmp_path, {"command": "search", "part": {"name": "part_x", "source": "p.toml"}, "seed": 7, "validation_seed": 9,
-                            "budget": "default", "search": {"sensors": (1, 2)}, "objective": {"name": "robust"},
-                            "band": {"file": "robust.toml", "conditions": {"noise_scales": (1.0, 5.0), "mounting_draws": 2}},
-                            "versions": {"optipose": "0.1.0"}})  # fmt: skip
+    write_config(
+        tmp_path,
+        {
+            "command": "search",
+            "part": {"name": "part_x", "source": "p.toml"},
+            "seed": 7,
+            "validation_seed": 9,
+            "budget": "default",
+            "search": {"sensors": (1, 2)},
+            "objective": {"name": "robust"},
+            "band": {"file": "robust.toml", "conditions": {"noise_scales": (1.0, 5.0), "mounting_draws": 2}},
+            "versions": {"optipose": "0.1.0"},
+        },
+    )
     config = read_config(tmp_path)
-    assert (config.command, config.format, config.part_name, config.part_source, config.seed, config.validation_seed, config.budget) == (
-        "search", RESULT_FORMAT, "part_x", "p.toml", 7, 9, "default")  # fmt: skip
+    assert (
+        config.command,
+        config.format,
+        config.part_name,
+        config.part_source,
+        config.seed,
+        config.validation_seed,
+        config.budget,
+    ) == ("search", RESULT_FORMAT, "part_x", "p.toml", 7, 9, "default")
     assert config.sensors == (1, 2) and config.objective_name == "robust" and config.versions == {"optipose": "0.1.0"}
     assert config.band == BandCheck("robust.toml", "worst", (1.0, 5.0), 0.0, 0.0, 2) and not config.band.brackets
     assert config.table["search"] == {"sensors": [1, 2]}  # the file as written, for showing it
     # a folder written before a key existed: its field is left empty, nothing fails
     old = run_config({"command": "evaluate"})
-    assert old == RunConfig(command="evaluate") and old.format is None and old.band is None and old.layouts == () and old.sensors == ()
+    assert (
+        old == RunConfig(command="evaluate")
+        and old.format is None
+        and old.band is None
+        and old.layouts == ()
+        and old.sensors == ()
+    )
 
 
 def test_a_folder_that_is_not_a_result_is_refused_in_one_line(tmp_path):
@@ -163,8 +220,14 @@ def test_under_a_band_a_choice_must_be_no_worse_at_every_condition():
     # found beats hand clearly at noise x1 but loses roll at x5: the robust (worst) statistics alone would
     # say "no worse" (found's worst roll 0.8 < hand's worst 1.0), yet at x5 found's 0.8 exceeds hand's 0.6
     lo, hi = "noise x1", "noise x5"
-    hand_lo, hand_hi = _choice((0,), S, [(1.0, 1.2), (0.1, 0.2), (0.1, 0.2)]), _choice((0,), S, [(0.6, 0.7), (0.1, 0.2), (0.1, 0.2)])
-    found_lo, found_hi = _choice((0,), F, [(0.2, 0.3), (0.1, 0.2), (0.1, 0.2)]), _choice((0,), F, [(0.8, 0.9), (0.1, 0.2), (0.1, 0.2)])
+    hand_lo, hand_hi = (
+        _choice((0,), S, [(1.0, 1.2), (0.1, 0.2), (0.1, 0.2)]),
+        _choice((0,), S, [(0.6, 0.7), (0.1, 0.2), (0.1, 0.2)]),
+    )
+    found_lo, found_hi = (
+        _choice((0,), F, [(0.2, 0.3), (0.1, 0.2), (0.1, 0.2)]),
+        _choice((0,), F, [(0.8, 0.9), (0.1, 0.2), (0.1, 0.2)]),
+    )
     hand = _banded(_choice((0,), S, [(1.0, 1.2), (0.1, 0.2), (0.1, 0.2)]), [(lo, hand_lo), (hi, hand_hi)])
     found = _banded(_choice((0,), F, [(0.8, 0.9), (0.1, 0.2), (0.1, 0.2)]), [(lo, found_lo), (hi, found_hi)])
     assert dominates(found.under[0][1], hand.under[0][1]) and not dominates(found, hand)
@@ -184,8 +247,16 @@ def test_a_band_validation_reads_back_with_every_condition(tmp_path):
     found = {1: _banded(found_hi, [(lo, VALIDATION.found[1]), (hi, found_hi)])}
     hand = {1: _banded(VALIDATION.hand[1], [(lo, VALIDATION.hand[1]), (hi, hand_hi)])}
     validation = Validation("full", 99, found, hand)
-    write_config(tmp_path, {"command": "search", "part": {"name": "part_x", "source": ""}, "seed": 7, "budget": "default",
-                            "validation_seed": 99})  # fmt: skip
+    write_config(
+        tmp_path,
+        {
+            "command": "search",
+            "part": {"name": "part_x", "source": ""},
+            "seed": 7,
+            "budget": "default",
+            "validation_seed": 99,
+        },
+    )
     sink = SearchFolder(tmp_path)
     sink.layouts({1: _layout("found_k1", 1, "F")}, _layout("hand", 3, "S"))
     sink.validation(validation)
@@ -193,7 +264,9 @@ def test_a_band_validation_reads_back_with_every_condition(tmp_path):
     assert [label for label, _ in loaded.found[1].under] == [lo, hi]
     assert loaded.verdict_lines() == validation.verdict_lines()
     (verdict,) = loaded.verdicts()
-    assert [(label, pytest.approx(r)) for label, r in verdict.ratios()] == [(label, r) for label, r in validation.verdicts()[0].ratios()]
+    assert [(label, pytest.approx(r)) for label, r in verdict.ratios()] == [
+        (label, r) for label, r in validation.verdicts()[0].ratios()
+    ]
 
 
 def test_a_selection_with_an_unobservable_axis_reads_back(tmp_path):
@@ -205,8 +278,11 @@ def test_a_selection_with_an_unobservable_axis_reads_back(tmp_path):
     from optipose.io.tables import selection_frame
     from optipose.search.records import IcpEvaluation
 
-    axes = (AxisChoice("roll", (0,), "F1", 0.01, 0.02), AxisChoice("pitch", (0,), "F1", 0.003, 0.004),
-            AxisChoice("yaw", (), "", np.nan, np.nan, UNOBSERVABLE))  # fmt: skip
+    axes = (
+        AxisChoice("roll", (0,), "F1", 0.01, 0.02),
+        AxisChoice("pitch", (0,), "F1", 0.003, 0.004),
+        AxisChoice("yaw", (), "", np.nan, np.nan, UNOBSERVABLE),
+    )
     record = IcpEvaluation(1, "subset of k=3", 2.0, "reduced", Choice(1, (0,), "F1", axes, 0.5), False)
     write_csv(selection_frame([record]), tmp_path / "selection.csv")
     (back,) = load_selection(tmp_path)

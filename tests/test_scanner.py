@@ -117,7 +117,12 @@ def test_tilted_plate_past_the_materials_aoi_limit_returns_nothing():
     assert len(within) > 0.9 * motion.n_profiles * 3200
 
 
-BRACKET_BOXES_MM = [([0, -20, 0], [40, -5, 15]), ([0, 5, 0], [40, 20, 15]), ([0, -5, 0], [40, 5, 5]), ([15, -2, 5], [25, 2, 25])]
+BRACKET_BOXES_MM = [
+    ([0, -20, 0], [40, -5, 15]),
+    ([0, 5, 0], [40, 20, 15]),
+    ([0, -5, 0], [40, 5, 5]),
+    ([15, -2, 5], [25, 2, 25]),
+]
 
 
 @pytest.fixture(scope="module")
@@ -280,7 +285,9 @@ def test_a_step_shadow_is_the_same_with_anchor_columns():
     mesh = trimesh.util.concatenate([box([-20, -30, -5], [20, 30, 0]), box([2, -30, 0], [20, 30, 10])])
     mesh.apply_transform(trimesh.transformations.rotation_matrix(np.deg2rad(30.0), [0, 0, 1]))
     motion = ScanMotion(16 * MM, 0.05 * MM)
-    every, anchors = (Scanner(mesh, SENSOR, "white-diffuse", column_stride=s).scan(T_DOWN, motion, noise=False) for s in (1, 16))
+    every, anchors = (
+        Scanner(mesh, SENSOR, "white-diffuse", column_stride=s).scan(T_DOWN, motion, noise=False) for s in (1, 16)
+    )
     assert len(every) < 320 * 3200  # a shadow was cast
     np.testing.assert_array_equal(every.points, anchors.points)
 
@@ -308,6 +315,11 @@ def test_profiles_whose_fan_misses_the_parts_box_cast_no_ray_and_change_nothing(
             return _first(origins, *args)
 
         scanner.caster.first_triangle = counted
-    a, b = (s.scan(pose, part.motion, PartPose(np.deg2rad([0.7, -0.4, 1.1]), part.rotation_centre), rng=4) for s in scanners.values())
+    a, b = (
+        s.scan(pose, part.motion, PartPose(np.deg2rad([0.7, -0.4, 1.1]), part.rotation_centre), rng=4)
+        for s in scanners.values()
+    )
     np.testing.assert_array_equal(a.points, b.points)
-    assert len(a) > 10_000 and cast["box"] < 0.5 * cast["everything"]  # 4 of 5 profiles miss; anchors are most of the rest
+    assert (
+        len(a) > 10_000 and cast["box"] < 0.5 * cast["everything"]
+    )  # 4 of 5 profiles miss; anchors are most of the rest

@@ -40,9 +40,11 @@ def test_paper_poses_have_the_documented_parameters(name):
 
 @settings(max_examples=150, deadline=None)
 @given(
-    st.floats(-1.0, 1.0), st.floats(-np.pi + 1e-6, np.pi - 1e-6), st.floats(-np.pi + 1e-6, np.pi - 1e-6),
+    st.floats(-1.0, 1.0),
+    st.floats(-np.pi + 1e-6, np.pi - 1e-6),
+    st.floats(-np.pi + 1e-6, np.pi - 1e-6),
     st.lists(st.floats(-0.1, 0.1), min_size=3, max_size=3),
-)  # fmt: skip
+)
 def test_pose_parameters_round_trip(alpha, beta, psi, R):
     T = pose_from_params(np.array(R), alpha, beta, psi)
     assert np.allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12) and np.linalg.det(T[:3, :3]) > 0
@@ -69,7 +71,9 @@ def test_pose_space_puts_the_turns_seams_where_nobody_mounts_a_sensor():
     at = lambda beta_u, psi_u: space.to_pose(np.r_[centre, beta_u, psi_u])  # noqa: E731
     # the middle of the box looks straight down; both faces of beta look straight up (the same pose)
     assert np.allclose(at(0.5, 0.25)[:3, 2], [0, 0, -1], atol=1e-12)
-    assert np.allclose(at(0.0, 0.25)[:3, 2], [0, 0, 1], atol=1e-12) and np.allclose(at(0.0, 0.25), at(1.0, 0.25), atol=1e-12)
+    assert np.allclose(at(0.0, 0.25)[:3, 2], [0, 0, 1], atol=1e-12) and np.allclose(
+        at(0.0, 0.25), at(1.0, 0.25), atol=1e-12
+    )
     # psi: a quarter is the paper's line across the motion with the receiver on +x, three quarters the
     # same line with the receiver on -x, and both faces put the line along the motion
     assert at(0.5, 0.25)[:3, 1] @ [1, 0, 0] > 0.999 and at(0.5, 0.75)[:3, 1] @ [1, 0, 0] < -0.999
@@ -90,10 +94,14 @@ def test_a_cache_saved_under_another_pose_map_is_not_reused(tmp_path):
     cache = {tuple(np.full(6, 0.25)): info, tuple(np.full(6, 0.75)): Violation("clearance", 1.5)}
     save_cache(tmp_path, cache, SPACE_VERSION)
     loaded = load_cache(tmp_path, SPACE_VERSION)
-    assert loaded[tuple(np.full(6, 0.75))] == ("clearance", 1.5) and np.array_equal(loaded[tuple(np.full(6, 0.25))].H, np.eye(6))
+    assert loaded[tuple(np.full(6, 0.75))] == ("clearance", 1.5) and np.array_equal(
+        loaded[tuple(np.full(6, 0.25))].H, np.eye(6)
+    )
     assert load_cache(tmp_path, SPACE_VERSION + 1) == {}  # its u keys name other poses
     data = dict(np.load(tmp_path / "cache.npz"))
-    np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k != "space"})  # as saved before the map changed
+    np.savez_compressed(
+        tmp_path / "cache.npz", **{k: v for k, v in data.items() if k != "space"}
+    )  # as saved before the map changed
     assert load_cache(tmp_path, SPACE_VERSION) == {}
 
 
@@ -192,9 +200,16 @@ def test_screen_finds_the_basin_a_local_search_from_the_centre_misses():
 @pytest.fixture(scope="module")
 def part_b_problem():
     cfg = SearchConfig(
-        global_evals=40, local_evals=15, joint_evals=20, max_time=120, random_starts=2, sensors=(1, 2),
-        screen_samples=64, screen_starts=2, screen_evals=8,
-    )  # fmt: skip
+        global_evals=40,
+        local_evals=15,
+        joint_evals=20,
+        max_time=120,
+        random_starts=2,
+        sensors=(1, 2),
+        screen_samples=64,
+        screen_starts=2,
+        screen_evals=8,
+    )
     return load_part("part_b"), load_objective("paper").in_cell("ideal"), cfg
 
 
@@ -242,12 +257,22 @@ def test_a_clock_that_ends_a_stage_is_recorded_and_said(caplog):
         out = run_search(part, objective, cfg, seed=4)
     assert out.clock_cut and out.clock_cut[0].endswith("k=1")  # the first k's share is the first to end
     assert len(set(out.clock_cut)) == len(out.clock_cut)
-    assert all(re.fullmatch(r"(screen|screen-polish|greedy|greedy-polish|joint):k=[123]", stage) for stage in out.clock_cut)
-    counts = {"screen": cfg.screen_samples, "screen-polish": cfg.screen_starts * cfg.screen_evals, "greedy": cfg.global_evals,
-              "greedy-polish": cfg.local_evals + cfg.local_evals // 2, "joint": cfg.joint_evals}  # fmt: skip
+    assert all(
+        re.fullmatch(r"(screen|screen-polish|greedy|greedy-polish|joint):k=[123]", stage) for stage in out.clock_cut
+    )
+    counts = {
+        "screen": cfg.screen_samples,
+        "screen-polish": cfg.screen_starts * cfg.screen_evals,
+        "greedy": cfg.global_evals,
+        "greedy-polish": cfg.local_evals + cfg.local_evals // 2,
+        "joint": cfg.joint_evals,
+    }
     first = out.clock_cut[0]
     assert sum(r.stage == first for r in out.history) < counts[first.split(":")[0]]  # cut before its evaluations
-    assert any("the clock ended the surrogate's" in r.getMessage() and out.clock_cut[0] in r.getMessage() for r in caplog.records)
+    assert any(
+        "the clock ended the surrogate's" in r.getMessage() and out.clock_cut[0] in r.getMessage()
+        for r in caplog.records
+    )
 
 
 def test_a_clock_that_stops_the_search_before_any_layout_says_so_once(caplog):
@@ -261,7 +286,11 @@ def test_a_clock_that_stops_the_search_before_any_layout_says_so_once(caplog):
     said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert not out.found and out.clock_cut
     assert len(said) == 1, said
-    assert "no layout of [1, 2, 3] sensor(s) yet" in said[0] and out.clock_cut[0] in said[0] and "raise max_time" in said[0]
+    assert (
+        "no layout of [1, 2, 3] sensor(s) yet" in said[0]
+        and out.clock_cut[0] in said[0]
+        and "raise max_time" in said[0]
+    )
 
 
 def test_results_never_violate_the_constraints(part_b_problem):
@@ -313,7 +342,12 @@ def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
             assert type(strict) is type(free), psi
             assert strict == free if isinstance(free, Violation) else np.array_equal(strict.H, free.H), psi
         else:
-            assert isinstance(strict, Violation) and strict.constraint == "line_skew" and strict.amount >= 1.0 and strict != free, psi
+            assert (
+                isinstance(strict, Violation)
+                and strict.constraint == "line_skew"
+                and strict.amount >= 1.0
+                and strict != free
+            ), psi
 
 
 def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the_hand_layout():
@@ -325,8 +359,18 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
 
     part = load_part("part_b")
     objective = load("paper").in_cell("ideal")
-    short = objective.__class__(**{**objective.__dict__, "protocol": objective.protocol.__class__(
-        **{**objective.protocol.__dict__, "sequences": ("R", "Y"), "step": objective.protocol.stop - objective.protocol.start})})  # fmt: skip
+    short = objective.__class__(
+        **{
+            **objective.__dict__,
+            "protocol": objective.protocol.__class__(
+                **{
+                    **objective.protocol.__dict__,
+                    "sequences": ("R", "Y"),
+                    "step": objective.protocol.stop - objective.protocol.start,
+                }
+            ),
+        }
+    )
     cfg = SearchConfig(polish_evals=8, polish_time=120.0, polish_step=0.2)
     problem = SurrogateProblem(part, objective, cfg)
     with Evaluator(part, short, seed=5) as evaluator:
@@ -348,7 +392,10 @@ def _choice(per_axis_mdeg, k=1):
     """A Choice with (median, p75) per axis given in millidegrees; score = their sum (the paper objective)."""
     from optipose.evaluate.assignment import AxisChoice, Choice
 
-    axes = tuple(AxisChoice(a, (0,), "F1", np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3)) for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg))
+    axes = tuple(
+        AxisChoice(a, (0,), "F1", np.deg2rad(m * 1e-3), np.deg2rad(p * 1e-3))
+        for a, (m, p) in zip(("roll", "pitch", "yaw"), per_axis_mdeg)
+    )
     return Choice(k, tuple(range(k)), "F1", axes, float(np.deg2rad(sum(m + p for m, p in per_axis_mdeg) * 1e-3)))
 
 
@@ -370,9 +417,11 @@ def test_the_polish_also_starts_from_the_candidate_closest_to_beating_the_hand_l
     low_sum = Found(1, "low sum", np.zeros(6), [], 0.0)  # roll great, yaw 0.3 mdeg over the hand's
     near = Found(1, "near", np.ones(6), [], 0.0)  # only the pitch median 0.01 mdeg over
     far = Found(1, "far", np.full(6, 0.5), [], 0.0)
-    pool = [((True, 1.0), low_sum, _choice([(0.2, 0.3), (0.05, 0.1), (0.25, 0.35)])),
-            ((True, 5.0), near, _choice([(2.0, 2.5), (0.11, 0.2), (0.1, 0.2)])),
-            ((True, 9.0), far, _choice([(9.0, 9.0), (1.0, 2.0), (1.0, 2.0)]))]  # fmt: skip
+    pool = [
+        ((True, 1.0), low_sum, _choice([(0.2, 0.3), (0.05, 0.1), (0.25, 0.35)])),
+        ((True, 5.0), near, _choice([(2.0, 2.5), (0.11, 0.2), (0.1, 0.2)])),
+        ((True, 9.0), far, _choice([(9.0, 9.0), (1.0, 2.0), (1.0, 2.0)])),
+    ]
     assert _nearest(pool, hand, low_sum) == [near]
     assert _nearest(pool, hand, near) == []  # the finalist itself is already the nearest
 
@@ -380,7 +429,10 @@ def test_the_polish_also_starts_from_the_candidate_closest_to_beating_the_hand_l
 def test_distinct_keeps_the_best_of_each_neighbourhood_by_the_given_key():
     from optipose.search.candidates import distinct as _distinct
 
-    a, b, c = (Found(1, n, u, [], s) for n, u, s in (("a", np.zeros(6), 3.0), ("b", np.full(6, 0.01), 1.0), ("c", np.ones(6), 2.0)))
+    a, b, c = (
+        Found(1, n, u, [], s)
+        for n, u, s in (("a", np.zeros(6), 3.0), ("b", np.full(6, 0.01), 1.0), ("c", np.ones(6), 2.0))
+    )
     assert [f.strategy for f in _distinct([a, b, c], 0.02)] == ["b", "c"]  # a lies within 0.02 of the better b
     rank = {"a": 0, "b": 2, "c": 1}
     assert [f.strategy for f in _distinct([a, b, c], 0.02, key=lambda f: rank[f.strategy])] == ["a", "c"]
@@ -401,7 +453,9 @@ def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_final
     confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
     confirmer._hand, confirmer._results, confirmer.chosen = hand, {}, {1: (True, np.deg2rad(5e-3))}
     confirmer.evaluate = lambda layout: pair_result
-    problem = SimpleNamespace(score=lambda u: LayoutScore(0.25, {"score": 0.25}), space=SimpleNamespace(to_poses=lambda u: ["pose"]))
+    problem = SimpleNamespace(
+        score=lambda u: LayoutScore(0.25, {"score": 0.25}), space=SimpleNamespace(to_poses=lambda u: ["pose"])
+    )
     pair = Found(2, "joint", np.concatenate([np.zeros(6), np.full(6, 0.5)]), [], 0.0)
     finalists, rows = {1: Found(1, "polish", np.ones(6), [], 0.0), 2: pair}, []
     confirmer.adopt_subsets(problem, finalists, rows)
@@ -422,8 +476,12 @@ def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_lay
 
     hand = SimpleNamespace(table=[_choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])])
     # on the full protocol the two leaders of the reduced ranking trade pitch for roll; the fourth is no worse anywhere
-    full = {0.0: _choice([(0.2, 0.3), (0.15, 0.3), (0.05, 0.1)]), 0.2: _choice([(0.3, 0.4), (0.12, 0.25), (0.05, 0.1)]),
-            0.4: _choice([(5.0, 6.0), (0.1, 0.2), (0.1, 0.2)]), 0.6: _choice([(0.5, 0.8), (0.08, 0.15), (0.04, 0.07)])}  # fmt: skip
+    full = {
+        0.0: _choice([(0.2, 0.3), (0.15, 0.3), (0.05, 0.1)]),
+        0.2: _choice([(0.3, 0.4), (0.12, 0.25), (0.05, 0.1)]),
+        0.4: _choice([(5.0, 6.0), (0.1, 0.2), (0.1, 0.2)]),
+        0.6: _choice([(0.5, 0.8), (0.08, 0.15), (0.04, 0.07)]),
+    }
     cands = [Found(1, f"c{i}", np.full(6, u), [], 0.0) for i, u in enumerate(sorted(full))]
     pool = [((True, float(i)), c) for i, c in enumerate(cands)]
     evaluated = []
@@ -447,8 +505,15 @@ def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_lay
 def test_a_tight_time_budget_still_places_every_sensor_count():
     """Evaluations enough for minutes and 8 s on the clock: each k gets its share of the clock instead of
     k = 1 using all of it, so k = 1, 2 and 3 all have a feasible layout, and the search keeps to its clock."""
-    cfg = SearchConfig(global_evals=5000, local_evals=2000, joint_evals=2000, max_time=8.0, random_starts=2,
-                       sensors=(1, 2, 3), screen_samples=0)  # fmt: skip
+    cfg = SearchConfig(
+        global_evals=5000,
+        local_evals=2000,
+        joint_evals=2000,
+        max_time=8.0,
+        random_starts=2,
+        sensors=(1, 2, 3),
+        screen_samples=0,
+    )
     out = run_search(load_part("part_b"), load_objective("paper").in_cell("ideal"), cfg, seed=1)
     assert sorted(out.found) == [1, 2, 3]
     assert all(f.score < PENALTY and len(f.poses) == k for k, f in out.found.items())
@@ -549,7 +614,6 @@ def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
     assert validation.hand[1].score > 0 and np.isfinite(validation.hand[1].score)
 
 
-
 def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_path):
     """Every stage in order on two cores (the hand layout's validation in its own process, a selection by
     ICP, the validation): each k gets a layout, and the hand layout's validation is the one a plain
@@ -560,8 +624,15 @@ def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_p
     from optipose.seeds import validation_seed
 
     part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
-    config = SearchConfig(sensors=(1, 2), global_evals=20, local_evals=6, joint_evals=8, random_starts=2,
-                          select_candidates=1, select_time=60.0)  # fmt: skip
+    config = SearchConfig(
+        sensors=(1, 2),
+        global_evals=20,
+        local_evals=6,
+        joint_evals=8,
+        random_starts=2,
+        select_candidates=1,
+        select_time=60.0,
+    )
     stages = []
     report = run(part, objective, config, 2, SearchFolder(tmp_path), jobs=2, on_stage=stages.append)
     assert set(report.layouts) == {1, 2} and report.validated
@@ -609,8 +680,15 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
     band_file = tmp_path / "band.toml"
     band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
     part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
-    config = SearchConfig(sensors=(1, 2), global_evals=20, local_evals=6, joint_evals=8, random_starts=2, select_candidates=0,
-                          band=str(band_file))  # fmt: skip
+    config = SearchConfig(
+        sensors=(1, 2),
+        global_evals=20,
+        local_evals=6,
+        joint_evals=8,
+        random_starts=2,
+        select_candidates=0,
+        band=str(band_file),
+    )
     out = tmp_path / "search"
     stages = []
     report = run(part, objective, config, 2, SearchFolder(out), jobs=1, on_stage=stages.append)
@@ -623,15 +701,22 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
 
     at_x1, nominal = (pd.read_csv(out / sub / "stats.csv") for sub in ("band/hand/noise-x1", "validation/hand"))
     assert np.array_equal(at_x1[["median", "p75"]].to_numpy(), nominal[["median", "p75"]].to_numpy())
-    assert (out / "band" / "comparison.csv").is_file() and (out / "band" / "hand" / "noise-x5" / "per_scan.csv").is_file()
+    assert (out / "band" / "comparison.csv").is_file() and (
+        out / "band" / "hand" / "noise-x5" / "per_scan.csv"
+    ).is_file()
     saved = load_result(out)
-    assert {k: v.ratio for k, v in saved.band_verdicts().items()} == pytest.approx({v.k: v.ratio for v in report.band.verdicts()})
+    assert {k: v.ratio for k, v in saved.band_verdicts().items()} == pytest.approx(
+        {v.k: v.ratio for v in report.band.verdicts()}
+    )
     assert saved.config.band.noise_scales == (1.0, 5.0)
     from optipose.batch.results import trial_results
     from optipose.batch.spec import TrialSpec
 
     row = trial_results(out, TrialSpec("part_b", "search", "paper", 2, "default", 2))  # a batch study's row of it
-    assert row["band_ratio"] == pytest.approx(saved.band_verdicts()[2].ratio) and row["band_no_worse"] == saved.band_verdicts()[2].no_worse
+    assert (
+        row["band_ratio"] == pytest.approx(saved.band_verdicts()[2].ratio)
+        and row["band_no_worse"] == saved.band_verdicts()[2].no_worse
+    )
     # a search under a band of its own validates under it; no second check
     from optipose.search.objectives import band_objective
 
@@ -659,7 +744,10 @@ def test_each_stage_objective_is_derived_in_one_place():
         assert (stage["band"] is None) == (not objective.conditions.trivial)
     band = stage_objective(load_objective("paper").in_cell("ideal"), "band", band="robust")
     assert band.conditions == robust.conditions and band.protocol == load_objective("paper").in_cell("ideal").protocol
-    assert stage_objective(band, "selection").conditions.noise_scales == (min(robust.conditions.noise_scales), max(robust.conditions.noise_scales))
+    assert stage_objective(band, "selection").conditions.noise_scales == (
+        min(robust.conditions.noise_scales),
+        max(robust.conditions.noise_scales),
+    )
     with pytest.raises(ValueError, match="no stage"):
         stage_objective(robust, "polishing")
 
@@ -672,7 +760,9 @@ def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought(
     nominal = Verdict(1, found, hand)
     assert verdict_headline(nominal).startswith("k=1: BUY found F1: 2.33x better")
     worse_there = Verdict(1, _choice([(1, 2), (1, 2), (5, 6)]), hand)
-    assert verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: F1 2.33x better, but worse under the band"
+    assert (
+        verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: F1 2.33x better, but worse under the band"
+    )
     assert verdict_headline(nominal, "hand", Verdict(1, found, hand)).startswith("k=1: BUY")
     # a nominal search that never checked under a band (quick): better in the ideal cell, not a buy
     assert verdict_headline(nominal, checked=False) == "k=1: found F1 2.33x better, no axis worse, in the ideal cell"
@@ -688,9 +778,19 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
 
     nominal = Verdict(1, _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)]))
     assert verdict_table([nominal], "hand").rows[0][-1] == "buy the found sensors"
-    assert verdict_table([nominal], "hand", unchecked=True).rows[0][-1].startswith("better in the ideal cell; check under the band")
-    ideal = {"objective": {"conditions": {"noise_scales": [1.0], "mounting_translation": 0.0, "mounting_rotation": 0.0}}}
-    banded = {"objective": {"conditions": {"noise_scales": [1.0, 5.0], "mounting_translation": 2e-4, "mounting_rotation": 1.7e-3}}}
+    assert (
+        verdict_table([nominal], "hand", unchecked=True)
+        .rows[0][-1]
+        .startswith("better in the ideal cell; check under the band")
+    )
+    ideal = {
+        "objective": {"conditions": {"noise_scales": [1.0], "mounting_translation": 0.0, "mounting_rotation": 0.0}}
+    }
+    banded = {
+        "objective": {
+            "conditions": {"noise_scales": [1.0, 5.0], "mounting_translation": 2e-4, "mounting_rotation": 1.7e-3}
+        }
+    }
     validation = Validation("full", 1, {}, {})
 
     def result(config):
@@ -704,24 +804,37 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
 def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():
     from optipose.evaluate.compare import Verdict, bought
 
-    good, bad, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(1, 2), (1, 2), (5, 6)]), _choice([(3, 4), (3, 4), (3, 4)])
+    good, bad, hand = (
+        _choice([(1, 2), (1, 2), (1, 2)]),
+        _choice([(1, 2), (1, 2), (5, 6)]),
+        _choice([(3, 4), (3, 4), (3, 4)]),
+    )
     x1, x3, x5 = (f"noise x{s}, worst of 2 bracket draws" for s in (1, 3, 5))
     levels = lambda *cs: replace(cs[0], under=tuple(zip((x1, x5) if len(cs) == 2 else (x1, x3, x5), cs)))  # noqa: E731
     holds_low = Verdict(1, levels(good, bad), levels(hand, hand))
     assert holds_low.band_advice("hand", nominal_no_worse=True) == (
         "k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), worse on some axis at "
         "noise x5 (1.24x in sum): it is the better buy only if the sensor's noise on this part, measured on the bench, "
-        "is no more than the preset's")  # fmt: skip
+        "is no more than the preset's"
+    )
     assert holds_low.band_advice("hand") == ""  # worse in the nominal cell already: no advice to buy it at any noise
     holds_high = Verdict(1, levels(bad, good), levels(hand, hand))  # worse at the preset's noise with the brackets off
-    assert "its win rests on brackets more precise than the band's" in holds_high.band_advice("hand", nominal_no_worse=True)
+    assert "its win rests on brackets more precise than the band's" in holds_high.band_advice(
+        "hand", nominal_no_worse=True
+    )
     # a level that holds between two that do not is not listed as lost
     three = Verdict(1, levels(good, bad, good), levels(hand, hand, hand)).band_advice("hand", nominal_no_worse=True)
     assert "worse on some axis at noise x3 (1.24x in sum): " in three and "at most 1x" not in three
-    assert Verdict(1, levels(good, good), levels(hand, hand)).band_advice(nominal_no_worse=True) == ""  # no worse everywhere
+    assert (
+        Verdict(1, levels(good, good), levels(hand, hand)).band_advice(nominal_no_worse=True) == ""
+    )  # no worse everywhere
     assert Verdict(1, good, hand).band_advice(nominal_no_worse=True) == ""  # no band
     nominal = Verdict(1, good, hand)
-    assert bought(nominal) and bought(nominal, Verdict(1, levels(good, good), levels(hand, hand))) and not bought(nominal, holds_low)
+    assert (
+        bought(nominal)
+        and bought(nominal, Verdict(1, levels(good, good), levels(hand, hand)))
+        and not bought(nominal, holds_low)
+    )
 
 
 def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, monkeypatch):
@@ -744,7 +857,9 @@ def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, m
     band_file = tmp_path / "band.toml"
     band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
     part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
-    config = SearchConfig(sensors=(1,), global_evals=12, local_evals=4, random_starts=1, select_candidates=0, band=str(band_file))
+    config = SearchConfig(
+        sensors=(1,), global_evals=12, local_evals=4, random_starts=1, select_candidates=0, band=str(band_file)
+    )
     report = run(part, objective, config, 3, SearchFolder(tmp_path / "search"), jobs=1)
     assert len(calls) == 2 and report.validated and report.band is None and report.band_interrupted
     saved = load_result(tmp_path / "search")
@@ -759,8 +874,12 @@ def test_a_search_with_nothing_to_compare_with_misses_no_check_under_the_band():
     found = {1: _choice([(1, 2), (1, 2), (1, 2)])}
     config = run_config({"band": {"file": "robust"}})
     assert not SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, {})).band_pending
-    assert SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, dict(found))).band_pending
-    assert not SearchResult("f", "p", 0, "default", RunConfig(), validation=Validation("full", 1, found, dict(found))).band_pending
+    assert SearchResult(
+        "f", "p", 0, "default", config, validation=Validation("full", 1, found, dict(found))
+    ).band_pending
+    assert not SearchResult(
+        "f", "p", 0, "default", RunConfig(), validation=Validation("full", 1, found, dict(found))
+    ).band_pending
 
 
 @pytest.mark.parametrize("algorithm", ["GN_DIRECT_L", "LN_BOBYQA", "GN_CRS2_LM"])

@@ -28,7 +28,9 @@ step_deg = 4.0
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=900)
+    return subprocess.run(
+        [sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=900
+    )
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +48,9 @@ def test_search_without_a_part_says_so():
 
 
 def test_a_part_no_sensor_can_see_ends_with_a_clear_message(files):
-    result = run("search", files / "speck.stl", "--units", "m", "--search-config", files / "small.toml", "--out", files / "speck")
+    result = run(
+        "search", files / "speck.stl", "--units", "m", "--search-config", files / "small.toml", "--out", files / "speck"
+    )
     assert result.returncode == 2, result.stderr
     assert "no feasible layout" in result.stderr and "Traceback" not in result.stderr
     assert (files / "speck" / "history.csv").is_file()  # what was tried is kept
@@ -55,8 +59,21 @@ def test_a_part_no_sensor_can_see_ends_with_a_clear_message(files):
 @pytest.fixture(scope="module")
 def searched(files):
     out = files / "b"
-    result = run("search", "part_b", "--sensors", "1,2", "--search-config", files / "small.toml",
-                 "--objective", files / "short.toml", "--seed", 4, "--out", out, "--no-report")  # fmt: skip
+    result = run(
+        "search",
+        "part_b",
+        "--sensors",
+        "1,2",
+        "--search-config",
+        files / "small.toml",
+        "--objective",
+        files / "short.toml",
+        "--seed",
+        4,
+        "--out",
+        out,
+        "--no-report",
+    )
     assert result.returncode == 0, result.stderr
     return out, result
 

@@ -14,7 +14,13 @@ from scipy.spatial.transform import Rotation
 
 from optipose.evaluate.conditions import Condition, ConditionsConfig, mounting_error
 from optipose.evaluate.objective import load_objective, reduced_objective
-from optipose.evaluate.sensitivity import AxisBias, BracketEvaluator, BracketSensitivity, SensorSensitivity, bracket_sensitivity
+from optipose.evaluate.sensitivity import (
+    AxisBias,
+    BracketEvaluator,
+    BracketSensitivity,
+    SensorSensitivity,
+    bracket_sensitivity,
+)
 from optipose.model.part import load_part
 
 TURN = np.deg2rad(0.3)  # a bracket tolerance well above the noise's few mdeg, so the bias is plain
@@ -104,9 +110,18 @@ def test_the_ranking_puts_the_largest_change_first_and_an_unmeasurable_one_befor
     def bias(axis, draw, value):
         return AxisBias(2, axis, "S1S2", draw, value, 0.0)
 
-    sens = BracketSensitivity("x", ("S1", "S2", "S3"), 2e-4, 1e-3, (0, 1), 4, True, (),
-                              (bias("roll", 0, -3.0), bias("roll", 1, 2.0)),
-                              (sensor(0, 1.0), sensor(1, 5.0), sensor(2, 9.0, in_choice=False)))  # fmt: skip
+    sens = BracketSensitivity(
+        "x",
+        ("S1", "S2", "S3"),
+        2e-4,
+        1e-3,
+        (0, 1),
+        4,
+        True,
+        (),
+        (bias("roll", 0, -3.0), bias("roll", 1, 2.0)),
+        (sensor(0, 1.0), sensor(1, 5.0), sensor(2, 9.0, in_choice=False)),
+    )
     assert [s.sensor for s in sens.ranking(2)] == [1, 0] and sens.most_sensitive(2) == 1  # S3 is not in the choice
     assert sens.worst_bias(2)["roll"] == 3.0 and np.isnan(sens.worst_bias(2)["x"])
     failed = replace(sens, sensors=(sensor(0, 1.0), sensor(1, float("nan"))))
@@ -126,7 +141,9 @@ mounting_rotation_deg = 0.1
 
 
 def _optipose(*args):
-    return subprocess.run([sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "optipose", *map(str, args)], capture_output=True, text=True, timeout=600
+    )
 
 
 def test_robustness_prints_and_saves_the_brackets_of_each_layout(tmp_path, part_b):
@@ -135,7 +152,16 @@ def test_robustness_prints_and_saves_the_brackets_of_each_layout(tmp_path, part_
     (tmp_path / "band.toml").write_text(BAND)
     write_layout(_sensors(part_b, 1, name="only_s2"), tmp_path / "only_s2.toml")
     out = tmp_path / "run"
-    result = _optipose("robustness", "part_b", "--layout", tmp_path / "only_s2.toml", "--objective", tmp_path / "band.toml", "--out", out)
+    result = _optipose(
+        "robustness",
+        "part_b",
+        "--layout",
+        tmp_path / "only_s2.toml",
+        "--objective",
+        tmp_path / "band.toml",
+        "--out",
+        out,
+    )
     assert result.returncode == 0, result.stderr
     assert "brackets off by ±0.2 mm, ±0.1°" in result.stdout and "make S2's bracket precise" in result.stdout
     assert max(len(line) for line in result.stdout.splitlines()) <= 80

@@ -33,7 +33,9 @@ def test_a_spheres_smooth_normals_are_ten_times_closer_to_radial_than_its_facets
         ref = SurfaceReference(mesh.vertices, mesh.faces)
         q, n, ids = ref.nearest(_on_sphere(4000))
         radial = q / np.linalg.norm(q, axis=1)[:, None]
-        smooth = np.degrees(np.arccos(np.clip((smooth_normals(q, ids, ref._tri, ref._corners) * radial).sum(axis=1), -1, 1))).max()
+        smooth = np.degrees(
+            np.arccos(np.clip((smooth_normals(q, ids, ref._tri, ref._corners) * radial).sum(axis=1), -1, 1))
+        ).max()
         faceted = np.degrees(np.arccos(np.clip((n * radial).sum(axis=1), -1, 1))).max()
         assert smooth < 0.1 * faceted  # the information a facet's turn adds goes as its square: 100x less
         errors.append(smooth)
@@ -48,7 +50,12 @@ def test_the_one_pass_information_is_the_information_of_the_smooth_normals():
     q, _, ids = ref.nearest(p)
     H, scale = ref.smooth_information(p, q, ids, (5e-3) ** 2)
     near = np.linalg.norm(p - q, axis=1) <= 5e-3
-    np.testing.assert_allclose(H, information_matrix(p[near], smooth_normals(q[near], ids[near], ref._tri, ref._corners)), rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(
+        H,
+        information_matrix(p[near], smooth_normals(q[near], ids[near], ref._tri, ref._corners)),
+        rtol=1e-9,
+        atol=1e-15,
+    )
     assert scale == pytest.approx(np.sqrt(((p[near] - p[near].mean(axis=0)) ** 2).sum(axis=1).mean()))
 
 
@@ -59,7 +66,9 @@ def test_a_boxs_smooth_normals_are_its_faces_normals():
     q, n, ids = ref.nearest(rng.uniform(-0.03, 0.03, (3000, 3)))
     # corners and edges are creases: each face keeps its own normal up to float32 storage
     inside = np.ones(len(q), bool)
-    np.testing.assert_allclose(smooth_normals(q[inside], ids[inside], ref._tri, ref._corners), ref.normals[ids[inside]], atol=1e-7)
+    np.testing.assert_allclose(
+        smooth_normals(q[inside], ids[inside], ref._tri, ref._corners), ref.normals[ids[inside]], atol=1e-7
+    )
 
 
 def test_the_rotations_of_a_sphere_are_unobservable_at_every_tessellation():

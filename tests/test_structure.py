@@ -42,8 +42,10 @@ def _imports(name: str, path: Path, modules: dict) -> list[tuple[str, str, int]]
 
 def _graph() -> dict[str, set[str]]:
     modules = _modules()
-    return {name: {target for target, _, _ in _imports(name, path, modules) if target in modules and target != name}
-            for name, path in modules.items()}  # fmt: skip
+    return {
+        name: {target for target, _, _ in _imports(name, path, modules) if target in modules and target != name}
+        for name, path in modules.items()
+    }
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -103,7 +105,21 @@ def test_no_module_over_450_lines():
 
 def test_no_private_name_imported_from_another_module():
     modules = _modules()
-    private = [f"{path.relative_to(ROOT.parent)}:{line}: {target}.{what}"
-               for name, path in modules.items() for target, what, line in _imports(name, path, modules)
-               if what.startswith("_") and not what.startswith("__") and target != name]  # fmt: skip
+    private = [
+        f"{path.relative_to(ROOT.parent)}:{line}: {target}.{what}"
+        for name, path in modules.items()
+        for target, what, line in _imports(name, path, modules)
+        if what.startswith("_") and not what.startswith("__") and target != name
+    ]
     assert private == []
+
+
+def test_the_code_is_formatted():
+    """ruff format (its settings in pyproject.toml) leaves every file as it is."""
+    import subprocess
+    import sys
+
+    ruff = Path(sys.executable).with_name("ruff")
+    roots = [str(ROOT.parent / name) for name in ("optipose", "tests", "benchmarks", "scripts")]
+    done = subprocess.run([str(ruff), "format", "--check", *roots], capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr

@@ -24,7 +24,11 @@ TURNS = [(2, 0, 0), (-1.2, 0, 0), (0, 2, 0), (0, -1.2, 0), (0, 0, 2), (0, 0, -1.
 @pytest.fixture(scope="module")
 def part_b():
     part = load_part("part_b")
-    return part, load_objective("paper").in_cell("ideal").registration, SurfaceReference(part.mesh.vertices, part.mesh.faces)
+    return (
+        part,
+        load_objective("paper").in_cell("ideal").registration,
+        SurfaceReference(part.mesh.vertices, part.mesh.faces),
+    )
 
 
 def _roll_errors_mdeg(part, cfg, reference, T, voxel: float, noise: bool) -> np.ndarray:
@@ -117,7 +121,9 @@ def test_the_prediction_record_is_consistent(hand_b_infos):
     # the fields of one Prediction agree with each other: the per-axis best subsets are the paper's
     # assignment (lowest median, ties by p75), the axis scores are theirs, and the score is their weighted sum
     weights, median_weight, p75_weight = (1.0, 2.0, 0.5), 1.0, 0.5
-    p = predicted_stats(hand_b_infos, weights, median_weight, p75_weight, noise_scales=(1.0, 3.0, 5.0), mounting=MOUNTING)
+    p = predicted_stats(
+        hand_b_infos, weights, median_weight, p75_weight, noise_scales=(1.0, 3.0, 5.0), mounting=MOUNTING
+    )
     n = len(hand_b_infos)
     assert p.subsets == tuple(c for r in range(1, n + 1) for c in itertools.combinations(range(n), r))
     assert p.median_deg.shape == p.p75_deg.shape == (2**n - 1, 3) and p.axis_score.shape == (3,)
@@ -128,7 +134,9 @@ def test_the_prediction_record_is_consistent(hand_b_infos):
         assert p.axis_score[a] == median_weight * p.median_deg[row, a] + p75_weight * p.p75_deg[row, a]
     assert p.score == float(np.dot(weights, p.axis_score))
     # each level on its own best subsets: no level's best median is above the band's (the worst over levels)
-    assert np.array_equal(p.level_axis_score, median_weight * p.level_axis_stats[..., 0] + p75_weight * p.level_axis_stats[..., 1])
+    assert np.array_equal(
+        p.level_axis_score, median_weight * p.level_axis_stats[..., 0] + p75_weight * p.level_axis_stats[..., 1]
+    )
     assert np.all(p.level_axis_stats[..., 0].max(axis=0) <= p.median_deg.min(axis=0))
     with pytest.raises(AttributeError):
         p.score = 0.0  # frozen
@@ -156,8 +164,12 @@ def test_without_mounting_the_prediction_is_todays(hand_b_infos):
     from optipose.search.surrogate import _axis_stats, rotation_sigma
 
     stats = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0))
-    assert all(np.array_equal(getattr(stats, key), getattr(predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=None), key))
-               for key in ("median_deg", "p75_deg", "axis_score"))  # fmt: skip
+    assert all(
+        np.array_equal(
+            getattr(stats, key), getattr(predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=None), key)
+        )
+        for key in ("median_deg", "p75_deg", "axis_score")
+    )
     for s, c in enumerate(stats.subsets):
         delta = bias_rotation(sum(hand_b_infos[i].A for i in c), sum(hand_b_infos[i].G for i in c))
         H = sum(hand_b_infos[i].H for i in c)
@@ -205,15 +217,25 @@ def test_search_cache_keeps_the_mounting_term(tmp_path, hand_b_infos):
     from optipose.search.space import SPACE_VERSION
 
     bare = SensorInfo(np.eye(6), 10, 5)  # an empty scan: no bias, no mounting term
-    cache = {(0.1,) * 6: hand_b_infos[0], (0.2,) * 6: hand_b_infos[2], (0.3,) * 6: Violation("clearance", 1.5), (0.4,) * 6: bare}
+    cache = {
+        (0.1,) * 6: hand_b_infos[0],
+        (0.2,) * 6: hand_b_infos[2],
+        (0.3,) * 6: Violation("clearance", 1.5),
+        (0.4,) * 6: bare,
+    }
     save_cache(tmp_path, cache, SPACE_VERSION)
     loaded = load_cache(tmp_path, SPACE_VERSION)
     for key in ((0.1,) * 6, (0.2,) * 6):
-        assert all(np.array_equal(getattr(loaded[key], f), getattr(cache[key], f)) for f in ("H", "A", "G", "A_turns", "N_turns"))
+        assert all(
+            np.array_equal(getattr(loaded[key], f), getattr(cache[key], f))
+            for f in ("H", "A", "G", "A_turns", "N_turns")
+        )
     assert loaded[(0.4,) * 6].N_turns is None and loaded[(0.3,) * 6] == ("clearance", 1.5)
     pair = [loaded[(0.1,) * 6], loaded[(0.2,) * 6]]
-    assert np.array_equal(predicted_stats(pair, mounting=MOUNTING).p75_deg,
-                          predicted_stats([hand_b_infos[0], hand_b_infos[2]], mounting=MOUNTING).p75_deg)  # fmt: skip
+    assert np.array_equal(
+        predicted_stats(pair, mounting=MOUNTING).p75_deg,
+        predicted_stats([hand_b_infos[0], hand_b_infos[2]], mounting=MOUNTING).p75_deg,
+    )
     # a cache from before the mounting term is not reused: its poses would score without it
     data = dict(np.load(tmp_path / "cache.npz"))
     np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k not in ("A_turns", "N_turns")})
@@ -287,8 +309,12 @@ def test_a_subset_met_before_is_looked_up_with_the_same_numbers():
     part = load_part("part_b")
     objective = load_objective("robust")
     band = objective.conditions
-    surrogate = Surrogate(part, voxel=objective.registration.voxel_size, turns=np.deg2rad(np.array(TURNS[:3], float)),
-                          noise_band=max(band.noise_scales))  # fmt: skip
+    surrogate = Surrogate(
+        part,
+        voxel=objective.registration.voxel_size,
+        turns=np.deg2rad(np.array(TURNS[:3], float)),
+        noise_band=max(band.noise_scales),
+    )
     infos = [surrogate.info(T) for T in part.layouts["hand"].poses]
     kw = dict(noise_scales=band.noise_scales, mounting=(band.mounting_translation, band.mounting_rotation))
     memo: dict = {}

@@ -53,7 +53,9 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
     key, folder = shared.acquire(mesh.vertices, mesh.faces)
     again, same = shared.acquire(mesh.vertices, mesh.faces)  # a second evaluator of the mesh: the same folder
     assert (again, same) == (key, folder)
-    assert os.path.basename(folder).startswith(f"{shared.PREFIX}{shared._owner(os.getpid())}-")  # named by its process, for sweep()
+    assert os.path.basename(folder).startswith(
+        f"{shared.PREFIX}{shared._owner(os.getpid())}-"
+    )  # named by its process, for sweep()
     mapped = load_reference(folder)
     assert not mapped._tri.flags.writeable
     assert not shared.surface(mesh.vertices, mesh.faces)._tri.flags.writeable  # held here: the surrogate maps it too
@@ -77,11 +79,20 @@ def test_a_killed_process_reference_folder_is_swept_and_the_others_are_left(tmp_
 
     from optipose.evaluate import shared
 
-    gone = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True).stdout)
+    gone = int(
+        subprocess.run(
+            [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True
+        ).stdout
+    )
     dead = tmp_path / f"{shared.PREFIX}{shared._owner(gone)}-ab12"
     elsewhere = f"{shared._namespace() + 1}.{gone}"  # the same pid in another namespace: not ours to judge
-    kept = [tmp_path / f"{shared.PREFIX}{shared._owner(os.getpid())}-cd34", tmp_path / f"{shared.PREFIX}{elsewhere}-ef56",
-            tmp_path / f"{shared.PREFIX}gh56", tmp_path / f"{shared.PREFIX}ij-78", tmp_path / "other-1-2"]  # fmt: skip
+    kept = [
+        tmp_path / f"{shared.PREFIX}{shared._owner(os.getpid())}-cd34",
+        tmp_path / f"{shared.PREFIX}{elsewhere}-ef56",
+        tmp_path / f"{shared.PREFIX}gh56",
+        tmp_path / f"{shared.PREFIX}ij-78",
+        tmp_path / "other-1-2",
+    ]
     for folder in [dead, *kept]:
         folder.mkdir()
         (folder / "tri.npy").write_bytes(b"x")
@@ -128,7 +139,9 @@ def test_a_point_beside_a_groove_at_the_parts_edge_finds_the_wall_beyond_it():
     vertices, faces = _strip([(-5, 0), (0, 0), (0, -1), (0.1, -1), (0.1, 1), (5, 1)])
     point = np.array([[-0.05, 0.0, 0.2]]) * MM
     _assert_exact(vertices, faces, point, [0])
-    assert np.isclose(np.linalg.norm(point - SurfaceReference(vertices, faces).nearest(point, np.array([0]))[0]), 0.15 * MM)
+    assert np.isclose(
+        np.linalg.norm(point - SurfaceReference(vertices, faces).nearest(point, np.array([0]))[0]), 0.15 * MM
+    )
 
 
 def test_a_face_in_the_plane_to_rounding_does_not_hide_the_wall_behind_it():
@@ -136,7 +149,9 @@ def test_a_face_in_the_plane_to_rounding_does_not_hide_the_wall_behind_it():
     way lies between the top and a wall rising 1 mm: neither turns away from a point 0.2 mm above the top near
     that edge, whatever rotation puts the rounding on either side; the wall 0.05-0.06 mm away answers."""
     rng = np.random.default_rng(1)
-    sliver_v = np.array([[-5, -5, 0], [0, -5, 0], [0, 5, 0], [-5, 5, 0], [0, 0, 0], [0, -5, 1], [0, 0, 1], [0, 5, 1]]) * MM
+    sliver_v = (
+        np.array([[-5, -5, 0], [0, -5, 0], [0, 5, 0], [-5, 5, 0], [0, 0, 0], [0, -5, 1], [0, 0, 1], [0, 5, 1]]) * MM
+    )
     sliver_f = np.array([[0, 1, 2], [0, 2, 3], [2, 1, 4], [1, 5, 6], [1, 6, 4], [4, 6, 7], [4, 7, 2]])
     flip_v = np.array([[x, y, 0] for x in (-5, -0.01, 0) for y in (-5, 5)] + [[0, -5, 1], [0, 5, 1]]) * MM
     flip_f = np.array([[0, 2, 3], [0, 3, 1], [2, 3, 4], [3, 5, 4], [4, 6, 7], [4, 7, 5]])

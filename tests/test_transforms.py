@@ -8,7 +8,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from optipose.errors import PoseError
-from optipose.transforms import invert_T, make_T, matrix_to_rpy, part_motion, rpy_to_matrix, transform_points, validate_pose
+from optipose.transforms import (
+    invert_T,
+    make_T,
+    matrix_to_rpy,
+    part_motion,
+    rpy_to_matrix,
+    transform_points,
+    validate_pose,
+)
 
 angles = st.floats(-np.pi / 2 + 1e-3, np.pi / 2 - 1e-3)
 

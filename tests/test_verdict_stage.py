@@ -41,15 +41,25 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
     layouts = {k: _as_found(hand, k) for k in (1, 2, 3)}
     first, draws = {}, []
     validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)
-    verdicts = confident_verdicts(part, objective, layouts, validation, first, 5, config,
-                                  on_draw=lambda i, name, result: draws.append((i, name, result.seed)))  # fmt: skip
+    verdicts = confident_verdicts(
+        part,
+        objective,
+        layouts,
+        validation,
+        first,
+        5,
+        config,
+        on_draw=lambda i, name, result: draws.append((i, name, result.seed)),
+    )
     by_k, fewer = split(verdicts)
     assert sorted(by_k) == [1, 2, 3]
     # one found sensor against the hand's three rides along on the same draws, without holding the race
     last = max(v.n_draws for v in by_k.values())
     assert (fewer.k, fewer.hand_k, fewer.hand_name, fewer.n_draws) == (1, 3, validation.hand[3].name, last)
     assert fewer.found_name == "F1"
-    same = [k for k in by_k if validation.hand[k].sensors == tuple(range(k))]  # the hand's own choice is its first k sensors
+    same = [
+        k for k in by_k if validation.hand[k].sensors == tuple(range(k))
+    ]  # the hand's own choice is its first k sensors
     assert 3 in same
     for k in same:
         v = by_k[k]
@@ -68,7 +78,9 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
     fresh = range(1, last) if cell == "ideal" else range(1, last + 1)
     assert sorted({(i, seed) for i, _, seed in draws}) == [(i, verdict_seed(5, i)) for i in fresh]
     assert verdict_seed(5, 0) == validation_seed(5) and len({verdict_seed(5, i) for i in range(4)}) == 4
-    if cell != "ideal":  # the real cell's race never reads the validation's evaluations: without them, the same verdicts
+    if (
+        cell != "ideal"
+    ):  # the real cell's race never reads the validation's evaluations: without them, the same verdicts
         again = confident_verdicts(part, objective, layouts, validation, {}, 5, config)
         assert [v.line() for v in again.values()] == [v.line() for v in verdicts.values()]
 
@@ -100,26 +112,45 @@ def test_racing_several_k_stops_each_at_its_own_look_and_ends_when_all_are_decid
 
     verdicts = race_many(undecided, replace(FAST, tolerance=0.0), min_draws=2, max_draws=6)
     assert verdicts[1].decision == BUY and verdicts[1].n_draws < 6
-    assert verdicts[2].decision == UNDECIDED and verdicts[2].n_draws == 6  # no tie within a zero tolerance: to the budget
+    assert (
+        verdicts[2].decision == UNDECIDED and verdicts[2].n_draws == 6
+    )  # no tie within a zero tolerance: to the budget
     # once k=1 is bought its layouts are not asked for again, and the race goes on for k=2 alone
-    assert asked[verdicts[1].n_draws:] == [frozenset({2})] * (6 - verdicts[1].n_draws)
+    assert asked[verdicts[1].n_draws :] == [frozenset({2})] * (6 - verdicts[1].n_draws)
 
 
 def test_the_verdict_table_reads_back_as_written(tmp_path):
     rng = np.random.default_rng(4)
-    verdicts = {k: compare_draws([_pairs(rng, i, 1.0 + k) for i in range(3)], FAST, k=k, found_name=f"F{k}", hand_name="S1",
-                                 seconds_per_draw=2.5) for k in (1, 2)}  # fmt: skip
+    verdicts = {
+        k: compare_draws(
+            [_pairs(rng, i, 1.0 + k) for i in range(3)],
+            FAST,
+            k=k,
+            found_name=f"F{k}",
+            hand_name="S1",
+            seconds_per_draw=2.5,
+        )
+        for k in (1, 2)
+    }
     verdicts[3] = replace(compare_draws([_pairs(rng, 0, 1.01)], FAST, k=3), decision=UNDECIDED, more_draws=7)
-    verdicts[FEWER] = compare_draws([_pairs(rng, i, 0.5) for i in range(3)], FAST, k=1, found_name="F1", hand_name="S1S2S3", hand_k=3)
+    verdicts[FEWER] = compare_draws(
+        [_pairs(rng, i, 0.5) for i in range(3)], FAST, k=1, found_name="F1", hand_name="S1S2S3", hand_k=3
+    )
     write_csv(verdict_frame(verdicts), tmp_path / "verdict.csv")
     back = read_verdicts(tmp_path / "verdict.csv")
     assert set(back) == {1, 2, 3, FEWER} and back[FEWER].hand_k == 3
     for k, v in verdicts.items():
-        assert back[k].line() == v.line() and back[k].axis_lines() == v.axis_lines() and back[k].fewer_line() == v.fewer_line()
+        assert (
+            back[k].line() == v.line()
+            and back[k].axis_lines() == v.axis_lines()
+            and back[k].fewer_line() == v.fewer_line()
+        )
         assert back[k].score.low == pytest.approx(v.score.low, rel=1e-12) and back[k].more_draws == v.more_draws
     assert read_verdicts(tmp_path / "none.csv") == {}
     # a verdict.csv from before the failures' rule: its failed shares and tolerance unknown (NaN), not taken as applied
-    old = pd.read_csv(tmp_path / "verdict.csv").drop(columns=["failed", "failed_low", "failed_high", "failures", "kept"])
+    old = pd.read_csv(tmp_path / "verdict.csv").drop(
+        columns=["failed", "failed_low", "failed_high", "failures", "kept"]
+    )
     old.to_csv(tmp_path / "old.csv", index=False)
     before = read_verdicts(tmp_path / "old.csv")
     assert all(np.isnan(v.failures) and np.isnan(v.axes[0].failed.high) and not v.kept for v in before.values())
@@ -137,9 +168,13 @@ def test_a_draw_of_fewer_scans_keeps_the_protocols_orientations_in_proportion():
     full = perturbations(load_objective("paper").in_cell("ideal").protocol, seed=3)
     part = full.sample(20, 11)
     assert len(part) == 20 and full.sample(0, 11) is full and full.sample(len(full), 11) is full
-    rows = [int(np.flatnonzero((full.seeds == s))[0]) for s in part.seeds]  # each a scan of the protocol, once, in order
+    rows = [
+        int(np.flatnonzero((full.seeds == s))[0]) for s in part.seeds
+    ]  # each a scan of the protocol, once, in order
     assert rows == sorted(set(rows)) and np.array_equal(full.rpy[rows], part.rpy)
-    assert np.array_equal(full.sample(20, 11).seeds, part.seeds) and not np.array_equal(full.sample(20, 12).seeds, part.seeds)
+    assert np.array_equal(full.sample(20, 11).seeds, part.seeds) and not np.array_equal(
+        full.sample(20, 12).seeds, part.seeds
+    )
 
 
 def test_a_buy_says_which_bracket_to_move_and_which_hand_sensors_stay():
@@ -151,8 +186,12 @@ def test_a_buy_says_which_bracket_to_move_and_which_hand_sensors_stay():
     moved[:3, 3] += [0.0, 0.002, 0.0]  # S1's bracket 2 mm along y
     found = Layout((SensorPose("F1", moved), SensorPose("F2", hand.sensors[1].T_O_S)), name="found_k2")
     assert kept_sensors(found, hand) == {"F2": "S2"}
-    buy = replace(compare_draws([_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=2,
-                                found_name="F1F2", hand_name="S1S2"), decision=BUY)  # fmt: skip
+    buy = replace(
+        compare_draws(
+            [_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
+        ),
+        decision=BUY,
+    )
     assert mount_line(buy, found, hand) == "k=2: mount F1 (new), keep S2; S1 freed"
     assert mount_line(replace(buy, decision=TIE), found, hand) == ""
     assert mount_line(replace(buy, found_name="F2", hand_name="S2S3"), found, hand) == "k=2: keep S2; S3 freed"
@@ -171,15 +210,34 @@ def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
     for i, T in enumerate(poses):
         T[:3, 3] = [0.1 * (i + 1), 0.0, 0.3]
     big = Layout(tuple(SensorPose(f"F{i + 1}", T) for i, T in enumerate(poses)), name="found_k4")
-    triple = Layout(tuple(SensorPose(f"F{i + 1}", T) for i, T in enumerate(poses[1:])), name="found_k3")  # big's F2, F3, F4
-    axes = (AxisChoice("roll", (1,), "F2", 1e-4, 2e-4), AxisChoice("pitch", (1, 2), "F2F3", 1e-4, 2e-4),
-            AxisChoice("yaw", (2,), "F3", 1e-4, 2e-4))  # fmt: skip
+    triple = Layout(
+        tuple(SensorPose(f"F{i + 1}", T) for i, T in enumerate(poses[1:])), name="found_k3"
+    )  # big's F2, F3, F4
+    axes = (
+        AxisChoice("roll", (1,), "F2", 1e-4, 2e-4),
+        AxisChoice("pitch", (1, 2), "F2F3", 1e-4, 2e-4),
+        AxisChoice("yaw", (2,), "F3", 1e-4, 2e-4),
+    )
     choice = Choice(3, (1, 2, 3), "F2F3F4", axes, 1e-3)
     assert _found_name(triple, choice, big) == "F1F2"  # big's F2, F3 are the triple's F1, F2; its F3 unused
-    blind = Choice(3, (1, 2, 3), "F2F3F4", tuple(AxisChoice(a, (), "", np.nan, np.nan, "unobservable") for a in ("roll", "pitch", "yaw")), 1e-3)
+    blind = Choice(
+        3,
+        (1, 2, 3),
+        "F2F3F4",
+        tuple(AxisChoice(a, (), "", np.nan, np.nan, "unobservable") for a in ("roll", "pitch", "yaw")),
+        1e-3,
+    )
     assert _found_name(triple, blind, big) == "F1F2F3"  # nothing measured: the choice's sensors
-    buy = replace(compare_draws([_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=3,
-                                found_name=_found_name(triple, choice, big), hand_name="S1S2S3"), decision=BUY)  # fmt: skip
+    buy = replace(
+        compare_draws(
+            [_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)],
+            FAST,
+            k=3,
+            found_name=_found_name(triple, choice, big),
+            hand_name="S1S2S3",
+        ),
+        decision=BUY,
+    )
     assert mount_line(buy, triple, hand) == "k=3: mount F1, F2 (new); S1, S2, S3 freed"
 
 
@@ -217,11 +275,16 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     hand = part.layouts["hand"]
     # by hand: hand's pair S2S3 (indices 1, 2; roll on S3 alone) beat the found pair (2e-3 rad against 3e-3); the
     # found triple beat hand's triple: only k = 2 is replaced, its subsets restated in the new layout's indices
-    axes = (AxisChoice("roll", (2,), "S3", 1e-4, 2e-4), AxisChoice("pitch", (1, 2), "S2S3", 1e-4, 2e-4),
-            AxisChoice("yaw", (1, 2), "S2S3", 1e-4, 2e-4))  # fmt: skip
+    axes = (
+        AxisChoice("roll", (2,), "S3", 1e-4, 2e-4),
+        AxisChoice("pitch", (1, 2), "S2S3", 1e-4, 2e-4),
+        AxisChoice("yaw", (1, 2), "S2S3", 1e-4, 2e-4),
+    )
     pair = Choice(2, (1, 2), "S2S3", axes, 2e-3)
     found_pair = Choice(2, (0, 1), "F1F2", tuple(replace(a, subset=(0, 1), name="F1F2") for a in axes), 3e-3)
-    found_triple = Choice(3, (0, 1, 2), "F1F2F3", tuple(replace(a, subset=(0, 1, 2), name="F1F2F3") for a in axes), 1e-3)
+    found_triple = Choice(
+        3, (0, 1, 2), "F1F2F3", tuple(replace(a, subset=(0, 1, 2), name="F1F2F3") for a in axes), 1e-3
+    )
     triple = Choice(3, (0, 1, 2), "S1S2S3", tuple(replace(a, subset=(0, 1, 2), name="S1S2S3") for a in axes), 2e-3)
     layouts = {2: _as_found(hand, 2), 3: _as_found(hand, 3)}
     validation = Validation("reduced", 1, {3: found_triple, 2: found_pair}, {2: pair, 3: triple})
@@ -244,11 +307,21 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
 
     nested = {1: lay(A), 2: lay(B, A), 3: lay(C, A, B)}
     one = Choice(1, (1,), "F2", tuple(replace(a, subset=(1,), name="F2") for a in axes), 1e-3)
-    two = Choice(2, (1, 2), "F2F3", tuple(replace(a, subset=s, name=n) for a, s, n in zip(axes, ((1,), (1, 2), (2,)), ("F2", "F2F3", "F3"))), 1e-3)
+    two = Choice(
+        2,
+        (1, 2),
+        "F2F3",
+        tuple(replace(a, subset=s, name=n) for a, s, n in zip(axes, ((1,), (1, 2), (2,)), ("F2", "F2F3", "F3"))),
+        1e-3,
+    )
     worse = replace(found_triple, score=5e-3)
     answered, v = hand_where_better(nested, Validation("reduced", 1, {3: worse, 2: two, 1: one}, {3: triple}), hand)
     assert is_part_of(answered[3], hand) and answered[2] is nested[2] and answered[1] is nested[1]
-    assert (v.found[1].sensors, v.found[1].name, [a.subset for a in v.found[1].axes]) == ((1,), "F2", [(1,), (1,), (1,)])
+    assert (v.found[1].sensors, v.found[1].name, [a.subset for a in v.found[1].axes]) == (
+        (1,),
+        "F2",
+        [(1,), (1,), (1,)],
+    )
     assert (v.found[2].sensors, v.found[2].name) == ((0, 1), "F1F2")
     assert [(a.subset, a.name) for a in v.found[2].axes] == [((1,), "F2"), ((0, 1), "F1F2"), ((0,), "F1")]
 
@@ -259,10 +332,14 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     layouts = {k: _as_found(hand, k) for k in (1, 2, 3)}
     first, names = {}, []
     validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)
-    worse = replace(validation, found={**validation.found, 1: replace(validation.found[1], score=validation.hand[1].score * 2)})
+    worse = replace(
+        validation, found={**validation.found, 1: replace(validation.found[1], score=validation.hand[1].score * 2)}
+    )
     answered, v = hand_where_better(layouts, worse, hand)
     assert sorted(k for k in answered if is_part_of(answered[k], hand)) == [1]
-    verdicts = confident_verdicts(part, objective, answered, v, first, 5, config, on_draw=lambda i, name, result: names.append(name))
+    verdicts = confident_verdicts(
+        part, objective, answered, v, first, 5, config, on_draw=lambda i, name, result: names.append(name)
+    )
     by_k, fewer = split(verdicts)
     one = by_k[1]
     assert one.decision == TIE and (one.score.estimate, one.score.low, one.score.high) == (1.0, 1.0, 1.0)
@@ -277,7 +354,11 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     sink.layouts(answered, hand)
     sink.validation(v)
     back = load_search(tmp_path, RunConfig(command="search", part_name="part_b", seed=5))
-    assert back.layouts[1].names == [validation.hand[1].name] and back.validation.found[1].name == validation.hand[1].name
+    assert (
+        back.layouts[1].names == [validation.hand[1].name] and back.validation.found[1].name == validation.hand[1].name
+    )
     assert [(a.subset, a.name) for a in back.validation.found[1].axes] == [(a.subset, a.name) for a in v.found[1].axes]
-    assert [a.median for a in back.validation.found[1].axes] == pytest.approx([a.median for a in v.found[1].axes], rel=1e-12)
+    assert [a.median for a in back.validation.found[1].axes] == pytest.approx(
+        [a.median for a in v.found[1].axes], rel=1e-12
+    )
     assert back.validation.found[3].name == v.found[3].name

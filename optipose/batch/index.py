@@ -100,10 +100,17 @@ def _from_folder(folder: Path, trial: TrialSpec) -> TrialRecord | None:
     except Exception as exc:  # a folder that cannot be read back is not a complete trial: run it again
         log.warning("trial %s: its folder cannot be read back (%s); running it again", trial.key, exc)
         return None
-    return TrialRecord(trial, TrialState.COMPLETE, started=saved["started"], finished=saved["finished"],
-                       seconds=float(saved["seconds"]), cpu_seconds=float(saved.get("cpu_seconds", "nan")),
-                       worker=saved["worker"], folder=f"trials/{trial.key}",
-                       results=results)  # fmt: skip
+    return TrialRecord(
+        trial,
+        TrialState.COMPLETE,
+        started=saved["started"],
+        finished=saved["finished"],
+        seconds=float(saved["seconds"]),
+        cpu_seconds=float(saved.get("cpu_seconds", "nan")),
+        worker=saved["worker"],
+        folder=f"trials/{trial.key}",
+        results=results,
+    )
 
 
 def _old_records(folder: Path) -> dict[str, TrialRecord]:
@@ -115,7 +122,9 @@ def _old_records(folder: Path) -> dict[str, TrialRecord]:
     with reading(folder / INDEX_FILE):  # a row it cannot take is damage too, said in one line
         for row in read_index(folder).to_dict("records"):
             trial = TrialSpec(*(int(row[p]) if p in ("sensors", "seed") else str(row[p]) for p in params))
-            fields = {k: ("" if pd.isna(row[k]) else row[k]) for k in ("error", "started", "finished", "worker", "folder")}
+            fields = {
+                k: ("" if pd.isna(row[k]) else row[k]) for k in ("error", "started", "finished", "worker", "folder")
+            }
             results = {k: row[k] for k in RESULT_COLUMNS + VERDICT_COLUMNS if k in row and not _missing(row[k])}
             seconds = {k: float(row.get(k, float("nan"))) for k in ("seconds", "cpu_seconds")}
             out[row["key"]] = TrialRecord(trial, TrialState(row["state"]), results=results, **seconds, **fields)

@@ -119,8 +119,16 @@ class DaskPool:
     address is checked first (:func:`optipose.batch.scheduler.check_scheduler`); a cluster without a
     worker is watched by a :class:`~optipose.batch.scheduler.WorkerWatch` (``no_workers``, ``after``)."""
 
-    def __init__(self, jobs: int, scheduler: str | None = None, trial_jobs: int | None = None, timeout: float = 5.0,
-                 no_workers: str = "stop", after: float = 60.0, notify: Callable[[str], None] | None = None):  # fmt: skip
+    def __init__(
+        self,
+        jobs: int,
+        scheduler: str | None = None,
+        trial_jobs: int | None = None,
+        timeout: float = 5.0,
+        no_workers: str = "stop",
+        after: float = 60.0,
+        notify: Callable[[str], None] | None = None,
+    ):
         from distributed import Client, LocalCluster
 
         self._cluster = None
@@ -129,7 +137,12 @@ class DaskPool:
             self._watch = WorkerWatch(address, no_workers, after, notify)
             try:
                 self._client = Client(address, timeout=timeout)
-            except (OSError, TimeoutError, TypeError, ValueError) as exc:  # TypeError: tls:// without Dask's TLS settings
+            except (
+                OSError,
+                TimeoutError,
+                TypeError,
+                ValueError,
+            ) as exc:  # TypeError: tls:// without Dask's TLS settings
                 raise ConfigError(f"cannot reach the Dask scheduler at {address} ({_first_line(exc)})") from None
             try:
                 self._wait_for_workers()
@@ -143,8 +156,14 @@ class DaskPool:
         else:
             self.workers = int(jobs)
             self.plan = plan(self.workers, trial_jobs=trial_jobs)
-            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                         dashboard_address=None, env=thread_env(self.plan.threads))  # fmt: skip
+            self._cluster = LocalCluster(
+                n_workers=self.workers,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                env=thread_env(self.plan.threads),
+            )
             self._client = Client(self._cluster)
             self._watch = WorkerWatch(self._client.scheduler.address, no_workers, after, notify)
         self.address = self._client.scheduler.address
@@ -182,8 +201,9 @@ class DaskPool:
             self._cluster.close()
 
 
-def make_pool(jobs: int = 1, backend: str = "joblib", scheduler: str | None = None, trial_jobs: int | None = None,
-              **watch) -> TrialPool:  # fmt: skip
+def make_pool(
+    jobs: int = 1, backend: str = "joblib", scheduler: str | None = None, trial_jobs: int | None = None, **watch
+) -> TrialPool:
     """The pool for ``--jobs``, ``--backend`` and ``--scheduler`` (see the module doc); ``watch``: a Dask
     pool's ``no_workers``, ``after`` and ``notify`` (:class:`DaskPool`)."""
     if backend not in BACKENDS:

@@ -54,6 +54,16 @@ class TrialRecord:
 
     def row(self) -> dict:
         """The index's row: key, parameters, state and timings, then the results' columns."""
-        return {"key": self.key, **self.trial.params(), "state": self.state.value, "error": self.error,
-                "started": self.started, "finished": self.finished, "seconds": self.seconds, "cpu_seconds": self.cpu_seconds,
-                "worker": self.worker, "folder": self.folder, **self.results}  # fmt: skip
+        return {
+            "key": self.key,
+            **self.trial.params(),
+            "state": self.state.value,
+            "error": self.error,
+            "started": self.started,
+            "finished": self.finished,
+            "seconds": self.seconds,
+            "cpu_seconds": self.cpu_seconds,
+            "worker": self.worker,
+            "folder": self.folder,
+            **self.results,
+        }

@@ -25,7 +25,13 @@ from optipose.evaluate.objective import AXES
 __all__ = ["trial_results", "RESULT_COLUMNS", "VERDICT_COLUMNS"]
 
 RESULT_COLUMNS = ["sensors_used", "score_deg"] + [f"{a}_{s}" for a in AXES for s in ("median_deg", "p75_deg", "subset")]
-VERDICT_COLUMNS = ["hand_score_deg", "ratio", "no_worse", "band_ratio", "band_no_worse"]  # a search's, against the hand layout
+VERDICT_COLUMNS = [
+    "hand_score_deg",
+    "ratio",
+    "no_worse",
+    "band_ratio",
+    "band_no_worse",
+]  # a search's, against the hand layout
 
 
 def trial_results(folder: str | Path, trial: TrialSpec) -> dict:
@@ -41,18 +47,29 @@ def trial_results(folder: str | Path, trial: TrialSpec) -> dict:
     verdict = {v.k: v for v in result.verdicts()}.get(trial.sensors)
     if verdict is None:  # no hand layout to compare with (a bare mesh): the found layout alone
         return _choice_columns(result.validation.found[trial.sensors])
-    hand = {f"hand_{key}": value for key, value in _choice_columns(verdict.reference).items() if not key.endswith("subset")}
+    hand = {
+        f"hand_{key}": value for key, value in _choice_columns(verdict.reference).items() if not key.endswith("subset")
+    }
     hand.pop("hand_sensors_used")
     band = result.band_verdicts().get(trial.sensors)
     checked = {} if band is None else {"band_ratio": band.ratio, "band_no_worse": bool(band.no_worse)}
-    return {**_choice_columns(verdict.found), **hand, "ratio": verdict.ratio, "no_worse": bool(verdict.no_worse), **checked}
+    return {
+        **_choice_columns(verdict.found),
+        **hand,
+        "ratio": verdict.ratio,
+        "no_worse": bool(verdict.no_worse),
+        **checked,
+    }
 
 
 def _choice_columns(choice) -> dict:
     out = {"sensors_used": choice.name, "score_deg": float(np.rad2deg(choice.score))}
     for a in choice.axes:
-        out |= {f"{a.axis}_median_deg": float(np.rad2deg(a.median)), f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)),
-                f"{a.axis}_subset": a.label}  # fmt: skip
+        out |= {
+            f"{a.axis}_median_deg": float(np.rad2deg(a.median)),
+            f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)),
+            f"{a.axis}_subset": a.label,
+        }
     return out
 
 
@@ -67,5 +84,9 @@ def _robustness(folder: Path, k: int) -> dict:
     robust = rows[rows.condition == rows.condition.iloc[-1]]
     out = {"sensors_used": str(robust.sensors.iloc[0]), "score_deg": float(robust.score_deg.iloc[0])}
     for r in robust.itertuples(index=False):
-        out |= {f"{r.axis}_median_deg": float(r.median_deg), f"{r.axis}_p75_deg": float(r.p75_deg), f"{r.axis}_subset": str(r.subset)}
+        out |= {
+            f"{r.axis}_median_deg": float(r.median_deg),
+            f"{r.axis}_p75_deg": float(r.p75_deg),
+            f"{r.axis}_subset": str(r.subset),
+        }
     return out

@@ -129,8 +129,14 @@ def _shown(data: bytes) -> str:
 class WorkerWatch:
     """Call :meth:`check` with the number of workers now, as often as convenient (see the module doc)."""
 
-    def __init__(self, where: str, policy: str = "stop", after: float = 60.0, notify: Callable[[str], None] | None = None,
-                 clock: Callable[[], float] = time.monotonic):  # fmt: skip
+    def __init__(
+        self,
+        where: str,
+        policy: str = "stop",
+        after: float = 60.0,
+        notify: Callable[[str], None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         if policy not in NO_WORKER_POLICIES:
             raise ConfigError(f"--no-workers {policy}: use {' or '.join(NO_WORKER_POLICIES)}")
         if not after > 0:

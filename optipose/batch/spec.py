@@ -69,8 +69,14 @@ class TrialSpec:
         return _safe("-".join([*parts, f"s{self.seed}"]))
 
     def params(self) -> dict:
-        return {"part": self.part, "task": self.task, "objective": self.objective, "sensors": self.sensors,
-                "budget": self.budget, "seed": self.seed}  # fmt: skip
+        return {
+            "part": self.part,
+            "task": self.task,
+            "objective": self.objective,
+            "sensors": self.sensors,
+            "budget": self.budget,
+            "seed": self.seed,
+        }
 
 
 @dataclass(frozen=True)
@@ -93,7 +99,9 @@ def load_study(path: str | Path) -> StudySpec:
     return study_from_table(table, where=str(path), base=path.resolve().parent, text=text, default_name=path.stem)
 
 
-def study_from_table(table: dict, where: str = "study", base: Path = Path("."), text: str = "", default_name: str = "study") -> StudySpec:
+def study_from_table(
+    table: dict, where: str = "study", base: Path = Path("."), text: str = "", default_name: str = "study"
+) -> StudySpec:
     """A :class:`StudySpec` from a parsed study file; see the module doc."""
     _check_keys(table, _TOP_KEYS, where)
     name = _string(table.get("name", default_name), f"{where}: name")
@@ -115,7 +123,9 @@ def study_from_table(table: dict, where: str = "study", base: Path = Path("."), 
     keys = [t.key for t in trials]
     clash = next((k for k in keys if keys.count(k) > 1), None)
     if clash:
-        raise ConfigError(f"{where}: two different trials share the name '{clash}' (two part or objective files of one stem?)")
+        raise ConfigError(
+            f"{where}: two different trials share the name '{clash}' (two part or objective files of one stem?)"
+        )
     return StudySpec(name, description, where, text, tuple(trials))
 
 
@@ -177,7 +187,9 @@ def _resolve_part(entry: str, where: str, base: Path) -> list[str]:
     if path.is_file():
         return [str(path.resolve())]
     shipped = ", ".join(list_parts())
-    raise ConfigError(f"{where}: unknown part '{entry}' (shipped parts: {shipped}; or a part .toml, a mesh file or a glob)")
+    raise ConfigError(
+        f"{where}: unknown part '{entry}' (shipped parts: {shipped}; or a part .toml, a mesh file or a glob)"
+    )
 
 
 def _resolve_objective(entry: str, where: str, base: Path) -> str:
@@ -206,7 +218,9 @@ def _values(table: dict, axis: str, where: str) -> list:
 
 def _element(value, kind: type, where: str):
     if isinstance(value, bool) or not isinstance(value, kind):
-        raise ConfigError(f"{where}: expected {'an integer' if kind is int else 'a string'}, got {value!r} ({type(value).__name__})")
+        raise ConfigError(
+            f"{where}: expected {'an integer' if kind is int else 'a string'}, got {value!r} ({type(value).__name__})"
+        )
     return value
 
 

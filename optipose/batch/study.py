@@ -47,8 +47,14 @@ def prepare_folder(folder: Path, resume: bool) -> None:
         raise ConfigError(f"--resume {folder}: not an optipose study folder (no {INDEX_FILE})")
 
 
-def run_study(spec: StudySpec, folder: Path, pool, resume: bool = False,
-              on_record: Callable[[TrialRecord], None] | None = None, config: dict | None = None) -> StudyIndex:  # fmt: skip
+def run_study(
+    spec: StudySpec,
+    folder: Path,
+    pool,
+    resume: bool = False,
+    on_record: Callable[[TrialRecord], None] | None = None,
+    config: dict | None = None,
+) -> StudyIndex:
     """Run every trial of ``spec`` that is not complete in ``folder`` on ``pool``; returns the index.
 
     on_record(record) is called for every trial that ends (complete or failed)."""
@@ -130,9 +136,19 @@ def _write_header(folder: Path, spec: StudySpec, pool, config: dict) -> None:
 
     if spec.text:
         write_text(folder / "study.toml", spec.text)
-    write_config(folder, {
-        "command": "batch", "study": {"name": spec.name, "source": spec.source, "description": spec.description,
-                                      "trials": len(spec.trials)},
-        "pool": {"kind": type(pool).__name__, "workers": pool.workers, "address": getattr(pool, "address", None)},
-        "plan": pool.plan.__dict__, **config, "versions": versions(),
-    })  # fmt: skip
+    write_config(
+        folder,
+        {
+            "command": "batch",
+            "study": {
+                "name": spec.name,
+                "source": spec.source,
+                "description": spec.description,
+                "trials": len(spec.trials),
+            },
+            "pool": {"kind": type(pool).__name__, "workers": pool.workers, "address": getattr(pool, "address", None)},
+            "plan": pool.plan.__dict__,
+            **config,
+            "versions": versions(),
+        },
+    )

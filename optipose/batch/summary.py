@@ -33,17 +33,26 @@ def summary_frame(index: pd.DataFrame) -> pd.DataFrame:
     for setting, group in index.groupby(SETTING, sort=False, dropna=False):
         done = group[group.state == "complete"]
         row = dict(zip(SETTING, setting))
-        row |= {"part": _short(row["part"]), "objective": _short(row["objective"]), "trials": len(group),
-                "complete": len(done), "failed": int((group.state == "failed").sum()),
-                "seeds": ",".join(str(s) for s in sorted(group.seed.unique()))}  # fmt: skip
+        row |= {
+            "part": _short(row["part"]),
+            "objective": _short(row["objective"]),
+            "trials": len(group),
+            "complete": len(done),
+            "failed": int((group.state == "failed").sum()),
+            "seeds": ",".join(str(s) for s in sorted(group.seed.unique())),
+        }
         scores = pd.to_numeric(done.get("score_deg"), errors="coerce") if len(done) else pd.Series(dtype=float)
         row |= {"score_median_deg": scores.median(), "score_worst_deg": scores.max()}
         for axis in AXES:
             column = f"{axis}_median_deg"
-            row[column] = pd.to_numeric(done[column], errors="coerce").median() if column in done and len(done) else float("nan")
+            row[column] = (
+                pd.to_numeric(done[column], errors="coerce").median() if column in done and len(done) else float("nan")
+            )
         if "ratio" in done and done["ratio"].notna().any():
-            row |= {"ratio_median": pd.to_numeric(done["ratio"], errors="coerce").median(),
-                    "no_worse": f"{int(done['no_worse'].fillna(False).astype(bool).sum())}/{len(done)}"}  # fmt: skip
+            row |= {
+                "ratio_median": pd.to_numeric(done["ratio"], errors="coerce").median(),
+                "no_worse": f"{int(done['no_worse'].fillna(False).astype(bool).sum())}/{len(done)}",
+            }
         if "band_no_worse" in done and done["band_no_worse"].notna().any():  # the check under the band
             row["band_no_worse"] = f"{int(done['band_no_worse'].fillna(False).astype(bool).sum())}/{len(done)}"
         rows.append(row)

@@ -57,8 +57,16 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
         if interrupted():  # a Ctrl-C that something in the task caught and went past: its result is not sure
             raise KeyboardInterrupt
         seconds = time.perf_counter() - t0
-        done = TrialRecord(trial, TrialState.COMPLETE, started=started, finished=now(), seconds=seconds,
-                           cpu_seconds=time.process_time() - c0, worker=worker, folder=f"trials/{trial.key}")  # fmt: skip
+        done = TrialRecord(
+            trial,
+            TrialState.COMPLETE,
+            started=started,
+            finished=now(),
+            seconds=seconds,
+            cpu_seconds=time.process_time() - c0,
+            worker=worker,
+            folder=f"trials/{trial.key}",
+        )
         _write_trial_file(tmp, done, plan)
         if final.exists():  # a folder that lost its trial.toml: never a complete trial
             shutil.rmtree(final)
@@ -66,10 +74,16 @@ def run_trial(trial: TrialSpec, study_dir: str, plan: Plan) -> TrialRecord:
         return done
     except Exception as exc:  # a failing trial is recorded and the study goes on
         shutil.rmtree(tmp, ignore_errors=True)
-        if is_interrupt(exc) or interrupted():  # Ctrl-C while compiled code ran (numba raises it as a SystemError): the study stops
+        if (
+            is_interrupt(exc) or interrupted()
+        ):  # Ctrl-C while compiled code ran (numba raises it as a SystemError): the study stops
             raise KeyboardInterrupt from exc
         log.debug("trial %s failed:\n%s", trial.key, traceback.format_exc())
-        return replace(record.failed(error_line(exc), now()), seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0)
+        return replace(
+            record.failed(error_line(exc), now()),
+            seconds=time.perf_counter() - t0,
+            cpu_seconds=time.process_time() - c0,
+        )
     except BaseException:  # Ctrl-C in a serial study: nothing half-written stays behind
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -84,8 +98,16 @@ def error_line(exc: BaseException) -> str:
 def _write_trial_file(folder: Path, record: TrialRecord, plan: Plan) -> None:
     import tomli_w
 
-    table = {"trial": record.trial.params(), "key": record.key, "started": record.started, "finished": record.finished,
-             "seconds": record.seconds, "cpu_seconds": record.cpu_seconds, "worker": record.worker, "plan": plan.__dict__}  # fmt: skip
+    table = {
+        "trial": record.trial.params(),
+        "key": record.key,
+        "started": record.started,
+        "finished": record.finished,
+        "seconds": record.seconds,
+        "cpu_seconds": record.cpu_seconds,
+        "worker": record.worker,
+        "plan": plan.__dict__,
+    }
     write_text(folder / TRIAL_FILE, tomli_w.dumps(table))
 
 
@@ -123,7 +145,9 @@ def _search(trial: TrialSpec, folder: Path, jobs: int) -> None:
 
     part = load_part(trial.part)
     objective = load_objective(trial.objective)
-    config = config_from_budget(trial.budget, (trial.sensors,), band=not objective.conditions.trivial, cell=not objective.cell.ideal)
+    config = config_from_budget(
+        trial.budget, (trial.sensors,), band=not objective.conditions.trivial, cell=not objective.cell.ideal
+    )
     report = run(part, objective, config, trial.seed, SearchFolder(folder), trial.budget, jobs)
     if report.outcome.interrupted or report.band_interrupted:  # the search kept a Ctrl-C to itself: the study stops
         raise KeyboardInterrupt

@@ -51,12 +51,21 @@ class Process:
     @property
     def exact(self) -> bool:
         """Whether this process makes the CAD exactly (the band and the layers' period are no magnitudes)."""
-        return all(getattr(self, f.name) == 0 for f in fields(self) if f.name not in ("name", "form_wavelengths", "layer_height"))
+        return all(
+            getattr(self, f.name) == 0
+            for f in fields(self)
+            if f.name not in ("name", "form_wavelengths", "layer_height")
+        )
 
     def scaled(self, factor: float) -> "Process":
         """Every magnitude times ``factor`` (a better or a worse shop); wavelengths and layer height kept."""
         keep = ("name", "form_wavelengths", "layer_height")
-        return Process(**{f.name: getattr(self, f.name) if f.name in keep else getattr(self, f.name) * factor for f in fields(self)})
+        return Process(
+            **{
+                f.name: getattr(self, f.name) if f.name in keep else getattr(self, f.name) * factor
+                for f in fields(self)
+            }
+        )
 
 
 class AsMade:
@@ -80,7 +89,9 @@ class AsMade:
         self.k = direction * (2 * np.pi / lam)[:, None]
         self.phase = rng.uniform(0, 2 * np.pi, FORM_MODES)
         self.form_amplitude = p.form_rms * np.sqrt(2.0 / FORM_MODES)
-        pad = 1e-3 + 0.01 * np.max(hi - lo)  # the grid covers the part and a margin: an as-made point lies near its face
+        pad = 1e-3 + 0.01 * np.max(
+            hi - lo
+        )  # the grid covers the part and a margin: an as-made point lies near its face
         self._lo, self._hi, self._grid = lo - pad, hi + pad, None
         # faces: offset and tilt of each plane about its centroid
         tri = vertices[faces]
@@ -91,7 +102,9 @@ class AsMade:
         self.plane = plane
         self.plane_centroid = centroid / np.maximum(weight, 1e-300)[:, None]
         self.plane_offset = rng.normal(0.0, 1.0, n_planes) * p.face_offset
-        self.plane_tilt = rng.normal(0.0, 1.0, (n_planes, 3)) * p.face_tilt  # a rotation vector; its part along n does nothing
+        self.plane_tilt = (
+            rng.normal(0.0, 1.0, (n_planes, 3)) * p.face_tilt
+        )  # a rotation vector; its part along n does nothing
         self.scale = rng.normal(0.0, 1.0, 3) * p.scale
         self.warp = rng.normal() * p.warp
         self.layer_phase = rng.uniform(0.0, 1.0)
@@ -124,7 +137,9 @@ class AsMade:
         """The smooth form deviation (m) at points ``x`` (m, 3), summed over every plane wave, in blocks."""
         out = np.empty(len(x))
         for i in range(0, len(x), 65536):
-            out[i:i + 65536] = np.cos(x[i:i + 65536] @ self.k.T + self.phase) @ np.full(FORM_MODES, self.form_amplitude)
+            out[i : i + 65536] = np.cos(x[i : i + 65536] @ self.k.T + self.phase) @ np.full(
+                FORM_MODES, self.form_amplitude
+            )
         return out
 
     def form_grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -135,7 +150,10 @@ class AsMade:
             if not self.process.form_rms:
                 self._grid = (np.zeros((0, 0, 0)), np.zeros(3), np.ones(3))
             else:
-                h = max(self.process.form_wavelengths[0] / 10.0, float(np.prod(self._hi - self._lo) / _GRID_NODES) ** (1 / 3))
+                h = max(
+                    self.process.form_wavelengths[0] / 10.0,
+                    float(np.prod(self._hi - self._lo) / _GRID_NODES) ** (1 / 3),
+                )
                 counts = [max(2, int(np.ceil((hi - lo) / h)) + 1) for lo, hi in zip(self._lo, self._hi)]
                 axes = [np.linspace(lo, hi, c) for lo, hi, c in zip(self._lo, self._hi, counts)]
                 step = np.array([a[1] - a[0] for a in axes])
@@ -153,8 +171,8 @@ class AsMade:
         out = np.empty((len(x), len(y), len(z)))
         block = max(1, 2**20 // (len(y) * FORM_MODES))
         for i in range(0, len(x), block):
-            xy = (wave[0][i:i + block, None, :] * (wave[1] * coefficient)[None]).reshape(-1, FORM_MODES)
-            out[i:i + block] = (xy @ wave[2].T).real.reshape(-1, len(y), len(z))
+            xy = (wave[0][i : i + block, None, :] * (wave[1] * coefficient)[None]).reshape(-1, FORM_MODES)
+            out[i : i + block] = (xy @ wave[2].T).real.reshape(-1, len(y), len(z))
         return out
 
     def kernel_args(self) -> tuple:
@@ -162,6 +180,19 @@ class AsMade:
         p = self.process
         faces = bool(p.face_offset or p.face_tilt)
         long = int(np.argmax(self.extent[:2]))
-        return (*self.form_grid(), self.plane if faces else np.zeros(0, np.int64), self.plane_centroid, self.plane_offset,
-                self.plane_tilt, self.scale, self.centre, float(self.warp), long, float(self.extent[long] / 2),
-                float(p.layer_height or 1.0), float(p.layer_amplitude), float(self.layer_phase), _LAYER_WALL)  # fmt: skip
+        return (
+            *self.form_grid(),
+            self.plane if faces else np.zeros(0, np.int64),
+            self.plane_centroid,
+            self.plane_offset,
+            self.plane_tilt,
+            self.scale,
+            self.centre,
+            float(self.warp),
+            long,
+            float(self.extent[long] / 2),
+            float(p.layer_height or 1.0),
+            float(p.layer_amplitude),
+            float(self.layer_phase),
+            _LAYER_WALL,
+        )

@@ -43,13 +43,28 @@ CELLS_DIR = Path(__file__).resolve().parents[2] / "cells"
 _PROCESSES = Path(__file__).resolve().parents[1] / "data" / "processes.toml"
 _MM, _DEG = 1e-3, np.pi / 180
 
-_ROBOT = {"path_mm": ("path", _MM), "path_rotation_deg": ("path_rotation", _DEG), "path_correlation_mm": ("path_correlation", _MM),
-          "step": ("step", 1.0), "orientation_deg": ("orientation", _DEG)}  # fmt: skip
-_CALIBRATION = {"sensor_translation_mm": ("sensor_translation", _MM), "sensor_rotation_deg": ("sensor_rotation", _DEG),
-                "frame_translation_mm": ("frame_translation", _MM), "frame_rotation_deg": ("frame_rotation", _DEG)}  # fmt: skip
-_PROCESS = {"form_rms_mm": ("form_rms", _MM), "face_offset_mm": ("face_offset", _MM), "face_tilt_deg": ("face_tilt", _DEG),
-            "scale": ("scale", 1.0), "warp_mm": ("warp", _MM), "layer_height_mm": ("layer_height", _MM),
-            "layer_amplitude_mm": ("layer_amplitude", _MM)}  # fmt: skip
+_ROBOT = {
+    "path_mm": ("path", _MM),
+    "path_rotation_deg": ("path_rotation", _DEG),
+    "path_correlation_mm": ("path_correlation", _MM),
+    "step": ("step", 1.0),
+    "orientation_deg": ("orientation", _DEG),
+}
+_CALIBRATION = {
+    "sensor_translation_mm": ("sensor_translation", _MM),
+    "sensor_rotation_deg": ("sensor_rotation", _DEG),
+    "frame_translation_mm": ("frame_translation", _MM),
+    "frame_rotation_deg": ("frame_rotation", _DEG),
+}
+_PROCESS = {
+    "form_rms_mm": ("form_rms", _MM),
+    "face_offset_mm": ("face_offset", _MM),
+    "face_tilt_deg": ("face_tilt", _DEG),
+    "scale": ("scale", 1.0),
+    "warp_mm": ("warp", _MM),
+    "layer_height_mm": ("layer_height", _MM),
+    "layer_amplitude_mm": ("layer_amplitude", _MM),
+}
 
 
 @dataclass(frozen=True)
@@ -104,7 +119,9 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
     zeroed = calibration_table.pop("zeroed", False)
     if not isinstance(zeroed, bool):
         raise ConfigError(f"{where} [calibration]: zeroed must be true or false, got {zeroed!r}")
-    calibration = CalibrationErrors(**_numbers(calibration_table, _CALIBRATION, f"{where} [calibration]"), zeroed=zeroed)
+    calibration = CalibrationErrors(
+        **_numbers(calibration_table, _CALIBRATION, f"{where} [calibration]"), zeroed=zeroed
+    )
     part = _table(table.get("part", {}), f"{where} [part]")
     _keys(part, {"as_made", "default_process", "process_scale"}, f"{where} [part]")
     material = _table(table.get("material", {}), f"{where} [material]")
@@ -117,8 +134,17 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
         raise ConfigError(f"{where} [part]: process_scale must be a number >= 0, got {scale!r}")
     default_process = str(part.get("default_process", "cad"))
     load_process(default_process)  # an unknown name fails here, with the file named
-    return Cell(str(table.get("name", default_name)), str(table.get("description", "")), robot, calibration, as_made,
-                default_process, float(scale), effects, source_text)  # fmt: skip
+    return Cell(
+        str(table.get("name", default_name)),
+        str(table.get("description", "")),
+        robot,
+        calibration,
+        as_made,
+        default_process,
+        float(scale),
+        effects,
+        source_text,
+    )
 
 
 def process_names() -> list[str]:

@@ -33,10 +33,39 @@ def trilinear(grid: np.ndarray, lo: np.ndarray, inv_h: np.ndarray, x: float, y: 
 
 
 @njit(cache=True, nogil=True)
-def along_rays(points, face, profile, shifts, normals_P, R, t, apex, view, grazing,
-               form, form_lo, form_h, plane, plane_centroid, plane_offset, plane_tilt,
-               scale, part_centre, warp, warp_axis, warp_half, layer_h, layer_amp, layer_phase, wall,
-               path_t, path_w, centre_O, extra, out):  # fmt: skip
+def along_rays(
+    points,
+    face,
+    profile,
+    shifts,
+    normals_P,
+    R,
+    t,
+    apex,
+    view,
+    grazing,
+    form,
+    form_lo,
+    form_h,
+    plane,
+    plane_centroid,
+    plane_offset,
+    plane_tilt,
+    scale,
+    part_centre,
+    warp,
+    warp_axis,
+    warp_half,
+    layer_h,
+    layer_amp,
+    layer_phase,
+    wall,
+    path_t,
+    path_w,
+    centre_O,
+    extra,
+    out,
+):
     """``out`` (n, 3): ``points`` (n, 3) in O (the part at pose ``R``, ``t``; the motion undone: profile k
     taken at ``shifts[k]`` along x) each moved along its ray by ``d / cos`` + ``extra`` (m), where ``d``
     is the surface's normal offset there: the part as made (``form`` a grid, empty (0, 0, 0) for none;
@@ -74,7 +103,11 @@ def along_rays(points, face, profile, shifts, normals_P, R, t, apex, view, grazi
             ax, ay, az = x - plane_centroid[k, 0], y - plane_centroid[k, 1], z - plane_centroid[k, 2]
             wx, wy, wz = plane_tilt[k, 0], plane_tilt[k, 1], plane_tilt[k, 2]
             d += plane_offset[k] + (wy * az - wz * ay) * mx + (wz * ax - wx * az) * my + (wx * ay - wy * ax) * mz
-        d += (x - part_centre[0]) * scale[0] * mx + (y - part_centre[1]) * scale[1] * my + (z - part_centre[2]) * scale[2] * mz
+        d += (
+            (x - part_centre[0]) * scale[0] * mx
+            + (y - part_centre[1]) * scale[1] * my
+            + (z - part_centre[2]) * scale[2] * mz
+        )
         if warp != 0.0:
             s = ((x, y)[warp_axis] - part_centre[warp_axis]) * inv_warp
             d += warp * (s * s - 1.0 / 3.0) * mz

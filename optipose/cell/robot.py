@@ -61,7 +61,9 @@ class CalibrationErrors:
         return bool(self.sensor_translation or self.sensor_rotation or self.frame_translation or self.frame_rotation)
 
 
-def gauss_markov(n: int, spacing: float, length: float, sigma: float, rng: np.random.Generator, dims: int = 3) -> np.ndarray:
+def gauss_markov(
+    n: int, spacing: float, length: float, sigma: float, rng: np.random.Generator, dims: int = 3
+) -> np.ndarray:
     """(n, dims): a stationary Gauss-Markov (Ornstein-Uhlenbeck) process sampled every ``spacing`` (m), of
     standard deviation ``sigma`` and correlation exp(-|Δs| / ``length``)."""
     rho = float(np.exp(-spacing / length)) if length > 0 else 0.0
@@ -74,7 +76,9 @@ def gauss_markov(n: int, spacing: float, length: float, sigma: float, rng: np.ra
     return out * sigma
 
 
-def path_draw(robot: RobotErrors, offsets: np.ndarray, step: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def path_draw(
+    robot: RobotErrors, offsets: np.ndarray, step: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """The part's pose error at each profile of one scan: translations (n, 3) m and rotation vectors
     (n, 3) rad about the rotation centre. ``offsets`` (n,) m: the motion's nominal shifts along x."""
     n = len(offsets)
@@ -89,7 +93,9 @@ def orientation_error(robot: RobotErrors, rng: np.random.Generator) -> np.ndarra
     return rng.normal(size=3) * robot.orientation
 
 
-def calibrated_poses(calibration: CalibrationErrors, poses: list[np.ndarray], centre: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
+def calibrated_poses(
+    calibration: CalibrationErrors, poses: list[np.ndarray], centre: np.ndarray, rng: np.random.Generator
+) -> list[np.ndarray]:
     """Each sensor's true pose when the cell believes it at ``poses`` (4×4 ``T_O_S``): the frame's error
     (about ``centre``) and each sensor's own, drawn from ``rng`` in this order (a sensor's draw does not
     depend on how many sensors follow it)."""

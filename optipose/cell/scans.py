@@ -36,8 +36,24 @@ _CELL, _INSTANCE, _SCAN, _CALIBRATION = 0xCE11, 1, 2, 3
 _EDGE_SAMPLE = 1e-4  # m between the samples of a concave edge that the multipath test measures to
 _CONCAVE_DEG = 20.0  # faces meeting at an inside angle this far below 180° form a concave edge
 # the kernel's part-as-made arguments when the part is its CAD: no form grid, no planes, no scale, warp or layers
-_NO_PART = (np.zeros((0, 0, 0)), np.zeros(3), np.ones(3), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
-            np.zeros(3), np.zeros(3), 0.0, 0, 1.0, 1.0, 0.0, 0.0, 0.5)  # fmt: skip
+_NO_PART = (
+    np.zeros((0, 0, 0)),
+    np.zeros(3),
+    np.ones(3),
+    np.zeros(0, np.int64),
+    np.zeros((0, 3)),
+    np.zeros(0),
+    np.zeros((0, 3)),
+    np.zeros(3),
+    np.zeros(3),
+    0.0,
+    0,
+    1.0,
+    1.0,
+    0.0,
+    0.0,
+    0.5,
+)
 
 
 @dataclass(frozen=True)
@@ -93,8 +109,16 @@ class LiveCell:
         rng = np.random.default_rng([self.seed, _CELL, _CALIBRATION])
         return calibrated_poses(self.setup.cell.calibration, poses, self.centre, rng)
 
-    def perturb(self, levels: list[list], normals_P: list[np.ndarray], apex_z: list[float], shifts: np.ndarray,
-                T_O_P: np.ndarray, step: float, scan_seed: int) -> list[list]:  # fmt: skip
+    def perturb(
+        self,
+        levels: list[list],
+        normals_P: list[np.ndarray],
+        apex_z: list[float],
+        shifts: np.ndarray,
+        T_O_P: np.ndarray,
+        step: float,
+        scan_seed: int,
+    ) -> list[list]:
         """Each scan of ``levels`` (per noise level, per sensor) with the cell's displacements added along
         its rays. ``normals_P``: per sensor, its scanner's outward unit face normals in the part's frame;
         ``apex_z``: the sensor's laser apex on its z axis (m; inf: parallel rays); ``shifts``: the motion's
@@ -114,11 +138,28 @@ class LiveCell:
             if not len(scan.points):
                 continue
             T = scan.T_O_S
-            apex = T[:3, :3] @ np.array([0.0, 0.0, apex_z[j]]) + T[:3, 3] if np.isfinite(apex_z[j]) else np.full(3, np.nan)
+            apex = (
+                T[:3, :3] @ np.array([0.0, 0.0, apex_z[j]]) + T[:3, 3] if np.isfinite(apex_z[j]) else np.full(3, np.nan)
+            )
             extra = self._material(effects, scan, R, t, np.random.default_rng([int(scan_seed), _CELL, _SCAN, 2, j]))
             moved = np.empty_like(scan.points)
-            along_rays(scan.points, scan.face, scan.profile, shifts, normals_P[j], R, t, apex, np.ascontiguousarray(T[:3, 2]),
-                       GRAZING, *part, *path, centre_O, extra, moved)  # fmt: skip
+            along_rays(
+                scan.points,
+                scan.face,
+                scan.profile,
+                shifts,
+                normals_P[j],
+                R,
+                t,
+                apex,
+                np.ascontiguousarray(T[:3, 2]),
+                GRAZING,
+                *part,
+                *path,
+                centre_O,
+                extra,
+                moved,
+            )
             out[0][j] = replace(scan, points=moved)
             if len(out) > 1:  # the other noise levels: the same rays, the same moves
                 delta = moved - scan.points

@@ -75,8 +75,18 @@ def _register(command) -> None:
 
 
 # The order here is the order of `optipose --help`.
-for _command in (scan.scan, parts.parts, parts.show, parts.counts, evaluate.evaluate, search.search,
-                 robustness.robustness, batch.batch, batch.study, report.report):  # fmt: skip
+for _command in (
+    scan.scan,
+    parts.parts,
+    parts.show,
+    parts.counts,
+    evaluate.evaluate,
+    search.search,
+    robustness.robustness,
+    batch.batch,
+    batch.study,
+    report.report,
+):
     _register(_command)
 
 

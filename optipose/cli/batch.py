@@ -19,7 +19,9 @@ from optipose.errors import ConfigError
 
 __all__ = ["batch", "batch_command", "study", "study_command"]
 
-StudyFile = Annotated[Path, typer.Argument(metavar="STUDY_FILE", help="The study file (TOML: a [grid] and/or [[trials]]; see studies/).")]
+StudyFile = Annotated[
+    Path, typer.Argument(metavar="STUDY_FILE", help="The study file (TOML: a [grid] and/or [[trials]]; see studies/).")
+]
 StudyDir = Annotated[Path, typer.Argument(metavar="FOLDER", help="A study folder written by `optipose batch`.")]
 
 
@@ -27,15 +29,48 @@ StudyDir = Annotated[Path, typer.Argument(metavar="FOLDER", help="A study folder
 def batch(
     study_file: StudyFile,
     out: Annotated[Optional[Path], typer.Option("--out", help="Study folder (default: results/<study name>/).")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Continue the study in its folder: complete trials are kept, the rest run.")] = False,
-    jobs: Annotated[int, typer.Option("--jobs", min=1, help="Trials at once: worker processes (joblib), or local Dask workers.")] = 1,
-    backend: Annotated[str, typer.Option("--backend", help="joblib (a process pool on this machine) or dask.")] = "joblib",
-    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="A Dask scheduler, tcp://HOST:8786 (default: a local cluster of --jobs workers).")] = None,
-    trial_jobs: Annotated[Optional[int], typer.Option("--trial-jobs", min=1, help="Each trial's own processes and threads (default: the cores split between the workers).")] = None,
-    no_workers: Annotated[str, typer.Option("--no-workers", help="When a Dask cluster has had no worker for a while: stop (finished trials kept) or wait.")] = "stop",
-    no_workers_after: Annotated[float, typer.Option("--no-workers-after", min=1, help="Seconds without a Dask worker before the study stops or waits.")] = 60.0,
-    summary: Annotated[bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")] = False,
-    no_report: Annotated[bool, typer.Option("--no-report", help="Do not write the study report (study.html, study.md).")] = False,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Continue the study in its folder: complete trials are kept, the rest run.")
+    ] = False,
+    jobs: Annotated[
+        int, typer.Option("--jobs", min=1, help="Trials at once: worker processes (joblib), or local Dask workers.")
+    ] = 1,
+    backend: Annotated[
+        str, typer.Option("--backend", help="joblib (a process pool on this machine) or dask.")
+    ] = "joblib",
+    scheduler: Annotated[
+        Optional[str],
+        typer.Option(
+            "--scheduler", help="A Dask scheduler, tcp://HOST:8786 (default: a local cluster of --jobs workers)."
+        ),
+    ] = None,
+    trial_jobs: Annotated[
+        Optional[int],
+        typer.Option(
+            "--trial-jobs",
+            min=1,
+            help="Each trial's own processes and threads (default: the cores split between the workers).",
+        ),
+    ] = None,
+    no_workers: Annotated[
+        str,
+        typer.Option(
+            "--no-workers",
+            help="When a Dask cluster has had no worker for a while: stop (finished trials kept) or wait.",
+        ),
+    ] = "stop",
+    no_workers_after: Annotated[
+        float,
+        typer.Option(
+            "--no-workers-after", min=1, help="Seconds without a Dask worker before the study stops or waits."
+        ),
+    ] = 60.0,
+    summary: Annotated[
+        bool, typer.Option("--summary", help="Only print the table of the study in --out (or results/<name>/).")
+    ] = False,
+    no_report: Annotated[
+        bool, typer.Option("--no-report", help="Do not write the study report (study.html, study.md).")
+    ] = False,
 ) -> None:
     """Run a study of many trials, each into its own result folder.
 
@@ -47,8 +82,18 @@ def batch(
 
         study_command(out or Path("results") / load_study(study_file).name, report=not no_report)
         return
-    batch_command(study_file, out, resume, jobs, backend, scheduler, trial_jobs, report=not no_report,
-                  no_workers=no_workers, no_workers_after=no_workers_after)  # fmt: skip
+    batch_command(
+        study_file,
+        out,
+        resume,
+        jobs,
+        backend,
+        scheduler,
+        trial_jobs,
+        report=not no_report,
+        no_workers=no_workers,
+        no_workers_after=no_workers_after,
+    )
 
 
 @friendly_errors
@@ -60,9 +105,18 @@ def study(folder: StudyDir) -> None:
     study_command(folder)
 
 
-def batch_command(study_file: Path, out: Path | None = None, resume: bool = False, jobs: int = 1, backend: str = "joblib",
-                  scheduler: str | None = None, trial_jobs: int | None = None, report: bool = True,
-                  no_workers: str = "stop", no_workers_after: float = 60.0) -> Path:  # fmt: skip
+def batch_command(
+    study_file: Path,
+    out: Path | None = None,
+    resume: bool = False,
+    jobs: int = 1,
+    backend: str = "joblib",
+    scheduler: str | None = None,
+    trial_jobs: int | None = None,
+    report: bool = True,
+    no_workers: str = "stop",
+    no_workers_after: float = 60.0,
+) -> Path:
     """Run the study with a progress bar; print its table; returns the study folder. A Dask cluster
     without workers for ``no_workers_after`` seconds stops the study (``no_workers="stop"``: one line,
     exit 2, the finished trials kept) or is waited for (``"wait"``: one line)."""
@@ -86,7 +140,9 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
     pool = make_pool(jobs, backend, scheduler, trial_jobs, no_workers=no_workers, after=no_workers_after, notify=notify)
     resume_hint = f"`optipose batch {study_file} --out {folder} --resume`"
     try:
-        index = _run_with_progress(console, spec, folder, pool, resume, {"backend": backend, "scheduler": scheduler or ""})
+        index = _run_with_progress(
+            console, spec, folder, pool, resume, {"backend": backend, "scheduler": scheduler or ""}
+        )
     except KeyboardInterrupt:
         console.print(f"[yellow]interrupted[/]: finished trials are in {folder}; continue with {resume_hint}")
         raise typer.Exit(EXIT_INTERRUPTED) from None
@@ -99,8 +155,10 @@ def batch_command(study_file: Path, out: Path | None = None, resume: bool = Fals
 
     n_failed = index.count(TrialState.FAILED)
     if n_failed:
-        console.print(f"[yellow]{n_failed} trial(s) failed[/] (their errors are in {folder}/index.csv); "
-                      f"`--resume` runs them again")  # fmt: skip
+        console.print(
+            f"[yellow]{n_failed} trial(s) failed[/] (their errors are in {folder}/index.csv); "
+            f"`--resume` runs them again"
+        )
     console.print(f"results: {folder}")
     return folder
 
@@ -160,7 +218,9 @@ def write_study_report(folder: Path, index) -> tuple[Path, Path]:
 
     rows = index.drop(columns=[c for c in ("folder",) if c in index]).to_dict("records")
     folders = [Path(folder) / f if isinstance(f, str) and f else None for f in index.get("folder", [None] * len(index))]
-    return study_report(rows, folders, folder, title=f"study {Path(folder).name}", summary=summary_table(summary_frame(index)))
+    return study_report(
+        rows, folders, folder, title=f"study {Path(folder).name}", summary=summary_table(summary_frame(index))
+    )
 
 
 def _summary_table(frame, name: str):
@@ -173,7 +233,9 @@ def _summary_table(frame, name: str):
     from optipose.report.study import summary_table
 
     block = summary_table(frame)
-    table = Table(title=f"study {name}: mdeg, median over seeds", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
+    table = Table(
+        title=f"study {name}: mdeg, median over seeds", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True
+    )
     for column, numeric in zip(block.header, block.numeric):
         # in a narrow terminal the names wrap, so that the numbers need not be cut
         table.add_column(column, justify="right" if numeric else "left", no_wrap=numeric, overflow="fold")

@@ -10,7 +10,19 @@ from pathlib import Path
 
 import typer
 
-from optipose.cli.options import CellOption, Jobs, LayoutFile, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors, warn_if_band
+from optipose.cli.options import (
+    CellOption,
+    Jobs,
+    LayoutFile,
+    Objective,
+    Part,
+    ResultFolder,
+    Seed,
+    Units,
+    check_output,
+    friendly_errors,
+    warn_if_band,
+)
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
@@ -43,8 +55,17 @@ def register(app: typer.Typer) -> None:
     app.command()(evaluate)
 
 
-def evaluate_command(part: str, units: str = "auto", layout: Path | None = None, out: Path | None = None,
-                     objective: str = "paper", jobs: int = 1, seed: int = 0, report: bool = True, cell: str | None = None) -> Path:  # fmt: skip
+def evaluate_command(
+    part: str,
+    units: str = "auto",
+    layout: Path | None = None,
+    out: Path | None = None,
+    objective: str = "paper",
+    jobs: int = 1,
+    seed: int = 0,
+    report: bool = True,
+    cell: str | None = None,
+) -> Path:
     """Run the evaluation, print Table 1, save the result folder; returns the folder."""
     from rich.console import Console
 
@@ -70,16 +91,22 @@ def evaluate_command(part: str, units: str = "auto", layout: Path | None = None,
     the_objective = load_objective(objective).in_cell(cell)
     warn_if_band(the_objective, "evaluate")
     console = make_console(stderr=True)
-    with status(console, f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"):
+    with status(
+        console, f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"
+    ):
         with Evaluator(the_part, the_objective, seed=seed, jobs=jobs) as evaluator:
             result = evaluator(the_layout)
     folder = make_result_dir(the_part.name, "evaluate", out)
-    write_evaluation(result, folder, part_source=str(part), layout_source=str(layout or "part:hand"), part_units=the_part.units)
+    write_evaluation(
+        result, folder, part_source=str(part), layout_source=str(layout or "part:hand"), part_units=the_part.units
+    )
     Console().print(table1(load_result(folder)))  # what the folder holds, as a report will read it
     n = len(result.per_scan)
     if result.n_failed:
-        console.print(f"[yellow]{result.n_failed} of {n} registrations failed or did not converge: each a 10° error in the "
-                      "medians and 75th percentiles, out of the means and maxima (see per_scan.csv)[/]")  # fmt: skip
+        console.print(
+            f"[yellow]{result.n_failed} of {n} registrations failed or did not converge: each a 10° error in the "
+            "medians and 75th percentiles, out of the means and maxima (see per_scan.csv)[/]"
+        )
     if report:
         from optipose.cli.report import write_report_after
 
@@ -95,8 +122,10 @@ def table1(result):
 
     n_scans = result.per_scan["scan"].nunique()
     cell = "" if result.objective.cell.ideal else f" in cell '{result.objective.cell.name}'"
-    table = Table(title=f"{result.part}: {result.layout.name} layout, objective '{result.objective.name}'{cell}, "
-                        f"{n_scans} scans, seed {result.seed} — median / 75th pct, degrees (subset)")  # fmt: skip
+    table = Table(
+        title=f"{result.part}: {result.layout.name} layout, objective '{result.objective.name}'{cell}, "
+        f"{n_scans} scans, seed {result.seed} — median / 75th pct, degrees (subset)"
+    )
     table.add_column("sensors", justify="right")
     table.add_column("choice")
     for axis in ("roll", "pitch", "yaw"):

@@ -16,9 +16,20 @@ import typer
 from optipose.errors import ConfigError, OptiposeError
 
 __all__ = [
-    "EXIT_USER_ERROR", "EXIT_INTERRUPTED", "fail", "friendly_errors", "parse_floats", "check_output",
-    "Part", "Units", "LayoutFile", "Objective", "Seed", "Jobs", "ResultFolder",
-]  # fmt: skip
+    "EXIT_USER_ERROR",
+    "EXIT_INTERRUPTED",
+    "fail",
+    "friendly_errors",
+    "parse_floats",
+    "check_output",
+    "Part",
+    "Units",
+    "LayoutFile",
+    "Objective",
+    "Seed",
+    "Jobs",
+    "ResultFolder",
+]
 
 EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a Ctrl-C
@@ -89,8 +100,11 @@ def check_output(path: Path | None, file: bool = False, what: str = "--out") -> 
 def warn_if_band(objective, command: str) -> None:
     """One line on stderr when an objective's band of conditions would be ignored by ``command``."""
     if not objective.conditions.trivial:
-        typer.echo(f"optipose: warning: {command} runs the nominal cell only; objective '{objective.name}' has a band "
-                   "of conditions: use `optipose robustness` for them", err=True)  # fmt: skip
+        typer.echo(
+            f"optipose: warning: {command} runs the nominal cell only; objective '{objective.name}' has a band "
+            "of conditions: use `optipose robustness` for them",
+            err=True,
+        )
 
 
 # -- options and arguments shared by several commands ----------------------------------------------------
@@ -98,9 +112,16 @@ def warn_if_band(objective, command: str) -> None:
 # a default it is required.
 Part = Annotated[
     Optional[str],
-    typer.Argument(metavar="PART", help="A shipped part name (see `optipose parts`), a part TOML or a mesh file (STL, OBJ, PLY)."),
+    typer.Argument(
+        metavar="PART", help="A shipped part name (see `optipose parts`), a part TOML or a mesh file (STL, OBJ, PLY)."
+    ),
 ]
-Units = Annotated[str, typer.Option("--units", help="Mesh units: auto (diagonal > 20 means mm, 2-20 is refused as mm-or-inches), m, mm or in.")]
+Units = Annotated[
+    str,
+    typer.Option(
+        "--units", help="Mesh units: auto (diagonal > 20 means mm, 2-20 is refused as mm-or-inches), m, mm or in."
+    ),
+]
 LayoutFile = Annotated[
     Optional[Path],
     typer.Option("--layout", help="Layout TOML, a name and T_O_S per sensor; default: the part's hand-placed one."),
@@ -108,10 +129,16 @@ LayoutFile = Annotated[
 Objective = Annotated[str, typer.Option("--objective", help="Objective name in objectives/ or a TOML path.")]
 CellOption = Annotated[
     Optional[str],
-    typer.Option("--cell", help="The cell the layouts are evaluated in: a name in cells/ (ideal, ur10e) or a TOML path; default: the objective's."),
+    typer.Option(
+        "--cell",
+        help="The cell the layouts are evaluated in: a name in cells/ (ideal, ur10e) or a TOML path; default: the objective's.",
+    ),
 ]
 Seed = Annotated[
-    int, typer.Option("--seed", help="Seed of the sensor noise and random protocols; a search validates with a seed derived from it.")
+    int,
+    typer.Option(
+        "--seed", help="Seed of the sensor noise and random protocols; a search validates with a seed derived from it."
+    ),
 ]
 Jobs = Annotated[
     Optional[int],
@@ -119,5 +146,7 @@ Jobs = Annotated[
 ]
 ResultFolder = Annotated[
     Optional[Path],
-    typer.Option("--out", help="Result folder (default: results/<part>-<command>-<timestamp>/, linked as results/latest)."),
+    typer.Option(
+        "--out", help="Result folder (default: results/<part>-<command>-<timestamp>/, linked as results/latest)."
+    ),
 ]

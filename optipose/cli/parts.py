@@ -90,7 +90,9 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
     elif layout == "hand" and layout not in loaded.layouts:
         layout = None  # a bare mesh: draw the part alone
     elif layout not in loaded.layouts:
-        raise ConfigError(f"part '{loaded.name}' has no layout '{layout}' (it has: {', '.join(loaded.layouts) or 'none'}; or give a .toml file)")
+        raise ConfigError(
+            f"part '{loaded.name}' has no layout '{layout}' (it has: {', '.join(loaded.layouts) or 'none'}; or give a .toml file)"
+        )
     path = render_part(loaded, out or Path(f"{loaded.name}.png"), layout)
     _console().print(f"wrote {path}")
     return path
@@ -108,8 +110,15 @@ def counts_table(parts: list[str], layout: str = "hand") -> list[dict]:
             continue
         for sensor, scan in nominal_scans(part, layout).items():
             n_prof = part.motion.n_profiles
-            rows.append({"part": part.name, "sensor": sensor, "points": len(scan),
-                         "profiles": n_prof, "per_profile": len(scan) / n_prof})  # fmt: skip
+            rows.append(
+                {
+                    "part": part.name,
+                    "sensor": sensor,
+                    "points": len(scan),
+                    "profiles": n_prof,
+                    "per_profile": len(scan) / n_prof,
+                }
+            )
     return rows
 
 

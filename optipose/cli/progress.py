@@ -41,9 +41,23 @@ class StageProgress:
     unit done too (a study's trials, which are few and slow); clock : for tests.
     """
 
-    def __init__(self, console, title: str, unit: str, every: float = 10.0, each: bool = False,
-                 clock: Callable[[], float] = time.monotonic):  # fmt: skip
-        self.console, self.title, self.unit, self.every, self.each, self.clock = console, title, unit, every, each, clock
+    def __init__(
+        self,
+        console,
+        title: str,
+        unit: str,
+        every: float = 10.0,
+        each: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+    ):
+        self.console, self.title, self.unit, self.every, self.each, self.clock = (
+            console,
+            title,
+            unit,
+            every,
+            each,
+            clock,
+        )
         self.live = console.is_terminal
         self.name, self.total, self.done, self.detail = "", None, 0, ""
         self._started = self._printed = clock()
@@ -56,8 +70,13 @@ class StageProgress:
         if self.live:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-            columns = [TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[count]}"),
-                       TextColumn("{task.fields[detail]}"), TimeElapsedColumn()]  # fmt: skip
+            columns = [
+                TextColumn("{task.description}"),
+                BarColumn(),
+                TextColumn("{task.fields[count]}"),
+                TextColumn("{task.fields[detail]}"),
+                TimeElapsedColumn(),
+            ]
             self._bar = Progress(*columns, console=self.console)
             self._bar.__enter__()
             self._task = self._bar.add_task(self.title, total=None, count="", detail="")
@@ -90,7 +109,13 @@ class StageProgress:
             self.name, self.total, self.done = name, total, 0
             self.detail = self.detail if detail is None else detail
             if self._bar is not None:
-                self._bar.reset(self._task, completed=0, description=f"{self.title}: {name}", count=self._count(), detail=self.detail)
+                self._bar.reset(
+                    self._task,
+                    completed=0,
+                    description=f"{self.title}: {name}",
+                    count=self._count(),
+                    detail=self.detail,
+                )
                 self._set_total(total)
             else:
                 self._line(count=self._count() if total else "")

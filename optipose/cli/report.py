@@ -18,13 +18,23 @@ from optipose.errors import ConfigError
 
 __all__ = ["report", "report_command", "write_report_after", "NoReport"]
 
-NoReport = Annotated[bool, typer.Option("--no-report", help="Do not write report.html and report.md into the result folder.")]
+NoReport = Annotated[
+    bool, typer.Option("--no-report", help="Do not write report.html and report.md into the result folder.")
+]
 
 
 @friendly_errors
 def report(
-    result_dir: Annotated[Path, typer.Argument(metavar="RESULT_DIR", help="A result folder of optipose search, evaluate or robustness, or a study folder of optipose batch.")],
-    views: Annotated[bool, typer.Option("--views/--no-views", help="Draw the 3D views (they scan each layout once).")] = True,
+    result_dir: Annotated[
+        Path,
+        typer.Argument(
+            metavar="RESULT_DIR",
+            help="A result folder of optipose search, evaluate or robustness, or a study folder of optipose batch.",
+        ),
+    ],
+    views: Annotated[
+        bool, typer.Option("--views/--no-views", help="Draw the 3D views (they scan each layout once).")
+    ] = True,
 ) -> None:
     """Write report.html and report.md into a result folder.
 

@@ -19,7 +19,17 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import CellOption, Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
+from optipose.cli.options import (
+    CellOption,
+    Jobs,
+    Objective,
+    Part,
+    ResultFolder,
+    Seed,
+    Units,
+    check_output,
+    friendly_errors,
+)
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError
@@ -28,13 +38,19 @@ __all__ = ["robustness", "robustness_command"]
 
 Layouts = Annotated[
     Optional[list[Path]],
-    typer.Option("--layout", help="A layout TOML to compare with the hand-placed one (repeatable), e.g. a search's layouts/found_k2.toml."),
+    typer.Option(
+        "--layout",
+        help="A layout TOML to compare with the hand-placed one (repeatable), e.g. a search's layouts/found_k2.toml.",
+    ),
 ]
 Brackets = Annotated[
     Optional[bool],
-    typer.Option("--brackets/--no-brackets", help="Each layout's bracket sensitivity (reduced protocol, noise x1): spread, "
-                 "un-zeroed bias, the sensor to mount precisely. Default: on when the objective has a mounting tolerance."),
-]  # fmt: skip
+    typer.Option(
+        "--brackets/--no-brackets",
+        help="Each layout's bracket sensitivity (reduced protocol, noise x1): spread, "
+        "un-zeroed bias, the sensor to mount precisely. Default: on when the objective has a mounting tolerance.",
+    ),
+]
 
 
 @friendly_errors
@@ -54,12 +70,23 @@ def robustness(
 
     Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
     levels, bracket tolerances) and say, per layout, whether it stays no worse than the hand one."""
-    robustness_command(part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report, cell=cell)
+    robustness_command(
+        part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report, cell=cell
+    )
 
 
-def robustness_command(part: str, layouts: list[Path], objective: str = "robust", units: str = "auto",
-                       out: Path | None = None, jobs: int = 1, seed: int = 0, brackets: bool | None = None,
-                       report: bool = True, cell: str | None = None) -> Path:  # fmt: skip
+def robustness_command(
+    part: str,
+    layouts: list[Path],
+    objective: str = "robust",
+    units: str = "auto",
+    out: Path | None = None,
+    jobs: int = 1,
+    seed: int = 0,
+    brackets: bool | None = None,
+    report: bool = True,
+    cell: str | None = None,
+) -> Path:
     """Run the evaluations, print the table and the verdicts, save the result folder; returns the folder."""
     from rich.console import Console
 
@@ -81,19 +108,25 @@ def robustness_command(part: str, layouts: list[Path], objective: str = "robust"
     if brackets is None:
         brackets = the_objective.conditions.mounted
     elif brackets and not the_objective.conditions.mounted:
-        raise ConfigError(f"--brackets: objective '{the_objective.name}' has no mounting tolerance (mounting_translation_mm, "
-                          "mounting_rotation_deg in [conditions])")  # fmt: skip
+        raise ConfigError(
+            f"--brackets: objective '{the_objective.name}' has no mounting tolerance (mounting_translation_mm, "
+            "mounting_rotation_deg in [conditions])"
+        )
     given = [load_layout(p) for p in layouts]
     for lay in given:
         check_sensors_outside(the_part, lay)
     console = make_console(stderr=True)
     results = {}
     for i, lay in enumerate([reference, *given]):
-        name = "hand" if i == 0 else (lay.name if lay.name not in results else f"{lay.name}-{len(results)}")  # two files of one name
+        name = (
+            "hand" if i == 0 else (lay.name if lay.name not in results else f"{lay.name}-{len(results)}")
+        )  # two files of one name
         with status(console, f"{the_part.name}: {name} under {len(_conditions(the_objective))} conditions"):
             results[name] = evaluate_robust(the_part, lay, the_objective, seed=seed, jobs=jobs, quiet=True)
     folder = make_result_dir(the_part.name, "robustness", out)
-    rows = write_robustness(folder, the_part, the_objective, seed, results, hand="hand", sources=[str(p) for p in layouts])
+    rows = write_robustness(
+        folder, the_part, the_objective, seed, results, hand="hand", sources=[str(p) for p in layouts]
+    )
     Console().print(_table(rows, the_part.name))
     for line in _verdicts(results):
         Console().print(line)
@@ -118,7 +151,10 @@ def _brackets(part, objective, seed: int, jobs: int, results: dict, folder: Path
     with BracketEvaluator(part, objective, seed=seed, jobs=jobs) as evaluator:
         for name, result in results.items():
             n = len(result.layout)
-            with status(console, f"{part.name}: {name}'s brackets ({1 + objective.conditions.mounting_draws * (3 + n)} evaluations)"):
+            with status(
+                console,
+                f"{part.name}: {name}'s brackets ({1 + objective.conditions.mounting_draws * (3 + n)} evaluations)",
+            ):
                 found[name] = evaluator(result.layout, result.table)
     write_brackets(folder, found)
     for renderable in _bracket_tables(found, part.name):
@@ -153,8 +189,12 @@ def _table(rows, part_name: str):
     from rich import box
     from rich.table import Table
 
-    table = Table(title=f"{part_name}: under every condition, mdeg median/p75 (x: noise scale, m: bracket draw)",
-                  box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)  # fmt: skip
+    table = Table(
+        title=f"{part_name}: under every condition, mdeg median/p75 (x: noise scale, m: bracket draw)",
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        collapse_padding=True,
+    )
     for col in ("layout", "cond.", "roll", "pitch", "yaw", "score", "hand/it"):
         table.add_column(col, justify="left" if col in ("layout", "cond.") else "right", no_wrap=True)
     for (layout, k, condition), group in rows.groupby(["layout", "k", "condition"], sort=False):
@@ -163,7 +203,9 @@ def _table(rows, part_name: str):
         ratio = "" if layout == "hand" else f"{first['hand_score_deg'] / first['score_deg']:.2f}x"
         short = condition.replace("noise x", "x").replace(", mounting draw ", " m")
         name = f"{layout} k{k}" if layout == "hand" else layout
-        table.add_row(name, short, cells["roll"], cells["pitch"], cells["yaw"], f"{1e3 * first['score_deg']:.2f}", ratio)
+        table.add_row(
+            name, short, cells["roll"], cells["pitch"], cells["yaw"], f"{1e3 * first['score_deg']:.2f}", ratio
+        )
     return table
 
 
@@ -178,13 +220,21 @@ def _bracket_tables(found: dict, part_name: str) -> list:
 
     first = next(iter(found.values()))
     protocol = f"{'reduced protocol, ' if first.reduced else ''}{first.n_scans} scans"
-    axes = Table(title=f"{part_name}: brackets off by ±{1e3 * first.translation:g} mm, ±{np.rad2deg(first.rotation):g}° "
-                       f"({len(first.draws)} draw{'s' if len(first.draws) > 1 else ''}, noise x1, {protocol}); mdeg, µm for x y z",
-                 box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)  # fmt: skip
+    axes = Table(
+        title=f"{part_name}: brackets off by ±{1e3 * first.translation:g} mm, ±{np.rad2deg(first.rotation):g}° "
+        f"({len(first.draws)} draw{'s' if len(first.draws) > 1 else ''}, noise x1, {protocol}); mdeg, µm for x y z",
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        collapse_padding=True,
+    )
     for col in ("layout", "axis", "subset", "perfect", "off", "bias per draw", "worst"):
         axes.add_column(col, justify="left" if col in ("layout", "axis", "subset") else "right", no_wrap=True)
-    sensors = Table(title="one bracket off at a time: change of each axis's median+p75 and of the score, mdeg (worst draw)",
-                    box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)  # fmt: skip
+    sensors = Table(
+        title="one bracket off at a time: change of each axis's median+p75 and of the score, mdeg (worst draw)",
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        collapse_padding=True,
+    )
     for col in ("layout", "sensor", "roll", "pitch", "yaw", "score", "rank"):
         sensors.add_column(col, justify="left" if col in ("layout", "sensor") else "right", no_wrap=True)
     lines = []
@@ -195,10 +245,17 @@ def _bracket_tables(found: dict, part_name: str) -> list:
             axes.add_row(label if i == 0 else "", *row)
         ranking = sens.ranking(k)
         for rank, s in enumerate(ranking, start=1):
-            sensors.add_row(label if rank == 1 else "", s.name, *(_mdeg(c, signed=True) for c in s.change),
-                            _mdeg(s.score_change, signed=True), str(rank))  # fmt: skip
+            sensors.add_row(
+                label if rank == 1 else "",
+                s.name,
+                *(_mdeg(c, signed=True) for c in s.change),
+                _mdeg(s.score_change, signed=True),
+                str(rank),
+            )
         best = ranking[0]
-        lines.append(f"{label}: make {best.name}'s bracket precise (score {_mdeg(best.score_change, signed=True)} mdeg with it alone off)")
+        lines.append(
+            f"{label}: make {best.name}'s bracket precise (score {_mdeg(best.score_change, signed=True)} mdeg with it alone off)"
+        )
     return [axes, sensors, *lines]
 
 
@@ -213,10 +270,22 @@ def _axis_rows(sens, k: int) -> list[tuple[str, ...]]:
         value = _mdeg if rotation else (lambda v, signed=False: f"{1e6 * v:+.1f}" if signed else f"{1e6 * v:.1f}")
         if rotation:
             s = spread[axis]
-            perfect, off = f"{_mdeg(s.nominal_median)}/{_mdeg(s.nominal_p75)}", f"{_mdeg(s.mounted_median)}/{_mdeg(s.mounted_p75)}"
+            perfect, off = (
+                f"{_mdeg(s.nominal_median)}/{_mdeg(s.nominal_p75)}",
+                f"{_mdeg(s.mounted_median)}/{_mdeg(s.mounted_p75)}",
+            )
         else:
             perfect = off = ""
-        rows.append((axis, biases[0].subset or "-", perfect, off, " ".join(value(b.bias, signed=True) for b in biases), value(worst[axis])))
+        rows.append(
+            (
+                axis,
+                biases[0].subset or "-",
+                perfect,
+                off,
+                " ".join(value(b.bias, signed=True) for b in biases),
+                value(worst[axis]),
+            )
+        )
     return rows
 
 

@@ -28,25 +28,43 @@ def scan(
     part: Part,
     sensor_pose: Annotated[
         Optional[list[str]],
-        typer.Option("--sensor-pose", "-p", help="A 4x4 T_O_S as 16 comma-separated numbers, row-major, metres. Repeatable."),
+        typer.Option(
+            "--sensor-pose", "-p", help="A 4x4 T_O_S as 16 comma-separated numbers, row-major, metres. Repeatable."
+        ),
     ] = None,
     layout: LayoutFile = None,
-    material: Annotated[Optional[str], typer.Option(help="Material preset or a CSV (aoi_deg,intensity); default: the part's.")] = None,
+    material: Annotated[
+        Optional[str], typer.Option(help="Material preset or a CSV (aoi_deg,intensity); default: the part's.")
+    ] = None,
     sensor: Annotated[Optional[str], typer.Option(help="Sensor preset or TOML file; default: the part's.")] = None,
     rpy: Annotated[str, typer.Option(help="Part orientation roll,pitch,yaw in degrees.")] = "0,0,0",
     seed: Seed = 0,
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise and Z quantisation.")] = True,
     out: Annotated[Optional[Path], typer.Option(help="Write the merged cloud (PLY, PCD, XYZ or NPY), metres.")] = None,
-    raw: Annotated[Optional[Path], typer.Option(help="Write each sensor's raw profiles (device format) into this folder.")] = None,
+    raw: Annotated[
+        Optional[Path], typer.Option(help="Write each sensor's raw profiles (device format) into this folder.")
+    ] = None,
     units: Units = "auto",
 ) -> None:
     """Scan a part with one or more sensors and print what each sees."""
-    scan_command(part, sensor_pose, layout, material, sensor, parse_floats(rpy, 3, "--rpy"), seed, noise, out, raw, units)
+    scan_command(
+        part, sensor_pose, layout, material, sensor, parse_floats(rpy, 3, "--rpy"), seed, noise, out, raw, units
+    )
 
 
-def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path | None = None, material: str | None = None,
-                 sensor: str | None = None, rpy_deg: Sequence[float] = (0.0, 0.0, 0.0), seed: int = 0, noise: bool = True,
-                 out: Path | None = None, raw_dir: Path | None = None, units: str = "auto") -> None:  # fmt: skip
+def scan_command(
+    part: str,
+    sensor_pose: list[str] | None = None,
+    layout: Path | None = None,
+    material: str | None = None,
+    sensor: str | None = None,
+    rpy_deg: Sequence[float] = (0.0, 0.0, 0.0),
+    seed: int = 0,
+    noise: bool = True,
+    out: Path | None = None,
+    raw_dir: Path | None = None,
+    units: str = "auto",
+) -> None:
     """Scan ``part`` once at orientation ``rpy_deg`` (degrees), print a table per sensor, write the clouds.
 
     sensor_pose : 4x4 T_O_S as text, 16 numbers each (metres); else ``layout``, else the part's hand layout.
@@ -68,7 +86,9 @@ def scan_command(part: str, sensor_pose: list[str] | None = None, layout: Path |
     check_sensors_outside(the_part, the_layout)
     scanner = part_scanner(the_part, sensor, material)
     rpy = np.deg2rad(rpy_deg)
-    scans = scanner.scan_many(the_layout.poses, the_part.motion, PartPose(rpy, the_part.rotation_centre), rng=seed, noise=noise)
+    scans = scanner.scan_many(
+        the_layout.poses, the_part.motion, PartPose(rpy, the_part.rotation_centre), rng=seed, noise=noise
+    )
 
     console = Console()
     console.print(_summary_table(the_part, scanner, the_layout, scans, list(rpy_deg)))
@@ -89,7 +109,9 @@ def poses_from_cli(sensor_pose: list[str] | None, layout_path: Path | None, part
     if sensor_pose and layout_path:
         raise ConfigError("give either --sensor-pose or --layout, not both")
     if sensor_pose:
-        return Layout(tuple(SensorPose(f"S{i + 1}", _pose(text, i + 1)) for i, text in enumerate(sensor_pose)), name="cli")
+        return Layout(
+            tuple(SensorPose(f"S{i + 1}", _pose(text, i + 1)) for i, text in enumerate(sensor_pose)), name="cli"
+        )
     if layout_path:
         return load_layout(layout_path)
     if "hand" in part.layouts:
@@ -146,7 +168,9 @@ def _summary_table(part, scanner, layout, scans, rpy_deg: list[float]):
         hit_profiles = len(np.unique(s.profile))
         x = f"{s.points[:, 0].min() * 1e3:.1f} .. {s.points[:, 0].max() * 1e3:.1f}" if len(s) else "-"
         inten = f"{float(s.intensity.mean()):.3f}" if len(s) else "-"
-        table.add_row(name, f"{len(s):,}", f"{hit_profiles}/{n_prof}", f"{100 * len(s) / (n_prof * n_col):.1f}", x, inten)
+        table.add_row(
+            name, f"{len(s):,}", f"{hit_profiles}/{n_prof}", f"{100 * len(s) / (n_prof * n_col):.1f}", x, inten
+        )
     return table
 
 

@@ -13,7 +13,18 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import EXIT_INTERRUPTED, CellOption, Jobs, Objective, Part, ResultFolder, Seed, Units, check_output, friendly_errors
+from optipose.cli.options import (
+    EXIT_INTERRUPTED,
+    CellOption,
+    Jobs,
+    Objective,
+    Part,
+    ResultFolder,
+    Seed,
+    Units,
+    check_output,
+    friendly_errors,
+)
 from optipose.cli.progress import make_console
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError, is_interrupt, read_toml
@@ -26,14 +37,28 @@ def search(
     part: Part = None,
     units: Units = "auto",
     sensors: Annotated[str, typer.Option(help="Sensor counts to place, e.g. 1,2,3.")] = "1,2,3",
-    budget: Annotated[str, typer.Option(help="quick (a first look), default (the search in the objective's cell, the paper's by default, its verdict raced on draws of the cell; in the ideal cell then checked under the band too) or thorough.")] = "default",
+    budget: Annotated[
+        str,
+        typer.Option(
+            help="quick (a first look), default (the search in the objective's cell, the paper's by default, its verdict raced on draws of the cell; in the ideal cell then checked under the band too) or thorough."
+        ),
+    ] = "default",
     objective: Objective = "paper",
     cell: CellOption = None,
     seed: Seed = 0,
     jobs: Jobs = None,
     out: ResultFolder = None,
-    resume: Annotated[Optional[Path], typer.Option(help="Continue the search in this result folder (same settings; PART is then not needed).")] = None,
-    config: Annotated[Optional[Path], typer.Option("--search-config", help="TOML with a search table overriding the budget (algorithms, evaluations, constraints).")] = None,
+    resume: Annotated[
+        Optional[Path],
+        typer.Option(help="Continue the search in this result folder (same settings; PART is then not needed)."),
+    ] = None,
+    config: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--search-config",
+            help="TOML with a search table overriding the budget (algorithms, evaluations, constraints).",
+        ),
+    ] = None,
     no_report: NoReport = False,
 ) -> None:
     """Place 1, 2, 3 … sensors automatically and compare with the hand layout.
@@ -41,12 +66,25 @@ def search(
     Search sensor poses with NLopt on a fast surrogate, pick and polish finalists by ICP, validate them on
     the full ICP protocol with a held-out noise seed, and print found vs. hand-placed per axis (the paper's
     Table 1 shape)."""
-    search_command(part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report, cell=cell)
+    search_command(
+        part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report, cell=cell
+    )
 
 
-def search_command(part: str | None = None, units: str = "auto", sensors: str = "1,2,3", budget: str = "default",
-                   objective: str = "paper", seed: int = 0, jobs: int | None = None, out: Path | None = None,
-                   resume: Path | None = None, config: Path | None = None, report: bool = True, cell: str | None = None) -> Path:  # fmt: skip
+def search_command(
+    part: str | None = None,
+    units: str = "auto",
+    sensors: str = "1,2,3",
+    budget: str = "default",
+    objective: str = "paper",
+    seed: int = 0,
+    jobs: int | None = None,
+    out: Path | None = None,
+    resume: Path | None = None,
+    config: Path | None = None,
+    report: bool = True,
+    cell: str | None = None,
+) -> Path:
     """Run the search, print found vs. hand-placed, keep everything in the result folder; returns the folder.
 
     With ``resume`` the part, budget, seed, objective and search settings come from that folder's config.toml.
@@ -69,30 +107,46 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
             units = saved_units or units
     else:
         the_objective = load_objective(objective).in_cell(cell)
-        search_config = config_from_budget(budget, _parse_sensors(sensors), _overrides(config), band=not the_objective.conditions.trivial,
-                                           cell=not the_objective.cell.ideal)  # fmt: skip
+        search_config = config_from_budget(
+            budget,
+            _parse_sensors(sensors),
+            _overrides(config),
+            band=not the_objective.conditions.trivial,
+            cell=not the_objective.cell.ideal,
+        )
     if not resume:
         check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
 
     try:
-        searched = _run_with_progress(console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume))
+        searched = _run_with_progress(
+            console, the_part, the_objective, search_config, seed, folder, budget, jobs, bool(resume)
+        )
     except (KeyboardInterrupt, SystemError) as exc:
         if not is_interrupt(exc):
             raise
-        console.print(f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
-                      f"continue with `optipose search --resume {folder}`")  # fmt: skip
+        console.print(
+            f"[yellow]interrupted[/]: what was computed is in {folder} (history, cache, layouts found so far); "
+            f"continue with `optipose search --resume {folder}`"
+        )
         raise typer.Exit(EXIT_INTERRUPTED) from None
     pictures = _draw_layouts(folder, the_part, searched.layouts, jobs) if searched.validated else None
     # a nominal search that did not check its answer under a band (quick, or `band = ""`) says so: its "better"
     # holds in the simulation's ideal cell only, which is not yet a reason to buy
-    unchecked = the_objective.conditions.trivial and the_objective.cell.ideal and searched.band is None and not searched.band_interrupted
+    unchecked = (
+        the_objective.conditions.trivial
+        and the_objective.cell.ideal
+        and searched.band is None
+        and not searched.band_interrupted
+    )
     _print_report(Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal)
     ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:
-        console.print(f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
-                      f"`optipose search --resume {folder}`")  # fmt: skip
+        console.print(
+            f"[yellow]interrupted[/]: the best layouts so far are in {folder}/layouts; continue with "
+            f"`optipose search --resume {folder}`"
+        )
         raise typer.Exit(EXIT_INTERRUPTED)
     if report:
         from optipose.cli.report import write_report_after
@@ -101,9 +155,11 @@ def search_command(part: str | None = None, units: str = "auto", sensors: str = 
     if ready:
         ready()
     if searched.band_interrupted:  # the validation above is complete; only its check under the band is missing
-        console.print(f"[yellow]interrupted[/] during the check under the band: the verdicts above hold for the nominal cell "
-                      f"only (results in {folder}); check them with `optipose robustness {part} --layout "
-                      f"{folder}/layouts/found_k{max(searched.layouts)}.toml`, or run the whole search again")  # fmt: skip
+        console.print(
+            f"[yellow]interrupted[/] during the check under the band: the verdicts above hold for the nominal cell "
+            f"only (results in {folder}); check them with `optipose robustness {part} --layout "
+            f"{folder}/layouts/found_k{max(searched.layouts)}.toml`, or run the whole search again"
+        )
         raise typer.Exit(EXIT_INTERRUPTED)
     console.print(f"results: {folder}")
     return folder
@@ -117,9 +173,15 @@ def _resumed_settings(resume: Path):
     try:
         return (*_settings(saved), saved.part_units)
     except (KeyError, TypeError, ValueError, AttributeError, ConfigError) as exc:
-        why = f"no '{exc.args[0]}' in it" if isinstance(exc, KeyError) else (str(exc).splitlines() or [type(exc).__name__])[0]
-        raise ConfigError(f"--resume {resume}: its config.toml ({_written_by(saved)}) cannot be resumed by this "
-                          f"version: {why}; start a new search") from None  # fmt: skip
+        why = (
+            f"no '{exc.args[0]}' in it"
+            if isinstance(exc, KeyError)
+            else (str(exc).splitlines() or [type(exc).__name__])[0]
+        )
+        raise ConfigError(
+            f"--resume {resume}: its config.toml ({_written_by(saved)}) cannot be resumed by this "
+            f"version: {why}; start a new search"
+        ) from None
 
 
 def _written_by(saved) -> str:
@@ -133,7 +195,9 @@ def _settings(saved):
     from optipose.evaluate.objective import objective_from_table
     from optipose.search.config import SearchConfig
 
-    part = _needed(saved.part_source, "part" if saved.part_name is None else "source") or _needed(saved.part_name, "name")
+    part = _needed(saved.part_source, "part" if saved.part_name is None else "source") or _needed(
+        saved.part_name, "name"
+    )
     cfg = dict(_needed(saved.search, "search"))
     unknown = set(cfg) - set(SearchConfig.__dataclass_fields__)
     if unknown:  # a setting this version no longer has
@@ -180,7 +244,9 @@ def _overrides(path: Path | None) -> dict:
     known = set(SearchConfig.__dataclass_fields__)
     unknown = set(table) - known
     if unknown:
-        raise ConfigError(f"search config {path}: unknown key(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(known))})")
+        raise ConfigError(
+            f"search config {path}: unknown key(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(known))})"
+        )
     if "sensors" in table:
         table["sensors"] = tuple(table["sensors"])
     return table
@@ -203,8 +269,10 @@ def _resumed(resume: Path):
         raise ConfigError(f"--resume {resume}: that folder holds a '{saved.command}' result, not a search")
     written = saved.format
     if written is not None and written != RESULT_FORMAT:
-        raise ConfigError(f"--resume {resume}: written by another optipose ({_written_by(saved)}); this version "
-                          f"reads result format {RESULT_FORMAT}: start a new search")  # fmt: skip
+        raise ConfigError(
+            f"--resume {resume}: written by another optipose ({_written_by(saved)}); this version "
+            f"reads result format {RESULT_FORMAT}: start a new search"
+        )
     return saved
 
 
@@ -255,7 +323,9 @@ def _draw_layouts(folder: Path, part, layouts, jobs: int):
     from optipose.report.views import render_layouts
 
     hand = baseline(part)
-    named = {f"found_k{k}": lay for k, lay in layouts.items()} | ({baseline_label(hand): hand} if hand is not None else {})
+    named = {f"found_k{k}": lay for k, lay in layouts.items()} | (
+        {baseline_label(hand): hand} if hand is not None else {}
+    )
     shown = replace(part, layouts={**part.layouts, **named})
     thread = threading.Thread(target=render_layouts, args=(shown, list(named), folder / "layouts", jobs), daemon=True)
     thread.start()
@@ -280,7 +350,10 @@ def _print_report(console, report, part, unchecked: bool = False, ideal: bool = 
         band = report.band.by_k() if report.band is not None else {}
         confident, fewer = split(getattr(report, "confident", {}))
         for v in confident.values() or verdicts:
-            console.print(v.line() if confident else verdict_headline(v, label, band.get(v.k), checked=not unchecked), highlight=False)
+            console.print(
+                v.line() if confident else verdict_headline(v, label, band.get(v.k), checked=not unchecked),
+                highlight=False,
+            )
         for v in confident.values():
             if line := mount_line(v, report.layouts.get(v.k), baseline(part)):
                 console.print(line, highlight=False)
@@ -301,13 +374,18 @@ def _print_report(console, report, part, unchecked: bool = False, ideal: bool = 
         if 1 in found and max(hand, default=0) > 1 and fewer is None:  # the headline: fewer sensors to buy
             top = hand[max(hand)]
             beats = "beats" if found[1].score < top.score else "does not beat"
-            console.print(f"one found sensor {beats} {label} {top.name} in sum ({mdeg(found[1].score):.3f} vs "
-                          f"{mdeg(top.score):.3f} mdeg)", highlight=False)  # fmt: skip
+            console.print(
+                f"one found sensor {beats} {label} {top.name} in sum ({mdeg(found[1].score):.3f} vs "
+                f"{mdeg(top.score):.3f} mdeg)",
+                highlight=False,
+            )
         console.print(_validation_table(report.validation, part, label))
         console.print(_subsets_table(report.validation, label))
         if any(v.ratios() for v in verdicts):
             console.print(_band_table(report.validation, part, label))
-        for line in lines[: len(verdicts)] if band or not confident else ():  # the validation draw's own lines, before the band's check
+        for line in (
+            lines[: len(verdicts)] if band or not confident else ()
+        ):  # the validation draw's own lines, before the band's check
             console.print(line, highlight=False)
         if band:
             console.print(_band_table(report.band, part, label, "under the band"))
@@ -393,8 +471,10 @@ def _confident_table(confident: dict, part):
     from optipose.report.confidence import interval_cell
 
     v = next(iter(confident.values()))
-    table = _narrow_table(f"{part.name}: predicted median |error| in the cell, mdeg [{100 * v.confidence:.1f} % interval]",
-                          [("k", "right"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"), ("yaw", "right")])  # fmt: skip
+    table = _narrow_table(
+        f"{part.name}: predicted median |error| in the cell, mdeg [{100 * v.confidence:.1f} % interval]",
+        [("k", "right"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"), ("yaw", "right")],
+    )
     for k, v in sorted(confident.items()):
         for name, axes in ((v.found_name, v.found), (v.hand_name, v.hand)):
             table.add_row(str(k), name, *(interval_cell(a.median_deg, digits=2) for a in axes))
@@ -407,21 +487,36 @@ def _validation_table(validation, part, label: str = "hand"):
 
     protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans)"
     band = ", worst over the band" if any(c.under for c in validation.found.values()) else ""
-    table = _narrow_table(f"{part.name}: found vs. {label}, {protocol}, held-out seed{band}; mdeg median/p75",
-                          [("k", "right"), ("layout", "left"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"),
-                           ("yaw", "right"), ("score", "right")])  # fmt: skip
+    table = _narrow_table(
+        f"{part.name}: found vs. {label}, {protocol}, held-out seed{band}; mdeg median/p75",
+        [
+            ("k", "right"),
+            ("layout", "left"),
+            ("sensors", "left"),
+            ("roll", "right"),
+            ("pitch", "right"),
+            ("yaw", "right"),
+            ("score", "right"),
+        ],
+    )
     for k in sorted({*validation.found, *validation.hand}):
         for name, choices in (("found", validation.found), (label, validation.hand)):
             if k in choices:
                 choice = choices[k]
-                cells = [f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else _short_reason(a) for a in choice.axes]
+                cells = [
+                    f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else _short_reason(a)
+                    for a in choice.axes
+                ]
                 table.add_row(str(k), _short(name), choice.name, *cells, _compact(mdeg(choice.score)))
     return table
 
 
 def _subsets_table(validation, label: str = "hand"):
     """The sensor subset each axis uses, per k and layout."""
-    table = _narrow_table("the subset each axis uses", [("k", "right"), ("layout", "left"), ("roll", "left"), ("pitch", "left"), ("yaw", "left")])
+    table = _narrow_table(
+        "the subset each axis uses",
+        [("k", "right"), ("layout", "left"), ("roll", "left"), ("pitch", "left"), ("yaw", "left")],
+    )
     for k in sorted({*validation.found, *validation.hand}):
         for name, choices in (("found", validation.found), (label, validation.hand)):
             if k in choices:
@@ -432,8 +527,10 @@ def _subsets_table(validation, label: str = "hand"):
 def _band_table(validation, part, label: str = "hand", title: str = "per condition"):
     """Per k and noise level of the band: baseline / found in sum, and whether found is no worse on every axis."""
     verdicts = [v for v in validation.verdicts() if v.levels()]
-    table = _narrow_table(f"{part.name}: {label} / found {title} (* found worse on some axis)",
-                          [("condition", "left")] + [(f"k={v.k}", "right") for v in verdicts])  # fmt: skip
+    table = _narrow_table(
+        f"{part.name}: {label} / found {title} (* found worse on some axis)",
+        [("condition", "left")] + [(f"k={v.k}", "right") for v in verdicts],
+    )
     for row in zip(*(v.levels() for v in verdicts)):
         table.add_row(row[0][0], *(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row))
     return table
@@ -441,8 +538,10 @@ def _band_table(validation, part, label: str = "hand", title: str = "per conditi
 
 def _strategies_table(outcome, label: str = "hand"):
     """The surrogate's predicted score per k for greedy, joint and the baseline, and which strategy won."""
-    strategies = _narrow_table(f"surrogate: predicted score (mdeg), greedy vs. joint vs. {label}",
-                               [("k", "right"), ("greedy", "right"), ("joint", "right"), (_short(label), "right"), ("winner", "right")])  # fmt: skip
+    strategies = _narrow_table(
+        f"surrogate: predicted score (mdeg), greedy vs. joint vs. {label}",
+        [("k", "right"), ("greedy", "right"), ("joint", "right"), (_short(label), "right"), ("winner", "right")],
+    )
     for k in sorted(outcome.found):
         g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
         fmt = lambda f: f"{1e3 * f.stats.score:.3f}" if f is not None and f.stats else "-"  # noqa: E731

@@ -22,9 +22,20 @@ from optipose.evaluate.objective import AXES, StatisticConfig
 from optipose.evaluate.statistics import FAILED_ERROR
 
 __all__ = [
-    "all_subsets", "subset_name", "AxisChoice", "Choice", "best_choices", "choose", "restated", "stats_by_key",
-    "MAX_FAILED_FRACTION", "UNOBSERVABLE_PENALTY", "UNOBSERVABLE", "FAILED", "not_measured",
-]  # fmt: skip
+    "all_subsets",
+    "subset_name",
+    "AxisChoice",
+    "Choice",
+    "best_choices",
+    "choose",
+    "restated",
+    "stats_by_key",
+    "MAX_FAILED_FRACTION",
+    "UNOBSERVABLE_PENALTY",
+    "UNOBSERVABLE",
+    "FAILED",
+    "not_measured",
+]
 
 MAX_FAILED_FRACTION = 0.1
 UNOBSERVABLE_PENALTY = FAILED_ERROR  # rad per axis (10°): worse than any measurable error under ±2° protocols
@@ -99,13 +110,17 @@ class Choice:
 
     def __repr__(self) -> str:
         cells = ", ".join(
-            f"{a.axis}={np.rad2deg(a.median):.4f}/{np.rad2deg(a.p75):.4f} deg ({a.name})" if a.observable else f"{a.axis}={a.label}"
+            f"{a.axis}={np.rad2deg(a.median):.4f}/{np.rad2deg(a.p75):.4f} deg ({a.name})"
+            if a.observable
+            else f"{a.axis}={a.label}"
             for a in self.axes
         )
         return f"Choice(k={self.k}, {self.name}: {cells})"
 
 
-def best_choices(stats: pd.DataFrame, names: list[str], cfg: StatisticConfig, n_scans: int, evaluated=None) -> list[Choice]:
+def best_choices(
+    stats: pd.DataFrame, names: list[str], cfg: StatisticConfig, n_scans: int, evaluated=None
+) -> list[Choice]:
     """The best choice for k = 1 … n sensors (Table 1), from :func:`optipose.evaluate.statistics.summarize` output;
     ``evaluated``: the subset names the evaluation registered (:func:`choose`; default every one)."""
     by_key = stats_by_key(stats)
@@ -121,8 +136,9 @@ def stats_by_key(stats: pd.DataFrame) -> dict:
     return {(r.subset, r.axis): r for r in stats.itertuples(index=False)}
 
 
-def choose(sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: StatisticConfig, n_scans: int,
-           evaluated=None) -> Choice:  # fmt: skip
+def choose(
+    sensors: tuple[int, ...], names: list[str], by_key: dict, cfg: StatisticConfig, n_scans: int, evaluated=None
+) -> Choice:
     """The choice of exactly these ``sensors`` (indices): each axis takes its best eligible subset of them.
 
     by_key : :func:`stats_by_key` of the layout's statistics (a KeyError where one is missing); n_scans : scans

@@ -31,8 +31,12 @@ class Background:
         context = multiprocessing.get_context("spawn")
         payload = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
         self._receive, send = context.Pipe(duplex=False)
-        self._process = context.Process(target=_serve, args=(send, thread_env(threads), nice, payload), daemon=True,
-                                        name=f"optipose-{getattr(fn, '__name__', 'call')}")  # fmt: skip
+        self._process = context.Process(
+            target=_serve,
+            args=(send, thread_env(threads), nice, payload),
+            daemon=True,
+            name=f"optipose-{getattr(fn, '__name__', 'call')}",
+        )
         try:
             self._process.start()
         except BaseException:

@@ -22,7 +22,19 @@ import numpy as np
 
 from optipose.evaluate.assignment import FAILED, UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 
-__all__ = ["dominates", "excess", "rank", "weighted_excess", "AxisGap", "Verdict", "bought", "UNCHECKED", "one_versus_many", "unmeasured_line", "mdeg"]
+__all__ = [
+    "dominates",
+    "excess",
+    "rank",
+    "weighted_excess",
+    "AxisGap",
+    "Verdict",
+    "bought",
+    "UNCHECKED",
+    "one_versus_many",
+    "unmeasured_line",
+    "mdeg",
+]
 
 _STATISTICS = ("median", "p75")
 
@@ -35,17 +47,24 @@ def _stat(axis: AxisChoice, statistic: str) -> float:
 def dominates(choice: Choice, reference: Choice) -> bool:
     """Every axis's median and 75th percentile at most the reference's (at every condition of a band)."""
     return all(
-        _stat(a, s) <= _stat(b, s) for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes) for s in _STATISTICS
-    )  # fmt: skip
+        _stat(a, s) <= _stat(b, s)
+        for c, r in _pairs(choice, reference)
+        for a, b in zip(c.axes, r.axes)
+        for s in _STATISTICS
+    )
 
 
 def excess(choice: Choice, reference: Choice, margin: float = 1.0) -> float:
     """How far (rad, summed) the choice's per-axis medians and 75th percentiles exceed margin × the
     reference's (summed over the conditions of a band)."""
-    return float(sum(
-        max(0.0, _stat(a, s) - margin * _stat(b, s))
-        for c, r in _pairs(choice, reference) for a, b in zip(c.axes, r.axes) for s in _STATISTICS
-    ))  # fmt: skip
+    return float(
+        sum(
+            max(0.0, _stat(a, s) - margin * _stat(b, s))
+            for c, r in _pairs(choice, reference)
+            for a, b in zip(c.axes, r.axes)
+            for s in _STATISTICS
+        )
+    )
 
 
 def _pairs(choice: Choice, reference: Choice) -> list[tuple[Choice, Choice]]:
@@ -100,16 +119,20 @@ class Verdict:
         return tuple(
             AxisGap(f.axis, stat, _stat(f, stat), _stat(r, stat), label)
             for label, (c, ref) in zip(labels, pairs)
-            for f, r in zip(c.axes, ref.axes) for stat in _STATISTICS
+            for f, r in zip(c.axes, ref.axes)
+            for stat in _STATISTICS
             if _stat(f, stat) > _stat(r, stat)
-        )  # fmt: skip
+        )
 
     def levels(self) -> list[tuple[str, float, bool]]:
         """Under a band, per noise level: its label, reference score over found score, and whether found is
         no worse on every axis there; else []."""
         if len(self.found.under) != len(self.reference.under):
             return []
-        return [(label, float(r.score / c.score), dominates(c, r)) for (label, c), (_, r) in zip(self.found.under, self.reference.under)]
+        return [
+            (label, float(r.score / c.score), dominates(c, r))
+            for (label, c), (_, r) in zip(self.found.under, self.reference.under)
+        ]
 
     def band_advice(self, reference: str = "hand", nominal_no_worse: bool = False) -> str:
         """Under a band, for a found layout the nominal validation found no worse on every axis
@@ -124,8 +147,11 @@ class Verdict:
         scale is read from the level's label (``evaluate.robust.by_level``: ``noise x<scale>…``)."""
         import re
 
-        levels = [(float(m.group(1)), label.split(",")[0], ratio, ok, "bracket" in label) for label, ratio, ok in self.levels()
-                  if (m := re.match(r"noise x([0-9.]+)", label))]  # fmt: skip
+        levels = [
+            (float(m.group(1)), label.split(",")[0], ratio, ok, "bracket" in label)
+            for label, ratio, ok in self.levels()
+            if (m := re.match(r"noise x([0-9.]+)", label))
+        ]
         levels.sort()
         if not nominal_no_worse or not levels or all(level[3] for level in levels):
             return ""
@@ -134,15 +160,19 @@ class Verdict:
             scale, name, ratio, _, brackets = levels[0]
             if not (scale == 1.0 and brackets):
                 return ""
-            return (f"{head} is worse on some axis than {reference} {self.reference.name} at {name} ({ratio:.2f}x in sum) once the "
-                    f"brackets are off by the tolerance, though no worse with them exact: its win rests on brackets more precise "
-                    f"than the band's (optipose robustness --layout ... ranks which to make precise)")  # fmt: skip
+            return (
+                f"{head} is worse on some axis than {reference} {self.reference.name} at {name} ({ratio:.2f}x in sum) once the "
+                f"brackets are off by the tolerance, though no worse with them exact: its win rests on brackets more precise "
+                f"than the band's (optipose robustness --layout ... ranks which to make precise)"
+            )
         n = next(i for i, level in enumerate(levels) if not level[3])
         held = ", ".join(f"{name} ({ratio:.2f}x better in sum)" for _, name, ratio, _, _ in levels[:n])
         lost = ", ".join(f"{name} ({ratio:.2f}x in sum)" for _, name, ratio, ok, _ in levels[n:] if not ok)
-        return (f"{head} is no worse than {reference} {self.reference.name} on every axis at {held}, "
-                f"worse on some axis at {lost}: it is the better buy only if the sensor's noise on this part, measured on the bench, "
-                f"is {'no more than' if levels[n - 1][0] == 1 else f'at most {levels[n - 1][0]:g}x'} the preset's")  # fmt: skip
+        return (
+            f"{head} is no worse than {reference} {self.reference.name} on every axis at {held}, "
+            f"worse on some axis at {lost}: it is the better buy only if the sensor's noise on this part, measured on the bench, "
+            f"is {'no more than' if levels[n - 1][0] == 1 else f'at most {levels[n - 1][0]:g}x'} the preset's"
+        )
 
     def ratios(self) -> list[tuple[str, float]]:
         """Under a band, (level label, reference score over found score) per noise level; else []."""
@@ -175,8 +205,10 @@ class Verdict:
         what = [f"the registrations of found {name} failed on {', '.join(mine)}"] if mine else []
         what += [f"those of {reference} {ref} on {', '.join(theirs)}"] if theirs else []
         then = f"keep {ref} until they succeed" if mine else f"found {name} is not shown better there"
-        return (f"k={self.k}: no verdict: {' and '.join(what)} in over a tenth of the scans (see per_scan.csv's failure "
-                f"column; is the part's mesh a closed solid?): {then}")  # fmt: skip
+        return (
+            f"k={self.k}: no verdict: {' and '.join(what)} in over a tenth of the scans (see per_scan.csv's failure "
+            f"column; is the part's mesh a closed solid?): {then}"
+        )
 
     def line(self, reference: str = "hand") -> str:
         """One line for a terminal or a report: ratio, every worse axis (mdeg), and keep or replace;
@@ -186,8 +218,11 @@ class Verdict:
             return failed
         ratio, name, ref = self.ratio, self.found.name, self.reference.name
         gaps = sorted(self.worse, key=lambda g: g.reference / g.found)  # the widest first
-        worse = [f"{g.axis} {g.statistic} {_mdeg_or_none(g.found)} vs {_mdeg_or_none(g.reference)}"
-                 + (f" ({g.condition})" if g.condition else "") for g in gaps[:3]]  # fmt: skip
+        worse = [
+            f"{g.axis} {g.statistic} {_mdeg_or_none(g.found)} vs {_mdeg_or_none(g.reference)}"
+            + (f" ({g.condition})" if g.condition else "")
+            for g in gaps[:3]
+        ]
         if len(gaps) > 3:
             worse.append(f"{len(gaps) - 3} more")
         robust = " at the worst over the band" if self.ratios() else ""
@@ -203,8 +238,10 @@ class Verdict:
 
 
 # what a nominal search's verdict says when it never checked its answer under a band (``--budget quick``)
-UNCHECKED = ("checked in the ideal cell only (the preset's noise, every bracket exact), not under the band of a real "
-             "cell: run --budget default before buying")  # fmt: skip
+UNCHECKED = (
+    "checked in the ideal cell only (the preset's noise, every bracket exact), not under the band of a real "
+    "cell: run --budget default before buying"
+)
 
 
 def bought(verdict: Verdict, band: Verdict | None = None) -> bool:
@@ -231,21 +268,31 @@ def unmeasured_line(k: int, found: Choice, reference: Choice | None = None, labe
         also = ""
         if theirs:
             seen = [a.axis for a in theirs if a.observable]
-            also = f"; {label} {reference.name} does not either" if not seen else f"; {label} {reference.name} measures {' and '.join(seen)}"
+            also = (
+                f"; {label} {reference.name} does not either"
+                if not seen
+                else f"; {label} {reference.name} measures {' and '.join(seen)}"
+            )
         if reason == UNOBSERVABLE:
             sensors = f"{k} sensor{'s' if k > 1 else ''}"
-            out.append(f"{names} unobservable: no layout of {sensors} the search found observes {'it' if len(axes) == 1 else 'them'}{also}")
+            out.append(
+                f"{names} unobservable: no layout of {sensors} the search found observes {'it' if len(axes) == 1 else 'them'}{also}"
+            )
         else:
-            out.append(f"{names} not measured: the registrations of found {found.name} that observe {'it' if len(axes) == 1 else 'them'} "
-                       f"failed in over a tenth of the scans{also}")  # fmt: skip
+            out.append(
+                f"{names} not measured: the registrations of found {found.name} that observe {'it' if len(axes) == 1 else 'them'} "
+                f"failed in over a tenth of the scans{also}"
+            )
     return f"k={k}: " + "; ".join(out) + " (the error is unknown, not small)" if out else ""
 
 
 def one_versus_many(one: Choice, many: Choice, reference: str = "hand-placed") -> str:
     """Whether one found sensor beats the reference's largest choice in sum: fewer sensors to buy."""
     beats = one.score < many.score
-    return (f"one found sensor {'beats' if beats else 'does not beat'} the {reference} {many.name} in sum "
-            f"({mdeg(one.score):.3f} vs {mdeg(many.score):.3f} mdeg)")  # fmt: skip
+    return (
+        f"one found sensor {'beats' if beats else 'does not beat'} the {reference} {many.name} in sum "
+        f"({mdeg(one.score):.3f} vs {mdeg(many.score):.3f} mdeg)"
+    )
 
 
 def mdeg(rad: float) -> float:

@@ -28,7 +28,16 @@ from optipose.errors import ConfigError
 from optipose.seeds import mounting_seed
 from optipose.transforms import make_T, rpy_to_matrix
 
-__all__ = ["ConditionsConfig", "Condition", "conditions", "by_draw", "band_ends", "mounting_error", "conditions_from_table", "aggregate"]
+__all__ = [
+    "ConditionsConfig",
+    "Condition",
+    "conditions",
+    "by_draw",
+    "band_ends",
+    "mounting_error",
+    "conditions_from_table",
+    "aggregate",
+]
 
 _MM, _DEG = 1e-3, np.pi / 180
 
@@ -151,5 +160,5 @@ def conditions_from_table(t: dict, where: str) -> ConditionsConfig:
         raise ConfigError(f"{where}: mounting tolerances must be >= 0 and mounting_draws >= 1")
     how = t.get("aggregate", "worst")
     if how != "worst" and not (isinstance(how, (int, float)) and 0 < how <= 1):
-        raise ConfigError(f"{where}: aggregate must be \"worst\" or a quantile in (0, 1], got {how!r}")
+        raise ConfigError(f'{where}: aggregate must be "worst" or a quantile in (0, 1], got {how!r}')
     return ConditionsConfig(scales, translation, rotation, draws, how if how == "worst" else float(how))

@@ -55,9 +55,24 @@ from optipose.evaluate.objective import AXES, StatisticConfig
 from optipose.evaluate.statistics import FAILED_ERROR
 
 __all__ = [
-    "BUY", "KEEP", "TIE", "UNDECIDED", "DECISIONS", "Rules", "PairedDraw", "Interval", "AxisError", "AxisRatio",
-    "ConfidentVerdict", "scan_errors", "paired_draw", "paired_draws", "compare_draws", "FEWER", "split",
-]  # fmt: skip
+    "BUY",
+    "KEEP",
+    "TIE",
+    "UNDECIDED",
+    "DECISIONS",
+    "Rules",
+    "PairedDraw",
+    "Interval",
+    "AxisError",
+    "AxisRatio",
+    "ConfidentVerdict",
+    "scan_errors",
+    "paired_draw",
+    "paired_draws",
+    "compare_draws",
+    "FEWER",
+    "split",
+]
 
 BUY, KEEP, TIE, UNDECIDED = "BUY", "KEEP", "TIE", "UNDECIDED"
 FEWER = "fewer"  # the key, among a search's verdicts by k, of one found sensor against the baseline's largest choice
@@ -92,7 +107,9 @@ class PairedDraw:
 
     def __post_init__(self):
         if self.found.shape != self.hand.shape or self.found.ndim != 2 or self.found.shape[1] != len(AXES):
-            raise ValueError(f"a paired draw needs two (n_scans, 3) arrays, got {self.found.shape} and {self.hand.shape}")
+            raise ValueError(
+                f"a paired draw needs two (n_scans, 3) arrays, got {self.found.shape} and {self.hand.shape}"
+            )
 
 
 def scan_errors(result, choice: Choice) -> np.ndarray:
@@ -117,7 +134,9 @@ def paired_draw(found, found_choice: Choice, hand, hand_choice: Choice) -> Paire
     """The paired draw of two evaluations on the same seed (common random numbers); a ValueError if they
     were not (another seed, other scans)."""
     if found.seed != hand.seed or found.n_scans != hand.n_scans:
-        raise ValueError(f"not a paired draw: seed {found.seed} ({found.n_scans} scans) vs {hand.seed} ({hand.n_scans} scans)")
+        raise ValueError(
+            f"not a paired draw: seed {found.seed} ({found.n_scans} scans) vs {hand.seed} ({hand.n_scans} scans)"
+        )
     return PairedDraw(int(found.seed), scan_errors(found, found_choice), scan_errors(hand, hand_choice))
 
 
@@ -190,8 +209,12 @@ class ConfidentVerdict:
     seconds_per_draw: float = float("nan")
     reference: str = "hand"
     hand_k: int = 0  # the hand choice's size when it differs from k (fewer found sensors against more hand ones)
-    failures: float = 0.01  # the share of an axis's scans found may fail on beyond hand's (Rules.failures); NaN: not applied
-    kept: bool = False  # the found side is the baseline's own choice, the search's answer where it beat the found layout
+    failures: float = (
+        0.01  # the share of an axis's scans found may fail on beyond hand's (Rules.failures); NaN: not applied
+    )
+    kept: bool = (
+        False  # the found side is the baseline's own choice, the search's answer where it beat the found layout
+    )
 
     @property
     def more_minutes(self) -> float:
@@ -211,16 +234,27 @@ class ConfidentVerdict:
         tail = f"{self.n_draws} draw{'s' if self.n_draws != 1 else ''}"
         if self.decision == UNDECIDED and self.more_draws is not None:
             minutes = self.more_minutes
-            took = (f", {minutes:.0f} min" if minutes >= 1 else f", {60 * minutes:.0f} s") if math.isfinite(minutes) else ""
+            took = (
+                (f", {minutes:.0f} min" if minutes >= 1 else f", {60 * minutes:.0f} s")
+                if math.isfinite(minutes)
+                else ""
+            )
             tail += f"; +{self.more_draws}{took}"
         if self.decision == KEEP:
             worse = [a.axis for a in self.axes if a.ratio.high < 1.0 / (1.0 + self.tolerance)]
             fails = [a for a in self.axes if a.failed.low > self.failures]
             why = (f", worse on {'/'.join(worse)}" if worse else "") + "".join(
-                f", fails {100 * a.failed.estimate:.1f} % more {a.axis}" for a in fails[:1])
+                f", fails {100 * a.failed.estimate:.1f} % more {a.axis}" for a in fails[:1]
+            )
             # the reasons before the ratio where both do not fit
-            texts = [f"{head} {ref}; {self.found_name} {ratio}{why}", f"{head} {ref}; {self.found_name}{why}", f"{head} {ref}{why}"]
-            text = next((t for t in texts if len(f"{t} ({tail})") <= 80), next((t for t in texts if len(t) <= 80), texts[-1]))
+            texts = [
+                f"{head} {ref}; {self.found_name} {ratio}{why}",
+                f"{head} {ref}; {self.found_name}{why}",
+                f"{head} {ref}{why}",
+            ]
+            text = next(
+                (t for t in texts if len(f"{t} ({tail})") <= 80), next((t for t in texts if len(t) <= 80), texts[-1])
+            )
         elif self.decision == BUY:
             text = f"{head} {self.found_name} {ratio} better than {ref}"
         elif self.decision == TIE and self.kept:
@@ -232,7 +266,9 @@ class ConfidentVerdict:
         # undecided: the axis whose interval straddles the tolerance, where it fits
         open_ = [a for a in self.axes if a.ratio.low < 1.0 / (1.0 + self.tolerance) <= a.ratio.high]
         axis = "".join(f"; {a.axis} {a.ratio.estimate:.2f}x [{a.ratio.low:.2f}, {a.ratio.high:.2f}]" for a in open_[:1])
-        failing = [a for a in self.axes if a.failed.low <= self.failures < a.failed.high]  # found may fail more than allowed
+        failing = [
+            a for a in self.axes if a.failed.low <= self.failures < a.failed.high
+        ]  # found may fail more than allowed
         fails = "".join(f"; {a.axis} fails {100 * a.failed.estimate:+.1f} %" for a in failing[:1])
         axis = (axis or fails) if self.decision == UNDECIDED else ""
         # the failed share is in no table: it goes before the draws to add where both do not fit
@@ -243,7 +279,9 @@ class ConfidentVerdict:
     @property
     def unmeasured(self) -> list[str]:
         """The axes neither layout measures in any draw (unobservable, or failed: the penalty throughout)."""
-        return [f.axis for f, h in zip(self.found, self.hand) if not_measured(f.median_deg) and not_measured(h.median_deg)]
+        return [
+            f.axis for f, h in zip(self.found, self.hand) if not_measured(f.median_deg) and not_measured(h.median_deg)
+        ]
 
     def fewer_line(self) -> str:
         """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line of at most 80
@@ -251,21 +289,34 @@ class ConfidentVerdict:
         (shorter where the names are long: ``fewer: F1 alone matches conventional S1S2S3 within 10 % …``)."""
         s = self.score
         ratio, ref = f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]", f"{self.reference} {self.hand_name}"
-        template = "nothing measured by {who} or {ref}" if len(self.unmeasured) == len(self.found) else {
-            BUY: "{who} is better than {ref}: {ratio}", KEEP: "{who} does not match {ref} ({ratio})",
-            TIE: "{who} matches {ref} within " + f"{100 * self.tolerance:.0f}" + " % ({ratio})"}.get(
-                self.decision, "{who} vs {ref}: {ratio}, not settled")  # fmt: skip
+        template = (
+            "nothing measured by {who} or {ref}"
+            if len(self.unmeasured) == len(self.found)
+            else {
+                BUY: "{who} is better than {ref}: {ratio}",
+                KEEP: "{who} does not match {ref} ({ratio})",
+                TIE: "{who} matches {ref} within " + f"{100 * self.tolerance:.0f}" + " % ({ratio})",
+            }.get(self.decision, "{who} vs {ref}: {ratio}, not settled")
+        )
         found = "" if self.kept else "found "  # the search answered with one of the baseline's own
-        lines = [f"{head}: " + template.format(who=who, ref=ref, ratio=ratio)
-                 for head, who in (("fewer sensors", f"{found}{self.found_name} alone"), ("fewer sensors", f"{self.found_name} alone"),
-                                   ("fewer", f"{self.found_name} alone"))]  # fmt: skip
+        lines = [
+            f"{head}: " + template.format(who=who, ref=ref, ratio=ratio)
+            for head, who in (
+                ("fewer sensors", f"{found}{self.found_name} alone"),
+                ("fewer sensors", f"{self.found_name} alone"),
+                ("fewer", f"{self.found_name} alone"),
+            )
+        ]
         return next((line for line in lines if len(line) <= 80), lines[-1][:80])
 
     def axis_lines(self) -> list[str]:
         """Per axis, found's and hand's predicted median / p75 (mdeg) with intervals, each ≤ 80 columns."""
         out = []
         for f, h in zip(self.found, self.hand):
-            cells = [f"{_mdeg(i.estimate)} [{_mdeg(i.low)}, {_mdeg(i.high)}]" for i in (f.median_deg, h.median_deg, f.p75_deg, h.p75_deg)]
+            cells = [
+                f"{_mdeg(i.estimate)} [{_mdeg(i.low)}, {_mdeg(i.high)}]"
+                for i in (f.median_deg, h.median_deg, f.p75_deg, h.p75_deg)
+            ]
             out.append(f"  {f.axis:5} median found {cells[0]} hand {cells[1]} mdeg")
             out.append(f"  {'':5} p75    found {cells[2]} hand {cells[3]} mdeg")
         return out
@@ -326,13 +377,18 @@ def _quantities(stats: np.ndarray, statistic: StatisticConfig) -> np.ndarray:
     of the score, each axis's test (the hand layout's score over that score with the axis's share, weight ·
     (median + p75), the found layout's), hand / found of each median and p75 (10); found's median and p75 per
     axis, hand's (12); found's and hand's score (2)."""
-    share = np.asarray(statistic.weights, float) * (statistic.median_weight * stats[..., 0, :, :] + statistic.p75_weight * stats[..., 1, :, :])
+    share = np.asarray(statistic.weights, float) * (
+        statistic.median_weight * stats[..., 0, :, :] + statistic.p75_weight * stats[..., 1, :, :]
+    )
     score = share.sum(axis=-1, keepdims=True)  # (…, 2 layouts, 1)
     swapped = score[..., 1, :] - share[..., 1, :] + share[..., 0, :]  # (…, 3)
     log = np.log(np.maximum(np.concatenate([score, stats[..., 0, :, :], stats[..., 1, :, :]], axis=-1), 1e-300))
     f, h = log[..., 0, :], log[..., 1, :]  # (…, 7): score, medians, p75s
     tests = h[..., :1] - np.log(np.maximum(swapped, 1e-300))
-    return np.concatenate([h[..., :1] - f[..., :1], tests, h[..., 1:] - f[..., 1:], f[..., 1:], h[..., 1:], f[..., :1], h[..., :1]], axis=-1)
+    return np.concatenate(
+        [h[..., :1] - f[..., :1], tests, h[..., 1:] - f[..., 1:], f[..., 1:], h[..., 1:], f[..., :1], h[..., :1]],
+        axis=-1,
+    )
 
 
 def _widening(per_draw: list, boot: np.ndarray, rules: Rules, n_scans: list[int]) -> np.ndarray:
@@ -362,13 +418,24 @@ def _interval(point: float, samples: np.ndarray, widen: float, confidence: float
     tail = 100.0 * (1.0 - read) / 2.0
     reach = stats_norm.ppf((1.0 + confidence) / 2.0) / stats_norm.ppf((1.0 + read) / 2.0)
     low, high = point + widen * reach * (np.percentile(samples, [tail, 100.0 - tail]) - point)
-    low, high = np.clip([low, high], -_LOG_BOUND, _LOG_BOUND)  # an unbounded side stays a finite number, not an overflow
+    low, high = np.clip(
+        [low, high], -_LOG_BOUND, _LOG_BOUND
+    )  # an unbounded side stays a finite number, not an overflow
     return Interval(float(unit(point)), float(unit(low)), float(unit(high)))
 
 
-def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int = 0, found_name: str = "found",
-                  hand_name: str = "hand", reference: str = "hand", seconds_per_draw: float = float("nan"),
-                  hand_k: int = 0, kept: bool = False) -> ConfidentVerdict:  # fmt: skip
+def compare_draws(
+    draws: Sequence[PairedDraw],
+    rules: Rules = Rules(),
+    *,
+    k: int = 0,
+    found_name: str = "found",
+    hand_name: str = "hand",
+    reference: str = "hand",
+    seconds_per_draw: float = float("nan"),
+    hand_k: int = 0,
+    kept: bool = False,
+) -> ConfidentVerdict:
     """The verdict on paired draws (one per seed, each the same scans for both layouts)."""
     if not draws:
         raise ValueError("a verdict needs at least one paired draw")
@@ -386,11 +453,27 @@ def compare_draws(draws: Sequence[PairedDraw], rules: Rules = Rules(), *, k: int
     hand = tuple(AxisError(axis, iv[16 + j], iv[19 + j]) for j, axis in enumerate(AXES))
     decision, more = _decide(iv[0], axes, rules.tolerance, rules.failures, len(draws))
     return ConfidentVerdict(
-        k=k, decision=decision, found_name=found_name, hand_name=hand_name, score=iv[0], axes=axes, found=found,
-        hand=hand, found_score_deg=iv[22], hand_score_deg=iv[23], n_draws=len(draws), n_scans=sum(n_scans),
-        tolerance=rules.tolerance, confidence=c, more_draws=more, seconds_per_draw=seconds_per_draw, reference=reference,
-        hand_k=hand_k, failures=rules.failures, kept=kept,
-    )  # fmt: skip
+        k=k,
+        decision=decision,
+        found_name=found_name,
+        hand_name=hand_name,
+        score=iv[0],
+        axes=axes,
+        found=found,
+        hand=hand,
+        found_score_deg=iv[22],
+        hand_score_deg=iv[23],
+        n_draws=len(draws),
+        n_scans=sum(n_scans),
+        tolerance=rules.tolerance,
+        confidence=c,
+        more_draws=more,
+        seconds_per_draw=seconds_per_draw,
+        reference=reference,
+        hand_k=hand_k,
+        failures=rules.failures,
+        kept=kept,
+    )
 
 
 def _failed(draws: Sequence[PairedDraw], confidence: float) -> list[Interval]:
@@ -399,7 +482,9 @@ def _failed(draws: Sequence[PairedDraw], confidence: float) -> list[Interval]:
     Student interval at ``confidence``: the draws' spread on D − 1 degrees of freedom where it exceeds the
     scans' own (the paired per-scan differences' variance over a draw's scans), else the scans' on all of theirs.
     Exactly [0, 0] where neither layout fails, or both fail on the same scans."""
-    diff = [(d.found >= FAILED_ERROR).astype(float) - (d.hand >= FAILED_ERROR) for d in draws]  # (n, 3) each, in {-1, 0, 1}
+    diff = [
+        (d.found >= FAILED_ERROR).astype(float) - (d.hand >= FAILED_ERROR) for d in draws
+    ]  # (n, 3) each, in {-1, 0, 1}
     per = np.stack([x.mean(axis=0) for x in diff])  # (D, 3)
     within = np.mean([x.var(axis=0, ddof=1) / len(x) if len(x) > 1 else np.zeros(len(AXES)) for x in diff], axis=0)
     between = per.var(axis=0, ddof=1) if len(draws) > 1 else within
@@ -409,7 +494,9 @@ def _failed(draws: Sequence[PairedDraw], confidence: float) -> list[Interval]:
     return [Interval(float(m), float(max(-1.0, m - h)), float(min(1.0, m + h))) for m, h in zip(mean, half)]
 
 
-def _decide(score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, failures: float, n: int) -> tuple[str, int | None]:
+def _decide(
+    score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, failures: float, n: int
+) -> tuple[str, int | None]:
     """The decision from the intervals (module docstring) and, when UNDECIDED, the draws to add."""
     floor, ceiling = 1.0 / (1.0 + tolerance), 1.0 + tolerance
     if score.high < 1.0 or any(a.ratio.high < floor or a.failed.low > failures for a in axes):
@@ -428,7 +515,9 @@ def _needed(interval: Interval, bound: float, above: bool, n: int, log: bool = T
     m = at(interval.estimate)
     half = abs(m - at(interval.low if above else interval.high))
     gap = (m - bound) if above else (bound - m)
-    if not log and gap == 0 and half == 0:  # a failed share exactly at its bound, no spread: met already (its test is <=)
+    if (
+        not log and gap == 0 and half == 0
+    ):  # a failed share exactly at its bound, no spread: met already (its test is <=)
         return float(n)
     if gap <= 0:
         return math.inf
@@ -438,11 +527,19 @@ def _needed(interval: Interval, bound: float, above: bool, n: int, log: bool = T
 def _more_draws(score: Interval, axes: tuple[AxisRatio, ...], tol: float, failures: float, n: int) -> int | None:
     """The fewest draws to add for some decision to be reached at the present estimates (None: none would)."""
     ratios, failed = [a.ratio for a in axes], [a.failed for a in axes]
-    buy = max([_needed(score, 0.0, True, n)] + [_needed(a, -tol, True, n) for a in ratios]
-              + [_needed(f, failures, False, n, log=False) for f in failed])  # fmt: skip
-    keep = min([_needed(score, 0.0, False, n)] + [_needed(a, -tol, False, n) for a in ratios]
-               + [_needed(f, failures, True, n, log=False) for f in failed])  # fmt: skip
-    tie = max([max(_needed(i, -tol, True, n), _needed(i, tol, False, n)) for i in [score, *ratios]]
-              + [_needed(f, failures, False, n, log=False) for f in failed])  # fmt: skip
+    buy = max(
+        [_needed(score, 0.0, True, n)]
+        + [_needed(a, -tol, True, n) for a in ratios]
+        + [_needed(f, failures, False, n, log=False) for f in failed]
+    )
+    keep = min(
+        [_needed(score, 0.0, False, n)]
+        + [_needed(a, -tol, False, n) for a in ratios]
+        + [_needed(f, failures, True, n, log=False) for f in failed]
+    )
+    tie = max(
+        [max(_needed(i, -tol, True, n), _needed(i, tol, False, n)) for i in [score, *ratios]]
+        + [_needed(f, failures, False, n, log=False) for f in failed]
+    )
     best = min(buy, keep, tie)
     return None if not math.isfinite(best) else max(1, math.ceil(best) - n)

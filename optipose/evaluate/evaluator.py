@@ -86,7 +86,9 @@ class EvaluationResult:
         return "\n".join(lines)
 
 
-def evaluate(part, layout: Layout | None = None, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1) -> EvaluationResult:
+def evaluate(
+    part, layout: Layout | None = None, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1
+) -> EvaluationResult:
     """Evaluate ``layout`` (default: the part's hand-placed one) on ``part`` (a :class:`optipose.model.part.Part`)."""
     if layout is None:
         from optipose.model.baseline import baseline
@@ -117,9 +119,18 @@ class Evaluator:
         which the workers map instead of building it (a search's, for the hand layout's processes).
     """
 
-    def __init__(self, part, objective: Objective | str = "paper", seed: int = 0, jobs: int = 1, quiet: bool = False,
-                 executor: Executor | None = None, condition: Condition | None = None, scans: int = 0,
-                 reference_dir: str | None = None):  # fmt: skip
+    def __init__(
+        self,
+        part,
+        objective: Objective | str = "paper",
+        seed: int = 0,
+        jobs: int = 1,
+        quiet: bool = False,
+        executor: Executor | None = None,
+        condition: Condition | None = None,
+        scans: int = 0,
+        reference_dir: str | None = None,
+    ):
         self.part = part
         self.objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.seed = int(seed)
@@ -136,7 +147,9 @@ class Evaluator:
             material=part.material,
             motion=registered_motion(part.motion),  # a long part in longer steps (SCAN_PROFILES)
             centre=np.asarray(part.rotation_centre, dtype=float),
-            registration=replace(self.objective.registration, null_tolerance=self.objective.statistic.observability_tolerance),
+            registration=replace(
+                self.objective.registration, null_tolerance=self.objective.statistic.observability_tolerance
+            ),
             observability_tolerance=self.objective.statistic.observability_tolerance,
             seed=self.seed,
             threads=None if self.jobs == 1 else 1,
@@ -170,14 +183,18 @@ class Evaluator:
         p = self.perturbations
         return [(i, p.rpy[i], p.offset[i], int(p.seeds[i]), str(p.label[i])) for i in range(len(p))]
 
-    def __call__(self, layout: Layout | list[np.ndarray], condition: Condition | None = None, subsets=None) -> EvaluationResult:
+    def __call__(
+        self, layout: Layout | list[np.ndarray], condition: Condition | None = None, subsets=None
+    ) -> EvaluationResult:
         """Evaluate a layout (or a list of 4×4 ``T_O_S``, named S1, S2, …), under ``condition`` when given
         (default: the evaluator's); the workers keep their scanners and reference across conditions.
         ``subsets``: register only these sensor subsets (tuples of indices; default every one): the result's
         table then chooses among them alone (a verdict's draw, which needs only the subsets its choices use)."""
         return self.under(layout, [condition or self.setup.condition], subsets)[0]
 
-    def under(self, layout: Layout | list[np.ndarray], conditions: list[Condition], subsets=None) -> list[EvaluationResult]:
+    def under(
+        self, layout: Layout | list[np.ndarray], conditions: list[Condition], subsets=None
+    ) -> list[EvaluationResult]:
         """One evaluation of ``layout`` per condition, in their order. Conditions that differ only in their
         noise scale (one bracket draw at several noise levels) are scanned together: each orientation is
         cast once for all of them (:func:`optipose.evaluate.worker.run_levels`), and each result is the one
@@ -185,8 +202,13 @@ class Evaluator:
         layout = _as_layout(layout)
         return [self.result(layout, [raw]) for raw in self.raw(layout, conditions, subsets=subsets)]
 
-    def raw(self, layout: Layout | list[np.ndarray], conditions: list[Condition], share: tuple[int, int] = (0, 1),
-            subsets=None) -> list[tuple]:  # fmt: skip
+    def raw(
+        self,
+        layout: Layout | list[np.ndarray],
+        conditions: list[Condition],
+        share: tuple[int, int] = (0, 1),
+        subsets=None,
+    ) -> list[tuple]:
         """What :meth:`under` makes its results of, per condition in their order: the workers' outputs and
         the wall time (s), of the orientations ``share[0]``, ``share[0] + share[1]``, … only. The shares of
         several calls (other processes') make one result together (:meth:`result`), the one ``under`` gives:
@@ -204,7 +226,9 @@ class Evaluator:
             t0 = time.perf_counter()
             levels = tuple(dict.fromkeys(c.noise_scale for c in group))
             setup = replace(self.setup, condition=group[0])
-            outputs = self.executor.map(functools.partial(run_levels, setup, layout, levels=levels, subsets=subsets), _chunks(tasks, self.jobs))
+            outputs = self.executor.map(
+                functools.partial(run_levels, setup, layout, levels=levels, subsets=subsets), _chunks(tasks, self.jobs)
+            )
             wall = (time.perf_counter() - t0) / len(levels)
             for n, level in enumerate(levels):
                 out[replace(group[0], noise_scale=level)] = ([o[n] for o in outputs], wall)
@@ -213,7 +237,9 @@ class Evaluator:
     def result(self, layout: Layout | list[np.ndarray], raws: list[tuple]) -> EvaluationResult:
         """One condition's evaluation from the :meth:`raw` outputs of the shares of its orientations (their
         wall time the longest)."""
-        return self._result(_as_layout(layout), [o for outputs, _ in raws for o in outputs], max(wall for _, wall in raws))
+        return self._result(
+            _as_layout(layout), [o for outputs, _ in raws for o in outputs], max(wall for _, wall in raws)
+        )
 
     def _result(self, layout: Layout, outputs: list[tuple], wall: float) -> EvaluationResult:
         """The workers' (rows, point rows, seconds) of one condition as an :class:`EvaluationResult`."""
@@ -222,11 +248,15 @@ class Evaluator:
         per_scan = pd.DataFrame(rows).sort_values(["scan", "subset_index"], kind="stable").reset_index(drop=True)
         points = pd.DataFrame(point_rows).sort_values(["scan", "sensor_index"], kind="stable").reset_index(drop=True)
         stats = summarize(per_scan, self.objective.statistic)
-        table = best_choices(stats, layout.names, self.objective.statistic, len(self.perturbations), set(per_scan["subset"]))
+        table = best_choices(
+            stats, layout.names, self.objective.statistic, len(self.perturbations), set(per_scan["subset"])
+        )
         timings = {k: float(sum(out[2][k] for out in outputs)) for k in ("scan", "register")}
         timings["wall"] = wall
         log_failures(per_scan, self._failure_level)
-        return EvaluationResult(self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings)
+        return EvaluationResult(
+            self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings
+        )
 
 
 def _as_layout(layout: Layout | list[np.ndarray]) -> Layout:

@@ -28,8 +28,18 @@ from typing import Protocol, runtime_checkable
 
 from optipose.errors import ConfigError, WorkerError
 
-__all__ = ["Executor", "SerialExecutor", "JoblibExecutor", "DaskExecutor", "EXECUTORS", "register_executor", "make_executor",
-           "THREAD_VARIABLES", "thread_env", "stop_workers"]  # fmt: skip
+__all__ = [
+    "Executor",
+    "SerialExecutor",
+    "JoblibExecutor",
+    "DaskExecutor",
+    "EXECUTORS",
+    "register_executor",
+    "make_executor",
+    "THREAD_VARIABLES",
+    "thread_env",
+    "stop_workers",
+]
 
 log = logging.getLogger(__name__)
 
@@ -148,8 +158,14 @@ class DaskExecutor:
             except (OSError, TimeoutError) as exc:
                 raise ConfigError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
         else:
-            self._cluster = LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True, host="127.0.0.1",
-                                         dashboard_address=None, env=thread_env(1))  # fmt: skip
+            self._cluster = LocalCluster(
+                n_workers=int(n_workers),
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                env=thread_env(1),
+            )
             self._client = Client(self._cluster, set_as_default=False)
         self.n_workers = max(1, sum(w["nthreads"] for w in self._client.scheduler_info()["workers"].values()))
 

@@ -121,13 +121,16 @@ def objective_from_dict(table: dict, source_text: str = "") -> Objective:
         return cls(**{k: frozen(v) for k, v in values.items() if k in cls.__dataclass_fields__})
 
     return Objective(
-        name=str(table.get("name", "objective")), description=str(table.get("description", "")),
+        name=str(table.get("name", "objective")),
+        description=str(table.get("description", "")),
         protocol=section(ProtocolConfig, table.get("protocol", {})),
         registration=section(RegistrationConfig, table.get("registration", {})),
         statistic=section(StatisticConfig, table.get("statistic", {})),
         conditions=section(ConditionsConfig, table.get("conditions", {})),
-        scan=section(ScanConfig, table.get("scan", {})), cell=_saved_cell(table.get("cell")), source_text=source_text,
-    )  # fmt: skip
+        scan=section(ScanConfig, table.get("scan", {})),
+        cell=_saved_cell(table.get("cell")),
+        source_text=source_text,
+    )
 
 
 def _saved_cell(t: dict | None) -> Cell:
@@ -148,9 +151,13 @@ def reduced_objective(objective: Objective) -> Objective:
     return replace(objective, protocol=replace(p, step=max(p.stop - p.start, 1e-9)))
 
 
-def objective_from_table(table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective") -> Objective:
+def objective_from_table(
+    table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective"
+) -> Objective:
     """Validate a parsed objective table; every problem is a :class:`ConfigError` naming the key."""
-    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "conditions", "scan", "cell"}, where)
+    _no_unknown(
+        table, {"name", "description", "protocol", "registration", "statistic", "conditions", "scan", "cell"}, where
+    )
     cell = table.get("cell", "ideal")
     if not isinstance(cell, str):
         raise ConfigError(f"{where}: cell must be a cell's name or a path to its file, got {cell!r}")
@@ -171,13 +178,25 @@ def objective_from_table(table: dict, where: str = "objective", source_text: str
 
 # ---------------------------------------------------------------------------------------------------------
 def _protocol(t: dict, where: str) -> ProtocolConfig:
-    keys = {"kind", "sequences", "start_deg", "stop_deg", "step_deg", "offsets_mm", "count", "range_deg", "offset_range_mm"}
+    keys = {
+        "kind",
+        "sequences",
+        "start_deg",
+        "stop_deg",
+        "step_deg",
+        "offsets_mm",
+        "count",
+        "range_deg",
+        "offset_range_mm",
+    }
     _no_unknown(t, keys, where)
     kind = _choice(t, "kind", ("sequences", "random"), "sequences", where)
     sequences = tuple(str(s).upper() for s in t.get("sequences", ProtocolConfig.sequences))
     bad = [s for s in sequences if s not in SEQUENCE_AXES]
     if bad or not sequences:
-        raise ConfigError(f"{where}: sequences must be a non-empty list of {', '.join(SEQUENCE_AXES)}; got {bad or '[]'}")
+        raise ConfigError(
+            f"{where}: sequences must be a non-empty list of {', '.join(SEQUENCE_AXES)}; got {bad or '[]'}"
+        )
     start, stop, step = (_num(t, k, d, where) for k, d in (("start_deg", -2.0), ("stop_deg", 2.0), ("step_deg", 0.4)))
     if not (step > 0 and stop >= start):
         raise ConfigError(f"{where}: need step_deg > 0 and stop_deg >= start_deg (got {start}, {stop}, {step})")
@@ -206,10 +225,23 @@ def _protocol(t: dict, where: str) -> ProtocolConfig:
 
 def _registration(t: dict, where: str) -> RegistrationConfig:
     keys = {
-        "method", "backend", "reference", "reference_spacing_mm", "voxel_size_mm", "outlier_removal",
-        "outlier_neighbors", "outlier_std_ratio", "max_correspondence_distance_mm", "max_iterations",
-        "tolerance_rotation_deg", "tolerance_translation_mm", "subset_start", "stop", "voxel_grid", "max_rmse_mm",
-    }  # fmt: skip
+        "method",
+        "backend",
+        "reference",
+        "reference_spacing_mm",
+        "voxel_size_mm",
+        "outlier_removal",
+        "outlier_neighbors",
+        "outlier_std_ratio",
+        "max_correspondence_distance_mm",
+        "max_iterations",
+        "tolerance_rotation_deg",
+        "tolerance_translation_mm",
+        "subset_start",
+        "stop",
+        "voxel_grid",
+        "max_rmse_mm",
+    }
     _no_unknown(t, keys, where)
     d = RegistrationConfig()
     cfg = RegistrationConfig(
@@ -230,7 +262,13 @@ def _registration(t: dict, where: str) -> RegistrationConfig:
         stop=_choice(t, "stop", ("step", "fitness"), d.stop, where),
         max_rmse=_num(t, "max_rmse_mm", 0.0, where) * _MM,
     )
-    positive = ("reference_spacing", "max_correspondence_distance", "max_iterations", "outlier_neighbors", "outlier_std_ratio")
+    positive = (
+        "reference_spacing",
+        "max_correspondence_distance",
+        "max_iterations",
+        "outlier_neighbors",
+        "outlier_std_ratio",
+    )
     bad = [k for k in positive if not getattr(cfg, k) > 0]
     bad += [k for k in ("voxel_size", "tolerance_rotation", "tolerance_translation", "max_rmse") if getattr(cfg, k) < 0]
     if bad:
@@ -271,7 +309,9 @@ def _no_unknown(t, allowed: set, where: str) -> None:
         raise ConfigError(f"{where}: expected a table")
     unknown = set(t) - allowed
     if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))} (allowed: {', '.join(sorted(allowed))})")
+        raise ConfigError(
+            f"{where}: unknown key(s) {', '.join(sorted(unknown))} (allowed: {', '.join(sorted(allowed))})"
+        )
 
 
 def _num(t: dict, key: str, default: float, where: str) -> float:

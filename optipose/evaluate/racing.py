@@ -49,9 +49,17 @@ def _planned(n: int, max_draws: int, seconds_left: float, per_draw: float) -> in
     return max(n, min(max_draws, n + int(seconds_left // per_draw)))
 
 
-def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
-         seconds: float = math.inf, clock: Callable[[], float] = time.monotonic, draws: Sequence[PairedDraw] = (),
-         **names) -> ConfidentVerdict:  # fmt: skip
+def race(
+    next_draw: Callable[[int], PairedDraw],
+    rules: Rules = Rules(),
+    *,
+    min_draws: int = 3,
+    max_draws: int = 20,
+    seconds: float = math.inf,
+    clock: Callable[[], float] = time.monotonic,
+    draws: Sequence[PairedDraw] = (),
+    **names,
+) -> ConfidentVerdict:
     """Add draws (``next_draw(i)``: the paired draw at position i, the ``draws`` given first) until the
     decision at one of the :func:`looks` is not UNDECIDED, or ``max_draws`` are in, or another draw would end
     past ``seconds`` (at the mean time a draw took so far; then a last look at the draws in). The looks are
@@ -59,14 +67,31 @@ def race(next_draw: Callable[[int], PairedDraw], rules: Rules = Rules(), *, min_
     (:func:`_planned`). Each look's intervals are at confidence 1 − (1 − ``rules.confidence``) · its share
     (:func:`spent`), and a last look the time forces early spends what the looks it leaves unmade would; the verdict carries its
     confidence, with the seconds a draw took. ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` for :func:`compare_draws`."""
-    verdicts = race_many(lambda i, keys: {0: next_draw(i)}, rules, min_draws=min_draws, max_draws=max_draws, seconds=seconds,
-                         clock=clock, draws={0: list(draws)} if draws else None, names={0: names})  # fmt: skip
+    verdicts = race_many(
+        lambda i, keys: {0: next_draw(i)},
+        rules,
+        min_draws=min_draws,
+        max_draws=max_draws,
+        seconds=seconds,
+        clock=clock,
+        draws={0: list(draws)} if draws else None,
+        names={0: names},
+    )
     return verdicts[0]
 
 
-def race_many(next_draws: Callable[[int, frozenset], dict], rules: Rules = Rules(), *, min_draws: int = 3, max_draws: int = 20,
-              seconds: float = math.inf, clock: Callable[[], float] = time.monotonic, draws: dict | None = None,
-              names: dict | None = None, passengers: frozenset = frozenset()) -> dict:  # fmt: skip
+def race_many(
+    next_draws: Callable[[int, frozenset], dict],
+    rules: Rules = Rules(),
+    *,
+    min_draws: int = 3,
+    max_draws: int = 20,
+    seconds: float = math.inf,
+    clock: Callable[[], float] = time.monotonic,
+    draws: dict | None = None,
+    names: dict | None = None,
+    passengers: frozenset = frozenset(),
+) -> dict:
     """:func:`race` for comparisons that share their draws: ``next_draws(i, keys)`` gives key → the paired draw at
     position i for at least the ``keys`` not yet decided (None before any draw: every key; a decided key's
     layouts need not be evaluated again), ``draws`` the draws in hand per key, ``names`` per key what
@@ -96,13 +121,17 @@ def race_many(next_draws: Callable[[int, frozenset], dict], rules: Rules = Rules
                 if verdict.decision != UNDECIDED or last:
                     done[key] = verdict
             if not taken.keys() - done.keys() - passengers:
-                riders = {key: compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
-                          for key in passengers & taken.keys()}  # fmt: skip
+                riders = {
+                    key: compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
+                    for key in passengers & taken.keys()
+                }
                 return {key: (done | riders)[key] for key in taken}
         pending = taken.keys() - done.keys() - passengers  # after this look's decisions
         given = next_draws(n, frozenset(pending) if taken else None)
         if not given or pending - given.keys():  # a key no draw comes for would hold the race forever
-            raise ValueError(f"next_draws gave no paired draw for {sorted(map(str, pending - given.keys())) or 'any key'} at position {n}")
+            raise ValueError(
+                f"next_draws gave no paired draw for {sorted(map(str, pending - given.keys())) or 'any key'} at position {n}"
+            )
         for key, pair in given.items():
             taken.setdefault(key, []).append(pair)
         added += 1

@@ -19,7 +19,16 @@ from optipose.evaluate.conditions import Condition, aggregate, conditions
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator, EvaluatorWrapper
 from optipose.evaluate.objective import Objective, load_objective
 
-__all__ = ["RobustResult", "RobustEvaluator", "make_evaluator", "evaluate_robust", "robust_result", "by_level", "choice_of", "robust_stats"]
+__all__ = [
+    "RobustResult",
+    "RobustEvaluator",
+    "make_evaluator",
+    "evaluate_robust",
+    "robust_result",
+    "by_level",
+    "choice_of",
+    "robust_stats",
+]
 
 
 @dataclass
@@ -102,8 +111,11 @@ def by_level(results: list[tuple[Condition, EvaluationResult]], how) -> list[tup
         group = [(c, r) for c, r in results if c.noise_scale == level]
         draws = [c.draw for c, _ in group if c.draw is not None]
         agg = "worst" if how == "worst" else f"quantile {how:g}"
-        label = f"noise x{level:g}" + (f", {agg} of {len(draws)} bracket draws" if len(draws) > 1 else
-                                       (f", bracket draw {draws[0]}" if draws else ""))  # fmt: skip
+        label = f"noise x{level:g}" + (
+            f", {agg} of {len(draws)} bracket draws"
+            if len(draws) > 1
+            else (f", bracket draw {draws[0]}" if draws else "")
+        )
         out.append((label, robust_stats([r.stats for _, r in group], how)))
     return out
 
@@ -114,7 +126,9 @@ def _levels_by_key(results, objective) -> list[tuple[str, dict]]:
 
 
 def _restated_by_level(choice: Choice, levels: list[tuple[str, dict]], objective) -> Choice:
-    return replace(choice, under=tuple((label, restated(choice, by_key, objective.statistic)) for label, by_key in levels))
+    return replace(
+        choice, under=tuple((label, restated(choice, by_key, objective.statistic)) for label, by_key in levels)
+    )
 
 
 def choice_of(result, sensors: tuple[int, ...]) -> Choice:
@@ -123,7 +137,9 @@ def choice_of(result, sensors: tuple[int, ...]) -> Choice:
     are a set: in any order (a found pair can sit inside the found triple in another order)."""
     sensors = tuple(sorted(sensors))
     if isinstance(result, EvaluationResult):
-        return choose(sensors, result.layout.names, stats_by_key(result.stats), result.objective.statistic, result.n_scans)
+        return choose(
+            sensors, result.layout.names, stats_by_key(result.stats), result.objective.statistic, result.n_scans
+        )
     objective = result.results[0][1].objective
     choice = choose(sensors, result.layout.names, stats_by_key(result.stats), objective.statistic, result.n_scans)
     return _restated_by_level(choice, _levels_by_key(result.results, objective), objective)

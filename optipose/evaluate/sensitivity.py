@@ -33,8 +33,15 @@ from optipose.evaluate.evaluator import EvaluationResult, Evaluator, EvaluatorWr
 from optipose.evaluate.objective import AXES, Objective, load_objective, reduced_objective
 from optipose.evaluate.robust import robust_stats
 
-__all__ = ["AxisSpread", "AxisBias", "SensorSensitivity", "BracketSensitivity", "BracketEvaluator", "bracket_sensitivity",
-           "BIAS_AXES"]  # fmt: skip
+__all__ = [
+    "AxisSpread",
+    "AxisBias",
+    "SensorSensitivity",
+    "BracketSensitivity",
+    "BracketEvaluator",
+    "bracket_sensitivity",
+    "BIAS_AXES",
+]
 
 BIAS_AXES = AXES + ("x", "y", "z")
 
@@ -134,8 +141,16 @@ class BracketEvaluator(EvaluatorWrapper):
     ``BracketEvaluator(part, objective)(layout, choices) -> BracketSensitivity``. The workers keep their
     scanners and reference across layouts and conditions. reduced : run the objective's reduced protocol."""
 
-    def __init__(self, part, objective: Objective | str, seed: int = 0, jobs: int = 1, quiet: bool = True,
-                 reduced: bool = True, executor=None):  # fmt: skip
+    def __init__(
+        self,
+        part,
+        objective: Objective | str,
+        seed: int = 0,
+        jobs: int = 1,
+        quiet: bool = True,
+        reduced: bool = True,
+        executor=None,
+    ):
         objective = objective if isinstance(objective, Objective) else load_objective(objective)
         self.objective, self.reduced = (reduced_objective(objective) if reduced else objective), reduced
         self.evaluator = Evaluator(part, self.objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
@@ -153,12 +168,17 @@ class BracketEvaluator(EvaluatorWrapper):
             choices = best_choices(stats, list(layout.names), self.objective.statistic, nominal.n_scans)
         names = tuple(layout.names)
         return BracketSensitivity(
-            layout=layout.name, names=names, translation=cfg.mounting_translation, rotation=cfg.mounting_rotation,
-            draws=draws, n_scans=nominal.n_scans, reduced=self.reduced,
+            layout=layout.name,
+            names=names,
+            translation=cfg.mounting_translation,
+            rotation=cfg.mounting_rotation,
+            draws=draws,
+            n_scans=nominal.n_scans,
+            reduced=self.reduced,
             spread=tuple(s for ch in choices for s in _spread(ch, runs, self.objective)),
             bias=tuple(b for ch in choices for b in _bias(ch, names, nominal, runs)),
             sensors=tuple(s for ch in choices for s in _sensors(ch, names, runs, self.objective)),
-        )  # fmt: skip
+        )
 
     def _draw(self, layout, draw: int) -> dict:
         """The evaluations of one mounting draw: perfect brackets, every bracket off (zeroed and not), and
@@ -174,8 +194,15 @@ class BracketEvaluator(EvaluatorWrapper):
         }
 
 
-def bracket_sensitivity(part, layout, objective: Objective | str = "robust", seed: int = 0, jobs: int = 1,
-                        choices: list[Choice] | None = None, reduced: bool = True) -> BracketSensitivity:  # fmt: skip
+def bracket_sensitivity(
+    part,
+    layout,
+    objective: Objective | str = "robust",
+    seed: int = 0,
+    jobs: int = 1,
+    choices: list[Choice] | None = None,
+    reduced: bool = True,
+) -> BracketSensitivity:
     """One call: the bracket sensitivity of ``layout`` on ``part`` (see the module doc and :class:`BracketEvaluator`)."""
     with BracketEvaluator(part, objective, seed=seed, jobs=jobs, reduced=reduced) as evaluator:
         return evaluator(layout, choices)
@@ -188,7 +215,9 @@ def _under(choice: Choice, result: EvaluationResult, objective: Objective) -> Ch
 def _terms(choice: Choice, objective: Objective) -> np.ndarray:
     """(3,) rad: each axis's term of the score, ``median_weight · median + p75_weight · p75`` (NaN: unmeasured)."""
     s = objective.statistic
-    return np.array([s.median_weight * a.median + s.p75_weight * a.p75 if a.observable else np.nan for a in choice.axes])
+    return np.array(
+        [s.median_weight * a.median + s.p75_weight * a.p75 if a.observable else np.nan for a in choice.axes]
+    )
 
 
 def _spread(choice: Choice, runs: list[dict], objective: Objective) -> list[AxisSpread]:
@@ -197,8 +226,17 @@ def _spread(choice: Choice, runs: list[dict], objective: Objective) -> list[Axis
     out = []
     for a, axis in enumerate(AXES):
         worst = lambda chs, stat: float(np.max([getattr(ch.axes[a], stat) for ch in chs]))  # noqa: E731  NaN stays NaN
-        out.append(AxisSpread(choice.k, axis, choice.axes[a].name, worst(perfect, "median"), worst(perfect, "p75"),
-                              worst(mounted, "median"), worst(mounted, "p75")))  # fmt: skip
+        out.append(
+            AxisSpread(
+                choice.k,
+                axis,
+                choice.axes[a].name,
+                worst(perfect, "median"),
+                worst(perfect, "p75"),
+                worst(mounted, "median"),
+                worst(mounted, "p75"),
+            )
+        )
     return out
 
 
@@ -207,8 +245,11 @@ def _bias(choice: Choice, names: tuple, nominal: EvaluationResult, runs: list[di
     everything = subset_name(choice.sensors, list(names))
     subsets = [a.name if a.observable else "" for a in choice.axes] + [everything] * 3
     base = _mean_errors(nominal, subsets)
-    return [AxisBias(choice.k, axis, subset, run["draw"], bias, b)
-            for run in runs for axis, subset, bias, b in zip(BIAS_AXES, subsets, _mean_errors(run["unzeroed"], subsets), base)]  # fmt: skip
+    return [
+        AxisBias(choice.k, axis, subset, run["draw"], bias, b)
+        for run in runs
+        for axis, subset, bias, b in zip(BIAS_AXES, subsets, _mean_errors(run["unzeroed"], subsets), base)
+    ]
 
 
 def _mean_errors(result: EvaluationResult, subsets: list[str]) -> list[float]:
@@ -232,5 +273,9 @@ def _sensors(choice: Choice, names: tuple, runs: list[dict], objective: Objectiv
             changes.append(_terms(moved, objective) - _terms(base, objective))
             scores.append(moved.score - base.score)
         change = np.max(changes, axis=0)  # NaN (unmeasured in some draw) stays NaN
-        out.append(SensorSensitivity(choice.k, j, name, tuple(float(c) for c in change), float(np.max(scores)), j in choice.sensors))
+        out.append(
+            SensorSensitivity(
+                choice.k, j, name, tuple(float(c) for c in change), float(np.max(scores)), j in choice.sensors
+            )
+        )
     return out

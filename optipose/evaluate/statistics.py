@@ -30,7 +30,9 @@ from optipose.registration.preprocess import scaled_information
 __all__ = ["unobservable_axes", "error_stats", "summarize", "STAT_COLUMNS", "FAILED_ERROR"]
 
 STAT_COLUMNS = ("median", "p75", "mean", "max")
-FAILED_ERROR = np.deg2rad(10.0)  # rad: a failed registration in the order statistics, worse than any measured error under ±2°
+FAILED_ERROR = np.deg2rad(
+    10.0
+)  # rad: a failed registration in the order statistics, worse than any measured error under ±2°
 
 
 def unobservable_axes(information: np.ndarray, scale: float, tolerance: float = 1e-6) -> np.ndarray:
@@ -80,8 +82,14 @@ def summarize(per_scan: pd.DataFrame, cfg: StatisticConfig | None = None) -> pd.
         for axis in AXES:
             stats = error_stats(np.abs(group.loc[ok, f"err_{axis}"].to_numpy()), int((~ok).sum()))
             blind = group[f"unobservable_{axis}"].to_numpy(bool)
-            rows.append({
-                "subset": subset, "axis": axis, **stats, "n_ok": int(ok.sum()), "n_failed": int((~ok).sum()),
-                "unobservable": bool(blind.mean() >= 0.5) if len(blind) else True,
-            })  # fmt: skip
+            rows.append(
+                {
+                    "subset": subset,
+                    "axis": axis,
+                    **stats,
+                    "n_ok": int(ok.sum()),
+                    "n_failed": int((~ok).sum()),
+                    "unobservable": bool(blind.mean() >= 0.5) if len(blind) else True,
+                }
+            )
     return pd.DataFrame(rows)

@@ -71,7 +71,9 @@ class WorkerSetup:
     occluders: tuple = ()
     condition: Condition = field(default_factory=Condition)
     column_stride: int = ScanConfig.column_stride
-    reference_dir: str | None = None  # the CAD-surface reference's arrays, shared by this machine's workers (evaluate.shared)
+    reference_dir: str | None = (
+        None  # the CAD-surface reference's arrays, shared by this machine's workers (evaluate.shared)
+    )
     cell: CellSetup | None = None  # a real cell's error sources (optipose.cell); None or an ideal one: none
 
 
@@ -105,12 +107,18 @@ class _Worker:
         self.scanners: dict = {}  # model -> Scanner (at every noise scale)
         cfg = setup.registration
         if cfg.reference == "cad-sample":
-            self.reference = SampledReference(*sample_surface(setup.vertices, setup.faces, cfg.reference_spacing), kind="cad-sample")
+            self.reference = SampledReference(
+                *sample_surface(setup.vertices, setup.faces, cfg.reference_spacing), kind="cad-sample"
+            )
         elif setup.reference_dir and os.path.isdir(setup.reference_dir):  # built once on this machine, mapped
             self.reference = load_reference(setup.reference_dir)
         else:  # the CAD surface; also answers the observability normals for nominal-scan references
             self.reference = SurfaceReference(setup.vertices, setup.faces)
-        self.cell = None if setup.cell is None or setup.cell.ideal else LiveCell(setup.cell, setup.vertices, setup.faces, setup.centre, setup.seed)
+        self.cell = (
+            None
+            if setup.cell is None or setup.cell.ideal
+            else LiveCell(setup.cell, setup.vertices, setup.faces, setup.centre, setup.seed)
+        )
         self._nominal: dict = {}
         self._zero: dict = {}
         self._exact_master: dict = {}
@@ -122,20 +130,43 @@ class _Worker:
         s = self.setup
         if model not in self.scanners:
             sensor = s.sensor if model is None else model
-            self.scanners[model] = Scanner(self.mesh, sensor, s.material, threads=s.threads, occluders=list(s.occluders),
-                                           column_stride=s.column_stride)  # fmt: skip
+            self.scanners[model] = Scanner(
+                self.mesh,
+                sensor,
+                s.material,
+                threads=s.threads,
+                occluders=list(s.occluders),
+                column_stride=s.column_stride,
+            )
         return self.scanners[model]
 
-    def scan(self, models: list, poses: list[np.ndarray], seed: int, rpy=(0.0, 0.0, 0.0), offset=None, exact=False,
-             noise=True) -> list:  # fmt: skip
+    def scan(
+        self,
+        models: list,
+        poses: list[np.ndarray],
+        seed: int,
+        rpy=(0.0, 0.0, 0.0),
+        offset=None,
+        exact=False,
+        noise=True,
+    ) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m) under the condition; ``seed`` is the orientation's
         noise seed; ``exact``: as if the brackets were exact and the cell ideal, whatever the condition; ``noise=False``: exact
         surface points."""
         return self.scan_levels(models, poses, seed, (self.condition.noise_scale,), rpy, offset, exact, noise)[0]
 
-    def scan_levels(self, models: list, poses: list[np.ndarray], seed: int, levels: tuple[float, ...], rpy=(0.0, 0.0, 0.0),
-                    offset=None, exact=False, noise=True) -> list[list]:  # fmt: skip
+    def scan_levels(
+        self,
+        models: list,
+        poses: list[np.ndarray],
+        seed: int,
+        levels: tuple[float, ...],
+        rpy=(0.0, 0.0, 0.0),
+        offset=None,
+        exact=False,
+        noise=True,
+    ) -> list[list]:
         """:meth:`scan` at each noise scale of ``levels`` (the condition's brackets, its noise scale
         replaced): one list of scans per level, from one ray cast (:meth:`Scanner.scan_levels`)."""
         groups = sensor_groups(models, self.setup.sensor)
@@ -143,16 +174,25 @@ class _Worker:
         mounted = condition.draw is not None and not exact
         if mounted:  # each sensor stands at its true pose
             poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
-        if cell is not None and not exact:  # ... where the calibration left it, and the part where the robot really turned it
+        if (
+            cell is not None and not exact
+        ):  # ... where the calibration left it, and the part where the robot really turned it
             poses, mounted, rpy = cell.poses(poses), True, cell.rpy(rpy, seed)
         scans = [[None] * len(poses) for _ in levels]
         for g, (model, idx) in enumerate(groups):
             if not idx:
                 continue
             scanner = self._scanner(model)
-            out = scanner.scan_levels([poses[j] for j in idx], self.setup.motion, levels, PartPose(rpy, self.setup.centre, offset),
-                                      rng=group_seed(seed, g), noise=noise, raw=False,
-                                      built=[nominal[j] for j in idx] if mounted else None)  # ... and the cell builds its cloud with the drawn pose
+            out = scanner.scan_levels(
+                [poses[j] for j in idx],
+                self.setup.motion,
+                levels,
+                PartPose(rpy, self.setup.centre, offset),
+                rng=group_seed(seed, g),
+                noise=noise,
+                raw=False,
+                built=[nominal[j] for j in idx] if mounted else None,
+            )  # ... and the cell builds its cloud with the drawn pose
             for level, level_out in zip(scans, out):
                 for j, scan in zip(idx, level_out):
                     level[j] = scan
@@ -180,7 +220,9 @@ class _Worker:
         millidegrees on part B that no other orientation shares) is not the brackets', and would shift
         every later measurement of the condition by one draw of it."""
         condition = self.condition
-        cell_zeroed = self.cell is not None and self.setup.cell.cell.calibration.zeroed  # the cell's procedure zeroes it
+        cell_zeroed = (
+            self.cell is not None and self.setup.cell.cell.calibration.zeroed
+        )  # the cell's procedure zeroes it
         if not cell_zeroed and (condition.draw is None or not condition.zeroed):
             return [np.eye(4)] * len(subsets)
         layout = (np.asarray(poses).tobytes(), tuple(map(str, models)), tuple(subsets))
@@ -212,7 +254,12 @@ class _Worker:
         """The reference of each subset: the part's, or the nominal scan of the subset's sensors."""
         if self.setup.registration.reference != "nominal-scan":
             return [self.reference] * len(subsets)
-        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), tuple(subsets), self.condition)  # taught with the cell's own brackets
+        key = (
+            np.asarray(poses).tobytes(),
+            tuple(map(str, models)),
+            tuple(subsets),
+            self.condition,
+        )  # taught with the cell's own brackets
         if key not in self._nominal:
             self._nominal[key] = self._nominal_references(models, poses, subsets)
         return self._nominal[key]
@@ -224,7 +271,9 @@ class _Worker:
         scans = self.scan(models, poses, nominal_reference_seed(self.setup.seed))
         clouds = [_with_normals(voxel_down(s.points, cfg.reference_spacing), T[:3, 2]) for s, T in zip(scans, poses)]
         return [
-            SampledReference(np.vstack([clouds[i][0] for i in s]), np.vstack([clouds[i][1] for i in s]), kind="nominal-scan")
+            SampledReference(
+                np.vstack([clouds[i][0] for i in s]), np.vstack([clouds[i][1] for i in s]), kind="nominal-scan"
+            )
             for s in subsets
         ]
 
@@ -249,7 +298,9 @@ def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[l
     return run_levels(setup, layout, tasks, (setup.condition.noise_scale,))[0]
 
 
-def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...], subsets=None) -> list[tuple]:
+def run_levels(
+    setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...], subsets=None
+) -> list[tuple]:
     """:func:`run_chunk` under ``setup.condition`` at each noise scale of ``levels`` (its bracket draw, its
     noise scale replaced): each orientation is cast once for all of them. One (rows, point rows, seconds)
     per level; the casting's seconds are shared out equally. ``subsets``: the sensor subsets to register
@@ -276,11 +327,27 @@ def run_levels(setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: t
         worker.condition = conditions[0]
         scans = worker.scan_levels(models, poses, seed, levels, rpy=rpy, offset=offset)
         cast = (time.perf_counter() - t0) / len(levels)
-        for condition, level_scans, (references, zeros), (rows, point_rows, timing) in zip(conditions, scans, cells, outputs):
+        for condition, level_scans, (references, zeros), (rows, point_rows, timing) in zip(
+            conditions, scans, cells, outputs
+        ):
             t1 = time.perf_counter()
             worker.condition = condition
-            rows += _register_subsets(worker, setup, level_scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label,
-                                      point_rows)  # fmt: skip
+            rows += _register_subsets(
+                worker,
+                setup,
+                level_scans,
+                seed,
+                subsets,
+                numbers,
+                references,
+                zeros,
+                names,
+                i,
+                rpy,
+                offset,
+                label,
+                point_rows,
+            )
             timing["scan"] += cast
             timing["register"] += time.perf_counter() - t1
     return outputs
@@ -308,12 +375,22 @@ def _register(worker, clouds, subset, reference, initial=None, start=None):
     return register(source, reference, worker.setup.registration, matches, start), source
 
 
-def _register_subsets(worker, setup, scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label, point_rows) -> list[dict]:
+def _register_subsets(
+    worker, setup, scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label, point_rows
+) -> list[dict]:
     cfg = setup.registration
     clouds = _clouds(cfg, scans, seed)
     for j, (scan, cloud) in enumerate(zip(scans, clouds)):
-        point_rows.append({"scan": i, "label": label, "sensor_index": j, "sensor": names[j],
-                           "n_points": len(scan.points), "n_points_down": len(cloud)})  # fmt: skip
+        point_rows.append(
+            {
+                "scan": i,
+                "label": label,
+                "sensor_index": j,
+                "sensor": names[j],
+                "n_points": len(scan.points),
+                "n_points_down": len(cloud),
+            }
+        )
     # every subset against the part's reference: each sensor's matches at identity are searched once
     shared = all(r is worker.reference for r in references) and backend_for(cfg).takes_initial
     initial = [worker.reference.matches(c) if len(c) else None for c in clouds] if shared else None
@@ -325,10 +402,23 @@ def _register_subsets(worker, setup, scans, seed, subsets, numbers, references, 
         start = _start(own, subset) if shared and len(subset) > 1 and cfg.subset_start == "combined" else None
         reg, source = _register(worker, clouds, subset, reference, initial, start)
         if shared and len(subset) == 1 and reg.ok and reg.matched is not None:
-            own[subset[0]] = (reg, reg.T_target_source[:3, :3] @ clouds[subset[0]].mean(axis=0) + reg.T_target_source[:3, 3])
-        row = {"scan": i, "label": label, "subset_index": s_index, "subset": subset_name(subset, names),
-               "n_points": len(source), "ok": reg.ok, "converged": reg.converged, "failure": reg.failure,
-               "iterations": reg.iterations, "fitness": reg.fitness, "rmse": reg.rmse}  # fmt: skip
+            own[subset[0]] = (
+                reg,
+                reg.T_target_source[:3, :3] @ clouds[subset[0]].mean(axis=0) + reg.T_target_source[:3, 3],
+            )
+        row = {
+            "scan": i,
+            "label": label,
+            "subset_index": s_index,
+            "subset": subset_name(subset, names),
+            "n_points": len(source),
+            "ok": reg.ok,
+            "converged": reg.converged,
+            "failure": reg.failure,
+            "iterations": reg.iterations,
+            "fitness": reg.fitness,
+            "rmse": reg.rmse,
+        }
         scale = _rms_radius([moments[j] for j in subset])
         rows.append(row | _errors(reg, scale, rpy, T_O_P, setup.observability_tolerance, zero))
     return rows

@@ -12,4 +12,3 @@ def load_result(folder):
 
 
 __all__ = ["load_result"]
-

@@ -27,7 +27,9 @@ def choices_from_comparison(rows: pd.DataFrame, names: list[str]) -> dict[int, C
     out = {}
     for k, group in rows.groupby("k", sort=False):
         labels = list(dict.fromkeys(group["condition"]))
-        under = tuple((label, _choice(group[group.condition == label], k, names)) for label in labels if label != "band")
+        under = tuple(
+            (label, _choice(group[group.condition == label], k, names)) for label in labels if label != "band"
+        )
         out[int(k)] = replace(_choice(group[group.condition == "band"], k, names), under=under)
     return out
 

@@ -94,8 +94,11 @@ class RunConfig:
         from optipose.evaluate.conditions import ConditionsConfig
 
         c = self.objective.get("conditions", {})
-        return ConditionsConfig(noise_scales=tuple(c.get("noise_scales", (1.0,))), mounting_translation=c.get("mounting_translation", 0.0),
-                                mounting_rotation=c.get("mounting_rotation", 0.0))  # fmt: skip
+        return ConditionsConfig(
+            noise_scales=tuple(c.get("noise_scales", (1.0,))),
+            mounting_translation=c.get("mounting_translation", 0.0),
+            mounting_rotation=c.get("mounting_rotation", 0.0),
+        )
 
 
 def run_config(table: dict) -> RunConfig:
@@ -103,17 +106,29 @@ def run_config(table: dict) -> RunConfig:
     part, layout, objective = _table(table.get("part")), _table(table.get("layout")), _table(table.get("objective"))
     band = table.get("band")
     return RunConfig(
-        command=table.get("command"), format=table.get("format"),
-        part_name=part.get("name"), part_source=part.get("source"), part_units=part.get("units"),
-        seed=table.get("seed"), validation_seed=table.get("validation_seed"), budget=table.get("budget"),
-        search=table.get("search"), objective=objective, objective_name=objective.get("name"),
+        command=table.get("command"),
+        format=table.get("format"),
+        part_name=part.get("name"),
+        part_source=part.get("source"),
+        part_units=part.get("units"),
+        seed=table.get("seed"),
+        validation_seed=table.get("validation_seed"),
+        budget=table.get("budget"),
+        search=table.get("search"),
+        objective=objective,
+        objective_name=objective.get("name"),
         objective_file=table.get("objective_file"),
-        layout=table.get("layout"), layout_name=layout.get("name"), layout_source=layout.get("source"),
-        layouts=_names(table.get("layouts")), layout_sources=_names(table.get("layout_sources")),
+        layout=table.get("layout"),
+        layout_name=layout.get("name"),
+        layout_source=layout.get("source"),
+        layouts=_names(table.get("layouts")),
+        layout_sources=_names(table.get("layout_sources")),
         band=None if band is None else _band(_table(band)),
-        timings=_table(table.get("timings_s")), failed_registrations=table.get("failed_registrations"),
-        versions=_table(table.get("versions")), table=table,
-    )  # fmt: skip
+        timings=_table(table.get("timings_s")),
+        failed_registrations=table.get("failed_registrations"),
+        versions=_table(table.get("versions")),
+        table=table,
+    )
 
 
 def given(value, default):
@@ -124,9 +139,14 @@ def given(value, default):
 def _band(band: dict) -> BandCheck:
     c = _table(band.get("conditions"))
     defaults = BandCheck()
-    return BandCheck(band.get("file", defaults.file), c.get("aggregate", defaults.aggregate), _names(c.get("noise_scales")),
-                     c.get("mounting_translation", defaults.mounting_translation),
-                     c.get("mounting_rotation", defaults.mounting_rotation), c.get("mounting_draws", defaults.mounting_draws))  # fmt: skip
+    return BandCheck(
+        band.get("file", defaults.file),
+        c.get("aggregate", defaults.aggregate),
+        _names(c.get("noise_scales")),
+        c.get("mounting_translation", defaults.mounting_translation),
+        c.get("mounting_rotation", defaults.mounting_rotation),
+        c.get("mounting_draws", defaults.mounting_draws),
+    )
 
 
 def _table(value) -> dict:

@@ -12,7 +12,9 @@ from optipose.io.tables import table1_frame
 __all__ = ["write_evaluation", "read_evaluation"]
 
 
-def write_evaluation(result, folder: Path, part_source: str = "", layout_source: str = "", part_units: str = "auto") -> Path:
+def write_evaluation(
+    result, folder: Path, part_source: str = "", layout_source: str = "", part_units: str = "auto"
+) -> Path:
     """Save an :class:`optipose.evaluate.evaluator.EvaluationResult`: per-scan errors (CSV and Parquet),
     point counts, statistics, Table 1 and, last, the config (a folder without ``config.toml`` is one whose
     writing was cut short). Each file is written whole or not at all. Returns the folder."""
@@ -23,17 +25,20 @@ def write_evaluation(result, folder: Path, part_source: str = "", layout_source:
     write_csv(result.points, folder / "points.csv")
     write_csv(result.stats, folder / "stats.csv")
     write_csv(table1_frame(result.table), folder / "table1.csv")
-    write_config(folder, {
-        "command": "evaluate",
-        "part": part_table(result.part, part_source, part_units),
-        "layout": {"name": result.layout.name, "source": layout_source, **result.layout.to_table()},
-        "seed": result.seed,
-        "objective": result.objective.to_dict(),
-        "objective_file": result.objective.source_text,
-        "timings_s": result.timings,
-        "failed_registrations": result.n_failed,
-        "versions": versions(),
-    })  # fmt: skip
+    write_config(
+        folder,
+        {
+            "command": "evaluate",
+            "part": part_table(result.part, part_source, part_units),
+            "layout": {"name": result.layout.name, "source": layout_source, **result.layout.to_table()},
+            "seed": result.seed,
+            "objective": result.objective.to_dict(),
+            "objective_file": result.objective.source_text,
+            "timings_s": result.timings,
+            "failed_registrations": result.n_failed,
+            "versions": versions(),
+        },
+    )
     return folder
 
 
@@ -62,4 +67,6 @@ def read_evaluation(folder: Path, config: RunConfig | None = None):
     with reading(folder / "points.csv") as path:
         points = pd.read_csv(path)
     timings = {k: float(v) for k, v in config.timings.items()}
-    return EvaluationResult(config.part_name, layout, objective, int(config.seed), per_scan, points, stats, table, timings)
+    return EvaluationResult(
+        config.part_name, layout, objective, int(config.seed), per_scan, points, stats, table, timings
+    )

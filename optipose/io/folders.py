@@ -19,7 +19,16 @@ import numpy as np
 
 from optipose.io.config import RunConfig, run_config
 
-__all__ = ["make_result_dir", "write_config", "part_table", "read_config", "write_csv", "versions", "RESULTS_DIR", "RESULT_FORMAT"]
+__all__ = [
+    "make_result_dir",
+    "write_config",
+    "part_table",
+    "read_config",
+    "write_csv",
+    "versions",
+    "RESULTS_DIR",
+    "RESULT_FORMAT",
+]
 
 log = logging.getLogger(__name__)
 RESULTS_DIR = Path("results")

@@ -54,12 +54,16 @@ def load_search(folder: Path, config: RunConfig | None = None):
 
     folder = Path(folder)
     config = config or read_config(folder)
-    layouts = {int(p.stem.removeprefix("found_k")): load_layout(p) for p in sorted((folder / "layouts").glob("found_k*.toml"))}
+    layouts = {
+        int(p.stem.removeprefix("found_k")): load_layout(p) for p in sorted((folder / "layouts").glob("found_k*.toml"))
+    }
     baselines = [p for p in (folder / "layouts" / "hand.toml", folder / "layouts" / "conventional.toml") if p.is_file()]
     hand = load_layout(baselines[0]) if baselines else None
     found_names = [f"F{i + 1}" for i in range(max(layouts, default=0))]
 
-    def names(k: int) -> list[str]:  # a found choice names the largest layout's sensors; the baseline's own, its sensors
+    def names(
+        k: int,
+    ) -> list[str]:  # a found choice names the largest layout's sensors; the baseline's own, its sensors
         return layouts[k].names if k in layouts and is_part_of(layouts[k], hand) else found_names
 
     def validation(path: Path):
@@ -74,10 +78,18 @@ def load_search(folder: Path, config: RunConfig | None = None):
             protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
         return Validation(protocol, int(given(config.validation_seed, -1)), found, hand_choices)
 
-    return SearchResult(folder, config.part_name, int(config.seed), str(given(config.budget, "")), config,
-                        layouts, hand, validation(folder / "comparison.csv"),
-                        validation(folder / "band" / "comparison.csv") if config.band is not None else None,
-                        read_verdicts(folder / "verdict.csv"))  # fmt: skip
+    return SearchResult(
+        folder,
+        config.part_name,
+        int(config.seed),
+        str(given(config.budget, "")),
+        config,
+        layouts,
+        hand,
+        validation(folder / "comparison.csv"),
+        validation(folder / "band" / "comparison.csv") if config.band is not None else None,
+        read_verdicts(folder / "verdict.csv"),
+    )
 
 
 def read_verdicts(path: Path) -> dict:
@@ -92,8 +104,16 @@ def read_verdicts(path: Path) -> dict:
         rows = pd.read_csv(path, keep_default_na=False, na_values=[""])
         if "hand_k" not in rows:
             rows["hand_k"] = rows["k"]
-        for name, value in (("failed", np.nan), ("failed_low", np.nan), ("failed_high", np.nan), ("failures", np.nan), ("kept", False)):
-            if name not in rows:  # a folder from before the failures' rule (NaN: not applied) and the hand choice's answer
+        for name, value in (
+            ("failed", np.nan),
+            ("failed_low", np.nan),
+            ("failed_high", np.nan),
+            ("failures", np.nan),
+            ("kept", False),
+        ):
+            if (
+                name not in rows
+            ):  # a folder from before the failures' rule (NaN: not applied) and the hand choice's answer
                 rows[name] = value
         for (k, hand_k), group in rows.groupby(["k", "hand_k"], sort=True):
             score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
@@ -104,18 +124,34 @@ def read_verdicts(path: Path) -> dict:
             more = int(score["more_draws"])
             fewer = int(hand_k) != int(k)
             out[FEWER if fewer else int(k)] = ConfidentVerdict(
-                k=int(k), decision=str(score["decision"]), found_name=str(score["found"]), hand_name=str(score["hand"]),
+                k=int(k),
+                decision=str(score["decision"]),
+                found_name=str(score["found"]),
+                hand_name=str(score["hand"]),
                 score=iv(score, "ratio"),
-                axes=tuple(AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio"), iv(r, "failed"))
-                           for _, r in axes.iterrows()),  # fmt: skip
-                found=tuple(AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()),
-                hand=tuple(AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()),
-                found_score_deg=iv(score, "found_median_deg"), hand_score_deg=iv(score, "hand_median_deg"),
-                n_draws=int(score["draws"]), n_scans=int(score["scans"]), tolerance=float(score["tolerance"]),
-                confidence=float(score["confidence"]), more_draws=None if more < 0 else more,
-                seconds_per_draw=float(score["seconds_per_draw"]), reference=str(score["reference"]),
-                hand_k=int(hand_k) if fewer else 0, failures=float(score["failures"]), kept=str(score["kept"]) == "True",
-            )  # fmt: skip
+                axes=tuple(
+                    AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio"), iv(r, "failed"))
+                    for _, r in axes.iterrows()
+                ),
+                found=tuple(
+                    AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()
+                ),
+                hand=tuple(
+                    AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()
+                ),
+                found_score_deg=iv(score, "found_median_deg"),
+                hand_score_deg=iv(score, "hand_median_deg"),
+                n_draws=int(score["draws"]),
+                n_scans=int(score["scans"]),
+                tolerance=float(score["tolerance"]),
+                confidence=float(score["confidence"]),
+                more_draws=None if more < 0 else more,
+                seconds_per_draw=float(score["seconds_per_draw"]),
+                reference=str(score["reference"]),
+                hand_k=int(hand_k) if fewer else 0,
+                failures=float(score["failures"]),
+                kept=str(score["kept"]) == "True",
+            )
     return out
 
 
@@ -132,10 +168,18 @@ def load_history(folder: str | Path) -> list:
     with reading(path):
         rows = pd.read_csv(path, keep_default_na=False, na_values={"value": ["nan"], "best": ["nan", ""]})
         return [
-            Evaluation(int(r.eval), str(r.stage), int(r.k), tuple(ast.literal_eval(r.u)), EvalState(r.state), float(r.value),
-                       float(r.best), str(r.constraint))
+            Evaluation(
+                int(r.eval),
+                str(r.stage),
+                int(r.k),
+                tuple(ast.literal_eval(r.u)),
+                EvalState(r.state),
+                float(r.value),
+                float(r.best),
+                str(r.constraint),
+            )
             for r in rows.itertuples(index=False)
-        ]  # fmt: skip
+        ]
 
 
 def load_selection(folder: str | Path, names: list[str] | None = None) -> list:
@@ -153,10 +197,17 @@ def load_selection(folder: str | Path, names: list[str] | None = None) -> list:
     with reading(path):
         rows = pd.read_csv(path, keep_default_na=False, na_values={"surrogate_deg": ["nan", ""]})
         for r in rows.to_dict("records"):
-            axes = tuple(axis_choice(axis, r[f"{axis}_subset"], r[f"{axis}_median_deg"], r[f"{axis}_p75_deg"], names) for axis in AXES)
+            axes = tuple(
+                axis_choice(axis, r[f"{axis}_subset"], r[f"{axis}_median_deg"], r[f"{axis}_p75_deg"], names)
+                for axis in AXES
+            )
             choice = Choice(int(r["k"]), (), "", axes, float(np.deg2rad(r["score_deg"])))
             dominates = str(r["dominates_hand"]).strip().lower() == "true"
-            out.append(IcpEvaluation(int(r["k"]), str(r["origin"]), float(r["surrogate_deg"]), str(r["protocol"]), choice, dominates))
+            out.append(
+                IcpEvaluation(
+                    int(r["k"]), str(r["origin"]), float(r["surrogate_deg"]), str(r["protocol"]), choice, dominates
+                )
+            )
     return out
 
 

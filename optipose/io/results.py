@@ -62,7 +62,12 @@ class SearchResult:
     def band_pending(self) -> bool:
         """The search was to check its answer under a band but has no such check (it stopped before it; a
         search with nothing to compare its layouts with has no check to miss)."""
-        return self.config.band is not None and self.band is None and self.validation is not None and bool(self.validation.hand)
+        return (
+            self.config.band is not None
+            and self.band is None
+            and self.validation is not None
+            and bool(self.validation.hand)
+        )
 
     @property
     def unchecked(self) -> bool:
@@ -103,5 +108,8 @@ class RobustnessResult:
     def verdicts(self) -> list[Verdict]:
         """Per given layout (``Verdict.layout``, in file order), its robust choice against the hand layout's
         choice of as many sensors."""
-        return [Verdict(k, choice, self.choices[("hand", k)], layout=name)
-                for (name, k), choice in self.choices.items() if name != "hand" and ("hand", k) in self.choices]  # fmt: skip
+        return [
+            Verdict(k, choice, self.choices[("hand", k)], layout=name)
+            for (name, k), choice in self.choices.items()
+            if name != "hand" and ("hand", k) in self.choices
+        ]

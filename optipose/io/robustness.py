@@ -35,7 +35,9 @@ from optipose.model.layout import write_layout
 __all__ = ["write_robustness", "write_brackets", "brackets_frame", "bracket_sensors_frame", "read_robustness"]
 
 
-def write_robustness(folder: Path, part, objective, seed: int, results: dict, hand: str = "hand", sources=()) -> pd.DataFrame:
+def write_robustness(
+    folder: Path, part, objective, seed: int, results: dict, hand: str = "hand", sources=()
+) -> pd.DataFrame:
     """Save the folder of ``optipose robustness``; returns the table written to ``robustness.csv``.
 
     results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the hand layout's under ``hand``.
@@ -44,17 +46,26 @@ def write_robustness(folder: Path, part, objective, seed: int, results: dict, ha
     (folder / "layouts").mkdir(parents=True, exist_ok=True)
     for name, result in results.items():
         write_layout(result.layout, folder / "layouts" / f"{name}.toml")
-    write_config(folder, {
-        "command": "robustness", "part": part_table(part.name, str(getattr(part, "source", "")), getattr(part, "units", "auto")),
-        "seed": seed, "layouts": list(results), "layout_sources": list(sources),
-        "objective": objective.to_dict(), "objective_file": objective.source_text, "versions": versions(),
-    })  # fmt: skip
+    write_config(
+        folder,
+        {
+            "command": "robustness",
+            "part": part_table(part.name, str(getattr(part, "source", "")), getattr(part, "units", "auto")),
+            "seed": seed,
+            "layouts": list(results),
+            "layout_sources": list(sources),
+            "objective": objective.to_dict(),
+            "objective_file": objective.source_text,
+            "versions": versions(),
+        },
+    )
     frame = robustness_frame(results, hand, objective.conditions.aggregate)
     write_csv(frame, folder / "robustness.csv")
     per_condition = [
         result.stats.assign(layout=name, condition=condition.label)
-        for name, robust in results.items() for condition, result in robust.results
-    ]  # fmt: skip
+        for name, robust in results.items()
+        for condition, result in robust.results
+    ]
     write_csv(pd.concat(per_condition, ignore_index=True), folder / "conditions.csv")
     return frame
 

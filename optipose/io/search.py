@@ -18,7 +18,14 @@ import numpy as np
 from optipose.io.evaluation import write_evaluation
 from optipose.files import atomic_path, reading
 from optipose.io.folders import part_table, versions, write_config, write_csv
-from optipose.io.tables import comparison_frame, history_frame, selection_frame, surrogate_frame, table1_frame, verdict_frame
+from optipose.io.tables import (
+    comparison_frame,
+    history_frame,
+    selection_frame,
+    surrogate_frame,
+    table1_frame,
+    verdict_frame,
+)
 from optipose.model.baseline import baseline_label
 from optipose.model.layout import Layout, write_layout
 
@@ -103,22 +110,27 @@ def _write_evaluations(sub: Path, result) -> None:
     write_csv(table1_frame(result.table), sub / "table1.csv")
 
 
-def _write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int, band=None) -> Path:
+def _write_search_config(
+    folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int, band=None
+) -> Path:
     from dataclasses import asdict
 
     extra = {} if band is None else {"band": {"file": config.band, "conditions": asdict(band.conditions)}}
-    return write_config(folder, {
-        "command": "search",
-        "part": part_table(part.name, str(getattr(part, "source", "")), getattr(part, "units", "auto")),
-        "seed": seed,
-        "validation_seed": validation_seed,
-        "budget": budget,
-        "search": asdict(config),
-        "objective": objective.to_dict(),
-        "objective_file": objective.source_text,
-        "versions": versions(),
-        **extra,
-    })  # fmt: skip
+    return write_config(
+        folder,
+        {
+            "command": "search",
+            "part": part_table(part.name, str(getattr(part, "source", "")), getattr(part, "units", "auto")),
+            "seed": seed,
+            "validation_seed": validation_seed,
+            "budget": budget,
+            "search": asdict(config),
+            "objective": objective.to_dict(),
+            "objective_file": objective.source_text,
+            "versions": versions(),
+            **extra,
+        },
+    )
 
 
 def save_cache(folder: Path, cache, space_version: int) -> None:
@@ -133,14 +145,20 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
         u=np.array(keys, dtype=float).reshape(-1, 6),
         feasible=ok,
         H=np.array([v.H if isinstance(v, SensorInfo) else np.zeros((6, 6)) for v in infos]).reshape(-1, 6, 6),
-        counts=np.array([[v.n_points, v.n_voxels] if isinstance(v, SensorInfo) else [0, 0] for v in infos]).reshape(-1, 2),
+        counts=np.array([[v.n_points, v.n_voxels] if isinstance(v, SensorInfo) else [0, 0] for v in infos]).reshape(
+            -1, 2
+        ),
         violation=np.array([0.0 if isinstance(v, SensorInfo) else v.amount for v in infos]),
         constraint=np.array(["" if isinstance(v, SensorInfo) else v.constraint for v in infos], dtype=str),
         A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(len(infos), 6, 6),
         G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
         # the mounting term's per-turn matrices (n_phases + 1 with the nominal orientation; NaN: none)
-        A_turns=np.array([_or_nan(v, "A_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(len(infos), n_phases + 1, 6, 6),
-        N_turns=np.array([_or_nan(v, "N_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(len(infos), n_phases + 1, 6, 6),
+        A_turns=np.array([_or_nan(v, "A_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(
+            len(infos), n_phases + 1, 6, 6
+        ),
+        N_turns=np.array([_or_nan(v, "N_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(
+            len(infos), n_phases + 1, 6, 6
+        ),
         # the noise bias term at each sensor's band top (NaN: none; noise_band 1)
         G_noise=np.array([_or_nan(v, "G_noise", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
         noise_band=np.array([getattr(v, "noise_band", 1.0) for v in infos], dtype=float),
@@ -174,16 +192,34 @@ def _cache_entries(data, space_version: int) -> dict:
     from optipose.search.problem import Violation
     from optipose.search.surrogate import SensorInfo
 
-    if "G" not in data or "N_turns" not in data or "G_noise" not in data:  # from before the voxel bias, the mounting or the noise bias term: start over
+    if (
+        "G" not in data or "N_turns" not in data or "G_noise" not in data
+    ):  # from before the voxel bias, the mounting or the noise bias term: start over
         return {}
     if (int(data["space"]) if "space" in data else 1) != space_version:  # its u keys name other poses: start over
         return {}
     constraint = data["constraint"] if "constraint" in data else np.full(len(data["u"]), "infeasible")
     out = {}
-    rows = zip(data["u"], data["feasible"], data["H"], data["counts"], data["violation"], data["A"], data["G"],
-               data["A_turns"], data["N_turns"], data["G_noise"], data["noise_band"], constraint)  # fmt: skip
+    rows = zip(
+        data["u"],
+        data["feasible"],
+        data["H"],
+        data["counts"],
+        data["violation"],
+        data["A"],
+        data["G"],
+        data["A_turns"],
+        data["N_turns"],
+        data["G_noise"],
+        data["noise_band"],
+        constraint,
+    )
     for u, ok, H, (n_points, n_voxels), violation, A, G, A_turns, N_turns, G_noise, band, why in rows:
         turns = (None, None) if np.isnan(N_turns).any() else (A_turns, N_turns)
         noise = (None, 1.0) if np.isnan(G_noise).any() else (G_noise, float(band))
-        out[tuple(np.round(u, 9))] = SensorInfo(H, int(n_points), int(n_voxels), A, G, *turns, *noise) if ok else Violation(str(why), float(violation))
+        out[tuple(np.round(u, 9))] = (
+            SensorInfo(H, int(n_points), int(n_voxels), A, G, *turns, *noise)
+            if ok
+            else Violation(str(why), float(violation))
+        )
     return out

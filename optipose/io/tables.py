@@ -10,18 +10,34 @@ import numpy as np
 import pandas as pd
 
 __all__ = [
-    "table1_frame", "comparison_frame", "selection_frame", "history_frame", "surrogate_frame", "robustness_frame",
-    "brackets_frame", "bracket_sensors_frame", "verdict_frame", "VERDICT_COLUMNS",
-]  # fmt: skip
+    "table1_frame",
+    "comparison_frame",
+    "selection_frame",
+    "history_frame",
+    "surrogate_frame",
+    "robustness_frame",
+    "brackets_frame",
+    "bracket_sensors_frame",
+    "verdict_frame",
+    "VERDICT_COLUMNS",
+]
 
 
 def table1_frame(choices) -> pd.DataFrame:
     """The paper's Table 1 (``table1.csv``): one row per k with each axis's subset, median and p75 (rad)."""
     rows = [
-        {"k": c.k, "sensors": c.name, "score_rad": c.score,
-         **{f"{a.axis}_{key}": val for a in c.axes for key, val in (("subset", a.name), ("median_rad", a.median), ("p75_rad", a.p75))}}
+        {
+            "k": c.k,
+            "sensors": c.name,
+            "score_rad": c.score,
+            **{
+                f"{a.axis}_{key}": val
+                for a in c.axes
+                for key, val in (("subset", a.name), ("median_rad", a.median), ("p75_rad", a.p75))
+            },
+        }
         for c in choices
-    ]  # fmt: skip
+    ]
     return pd.DataFrame(rows)
 
 
@@ -46,20 +62,38 @@ def _band_rows(label: str, k: int, choice) -> list[dict]:
 
 def _choice_rows(label: str, k: int, choice) -> list[dict]:
     return [
-        {"k": k, "layout": label, "sensors": choice.name, "axis": a.axis, "subset": a.label,
-         "median_deg": float(np.rad2deg(a.median)), "p75_deg": float(np.rad2deg(a.p75)), "score_deg": float(np.rad2deg(choice.score))}
+        {
+            "k": k,
+            "layout": label,
+            "sensors": choice.name,
+            "axis": a.axis,
+            "subset": a.label,
+            "median_deg": float(np.rad2deg(a.median)),
+            "p75_deg": float(np.rad2deg(a.p75)),
+            "score_deg": float(np.rad2deg(choice.score)),
+        }
         for a in choice.axes
-    ]  # fmt: skip
+    ]
 
 
 def selection_frame(records) -> pd.DataFrame:
     """The ICP evaluations of the selection, polish and confirmation (``selection.csv``)."""
     rows = []
     for r in records:
-        row = {"k": r.k, "origin": r.origin, "surrogate_deg": r.surrogate, "protocol": r.protocol,
-               "score_deg": float(np.rad2deg(r.choice.score)), "dominates_hand": r.dominates}  # fmt: skip
+        row = {
+            "k": r.k,
+            "origin": r.origin,
+            "surrogate_deg": r.surrogate,
+            "protocol": r.protocol,
+            "score_deg": float(np.rad2deg(r.choice.score)),
+            "dominates_hand": r.dominates,
+        }
         for a in r.choice.axes:
-            row |= {f"{a.axis}_median_deg": float(np.rad2deg(a.median)), f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)), f"{a.axis}_subset": a.label}
+            row |= {
+                f"{a.axis}_median_deg": float(np.rad2deg(a.median)),
+                f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)),
+                f"{a.axis}_subset": a.label,
+            }
         row["state"] = r.state.value
         rows.append(row)
     return pd.DataFrame(rows)
@@ -67,20 +101,44 @@ def selection_frame(records) -> pd.DataFrame:
 
 def history_frame(evaluations) -> pd.DataFrame:
     """Every surrogate evaluation of the search (``history.csv``): u as a list, value as the optimiser saw it."""
-    return pd.DataFrame([
-        {"eval": e.number, "stage": e.stage, "k": e.k, "value": e.value, "feasible": e.feasible, "best": e.best,
-         "u": list(e.u), "state": e.state.value, "constraint": e.constraint}
-        for e in evaluations
-    ])  # fmt: skip
+    return pd.DataFrame(
+        [
+            {
+                "eval": e.number,
+                "stage": e.stage,
+                "k": e.k,
+                "value": e.value,
+                "feasible": e.feasible,
+                "best": e.best,
+                "u": list(e.u),
+                "state": e.state.value,
+                "constraint": e.constraint,
+            }
+            for e in evaluations
+        ]
+    )
 
 
 def surrogate_frame(outcome) -> pd.DataFrame:
     """The surrogate's scores of the winner, greedy, joint and hand layouts per k (``surrogate_scores.csv``)."""
     rows = []
     for k, f in sorted(outcome.found.items()):
-        for label, g in (("found", f), ("greedy", outcome.greedy.get(k)), ("joint", outcome.joint.get(k)), ("hand", outcome.hand.get(k))):
+        for label, g in (
+            ("found", f),
+            ("greedy", outcome.greedy.get(k)),
+            ("joint", outcome.joint.get(k)),
+            ("hand", outcome.hand.get(k)),
+        ):
             if g is not None and g.stats:
-                rows.append({"k": k, "layout": label, "fidelity": "surrogate", "score_deg": g.stats.score, "penalised_deg": g.score})
+                rows.append(
+                    {
+                        "k": k,
+                        "layout": label,
+                        "fidelity": "surrogate",
+                        "score_deg": g.stats.score,
+                        "penalised_deg": g.score,
+                    }
+                )
     return pd.DataFrame(rows)
 
 
@@ -101,7 +159,10 @@ def robustness_frame(results: dict, hand: str = "hand", aggregate="worst") -> pd
     rows = []
     for name, k in jobs:
         choice, reference = results[name].table[k - 1], hand_result.table[k - 1]
-        pairs = [(c.label, mine, theirs.score) for (c, mine), (_, theirs) in zip(results[name].under(choice), hand_result.under(reference))]
+        pairs = [
+            (c.label, mine, theirs.score)
+            for (c, mine), (_, theirs) in zip(results[name].under(choice), hand_result.under(reference))
+        ]
         for label, mine, hand_score in pairs + [(robust_label, choice, reference.score)]:
             extra = {"condition": label, "hand_score_deg": float(np.rad2deg(hand_score))}
             rows += [row | extra for row in _choice_rows(name, k, mine)]
@@ -118,16 +179,30 @@ def brackets_frame(sensitivities: dict) -> pd.DataFrame:
             for axis in dict.fromkeys(b.axis for b in sens.bias):
                 biases = [b for b in sens.bias if b.k == k and b.axis == axis]
                 scale = np.rad2deg(1.0) if axis in ("roll", "pitch", "yaw") else 1.0
-                row = {"layout": name, "k": k, "axis": axis, "subset": biases[0].subset or "unobservable",
-                       "unit": "deg" if scale != 1.0 else "m"}  # fmt: skip
+                row = {
+                    "layout": name,
+                    "k": k,
+                    "axis": axis,
+                    "subset": biases[0].subset or "unobservable",
+                    "unit": "deg" if scale != 1.0 else "m",
+                }
                 if (k, axis) in spread:
                     s = spread[(k, axis)]
-                    row |= {"perfect_median_deg": scale * s.nominal_median, "perfect_p75_deg": scale * s.nominal_p75,
-                            "mounted_median_deg": scale * s.mounted_median, "mounted_p75_deg": scale * s.mounted_p75}  # fmt: skip
+                    row |= {
+                        "perfect_median_deg": scale * s.nominal_median,
+                        "perfect_p75_deg": scale * s.nominal_p75,
+                        "mounted_median_deg": scale * s.mounted_median,
+                        "mounted_p75_deg": scale * s.mounted_p75,
+                    }
                 row |= {f"bias_draw{b.draw}": scale * b.bias for b in biases}
                 row |= {"worst_abs_bias": scale * worst[axis], "perfect_bias": scale * biases[0].nominal}
-                row |= {"tolerance_mm": 1e3 * sens.translation, "tolerance_deg": float(np.rad2deg(sens.rotation)),
-                        "draws": len(sens.draws), "n_scans": sens.n_scans, "reduced_protocol": sens.reduced}  # fmt: skip
+                row |= {
+                    "tolerance_mm": 1e3 * sens.translation,
+                    "tolerance_deg": float(np.rad2deg(sens.rotation)),
+                    "draws": len(sens.draws),
+                    "n_scans": sens.n_scans,
+                    "reduced_protocol": sens.reduced,
+                }
                 rows.append(row)
     return pd.DataFrame(rows)
 
@@ -138,14 +213,34 @@ def bracket_sensors_frame(sensitivities: dict) -> pd.DataFrame:
     for name, sens in sensitivities.items():
         for k in sorted({s.k for s in sens.sensors}):
             for rank, s in enumerate(sens.ranking(k), start=1):
-                rows.append({"layout": name, "k": k, "sensor": s.name, "sensor_index": s.sensor, "rank": rank,
-                             **{f"change_{axis}_deg": float(np.rad2deg(c)) for axis, c in zip(("roll", "pitch", "yaw"), s.change)},
-                             "score_change_deg": float(np.rad2deg(s.score_change))})  # fmt: skip
+                rows.append(
+                    {
+                        "layout": name,
+                        "k": k,
+                        "sensor": s.name,
+                        "sensor_index": s.sensor,
+                        "rank": rank,
+                        **{
+                            f"change_{axis}_deg": float(np.rad2deg(c))
+                            for axis, c in zip(("roll", "pitch", "yaw"), s.change)
+                        },
+                        "score_change_deg": float(np.rad2deg(s.score_change)),
+                    }
+                )
     return pd.DataFrame(rows)
 
 
 # the interval columns of ``verdict.csv``: each the estimate, then ``_low`` and ``_high``
-VERDICT_COLUMNS = ("ratio", "median_ratio", "p75_ratio", "failed", "found_median_deg", "found_p75_deg", "hand_median_deg", "hand_p75_deg")
+VERDICT_COLUMNS = (
+    "ratio",
+    "median_ratio",
+    "p75_ratio",
+    "failed",
+    "found_median_deg",
+    "found_p75_deg",
+    "hand_median_deg",
+    "hand_p75_deg",
+)
 
 
 def verdict_frame(verdicts: dict) -> pd.DataFrame:
@@ -157,15 +252,36 @@ def verdict_frame(verdicts: dict) -> pd.DataFrame:
     ``hand_k`` exceeds its ``k`` compares fewer found sensors with more hand ones."""
     rows = []
     for v in sorted(verdicts.values(), key=lambda v: (v.hand_k > v.k, v.k)):
-        head = {"k": v.k, "hand_k": v.hand_k or v.k, "decision": v.decision, "found": v.found_name, "reference": v.reference, "hand": v.hand_name,
-                "draws": v.n_draws, "scans": v.n_scans, "tolerance": v.tolerance, "failures": v.failures, "kept": v.kept, "confidence": v.confidence,
-                "more_draws": v.more_draws if v.more_draws is not None else -1, "seconds_per_draw": v.seconds_per_draw}  # fmt: skip
+        head = {
+            "k": v.k,
+            "hand_k": v.hand_k or v.k,
+            "decision": v.decision,
+            "found": v.found_name,
+            "reference": v.reference,
+            "hand": v.hand_name,
+            "draws": v.n_draws,
+            "scans": v.n_scans,
+            "tolerance": v.tolerance,
+            "failures": v.failures,
+            "kept": v.kept,
+            "confidence": v.confidence,
+            "more_draws": v.more_draws if v.more_draws is not None else -1,
+            "seconds_per_draw": v.seconds_per_draw,
+        }
         empty = {"median_ratio": None, "p75_ratio": None, "failed": None, "found_p75_deg": None, "hand_p75_deg": None}
         score = {"ratio": v.score, "found_median_deg": v.found_score_deg, "hand_median_deg": v.hand_score_deg, **empty}
         rows.append({**head, "axis": "score", **_intervals(score)})
         for ratio, found, hand in zip(v.axes, v.found, v.hand):
-            cells = {"ratio": ratio.ratio, "median_ratio": ratio.median, "p75_ratio": ratio.p75, "failed": ratio.failed, "found_median_deg": found.median_deg,
-                     "found_p75_deg": found.p75_deg, "hand_median_deg": hand.median_deg, "hand_p75_deg": hand.p75_deg}  # fmt: skip
+            cells = {
+                "ratio": ratio.ratio,
+                "median_ratio": ratio.median,
+                "p75_ratio": ratio.p75,
+                "failed": ratio.failed,
+                "found_median_deg": found.median_deg,
+                "found_p75_deg": found.p75_deg,
+                "hand_median_deg": hand.median_deg,
+                "hand_p75_deg": hand.p75_deg,
+            }
             rows.append({**head, "axis": ratio.axis, **_intervals(cells)})
     return pd.DataFrame(rows)
 

@@ -26,9 +26,11 @@ from optipose.model.layout import Layout, SensorPose
 __all__ = ["CONVENTIONAL", "conventional_layout", "baseline", "baseline_label"]
 
 CONVENTIONAL = "conventional"
-_DESCRIPTION = ("conventional placement: S1 and S3 look down at 45 deg at the two long top edges from -y and +y, "
-                "S2 straight down at the top; laser lines across the motion, R mid-length, heads backed off along "
-                "their viewing axes until clear of the part")  # fmt: skip
+_DESCRIPTION = (
+    "conventional placement: S1 and S3 look down at 45 deg at the two long top edges from -y and +y, "
+    "S2 straight down at the top; laser lines across the motion, R mid-length, heads backed off along "
+    "their viewing axes until clear of the part"
+)
 _STEP = 1e-3  # m, standoff increments
 _S2_SHIFT = 2.5e-3  # m along -x when S2 is turned (parts A and C)
 _C = np.sqrt(0.5)
@@ -79,8 +81,11 @@ def conventional_layout(part, margin: float | None = None) -> Layout:
     sensor = model.sensor
     lo, hi = np.asarray(part.mesh.bounds, dtype=float)
     xc = 0.5 * (lo[0] + hi[0])
-    aims = {"S1": np.array([xc, lo[1], hi[2]]), "S2": np.array([xc, 0.5 * (lo[1] + hi[1]), hi[2]]),
-            "S3": np.array([xc, hi[1], hi[2]])}  # fmt: skip
+    aims = {
+        "S1": np.array([xc, lo[1], hi[2]]),
+        "S2": np.array([xc, 0.5 * (lo[1] + hi[1]), hi[2]]),
+        "S3": np.array([xc, hi[1], hi[2]]),
+    }
     axes = _axes()
     standoffs = np.arange(0.0, 0.8 * 0.5 * (sensor.z_far - sensor.z_near) + 1e-9, _STEP)
 
@@ -89,8 +94,12 @@ def conventional_layout(part, margin: float | None = None) -> Layout:
 
     side = {name: first_clear(axes[name], aims[name]) for name in ("S1", "S3")}
     turned_aim = aims["S2"] - np.array([_S2_SHIFT, 0.0, 0.0])
-    tops = [(T, False) for T in first_clear(axes["S2"], aims["S2"])] + [(T, True) for T in first_clear(axes["S2 turned"], turned_aim)]
-    tops.sort(key=lambda item: (round(float(item[0][2, 3]), 6), item[1]))  # the lowest standoff first, unturned on a tie
+    tops = [(T, False) for T in first_clear(axes["S2"], aims["S2"])] + [
+        (T, True) for T in first_clear(axes["S2 turned"], turned_aim)
+    ]
+    tops.sort(
+        key=lambda item: (round(float(item[0][2, 3]), 6), item[1])
+    )  # the lowest standoff first, unturned on a tie
     for T1, T3 in itertools.product(side["S1"][:6], side["S3"][:6]):
         if heads_clearance(sensor, T1, sensor, T3) < 0:
             continue
@@ -98,5 +107,7 @@ def conventional_layout(part, margin: float | None = None) -> Layout:
             if heads_clearance(sensor, T1, sensor, T2) >= 0 and heads_clearance(sensor, T3, sensor, T2) >= 0:
                 poses = (SensorPose("S1", T1), SensorPose("S2", T2), SensorPose("S3", T3))
                 return Layout(poses, name=CONVENTIONAL, description=_DESCRIPTION)
-    raise ConfigError(f"part '{part.name}': no conventional placement clears the part and its keep-outs within the "
-                      f"sensor's measuring range; give a layout")  # fmt: skip
+    raise ConfigError(
+        f"part '{part.name}': no conventional placement clears the part and its keep-outs within the "
+        f"sensor's measuring range; give a layout"
+    )

@@ -43,9 +43,20 @@ from optipose.model.grouping import unique_rows
 from optipose.model.sensor import SensorModel, load_sensor
 
 __all__ = [
-    "DEFAULT_MARGIN", "EXACT_HULL_VERTICES", "BOUND_LOOSENESS", "Clearance", "ConvexSet", "CollisionModel", "bounding_directions",
-    "collision_model", "clearance", "collides", "heads_clearance", "check_sensors_outside", "contains",
-]  # fmt: skip
+    "DEFAULT_MARGIN",
+    "EXACT_HULL_VERTICES",
+    "BOUND_LOOSENESS",
+    "Clearance",
+    "ConvexSet",
+    "CollisionModel",
+    "bounding_directions",
+    "collision_model",
+    "clearance",
+    "collides",
+    "heads_clearance",
+    "check_sensors_outside",
+    "contains",
+]
 
 DEFAULT_MARGIN = 2e-3  # m
 _DEDUP_DECIMALS = 9
@@ -85,13 +96,20 @@ class ConvexSet:
 
         try:
             hull = ConvexHull(points)
-        except QhullError:  # a flat part (a sheet of zero thickness) swept in its own plane: joggled, still flat to ~1e-10
+        except (
+            QhullError
+        ):  # a flat part (a sheet of zero thickness) swept in its own plane: joggled, still flat to ~1e-10
             hull = ConvexHull(points, qhull_options="QJ")
         vertices = points[hull.vertices]
         normals = _unique_directions(hull.equations[:, :3])
         tri = hull.simplices
-        edges = np.concatenate([points[tri[:, 1]] - points[tri[:, 0]], points[tri[:, 2]] - points[tri[:, 1]],
-                                points[tri[:, 0]] - points[tri[:, 2]]])  # fmt: skip
+        edges = np.concatenate(
+            [
+                points[tri[:, 1]] - points[tri[:, 0]],
+                points[tri[:, 2]] - points[tri[:, 1]],
+                points[tri[:, 0]] - points[tri[:, 2]],
+            ]
+        )
         return cls._build(vertices, normals, _unique_directions(edges))
 
     @classmethod
@@ -142,7 +160,9 @@ class CollisionModel:
         travel = np.array([[offsets.min(), 0.0, 0.0], [offsets.max(), 0.0, 0.0]])
         try:
             hull = hull_arrays(part.mesh)[0]
-        except Exception:  # trimesh's hull of a flat mesh fails (qhull, or its winding fix): the vertices span the same hull
+        except (
+            Exception
+        ):  # trimesh's hull of a flat mesh fails (qhull, or its winding fix): the vertices span the same hull
             hull = np.asarray(part.mesh.vertices, dtype=float)
         self.exact = len(hull) <= EXACT_HULL_VERTICES  # else the hull's bounding polytope (module doc)
         if self.exact:
@@ -212,7 +232,9 @@ def check_sensors_outside(part, layout) -> None:
         if inside.any():
             what = "window" if inside[0] else "head"
             at = np.round(where[int(np.argmax(inside))] * 1e3, 1).tolist()
-            raise ConfigError(f"sensor {s.name}: its {what} is inside the part (at {at} mm in O); move it out along -z_S")
+            raise ConfigError(
+                f"sensor {s.name}: its {what} is inside the part (at {at} mm in O); move it out along -z_S"
+            )
 
 
 _RAY = np.array([1.0, 1.0 + 1e-3, 1.0 - 2e-3])  # near the diagonal, along no edge of a CAD face
@@ -224,7 +246,9 @@ def contains(mesh, points: np.ndarray) -> np.ndarray:
     handful of points (on a 5 M-face mesh that took longer than the scan)."""
     ray = _RAY / np.linalg.norm(_RAY)
     tris = np.asarray(mesh.vertices, dtype=np.float64), np.ascontiguousarray(mesh.faces, dtype=np.int64)
-    return np.array([_crossings(*tris, np.asarray(p, dtype=np.float64), ray) % 2 == 1 for p in np.atleast_2d(points)], dtype=bool)
+    return np.array(
+        [_crossings(*tris, np.asarray(p, dtype=np.float64), ray) % 2 == 1 for p in np.atleast_2d(points)], dtype=bool
+    )
 
 
 @njit(cache=True, nogil=True)
@@ -233,8 +257,16 @@ def _crossings(vertices, faces, origin, d):
     count = 0
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        e10, e11, e12 = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
-        e20, e21, e22 = vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1], vertices[c, 2] - vertices[a, 2]
+        e10, e11, e12 = (
+            vertices[b, 0] - vertices[a, 0],
+            vertices[b, 1] - vertices[a, 1],
+            vertices[b, 2] - vertices[a, 2],
+        )
+        e20, e21, e22 = (
+            vertices[c, 0] - vertices[a, 0],
+            vertices[c, 1] - vertices[a, 1],
+            vertices[c, 2] - vertices[a, 2],
+        )
         p0, p1, p2 = d[1] * e22 - d[2] * e21, d[2] * e20 - d[0] * e22, d[0] * e21 - d[1] * e20
         det = e10 * p0 + e11 * p1 + e12 * p2
         if det == 0.0:

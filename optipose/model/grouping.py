@@ -65,13 +65,17 @@ def vertex_faces(faces, n):
     return indptr, around
 
 
-def closed_and_wound(faces: np.ndarray, n: int, csr: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[bool, bool] | None:
+def closed_and_wound(
+    faces: np.ndarray, n: int, csr: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[bool, bool] | None:
     """trimesh's ``is_watertight`` and ``is_winding_consistent`` of a mesh's ``faces`` (f, 3) over ``n`` vertices:
     every edge in exactly two faces; every edge in two faces run the other way by the second. ``None`` for a
     mesh with a face that names a vertex twice (trimesh's then). ``csr``: the caller's :func:`vertex_faces` of
     these faces, not listed again."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    if len(faces) == 0 or np.any((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])):
+    if len(faces) == 0 or np.any(
+        (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
+    ):
         return None
     return _closed_and_wound(faces, *(csr if csr is not None else vertex_faces(faces, n)))
 

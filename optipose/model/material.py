@@ -45,7 +45,9 @@ class MaterialEffects:
 
     @property
     def none(self) -> bool:
-        return not any((self.speckle, self.subsurface_bias, self.subsurface_sigma, self.spurious_fraction, self.concave_fraction))
+        return not any(
+            (self.speckle, self.subsurface_bias, self.subsurface_sigma, self.spurious_fraction, self.concave_fraction)
+        )
 
 
 @dataclass(frozen=True)
@@ -107,9 +109,15 @@ def _from_table(name: str, table: dict) -> Material:
     return m
 
 
-_EFFECT_KEYS = {"speckle_mm": "speckle", "subsurface_bias_mm": "subsurface_bias", "subsurface_sigma_mm": "subsurface_sigma",
-                "spurious_fraction": "spurious_fraction", "spurious_range_mm": "spurious_range",
-                "concave_fraction": "concave_fraction", "concave_distance_mm": "concave_distance"}  # fmt: skip
+_EFFECT_KEYS = {
+    "speckle_mm": "speckle",
+    "subsurface_bias_mm": "subsurface_bias",
+    "subsurface_sigma_mm": "subsurface_sigma",
+    "spurious_fraction": "spurious_fraction",
+    "spurious_range_mm": "spurious_range",
+    "concave_fraction": "concave_fraction",
+    "concave_distance_mm": "concave_distance",
+}
 
 
 def _effects(table, name: str) -> MaterialEffects:
@@ -175,7 +183,7 @@ def load_material(spec: str | Path | Material) -> Material:
         tables, _ = read_toml(path, "material file")
         if len(tables) != 1:
             raise ConfigError(f"material file {path}: expected exactly one [material-name] table")
-        (name, table), = tables.items()
+        ((name, table),) = tables.items()
         if "csv" in table:
             table = dict(table, csv=str((path.parent / table["csv"]).resolve()))
         return _from_table(name, table)

@@ -60,9 +60,7 @@ def load_mesh(path: str | Path, units: str = "auto"):
         mesh.apply_scale(scale)
     diagonal_m = float(np.linalg.norm(mesh.extents))
     if not (1e-4 < diagonal_m < 20.0):
-        raise MeshError(
-            f"{path.name}: part is {diagonal_m:.3g} m across in '{units}' units; wrong --units?"
-        )
+        raise MeshError(f"{path.name}: part is {diagonal_m:.3g} m across in '{units}' units; wrong --units?")
     check_mesh(mesh, path.name)  # after the scaling, which would clear what it finds from trimesh's cache
     return mesh
 
@@ -126,11 +124,21 @@ def check_mesh(mesh, name: str = "mesh", watertight: bool = True) -> None:
     # warned, not refused: an open surface (a sheet, a scanned face) is scanned and registered as any other;
     # a soup of loose triangles is too, but its registrations may fail, and every verdict then says so
     # (evaluate.compare.Verdict.failed_line)
-    problems = [w for w, bad in (("open: some edges have one face", not mesh.is_watertight),
-                                 ("faces not consistently oriented", not mesh.is_winding_consistent)) if bad]  # fmt: skip
+    problems = [
+        w
+        for w, bad in (
+            ("open: some edges have one face", not mesh.is_watertight),
+            ("faces not consistently oriented", not mesh.is_winding_consistent),
+        )
+        if bad
+    ]
     if problems:
-        log.warning("%s: mesh is not a closed solid (%s); shadows and inside/outside tests may be wrong and registrations "
-                    "may fail: export the part as a closed solid", name, "; ".join(problems))  # fmt: skip
+        log.warning(
+            "%s: mesh is not a closed solid (%s); shadows and inside/outside tests may be wrong and registrations "
+            "may fail: export the part as a closed solid",
+            name,
+            "; ".join(problems),
+        )
     count = bodies(mesh.faces, len(mesh.vertices))  # trimesh's body_count (vertices joined by edges), by union-find
     if count > 1:  # legal (a part and its fixture move as one), but often an assembly exported by mistake
         log.warning("%s: mesh has %d separate bodies; they are scanned and registered as one rigid part", name, count)

@@ -61,9 +61,17 @@ DEFAULT_STEP_MM = 0.5
 _MM = 1e-3
 _MESH_SUFFIXES = {".stl", ".ply", ".obj", ".off", ".glb", ".gltf"}
 _PART_KEYS = {
-    "name", "description", "mesh", "units", "material", "sensor",
-    "scan_length_mm", "scan_step_mm", "rotation_centre_mm", "process",
-}  # fmt: skip
+    "name",
+    "description",
+    "mesh",
+    "units",
+    "material",
+    "sensor",
+    "scan_length_mm",
+    "scan_step_mm",
+    "rotation_centre_mm",
+    "process",
+}
 
 
 class Keepout(NamedTuple):
@@ -156,7 +164,9 @@ def _lean(part: Part) -> Part:
 
     if len(part.mesh.faces) > SHARED_FACES:
         cached = part.mesh._cache.cache  # trimesh's cache of derived properties, dropped by trimesh itself on any edit
-        for key in [k for k in cached if k not in ("face_normals", "vertex_normals", "is_watertight", "is_winding_consistent")]:
+        for key in [
+            k for k in cached if k not in ("face_normals", "vertex_normals", "is_watertight", "is_winding_consistent")
+        ]:
             del cached[key]
     return part
 
@@ -191,7 +201,9 @@ def _from_part_file(path: Path, units: str, mesh_path: Path | None = None) -> Pa
     data = _read_toml(path)
     unknown = set(data) - {"part", "keepout", "layouts"}
     if unknown:
-        raise ConfigError(f"{path}: unknown table(s) {', '.join(sorted(unknown))} (use [part], [[keepout]], [layouts.*])")
+        raise ConfigError(
+            f"{path}: unknown table(s) {', '.join(sorted(unknown))} (use [part], [[keepout]], [layouts.*])"
+        )
     table = data.get("part")
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: needs a [part] table")
@@ -200,7 +212,7 @@ def _from_part_file(path: Path, units: str, mesh_path: Path | None = None) -> Pa
         raise ConfigError(f"{path}: unknown key(s) in [part]: {', '.join(sorted(bad))}")
     if mesh_path is None:
         if "mesh" not in table:
-            raise ConfigError(f"{path}: [part] needs mesh = \"file.stl\" (relative to the part file)")
+            raise ConfigError(f'{path}: [part] needs mesh = "file.stl" (relative to the part file)')
         mesh_path = path.parent / str(table["mesh"])
     mesh_units = units if units != "auto" else str(table.get("units", "auto"))
     mesh = load_mesh(mesh_path, mesh_units)
@@ -251,7 +263,9 @@ def _process(table: dict, where: str) -> str:
         raise ConfigError(f"{where}: process must be a process's name, got {process!r}")
     presets = read_toml(resources.files("optipose.data").joinpath("processes.toml"), "process presets")[0]
     if process and process != "cad" and process not in presets:
-        raise ConfigError(f"{where}: unknown manufacturing process '{process}' (presets: cad, {', '.join(sorted(presets))})")
+        raise ConfigError(
+            f"{where}: unknown manufacturing process '{process}' (presets: cad, {', '.join(sorted(presets))})"
+        )
     return process
 
 
@@ -302,6 +316,5 @@ def _layouts(tables, where: str) -> dict[str, Layout]:
     if not isinstance(tables, dict):
         raise ConfigError(f"{where}: layouts must be [layouts.NAME] tables")
     return {
-        name: layout_from_table(table, name=name, where=f"{where} [layouts.{name}]")
-        for name, table in tables.items()
+        name: layout_from_table(table, name=name, where=f"{where} [layouts.{name}]") for name, table in tables.items()
     }

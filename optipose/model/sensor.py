@@ -191,6 +191,6 @@ def load_sensor(spec: str | Path | SensorModel) -> SensorModel:
         tables, _ = read_toml(path, "sensor file")
         if len(tables) != 1:
             raise ConfigError(f"sensor file {path}: expected exactly one [sensor-name] table")
-        (name, table), = tables.items()
+        ((name, table),) = tables.items()
         return _from_table(name, table)
     raise ConfigError(f"unknown sensor '{spec}' (presets: {', '.join(sorted(presets))}, or a .toml file)")

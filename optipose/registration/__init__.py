@@ -13,11 +13,28 @@
 Importing this package is light: SciPy, numba and Open3D load when a back-end first runs.
 """
 
-from optipose.registration.backends import BACKENDS, RegistrationBackend, backend_for, get_backend, register, register_backend
+from optipose.registration.backends import (
+    BACKENDS,
+    RegistrationBackend,
+    backend_for,
+    get_backend,
+    register,
+    register_backend,
+)
 from optipose.registration.preprocess import grid_origin, information_matrix, remove_outliers, voxel_down
 from optipose.registration.result import Matches, Registration
 
 __all__ = [
-    "register", "Registration", "Matches", "RegistrationBackend", "BACKENDS", "get_backend", "register_backend",
-    "backend_for", "voxel_down", "grid_origin", "remove_outliers", "information_matrix",
-]  # fmt: skip
+    "register",
+    "Registration",
+    "Matches",
+    "RegistrationBackend",
+    "BACKENDS",
+    "get_backend",
+    "register_backend",
+    "backend_for",
+    "voxel_down",
+    "grid_origin",
+    "remove_outliers",
+    "information_matrix",
+]

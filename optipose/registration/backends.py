@@ -48,7 +48,9 @@ class RegistrationBackend(Protocol):
     methods: tuple[str, ...]
     takes_initial: bool
 
-    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration: ...
+    def register(
+        self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None
+    ) -> Registration: ...
 
 
 BACKENDS: dict[str, RegistrationBackend | str] = {
@@ -82,8 +84,13 @@ def backend_for(cfg: RegistrationConfig) -> RegistrationBackend:
     return backend if cfg.method in backend.methods else get_backend("open3d")
 
 
-def register(source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None,
-             start: tuple[np.ndarray, np.ndarray] | None = None) -> Registration:  # fmt: skip
+def register(
+    source: np.ndarray,
+    reference,
+    cfg: RegistrationConfig,
+    initial: Matches | None = None,
+    start: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Registration:
     """Register a scan ``source`` (n, 3) m onto ``reference`` from identity (ICP, see :func:`backend_for`).
 
     initial : the reference matches of ``source`` at identity, if already known (they are the same for

@@ -127,7 +127,9 @@ def sample_neighbours(points, k, reach, origin, cell, shape, start):
 
 WALK = 4  # hops from a point's last nearest reference point toward its new one before the grid is searched
 SLACK = 1e-13  # m off every margin: far above the rounding of coordinates within metres of O, so a point that close to a bisector is searched again
-SETTLE = 1.0 / 64  # cells: a point that moved less than this since its last search is settling: its exact margin is worth the work
+SETTLE = (
+    1.0 / 64
+)  # cells: a point that moved less than this since its last search is settling: its exact margin is worth the work
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -171,8 +173,9 @@ def _grid_two(px, py, pz, h, reach, two, points, origin, cell, shape, start):
 
 
 @njit(cache=True, nogil=True)
-def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neighbours, rho, reach, origin, cell, shape,
-                    start):  # fmt: skip
+def tracked_nearest(
+    p, ids, anchor, margin, q, n, ref_points, ref_normals, neighbours, rho, reach, origin, cell, shape, start
+):
     """The nearest reference point to each point of an ICP's cloud p (n, 3), as :func:`grid_nearest` finds
     it, searching again only the points that may have changed theirs since they were last searched.
 
@@ -240,8 +243,11 @@ def tracked_nearest(p, ids, anchor, margin, q, n, ref_points, ref_normals, neigh
                         if k == g:
                             continue
                         d2 = (px - ref_points[k, 0]) ** 2 + (py - ref_points[k, 1]) ** 2 + (pz - ref_points[k, 2]) ** 2
-                        sg = np.sqrt((ref_points[k, 0] - ref_points[g, 0]) ** 2 + (ref_points[k, 1] - ref_points[g, 1]) ** 2
-                                     + (ref_points[k, 2] - ref_points[g, 2]) ** 2)  # fmt: skip
+                        sg = np.sqrt(
+                            (ref_points[k, 0] - ref_points[g, 0]) ** 2
+                            + (ref_points[k, 1] - ref_points[g, 1]) ** 2
+                            + (ref_points[k, 2] - ref_points[g, 2]) ** 2
+                        )
                         m_ = min(m_, (d2 - best) / (2.0 * sg)) if sg > 0.0 else 0.0
                 margin[i] = max(m_ * (1.0 - 1e-9) - SLACK, 0.0)
                 break

@@ -13,7 +13,9 @@ from numba import njit
 __all__ = ["face_grid", "face_boxes", "nearest_into", "edge_normal", "adjacent_faces", "CREASE_DEG"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
-CREASE_DEG = 1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
+CREASE_DEG = (
+    1.0  # a fold between two faces sharper than this is a crease (an edge of the part, not of its tessellation)
+)
 _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
 # m: a point keeps a face for the faces of its plane around it (:func:`_in_plane`) only this near the plane. A
 # cloud of the part as made lies within a tenth of a millimetre of the CAD; a point farther may be past the
@@ -152,7 +154,12 @@ def _folds_away(h, f, h0, tri, planes, plane_c):
     distance of its projection on f."""
     far = 0.0
     for m in range(3):
-        s = planes[f, 0, 0] * tri[h, m, 0] + planes[f, 0, 1] * tri[h, m, 1] + planes[f, 0, 2] * tri[h, m, 2] - plane_c[f, 0]
+        s = (
+            planes[f, 0, 0] * tri[h, m, 0]
+            + planes[f, 0, 1] * tri[h, m, 1]
+            + planes[f, 0, 2] * tri[h, m, 2]
+            - plane_c[f, 0]
+        )
         if abs(s) > abs(far):
             far = s
     return far * h0 < 0.0 and abs(far) > _FOLD  # a face in the plane to rounding (a sliver, a flipped face) is not
@@ -215,7 +222,9 @@ def _inset2(p, i, f, planes, plane_c):
     """The square of how far inside face f's edges p[i] projects, or -1 where it projects outside."""
     inset = np.inf
     for k in range(1, 4):
-        inset = min(inset, planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k])
+        inset = min(
+            inset, planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
+        )
     return inset * inset if inset > 0.0 else -1.0
 
 
@@ -236,15 +245,34 @@ def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _project(p, i, g, planes, plane_c, q)[0] or _in_plane(p, i, g, planes, plane_c, tri, adjacent, paired,
-                                                                   plane_id, q, seen):
+        if _project(p, i, g, planes, plane_c, q)[0] or _in_plane(
+            p, i, g, planes, plane_c, tri, adjacent, paired, plane_id, q, seen
+        ):
             return g
     return -1
 
 
 @njit(cache=True, nogil=True)
-def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, plane_id, origin, cell, shape, reach, start, faces,
-                 box32):
+def nearest_into(
+    p,
+    ids,
+    q,
+    nrm,
+    open_,
+    planes,
+    plane_c,
+    tri,
+    adjacent,
+    paired,
+    plane_id,
+    origin,
+    cell,
+    shape,
+    reach,
+    start,
+    faces,
+    box32,
+):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
     ``open`` (n,) (set True for them, left as they were for the rest).
@@ -278,8 +306,9 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
         f = ids[i]
         if f >= 0:
             g = f
-            if not _project(p, i, f, planes, plane_c, q)[0] and not _in_plane(p, i, f, planes, plane_c, tri, adjacent,
-                                                                              paired, plane_id, q, seen):
+            if not _project(p, i, f, planes, plane_c, q)[0] and not _in_plane(
+                p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen
+            ):
                 g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen)
             if g >= 0:
                 ids[i] = g
@@ -324,7 +353,10 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
                     c = cc[2] - r
                     while c <= cc[2] + r:
                         # a cell farther than the best holds no nearer face: a face is listed in every cell it meets
-                        if 0 <= c < shape[2] and gab + _gap(pz, origin[2] + c * cell, cell) <= best * (1.0 + 1e-6) + 1e-22:
+                        if (
+                            0 <= c < shape[2]
+                            and gab + _gap(pz, origin[2] + c * cell, cell) <= best * (1.0 + 1e-6) + 1e-22
+                        ):
                             cell_id = (a * shape[1] + b) * shape[2] + c
                             for e in range(start[cell_id], start[cell_id + 1]):
                                 g = np.int64(faces[e])
@@ -334,12 +366,16 @@ def nearest_into(p, ids, q, nrm, open_, planes, plane_c, tri, adjacent, paired, 
                                     gap2 += gap * gap
                                 if gap2 > best:
                                     continue
-                                if g == g_best or (planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0):
+                                if g == g_best or (
+                                    planes[g, 0, 0] == 0.0 and planes[g, 0, 1] == 0.0 and planes[g, 0, 2] == 0.0
+                                ):
                                     continue  # the best again; or a zero-area face (no normal), on its neighbours' edges: they answer for it
                                 if plane_id[g] == plane_id[g_best] and inset2 > best * 1e-6 + 1e-18:
                                     continue  # in the plane of the best face, which p projects well inside of: farther by at least that inset
                                 h = planes[g, 0, 0] * px + planes[g, 0, 1] * py + planes[g, 0, 2] * pz - plane_c[g, 0]
-                                if h * h > best * (1.0 + 1e-6) + 1e-22:  # its plane alone is farther (with room for rounding: no tie is lost)
+                                if (
+                                    h * h > best * (1.0 + 1e-6) + 1e-22
+                                ):  # its plane alone is farther (with room for rounding: no tie is lost)
                                     continue
                                 box = 0.0  # after the plane: a long face's box holds the point more often than its plane passes near it
                                 for j in range(3):
@@ -382,12 +418,21 @@ def _crease(p, i, f, planes, plane_c, adjacent):
     normals differ by less than the fold, and f's stands, as before."""
     sharp = False
     for k in range(3):
-        hk = planes[f, k + 1, 0] * p[i, 0] + planes[f, k + 1, 1] * p[i, 1] + planes[f, k + 1, 2] * p[i, 2] - plane_c[f, k + 1]
+        hk = (
+            planes[f, k + 1, 0] * p[i, 0]
+            + planes[f, k + 1, 1] * p[i, 1]
+            + planes[f, k + 1, 2] * p[i, 2]
+            - plane_c[f, k + 1]
+        )
         if hk < 0.0:
             g = adjacent[f, k]
             if g < 0:
                 return False
-            cos = planes[f, 0, 0] * planes[g, 0, 0] + planes[f, 0, 1] * planes[g, 0, 1] + planes[f, 0, 2] * planes[g, 0, 2]
+            cos = (
+                planes[f, 0, 0] * planes[g, 0, 0]
+                + planes[f, 0, 1] * planes[g, 0, 1]
+                + planes[f, 0, 2] * planes[g, 0, 2]
+            )
             sharp = sharp or cos < _CREASE_COS
     return sharp
 

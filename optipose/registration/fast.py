@@ -44,8 +44,14 @@ class FastBackend:
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
-    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None,
-                 start: tuple[np.ndarray, np.ndarray] | None = None) -> Registration:  # fmt: skip
+    def register(
+        self,
+        source: np.ndarray,
+        reference,
+        cfg: RegistrationConfig,
+        initial: Matches | None = None,
+        start: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> Registration:
         """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity.
         ``start``: (T (4, 4), ids (n,)) a pose to start from instead, and each point's match there as a hint."""
         from optipose.registration.normal_equations import cross_covariance, kabsch, normal_equations, transform
@@ -58,7 +64,10 @@ class FastBackend:
         cycle = Cycle(cfg)
         track = reference.tracker(ids, initial)
         smooth = _smooth(reference, cfg)
-        seen, free = None, False  # the motions stepped along (None: all six), and whether the smooth surface leaves any free
+        seen, free = (
+            None,
+            False,
+        )  # the motions stepped along (None: all six), and whether the smooth surface leaves any free
         p = np.empty_like(source)  # every step's moved cloud, in one buffer
         for it in range(1, cfg.max_iterations + 1):
             p = transform(source, T, p)
@@ -74,7 +83,11 @@ class FastBackend:
                 return Registration.failed(len(source), f"{n_in} points within the correspondence distance", T, it)
             if cfg.stop == "fitness":  # Open3D's test, on the matches at T against those before the last step
                 now = (n_in / len(source), float(np.sqrt(sum_d2 / n_in)))
-                if before is not None and abs(now[0] - before[0]) < FITNESS_CHANGE and abs(now[1] - before[1]) < RMSE_CHANGE:
+                if (
+                    before is not None
+                    and abs(now[0] - before[0]) < FITNESS_CHANGE
+                    and abs(now[1] - before[1]) < RMSE_CHANGE
+                ):
                     converged = True
                     break
                 before = now
@@ -122,8 +135,14 @@ class PlainBackend:
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
-    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None,
-                 start: tuple[np.ndarray, np.ndarray] | None = None) -> Registration:  # fmt: skip
+    def register(
+        self,
+        source: np.ndarray,
+        reference,
+        cfg: RegistrationConfig,
+        initial: Matches | None = None,
+        start: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> Registration:
         """Register ``source`` (n, 3) m onto ``reference`` from identity; ``initial``: its matches at identity.
         ``start``: (T (4, 4), ids (n,)) a pose to start from instead (its ids are not needed here)."""
         T = np.eye(4) if start is None else np.array(start[0], dtype=float)
@@ -147,7 +166,9 @@ class PlainBackend:
                     q[stale], n[stale], ids[stale] = reference.closest(p[stale])
             inlier = np.einsum("ij,ij->i", p - q, p - q) <= max_d2
             if inlier.sum() < MIN_POINTS:
-                return Registration.failed(len(source), f"{int(inlier.sum())} points within the correspondence distance", T, it)
+                return Registration.failed(
+                    len(source), f"{int(inlier.sum())} points within the correspondence distance", T, it
+                )
             if it == 1 and smooth is not None:
                 seen, free = _seen(smooth, p, q, ids, max_d2, cfg.null_tolerance)
             delta = step(p[inlier], q[inlier], n[inlier], seen)
@@ -201,7 +222,9 @@ class Cycle:
         """The mean pose of the cycle ``T`` closes (or of the jitter it ends), or None."""
         if self.poses:  # T's motion from each kept pose, oldest first, in one pass (this runs every ICP step)
             angle, shift = _motions_from(T, np.asarray(self.poses))
-            back = np.flatnonzero((angle[:-1] < self.cfg.tolerance_rotation) & (shift[:-1] < self.cfg.tolerance_translation))
+            back = np.flatnonzero(
+                (angle[:-1] < self.cfg.tolerance_rotation) & (shift[:-1] < self.cfg.tolerance_translation)
+            )
             if len(back):  # the most recent pose T is back at, two steps ago or more
                 return mean_pose(self.poses[back[-1] + 1 :] + [T])
             twist = angle * _TWIST_LENGTH + shift

@@ -34,7 +34,9 @@ class Open3DBackend:
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
-    def register(self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None) -> Registration:
+    def register(
+        self, source: np.ndarray, reference, cfg: RegistrationConfig, initial: Matches | None = None
+    ) -> Registration:
         """Register ``source`` (n, 3) m onto ``reference`` from identity (``initial`` is not used)."""
         import open3d as o3d
 
@@ -43,20 +45,36 @@ class Open3DBackend:
         src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source))
         from optipose.registration.config import FITNESS_CHANGE, RMSE_CHANGE
 
-        criteria = reg.ICPConvergenceCriteria(relative_fitness=FITNESS_CHANGE, relative_rmse=RMSE_CHANGE, max_iteration=cfg.max_iterations)
+        criteria = reg.ICPConvergenceCriteria(
+            relative_fitness=FITNESS_CHANGE, relative_rmse=RMSE_CHANGE, max_iteration=cfg.max_iterations
+        )
         dist = cfg.max_correspondence_distance
         if cfg.method == "generalized":
-            result = reg.registration_generalized_icp(src, target, dist, np.eye(4), reg.TransformationEstimationForGeneralizedICP(), criteria)
+            result = reg.registration_generalized_icp(
+                src, target, dist, np.eye(4), reg.TransformationEstimationForGeneralizedICP(), criteria
+            )
         else:
-            est = reg.TransformationEstimationPointToPoint() if cfg.method == "point_to_point" else reg.TransformationEstimationPointToPlane()
+            est = (
+                reg.TransformationEstimationPointToPoint()
+                if cfg.method == "point_to_point"
+                else reg.TransformationEstimationPointToPlane()
+            )
             result = reg.registration_icp(src, target, dist, np.eye(4), est, criteria)
         T = np.asarray(result.transformation).copy()
         p = source @ T[:3, :3].T + T[:3, 3]
         q, n, _ = reference.closest(p)
         inlier = np.einsum("ij,ij->i", p - q, p - q) <= dist**2
         ok = result.fitness > 0
-        return Registration(T, bool(ok), -1, float(result.fitness), float(result.inlier_rmse), len(source),
-                            information_matrix(p[inlier], n[inlier]), "" if ok else "no correspondences")  # fmt: skip
+        return Registration(
+            T,
+            bool(ok),
+            -1,
+            float(result.fitness),
+            float(result.inlier_rmse),
+            len(source),
+            information_matrix(p[inlier], n[inlier]),
+            "" if ok else "no correspondences",
+        )
 
 
 def _open3d_target(reference, cfg: RegistrationConfig):

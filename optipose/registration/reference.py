@@ -40,7 +40,21 @@ _EDGES_A_CELL = 4.0
 _FINE_CELL = 0.1e-3
 _NEIGHBOURS = 16  # per sample point: where an ICP's point that left its nearest sample looks first
 _REACH = 2  # cells: how far the grid is searched (SampleTracker) before the KD-tree is asked
-_ARRAYS = ("vertices", "faces", "tri", "planes", "plane_c", "adjacent", "paired", "plane_id", "grid_start", "grid_faces", "box32", "corners", "meta")
+_ARRAYS = (
+    "vertices",
+    "faces",
+    "tri",
+    "planes",
+    "plane_c",
+    "adjacent",
+    "paired",
+    "plane_id",
+    "grid_start",
+    "grid_faces",
+    "box32",
+    "corners",
+    "meta",
+)
 
 
 class SurfaceReference:
@@ -67,15 +81,35 @@ class SurfaceReference:
     def arrays(self) -> dict:
         """Everything the reference is built from, as arrays: ``SurfaceReference(None, None, arrays)`` is
         the same reference (:func:`save_reference` writes them, :func:`load_reference` maps them back)."""
-        values = (self.vertices, self.faces, self._tri, self._planes, self._plane_c, self._adjacent, self._paired, self._plane_id,
-                  self._grid_start, self._grid_faces, self._box32, self._corners, self._meta)  # fmt: skip
+        values = (
+            self.vertices,
+            self.faces,
+            self._tri,
+            self._planes,
+            self._plane_c,
+            self._adjacent,
+            self._paired,
+            self._plane_id,
+            self._grid_start,
+            self._grid_faces,
+            self._box32,
+            self._corners,
+            self._meta,
+        )
         return dict(zip(_ARRAYS, values))
 
     def _grid(self) -> tuple:
         """The grid's origin (3,), cell (m), shape (3,), the search's reach in cells, and the CSR start and
         face list of the faces that cross each cell (:func:`optipose.registration.closest_surface.face_grid`)."""
         meta = self._meta
-        return meta[1:4], float(meta[4]), meta[5:8].astype(np.int64), _reach(float(meta[4])), self._grid_start, self._grid_faces
+        return (
+            meta[1:4],
+            float(meta[4]),
+            meta[5:8].astype(np.int64),
+            _reach(float(meta[4])),
+            self._grid_start,
+            self._grid_faces,
+        )
 
     def _bvh(self):
         """Open3D's ``RaycastingScene`` of the mesh, built on first use. The BVH is float32: built about the
@@ -117,8 +151,15 @@ class SurfaceReference:
         if len(off):
             q_off = np.ascontiguousarray(q[off])
             n_off = np.ascontiguousarray(n[off])
-            _edge_normals(np.ascontiguousarray(points[off], dtype=np.float64), q_off, n_off, self._plane_c[ids[off], 1:],
-                          np.einsum("ikj,ij->ik", self.edge_n[ids[off]], points[off]), self._adjacent[ids[off]], self.normals)
+            _edge_normals(
+                np.ascontiguousarray(points[off], dtype=np.float64),
+                q_off,
+                n_off,
+                self._plane_c[ids[off], 1:],
+                np.einsum("ikj,ij->ik", self.edge_n[ids[off]], points[off]),
+                self._adjacent[ids[off]],
+                self.normals,
+            )
             n[off] = n_off
         return q, n, ids
 
@@ -156,19 +197,36 @@ class SurfaceReference:
         self.nearest_into(points, ids, q, n, open_)
         return q, n, ids
 
-    def nearest_into(self, points: np.ndarray, ids: np.ndarray, q: np.ndarray, n: np.ndarray, open_: np.ndarray) -> None:
+    def nearest_into(
+        self, points: np.ndarray, ids: np.ndarray, q: np.ndarray, n: np.ndarray, open_: np.ndarray
+    ) -> None:
         """:meth:`nearest` into the caller's arrays: points (m, 3) float64 contiguous, ids (m,) int64 (the
         guesses, each -1 or a face, then the answer), q and n (m, 3), ``open_`` (m,) bool all False (and so
         again on return)."""
         from optipose.registration.closest_surface import nearest_into
 
-        if nearest_into(points, ids, q, n, open_, self._planes, self._plane_c, self._tri, self._adjacent, self._paired,
-                        self._plane_id, *self._grid(), self._box32):
+        if nearest_into(
+            points,
+            ids,
+            q,
+            n,
+            open_,
+            self._planes,
+            self._plane_c,
+            self._tri,
+            self._adjacent,
+            self._paired,
+            self._plane_id,
+            *self._grid(),
+            self._box32,
+        ):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])
             open_[far] = False
 
-    def smooth_information(self, p: np.ndarray, q: np.ndarray, ids: np.ndarray, max_d2: float) -> tuple[np.ndarray, float]:
+    def smooth_information(
+        self, p: np.ndarray, q: np.ndarray, ids: np.ndarray, max_d2: float
+    ) -> tuple[np.ndarray, float]:
         """:func:`optipose.registration.smooth.smooth_information` of pairs (p, q) on faces ``ids``: (H (6, 6), RMS radius)."""
         from optipose.registration.smooth import smooth_information
 
@@ -225,9 +283,21 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     shape = np.floor((hi + margin - origin) / cell).astype(np.int64) + 1
     start, listed = face_grid(tri, planes[:, 0], plane_c[:, 0], origin, cell, shape)
     meta = np.concatenate([[area], origin, [cell], shape.astype(np.float64)])
-    return {"vertices": vertices, "faces": faces, "tri": tri, "planes": planes, "plane_c": plane_c,
-            "adjacent": adjacent, "paired": paired, "plane_id": plane_id, "grid_start": start, "grid_faces": listed,
-            "box32": face_boxes(tri), "meta": meta, "corners": corner_normals(vertices, faces, planes[:, 0].copy(), np.cos(np.deg2rad(CREASE_DEG)))}  # fmt: skip
+    return {
+        "vertices": vertices,
+        "faces": faces,
+        "tri": tri,
+        "planes": planes,
+        "plane_c": plane_c,
+        "adjacent": adjacent,
+        "paired": paired,
+        "plane_id": plane_id,
+        "grid_start": start,
+        "grid_faces": listed,
+        "box32": face_boxes(tri),
+        "meta": meta,
+        "corners": corner_normals(vertices, faces, planes[:, 0].copy(), np.cos(np.deg2rad(CREASE_DEG))),
+    }
 
 
 def _reach(cell: float) -> int:
@@ -249,7 +319,9 @@ def load_reference(folder) -> SurfaceReference:
     processes of one machine that load it share one copy in the page cache."""
     from pathlib import Path
 
-    return SurfaceReference(None, None, {name: np.load(Path(folder) / f"{name}.npy", mmap_mode="r") for name in _ARRAYS})
+    return SurfaceReference(
+        None, None, {name: np.load(Path(folder) / f"{name}.npy", mmap_mode="r") for name in _ARRAYS}
+    )
 
 
 def _edge_normals(points, q, n, edge_c, edge_h, adjacent, normals) -> None:
@@ -406,7 +478,9 @@ class SampleTracker:
         points = np.ascontiguousarray(points, dtype=np.float64)
         m, ref = len(points), self.reference
         if self.q is None:
-            if self._initial is not None:  # the cloud's matches on this reference where the ICP starts: the first step is answered
+            if (
+                self._initial is not None
+            ):  # the cloud's matches on this reference where the ICP starts: the first step is answered
                 initial, self._initial = self._initial, None
                 self.ids, self.q, self.n = initial.ids.copy(), initial.q.copy(), initial.n.copy()
                 self.anchor = points.copy()
@@ -416,8 +490,19 @@ class SampleTracker:
             self.ids[self.ids >= len(ref.points)] = -1  # a hint that is no point of this reference (any other is safe)
             self.anchor, self.margin = np.zeros((m, 3)), np.zeros(m)
             self.q, self.n = np.empty((m, 3)), np.empty((m, 3))
-        open_ = tracked_nearest(points, self.ids, self.anchor, self.margin, self.q, self.n, ref.points,
-                                ref.normals, *ref._neighbours(), _REACH, *ref._grid())  # fmt: skip
+        open_ = tracked_nearest(
+            points,
+            self.ids,
+            self.anchor,
+            self.margin,
+            self.q,
+            self.n,
+            ref.points,
+            ref.normals,
+            *ref._neighbours(),
+            _REACH,
+            *ref._grid(),
+        )
         open_ = np.flatnonzero(open_)
         if len(open_):  # far from the cloud: the KD-tree, searched again next step (margin zero)
             found = ref._tree.query(points[open_])[1]
@@ -432,7 +517,9 @@ def _cloud_area(points: np.ndarray, tree) -> float:
     return float(len(points) * np.median(d) ** 2)
 
 
-def sample_surface(vertices: np.ndarray, faces: np.ndarray, spacing: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def sample_surface(
+    vertices: np.ndarray, faces: np.ndarray, spacing: float, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
     """Area-weighted random sample of a mesh, ``area / spacing²`` points (seeded); points, face normals."""
     tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])

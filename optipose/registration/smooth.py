@@ -53,8 +53,16 @@ def corner_normals(vertices, faces, normals, cos_crease):
     for f in range(n_f):
         for k in range(3):
             a, b, c = faces[f, k], faces[f, (k + 1) % 3], faces[f, (k + 2) % 3]
-            u0, u1, u2 = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
-            w0, w1, w2 = vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1], vertices[c, 2] - vertices[a, 2]
+            u0, u1, u2 = (
+                vertices[b, 0] - vertices[a, 0],
+                vertices[b, 1] - vertices[a, 1],
+                vertices[b, 2] - vertices[a, 2],
+            )
+            w0, w1, w2 = (
+                vertices[c, 0] - vertices[a, 0],
+                vertices[c, 1] - vertices[a, 1],
+                vertices[c, 2] - vertices[a, 2],
+            )
             x0, x1, x2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
             angle[f, k] = np.arctan2(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), u0 * w0 + u1 * w1 + u2 * w2)
     out = np.empty((n_f, 3, 3), np.float32)
@@ -64,7 +72,10 @@ def corner_normals(vertices, faces, normals, cos_crease):
             s0 = s1 = s2 = 0.0
             for j in range(count[v], count[v + 1]):
                 g = around[j]
-                if normals[g, 0] * normals[f, 0] + normals[g, 1] * normals[f, 1] + normals[g, 2] * normals[f, 2] >= cos_crease:
+                if (
+                    normals[g, 0] * normals[f, 0] + normals[g, 1] * normals[f, 1] + normals[g, 2] * normals[f, 2]
+                    >= cos_crease
+                ):
                     w = angle[g, corner[j]]
                     s0 += w * normals[g, 0]
                     s1 += w * normals[g, 1]

@@ -79,7 +79,9 @@ def _views(config, layouts: dict, enabled: bool, drawn: Path | None = None) -> l
     if None in pngs.values():  # a view to draw: the part is needed
         part = _part(config)
         if part is None:
-            return blocks + [Paragraph("no 3D views: the part's file could not be loaded from where the result says it was", "note")]
+            return blocks + [
+                Paragraph("no 3D views: the part's file could not be loaded from where the result says it was", "note")
+            ]
         shown = replace(part, layouts={**part.layouts, **layouts})
     for name, layout in layouts.items():
         try:
@@ -88,9 +90,15 @@ def _views(config, layouts: dict, enabled: bool, drawn: Path | None = None) -> l
             log.warning("report: could not draw %s: %s", name, exc)
             blocks.append(Paragraph(f"{name}: no picture ({exc})", "note"))
             continue
-        blocks.append(Figure(png, f"view_{name}.png", f"{name} ({len(layout)} sensor{'s' if len(layout) > 1 else ''}): isometric, front, and close-ups from the "
-                             "front and the top; heads (boxes), laser fans (dashed), measuring ranges (filled), keep-outs "
-                             "(dotted) and the points of a nominal scan, one colour per sensor"))  # fmt: skip
+        blocks.append(
+            Figure(
+                png,
+                f"view_{name}.png",
+                f"{name} ({len(layout)} sensor{'s' if len(layout) > 1 else ''}): isometric, front, and close-ups from the "
+                "front and the top; heads (boxes), laser fans (dashed), measuring ranges (filled), keep-outs "
+                "(dotted) and the points of a nominal scan, one colour per sensor",
+            )
+        )
     return blocks
 
 
@@ -113,7 +121,9 @@ def _evaluations(sub: Path) -> tuple[object, str]:
     conditions = sorted(p for p in sub.iterdir() if (p / "config.toml").is_file())
     if not conditions:
         return None, ""
-    return load_result(conditions[0]), f"condition {conditions[0].name} of the band ({len(conditions)} conditions in {sub})"
+    return load_result(
+        conditions[0]
+    ), f"condition {conditions[0].name} of the band ({len(conditions)} conditions in {sub})"
 
 
 def _band_check(result, label: str) -> list[Block]:
@@ -122,9 +132,14 @@ def _band_check(result, label: str) -> list[Block]:
     from optipose.report.robustness import band_blocks
 
     if result.band_pending:
-        return [Heading("Under the band of a real cell"), Paragraph(
-            "The search stopped before its check under the band: the verdict above holds for the nominal cell only "
-            "(the preset's noise, every bracket exact); resume the search, or run optipose robustness with its layouts.", "verdict mixed")]  # fmt: skip
+        return [
+            Heading("Under the band of a real cell"),
+            Paragraph(
+                "The search stopped before its check under the band: the verdict above holds for the nominal cell only "
+                "(the preset's noise, every bracket exact); resume the search, or run optipose robustness with its layouts.",
+                "verdict mixed",
+            ),
+        ]
     verdicts = result.band_verdicts()
     if not verdicts:
         return []
@@ -133,13 +148,20 @@ def _band_check(result, label: str) -> list[Block]:
     over = "the worst" if how == "worst" else f"the {float(how):g} quantile"
     what = f"sensor noise at {', '.join(f'x{s:g}' for s in band.noise_scales)} the preset's"
     if band.brackets:
-        what += (f", brackets off by up to {1e3 * band.mounting_translation:.2g} mm and {np.rad2deg(band.mounting_rotation):.2g}° "
-                 f"({band.mounting_draws} draw{'s' if band.mounting_draws > 1 else ''} per level, each statistic {over} "
-                 "over them), the cell zeroed on a master part")  # fmt: skip
-    blocks: list[Block] = [Heading("Under the band of a real cell"), Paragraph(
-        f"The search tuned its layouts at the preset's noise with every bracket where it was drawn. Checked again on the held-out seed "
-        f"under the band of objective '{band.file}': {what}. A found layout is bought only when it is no worse than the "
-        f"{label} one on every axis at every level too.", "note")]  # fmt: skip
+        what += (
+            f", brackets off by up to {1e3 * band.mounting_translation:.2g} mm and {np.rad2deg(band.mounting_rotation):.2g}° "
+            f"({band.mounting_draws} draw{'s' if band.mounting_draws > 1 else ''} per level, each statistic {over} "
+            "over them), the cell zeroed on a master part"
+        )
+    blocks: list[Block] = [
+        Heading("Under the band of a real cell"),
+        Paragraph(
+            f"The search tuned its layouts at the preset's noise with every bracket where it was drawn. Checked again on the held-out seed "
+            f"under the band of objective '{band.file}': {what}. A found layout is bought only when it is no worse than the "
+            f"{label} one on every axis at every level too.",
+            "note",
+        ),
+    ]
     for _, v in sorted(verdicts.items()):
         blocks += band_blocks("found", v, label)
     return blocks
@@ -161,23 +183,51 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
     title = f"{result.part}: where to mount the sensors (search, budget {result.budget}, seed {result.seed})"
     blocks: list[Block] = []
     if validation is None:
-        blocks.append(Paragraph("the search stopped before its validation: no verdict; the layouts below are its best so far", "verdict mixed"))
+        blocks.append(
+            Paragraph(
+                "the search stopped before its validation: no verdict; the layouts below are its best so far",
+                "verdict mixed",
+            )
+        )
     else:
-        protocol = "the full protocol" if validation.protocol == "full" else "the REDUCED protocol (14 scans; --budget default for the full one)"
+        protocol = (
+            "the full protocol"
+            if validation.protocol == "full"
+            else "the REDUCED protocol (14 scans; --budget default for the full one)"
+        )
         band = result.band_verdicts()
         verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, band, result.unchecked)
-        if result.confident:  # the verdict on draws decides; the validation draw's own lines only where the band's check follows them
-            verdict = verdict[:1] + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.hand) + (
-                [Heading("The validation draw alone, statistic by statistic")] + verdict[1:] if band else [])
+        if (
+            result.confident
+        ):  # the verdict on draws decides; the validation draw's own lines only where the band's check follows them
+            verdict = (
+                verdict[:1]
+                + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.hand)
+                + ([Heading("The validation draw alone, statistic by statistic")] + verdict[1:] if band else [])
+            )
         blocks += verdict
-        blocks.append(Paragraph(f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "
-                                f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
-                                + ("The table below is that draw alone, on which each layout's subset per axis was chosen." if result.confident else
-                                   "A verdict says 'better in sum' from the summed per-axis medians and 75th percentiles, and 'no worse on "
-                                   "any axis' only when every one of them is at most the baseline's."), "note"))  # fmt: skip
+        blocks.append(
+            Paragraph(
+                f"Validated on {protocol} with a held-out noise seed ({validation.seed}); the baseline is the "
+                f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
+                + (
+                    "The table below is that draw alone, on which each layout's subset per axis was chosen."
+                    if result.confident
+                    else "A verdict says 'better in sum' from the summed per-axis medians and 75th percentiles, and 'no worse on "
+                    "any axis' only when every one of them is at most the baseline's."
+                ),
+                "note",
+            )
+        )
         blocks.append(Heading("Per axis (the paper's Table 1)"))
-        blocks.append(table1_side_by_side(validation.found, validation.hand, label,
-                                          "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses"))  # fmt: skip
+        blocks.append(
+            table1_side_by_side(
+                validation.found,
+                validation.hand,
+                label,
+                "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses",
+            )
+        )
         for v in result.verdicts():
             blocks += band_blocks(f"found k={v.k}", v, label)
         blocks += _band_check(result, label)
@@ -216,11 +266,22 @@ def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     name = result.layout.name
     title = f"{result.part}: layout '{name}' evaluated ({result.objective.name}, {n_scans} scans, seed {result.seed})"
     best = result.table[-1]
-    blocks: list[Block] = [Heading("Summary"), Paragraph(
-        f"with all {best.k} sensors the best per-axis choice scores {mdeg(best.score):.3f} mdeg (sum of per-axis median and p75); "
-        + "; ".join(f"k={c.k}: {c.name} {mdeg(c.score):.3f} mdeg" for c in result.table), "verdict info")]  # fmt: skip
+    blocks: list[Block] = [
+        Heading("Summary"),
+        Paragraph(
+            f"with all {best.k} sensors the best per-axis choice scores {mdeg(best.score):.3f} mdeg (sum of per-axis median and p75); "
+            + "; ".join(f"k={c.k}: {c.name} {mdeg(c.score):.3f} mdeg" for c in result.table),
+            "verdict info",
+        ),
+    ]
     blocks.append(Heading("Per axis (the paper's Table 1)"))
-    blocks.append(table1_alone(result.table, name, "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses"))
+    blocks.append(
+        table1_alone(
+            result.table,
+            name,
+            "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses",
+        )
+    )
     config = read_config(folder)
     blocks += _views(config, {name: result.layout}, views)
     blocks.append(Heading("Poses for the robot program"))
@@ -248,20 +309,31 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
         blocks.append(Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed"))
     blocks.append(Heading("Per axis (the paper's Table 1), the robust statistic over the band"))
     for v in verdicts:
-        blocks.append(table1_side_by_side({v.k: v.found}, {v.k: v.reference}, label, f"Table 1, {v.layout} vs. {label}: median / 75th percentile "
-                                          "(mdeg) of the worst condition, and the subset each axis uses"))  # fmt: skip
+        blocks.append(
+            table1_side_by_side(
+                {v.k: v.found},
+                {v.k: v.reference},
+                label,
+                f"Table 1, {v.layout} vs. {label}: median / 75th percentile "
+                "(mdeg) of the worst condition, and the subset each axis uses",
+            )
+        )
     if not verdicts:
         hand = {k: c for (n, k), c in result.choices.items() if n == "hand"}
-        blocks.append(table1_side_by_side({}, hand, label, "Table 1: median / 75th percentile (mdeg), robust over the band"))
+        blocks.append(
+            table1_side_by_side({}, hand, label, "Table 1: median / 75th percentile (mdeg), robust over the band")
+        )
     blocks.append(Heading("At every condition of the band"))
     for v in verdicts:
         blocks += band_blocks(v.layout, v, label)
     blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
-    layouts = {(label if n == "hand" else n): replace(lay, name=label if n == "hand" else n) for n, lay in result.layouts.items()}
+    layouts = {
+        (label if n == "hand" else n): replace(lay, name=label if n == "hand" else n)
+        for n, lay in result.layouts.items()
+    }
     blocks += _views(result.config, layouts, views)
     blocks.append(Heading("Poses for the robot program"))
     for name, layout in layouts.items():
         blocks += layout_section(name, layout)
     blocks += provenance_blocks(result.config)
     return title, blocks
-

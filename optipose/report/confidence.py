@@ -15,8 +15,10 @@ from optipose.report.figures import verdict_intervals
 
 __all__ = ["confident_blocks", "confident_css", "interval_cell", "mount_line", "IDEAL_CELL"]
 
-IDEAL_CELL = ("in the ideal cell (the CAD part, an exact robot and calibration): run without --cell ideal, or "
-              "with a cell file of yours, for the errors of a real cell before buying")  # fmt: skip
+IDEAL_CELL = (
+    "in the ideal cell (the CAD part, an exact robot and calibration): run without --cell ideal, or "
+    "with a cell file of yours, for the errors of a real cell before buying"
+)
 
 _CSS = {BUY: "verdict good", KEEP: "verdict bad", TIE: "verdict info"}
 
@@ -64,24 +66,50 @@ def confident_blocks(verdicts: dict, cell: str = "ideal", layouts: dict | None =
     ordered = list(by_k.values())
     label = ordered[0].reference
     blocks: list[Block] = [Paragraph(v.line(), confident_css(v.decision)) for v in ordered]
-    blocks += [Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), hand))]
+    blocks += [
+        Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), hand))
+    ]
     if cell == "ideal":
         blocks.append(Paragraph("These verdicts hold " + IDEAL_CELL + ".", "verdict mixed"))
     if fewer is not None:
         blocks.append(Paragraph(fewer.fewer_line(), confident_css(fewer.decision)))
     rows = []
     for v in ordered:
-        rows.append((f"k={v.k}", v.decision, "found " + v.found_name, f"{v.score.estimate:.2f}x [{v.score.low:.2f}, {v.score.high:.2f}]",
-                     *(interval_cell(a.median_deg) for a in v.found), str(v.n_draws)))  # fmt: skip
+        rows.append(
+            (
+                f"k={v.k}",
+                v.decision,
+                "found " + v.found_name,
+                f"{v.score.estimate:.2f}x [{v.score.low:.2f}, {v.score.high:.2f}]",
+                *(interval_cell(a.median_deg) for a in v.found),
+                str(v.n_draws),
+            )
+        )
         rows.append(("", "", f"{label} {v.hand_name}", "", *(interval_cell(a.median_deg) for a in v.hand), ""))
     v = ordered[0]  # its failures NaN: a verdict from before the failures' rule, whose caption leaves it out
-    caption = (f"Predicted median |error| per axis in the {cell} cell (mdeg), each with its {100 * v.confidence:.1f} % interval "
-               f"from paired draws of the cell and a bootstrap over scans; {label} / found in sum; BUY needs the interval of "
-               f"the sum above 1, no axis of the found layout adding more than {100 * v.tolerance:.0f} % to the {label} layout's total"
-               + (f" and none failing its registration on more than {100 * v.failures:g} % of the scans beyond the {label} layout's."
-                  if v.failures == v.failures else "."))  # fmt: skip
-    blocks.append(Table(("k", "verdict", "layout", f"{label} / found", "roll", "pitch", "yaw", "draws"), tuple(rows), caption,
-                        anchor="confident-verdict"))  # fmt: skip
-    blocks.append(Figure(verdict_intervals(ordered), "verdict_intervals.png",
-                         f"Found (blue) and {label} (orange): predicted median |error| per axis and k, with intervals."))  # fmt: skip
+    caption = (
+        f"Predicted median |error| per axis in the {cell} cell (mdeg), each with its {100 * v.confidence:.1f} % interval "
+        f"from paired draws of the cell and a bootstrap over scans; {label} / found in sum; BUY needs the interval of "
+        f"the sum above 1, no axis of the found layout adding more than {100 * v.tolerance:.0f} % to the {label} layout's total"
+        + (
+            f" and none failing its registration on more than {100 * v.failures:g} % of the scans beyond the {label} layout's."
+            if v.failures == v.failures
+            else "."
+        )
+    )
+    blocks.append(
+        Table(
+            ("k", "verdict", "layout", f"{label} / found", "roll", "pitch", "yaw", "draws"),
+            tuple(rows),
+            caption,
+            anchor="confident-verdict",
+        )
+    )
+    blocks.append(
+        Figure(
+            verdict_intervals(ordered),
+            "verdict_intervals.png",
+            f"Found (blue) and {label} (orange): predicted median |error| per axis and k, with intervals.",
+        )
+    )
     return blocks

@@ -119,10 +119,12 @@ window.addEventListener('hashchange',openTarget);window.addEventListener('load',
 def render_html(title: str, blocks: list[Block]) -> str:
     """One self-contained HTML page: figures as data URIs, style and script inline."""
     body = "\n".join(_html_block(b) for b in blocks)
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-            f'<meta name="viewport" content="width=device-width,initial-scale=1">'
-            f'<title>{_e(title)}</title><style>{_CSS}</style></head>\n<body><main>\n<h1>{_e(title)}</h1>\n{body}\n'
-            f'</main><script>{_JS}</script></body></html>\n')  # fmt: skip
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f'<meta name="viewport" content="width=device-width,initial-scale=1">'
+        f"<title>{_e(title)}</title><style>{_CSS}</style></head>\n<body><main>\n<h1>{_e(title)}</h1>\n{body}\n"
+        f"</main><script>{_JS}</script></body></html>\n"
+    )
 
 
 def render_markdown(title: str, blocks: list[Block], figure_dir: str) -> str:
@@ -155,8 +157,10 @@ def _html_block(b: Block) -> str:
         return _html_table(b)
     if isinstance(b, Figure):
         data = base64.b64encode(b.png).decode("ascii")
-        return (f'<figure><img src="data:image/png;base64,{data}" alt="{_e(b.caption)}">'
-                f"<figcaption>{_e(b.caption)}</figcaption></figure>")  # fmt: skip
+        return (
+            f'<figure><img src="data:image/png;base64,{data}" alt="{_e(b.caption)}">'
+            f"<figcaption>{_e(b.caption)}</figcaption></figure>"
+        )
     if isinstance(b, Code):
         title = f'<div class="t">{_e(b.title)}</div>' if b.title else ""
         return f'<div class="code">{title}<pre>{_e(b.text)}</pre><button type="button" onclick="copyText(this)">copy</button></div>'

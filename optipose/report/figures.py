@@ -120,8 +120,17 @@ def surrogate_vs_icp(pairs: list[tuple[str, int, float, float]]) -> bytes:
     for label in dict.fromkeys(p[0] for p in pairs):
         for k in sorted({p[1] for p in pairs if p[0] == label}):
             pts = np.array([(p[2], p[3]) for p in pairs if p[0] == label and p[1] == k]) * 1e3
-            ax.scatter(pts[:, 0], pts[:, 1], marker=markers.get(label, "^"), color=f"C{k - 1}", s=40,
-                       alpha=0.8, label=f"{label} k={k}", edgecolor="k", linewidth=0.4)  # fmt: skip
+            ax.scatter(
+                pts[:, 0],
+                pts[:, 1],
+                marker=markers.get(label, "^"),
+                color=f"C{k - 1}",
+                s=40,
+                alpha=0.8,
+                label=f"{label} k={k}",
+                edgecolor="k",
+                linewidth=0.4,
+            )
     values = np.array([(p[2], p[3]) for p in pairs]) * 1e3
     if len(values):
         lo, hi = values.min() / 1.5, values.max() * 1.5

@@ -21,9 +21,13 @@ def pose_text(name: str, T_O_S: np.ndarray) -> str:
     """A sensor's pose as text to paste: the 4×4 (m) and the XYZ (mm) + RPY (deg) line."""
     xyz, rpy = xyz_rpy(T_O_S)
     rows = "\n".join("[" + ", ".join(f"{v: .6f}" for v in row) + "]" for row in np.asarray(T_O_S, float))
-    return (f"# {name}: T_O_S (m)\n{rows}\n"
-            f"# {name}: X Y Z (mm), roll pitch yaw (deg, extrinsic xyz)\n"
-            + ", ".join(f"{v:.3f}" for v in xyz) + ", " + ", ".join(f"{v:.4f}" for v in rpy))  # fmt: skip
+    return (
+        f"# {name}: T_O_S (m)\n{rows}\n"
+        f"# {name}: X Y Z (mm), roll pitch yaw (deg, extrinsic xyz)\n"
+        + ", ".join(f"{v:.3f}" for v in xyz)
+        + ", "
+        + ", ".join(f"{v:.4f}" for v in rpy)
+    )
 
 
 def layout_section(title: str, layout, note: str = "") -> list[Block]:
@@ -35,8 +39,13 @@ def layout_section(title: str, layout, note: str = "") -> list[Block]:
     blocks: list[Block] = [Heading(title, 3)]
     if note:
         blocks.append(Paragraph(note, "note"))
-    blocks.append(Table(("sensor", "X (mm)", "Y (mm)", "Z (mm)", "roll (deg)", "pitch (deg)", "yaw (deg)", "model"),
-                        tuple(rows), caption=f"{title}: R (the middle of the measuring range) in O, and the sensor frame's "
-                        "orientation as extrinsic roll, pitch, yaw about x_O, y_O, z_O"))  # fmt: skip
+    blocks.append(
+        Table(
+            ("sensor", "X (mm)", "Y (mm)", "Z (mm)", "roll (deg)", "pitch (deg)", "yaw (deg)", "model"),
+            tuple(rows),
+            caption=f"{title}: R (the middle of the measuring range) in O, and the sensor frame's "
+            "orientation as extrinsic roll, pitch, yaw about x_O, y_O, z_O",
+        )
+    )
     blocks += [Code(pose_text(s.name, s.T_O_S), f"{s.name}") for s in layout.sensors]
     return blocks

@@ -42,8 +42,12 @@ def cell_name(config: RunConfig) -> str:
 
 def provenance_blocks(config: RunConfig) -> list[Block]:
     """The command, the seed(s), the versions and the search settings, then the objective file as run."""
-    rows = [("command", given(config.command, "")), ("part", given(config.part_name, "")),
-            ("part source", given(config.part_source, "")), ("seed", str(given(config.seed, "")))]  # fmt: skip
+    rows = [
+        ("command", given(config.command, "")),
+        ("part", given(config.part_name, "")),
+        ("part source", given(config.part_source, "")),
+        ("seed", str(given(config.seed, ""))),
+    ]
     if config.validation_seed is not None:
         rows.append(("validation seed (held out)", str(config.validation_seed)))
     if config.budget is not None:
@@ -51,11 +55,16 @@ def provenance_blocks(config: RunConfig) -> list[Block]:
     rows.append(("objective", str(given(config.objective_name, ""))))
     rows.append(("cell", cell_name(config)))
     rows += [(f"version: {name}", str(v)) for name, v in config.versions.items()]
-    blocks: list[Block] = [Heading("How this was made"), Code(command_line(config), "command"),
-                           Table(("what", "value"), tuple(rows), numeric=(False, False))]  # fmt: skip
+    blocks: list[Block] = [
+        Heading("How this was made"),
+        Code(command_line(config), "command"),
+        Table(("what", "value"), tuple(rows), numeric=(False, False)),
+    ]
     if config.search:
         settings = tuple((k, str(v)) for k, v in config.search.items())
-        blocks.append(Table(("search setting", "value"), settings, "search settings (SI units)", numeric=(False, False)))
+        blocks.append(
+            Table(("search setting", "value"), settings, "search settings (SI units)", numeric=(False, False))
+        )
     if config.objective_file:
         blocks.append(Code(config.objective_file.strip(), "objective file"))
     return blocks

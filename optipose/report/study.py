@@ -23,10 +23,19 @@ __all__ = ["study_report", "study_table", "summary_table", "trial_details", "TRI
 
 # (header, column of a study index) of the short table, in this order; a trial's other columns are in its details
 TRIAL_COLUMNS = (
-    ("trial", "key"), ("part", "part"), ("task", "task"), ("k", "sensors"), ("seed", "seed"), ("state", "state"),
-    ("score", "score_deg"), ("roll", "roll_median_deg"), ("pitch", "pitch_median_deg"), ("yaw", "yaw_median_deg"),
-    ("hand/found", "ratio"), ("s", "seconds"),
-)  # fmt: skip
+    ("trial", "key"),
+    ("part", "part"),
+    ("task", "task"),
+    ("k", "sensors"),
+    ("seed", "seed"),
+    ("state", "state"),
+    ("score", "score_deg"),
+    ("roll", "roll_median_deg"),
+    ("pitch", "pitch_median_deg"),
+    ("yaw", "yaw_median_deg"),
+    ("hand/found", "ratio"),
+    ("s", "seconds"),
+)
 _TEXT = {"key", "part", "task", "state"}  # left-aligned, sorted as text
 
 
@@ -52,8 +61,15 @@ def study_table(rows: list[dict], folders: list[str | Path | None], out_dir: Pat
     angles = [h for h, c in shown if c.endswith("_deg")]
     if angles:
         caption += f"; {', '.join(angles)} in mdeg" + (" (each axis: its median)" if len(angles) > 1 else "")
-    return Table((*(h for h, _ in shown), "report"), tuple(cells), caption, sortable=True, links=links,
-                 numeric=(*numeric, False), anchor="trials")  # fmt: skip
+    return Table(
+        (*(h for h, _ in shown), "report"),
+        tuple(cells),
+        caption,
+        sortable=True,
+        links=links,
+        numeric=(*numeric, False),
+        anchor="trials",
+    )
 
 
 def trial_details(rows: list[dict]) -> list[Details]:
@@ -62,7 +78,11 @@ def trial_details(rows: list[dict]) -> list[Details]:
     for row in rows:
         fields = tuple((_mdeg_name(c), _value(c, row.get(c))) for c in _columns(rows))
         score = _value("score_deg", row.get("score_deg"))
-        head = ", ".join(p for p in (str(row.get("state", "")), f"score {score} mdeg" if score else "", str(row.get("error") or "")) if p)
+        head = ", ".join(
+            p
+            for p in (str(row.get("state", "")), f"score {score} mdeg" if score else "", str(row.get("error") or ""))
+            if p
+        )
         out.append(Details(f"{row.get('key', '')}: {head}", (_side_by_side(fields, 3),), _anchor(row.get("key", ""))))
     return out
 
@@ -83,26 +103,67 @@ def summary_table(frame) -> Table:
     axis, and, checked under a band, how many stayed so there (``in band``)."""
     searches = "ratio_median" in frame
     banded = searches and "band_no_worse" in frame
-    header = ("part", "task", "k", "ok/n", "score", "worst", "roll", "pitch", "yaw", *(("hand/f", "no worse") if searches else ()),
-              *(("in band",) if banded else ()))  # fmt: skip
+    header = (
+        "part",
+        "task",
+        "k",
+        "ok/n",
+        "score",
+        "worst",
+        "roll",
+        "pitch",
+        "yaw",
+        *(("hand/f", "no worse") if searches else ()),
+        *(("in band",) if banded else ()),
+    )
     rows = []
     for r in frame.to_dict("records"):
-        task = r["task"] + (f" {r['budget']}" if r["budget"] else "") + ("" if r["objective"] in ("paper", "robust") else f" {r['objective']}")
-        cells = [r["part"], task, str(r["sensors"]), f"{r['complete']}/{r['trials']}" + (f" {r['failed']}F" if r["failed"] else ""),
-                 *(_two_decimals(r[c]) for c in ("score_median_deg", "score_worst_deg", "roll_median_deg", "pitch_median_deg", "yaw_median_deg"))]  # fmt: skip
+        task = (
+            r["task"]
+            + (f" {r['budget']}" if r["budget"] else "")
+            + ("" if r["objective"] in ("paper", "robust") else f" {r['objective']}")
+        )
+        cells = [
+            r["part"],
+            task,
+            str(r["sensors"]),
+            f"{r['complete']}/{r['trials']}" + (f" {r['failed']}F" if r["failed"] else ""),
+            *(
+                _two_decimals(r[c])
+                for c in (
+                    "score_median_deg",
+                    "score_worst_deg",
+                    "roll_median_deg",
+                    "pitch_median_deg",
+                    "yaw_median_deg",
+                )
+            ),
+        ]
         if searches:
             ratio = r.get("ratio_median")
             no_worse = r.get("no_worse")  # NaN on the rows of other tasks in a study of several
-            cells += ["-" if ratio is None or math.isnan(ratio) else f"{ratio:.2f}", no_worse if isinstance(no_worse, str) else "-"]
+            cells += [
+                "-" if ratio is None or math.isnan(ratio) else f"{ratio:.2f}",
+                no_worse if isinstance(no_worse, str) else "-",
+            ]
         if banded:
             cells.append(r["band_no_worse"] if isinstance(r.get("band_no_worse"), str) else "-")
         rows.append(tuple(cells))
-    return Table(header, tuple(rows), "mdeg, the median over seeds (worst: the largest score); ok/n: trials complete of all, "
-                 "F: failed", numeric=tuple(h not in ("part", "task") for h in header))  # fmt: skip
+    return Table(
+        header,
+        tuple(rows),
+        "mdeg, the median over seeds (worst: the largest score); ok/n: trials complete of all, F: failed",
+        numeric=tuple(h not in ("part", "task") for h in header),
+    )
 
 
-def study_report(rows: list[dict], folders: list[str | Path | None], out: str | Path, title: str = "study",
-                 summary: Table | None = None) -> tuple[Path, Path]:  # fmt: skip
+def study_report(
+    rows: list[dict],
+    folders: list[str | Path | None],
+    out: str | Path,
+    title: str = "study",
+    summary: Table | None = None,
+) -> tuple[Path, Path]:
     """Write ``study.html`` (self-contained, sortable) and ``study.md`` into ``out``; returns both paths.
 
     rows : one dict per trial (its parameters, state and results; floats shown to 4 significant digits,
@@ -156,7 +217,7 @@ def _value(column: str, value, digits: int = 4) -> str:
         return ""
     if column.endswith("_deg") and _is_number(value):
         value = 1e3 * value
-        return f"{value:.0f}" if abs(value) >= 10 ** digits else f"{value:.{digits}g}"
+        return f"{value:.0f}" if abs(value) >= 10**digits else f"{value:.{digits}g}"
     if isinstance(value, float):
         return f"{value:.{digits}g}"
     return str(value)

@@ -22,8 +22,9 @@ def verdict_css(verdict: Verdict) -> str:
     return "verdict mixed" if verdict.ratio >= 1 else "verdict bad"
 
 
-def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label: str, band: dict | None = None,
-                   unchecked: bool = False) -> list[Block]:  # fmt: skip
+def verdict_blocks(
+    verdicts: list[Verdict], found: dict, reference: dict, label: str, band: dict | None = None, unchecked: bool = False
+) -> list[Block]:
     """An axis a found layout does not measure, one line per k; one coloured line per k (the terminal's), then
     the headline: one found sensor vs. the baseline's largest.
 
@@ -35,7 +36,11 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     unmeasured = (unmeasured_line(k, choice, reference.get(k), label) for k, choice in found.items())
     blocks += [Paragraph(text, "verdict bad") for text in unmeasured if text]  # an axis no found layout measures, first
     if not verdicts:
-        blocks.append(Paragraph(f"no verdict: nothing to compare the found layouts with ({label} layout missing)", "verdict mixed"))
+        blocks.append(
+            Paragraph(
+                f"no verdict: nothing to compare the found layouts with ({label} layout missing)", "verdict mixed"
+            )
+        )
         return blocks
     band = band or {}
     blocks.append(verdict_table(verdicts, label, band, unchecked))
@@ -52,8 +57,12 @@ def verdict_blocks(verdicts: list[Verdict], found: dict, reference: dict, label:
     if 1 in found and top > 1:
         beats = found[1].score < reference[top].score
         text = one_versus_many(found[1], reference[top], "hand-placed" if label == "hand" else label)
-        blocks.append(Paragraph(("Fewer sensors to buy: " if beats else "Fewer sensors to buy? No: ") + text,
-                                "verdict good" if beats else "verdict bad"))  # fmt: skip
+        blocks.append(
+            Paragraph(
+                ("Fewer sensors to buy: " if beats else "Fewer sensors to buy? No: ") + text,
+                "verdict good" if beats else "verdict bad",
+            )
+        )
     return blocks
 
 
@@ -65,17 +74,33 @@ def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None,
     buy = "better in the ideal cell; check under the band before buying" if unchecked else "buy the found sensors"
     for v in verdicts:
         gaps = {g.axis for g in v.worse}
-        decision = buy if v.no_worse else (f"keep {label}" if v.ratio < 1 else f"better in sum; keep {label} if no axis may get worse")
+        decision = (
+            buy
+            if v.no_worse
+            else (f"keep {label}" if v.ratio < 1 else f"better in sum; keep {label} if no axis may get worse")
+        )
         if v.tie:
             decision = f"keep {label}: the found choice ties it"
         elif v.no_worse and not bought(v, band.get(v.k)):
             worse = ", ".join(dict.fromkeys(g.axis for g in band[v.k].worse))
             decision = f"keep {label}: worse on {worse} under the band"
-        rows.append((str(v.k), v.found.name, v.reference.name, f"{v.ratio:.2f}x",
-                     *("worse" if a in gaps else "no worse" for a in _AXES), decision))  # fmt: skip
-    return Table(("k", "found", label, f"{label} / found in sum", *_AXES, "what to do"), tuple(rows),
-                 f"found vs. {label} per k: above 1x the found choice is better in sum; per axis, no worse on median and "
-                 "75th percentile", numeric=(True, False, False, True, False, False, False, False))  # fmt: skip
+        rows.append(
+            (
+                str(v.k),
+                v.found.name,
+                v.reference.name,
+                f"{v.ratio:.2f}x",
+                *("worse" if a in gaps else "no worse" for a in _AXES),
+                decision,
+            )
+        )
+    return Table(
+        ("k", "found", label, f"{label} / found in sum", *_AXES, "what to do"),
+        tuple(rows),
+        f"found vs. {label} per k: above 1x the found choice is better in sum; per axis, no worse on median and "
+        "75th percentile",
+        numeric=(True, False, False, True, False, False, False, False),
+    )
 
 
 def _cell(axis) -> str:
@@ -96,12 +121,20 @@ def table1_side_by_side(found: dict, reference: dict, label: str, caption: str) 
         for name, choices in (("found", found), (label, reference)):
             if k in choices:
                 rows.append(table1_rows(name, choices[k]))
-    return Table(("k", "layout", "sensors", *(f"{a} (mdeg)" for a in _AXES), "score (mdeg)"), tuple(rows), caption,
-                 numeric=(True, False, False, True, True, True, True))  # fmt: skip
+    return Table(
+        ("k", "layout", "sensors", *(f"{a} (mdeg)" for a in _AXES), "score (mdeg)"),
+        tuple(rows),
+        caption,
+        numeric=(True, False, False, True, True, True, True),
+    )
 
 
 def table1_alone(choices: list, label: str, caption: str) -> Table:
     """Table 1 of one layout (an evaluation): one row per k."""
     rows = tuple(table1_rows(label, c) for c in choices)
-    return Table(("k", "layout", "sensors", *(f"{a} (mdeg)" for a in _AXES), "score (mdeg)"), rows, caption,
-                 numeric=(True, False, False, True, True, True, True))  # fmt: skip
+    return Table(
+        ("k", "layout", "sensors", *(f"{a} (mdeg)" for a in _AXES), "score (mdeg)"),
+        rows,
+        caption,
+        numeric=(True, False, False, True, True, True, True),
+    )

@@ -128,14 +128,18 @@ def _draw_part(ax, part) -> None:
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     mm, triangles, sharp = _kept(part.mesh, "drawn", lambda: _drawn_arrays(part.mesh))
-    ax.add_collection3d(Poly3DCollection(triangles, facecolor=(0.80, 0.82, 0.86, 0.30), edgecolor="none",
-                                         axlim_clip=True, zorder=1))  # fmt: skip
+    ax.add_collection3d(
+        Poly3DCollection(triangles, facecolor=(0.80, 0.82, 0.86, 0.30), edgecolor="none", axlim_clip=True, zorder=1)
+    )
     ax.add_collection3d(Line3DCollection(mm[sharp], colors="0.25", linewidths=0.6, axlim_clip=True, zorder=2))
     for keepout in part.keepouts:
         lo, hi = keepout.lo * 1e3, keepout.hi * 1e3
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        ax.add_collection3d(Line3DCollection(corners[_BOX_EDGES], colors="0.55", linewidths=0.8, linestyles=":",
-                                              axlim_clip=True, zorder=2))  # fmt: skip
+        ax.add_collection3d(
+            Line3DCollection(
+                corners[_BOX_EDGES], colors="0.55", linewidths=0.8, linestyles=":", axlim_clip=True, zorder=2
+            )
+        )
 
 
 def _drawn_arrays(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -155,8 +159,10 @@ def drawn_mesh(mesh, max_triangles: int = _MAX_TRIANGLES):
     import open3d as o3d
     import trimesh
 
-    full = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(mesh.vertices, dtype=np.float64)),
-                                     o3d.utility.Vector3iVector(np.asarray(mesh.faces, dtype=np.int32)))  # fmt: skip
+    full = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(np.asarray(mesh.vertices, dtype=np.float64)),
+        o3d.utility.Vector3iVector(np.asarray(mesh.faces, dtype=np.int32)),
+    )
     cell = np.sqrt(2.0 * float(mesh.area) / max_triangles)  # about two triangles per cell of the surface
     while True:
         few = full.simplify_vertex_clustering(voxel_size=cell)
@@ -175,10 +181,26 @@ def _draw_sensors(ax, part, layout: Layout, scans: dict, colours) -> None:
         head = transform_points(T, sensor.head_box_corners()) * 1e3
         ax.add_collection3d(Line3DCollection(head[_BOX_EDGES], colors=[colour], linewidths=1.2, axlim_clip=True))
         trapezoid, fan = _fan_S(sensor)
-        ax.add_collection3d(Poly3DCollection([transform_points(T, trapezoid) * 1e3], facecolor=(*colour, 0.08),
-                                             edgecolor=colour, linewidths=0.8, axlim_clip=True, zorder=3))  # fmt: skip
-        ax.add_collection3d(Line3DCollection(transform_points(T, fan).reshape(-1, 2, 3) * 1e3, colors=[colour],
-                                             linewidths=0.6, linestyles="--", axlim_clip=True, zorder=3))  # fmt: skip
+        ax.add_collection3d(
+            Poly3DCollection(
+                [transform_points(T, trapezoid) * 1e3],
+                facecolor=(*colour, 0.08),
+                edgecolor=colour,
+                linewidths=0.8,
+                axlim_clip=True,
+                zorder=3,
+            )
+        )
+        ax.add_collection3d(
+            Line3DCollection(
+                transform_points(T, fan).reshape(-1, 2, 3) * 1e3,
+                colors=[colour],
+                linewidths=0.6,
+                linestyles="--",
+                axlim_clip=True,
+                zorder=3,
+            )
+        )
         pts = scans.get(pose.name)
         if pts is not None and len(pts):
             pick = np.random.default_rng(i).choice(len(pts), min(len(pts), _MAX_POINTS), replace=False)

@@ -13,9 +13,23 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def measure_hits(
-    tri, n_part, n_col, shift_b, ray_cos, ray_sin, normals, offsets, frame, on_hull,
-    apex_z, z_near, z_far, intensity_grid, threshold, saturation,
-):  # fmt: skip
+    tri,
+    n_part,
+    n_col,
+    shift_b,
+    ray_cos,
+    ray_sin,
+    normals,
+    offsets,
+    frame,
+    on_hull,
+    apex_z,
+    z_near,
+    z_far,
+    intensity_grid,
+    threshold,
+    saturation,
+):
     """From Embree's first triangles (m,) of a block of rays to the hits that are measured; triangles
     ``n_part`` and above belong to occluders and hide what is behind them.
 
@@ -192,12 +206,17 @@ _QUANTILES = np.sqrt(2.0) * __import__("scipy.special", fromlist=["erfinv"]).erf
 )
 # per cell: its quantile and the differences to the next and from the previous one (0 at the ends), in
 # one row, so a draw reads one cache line
-NORMAL_QUANTILES = np.ascontiguousarray(np.stack([
-    _QUANTILES,
-    np.r_[_QUANTILES[1:], _QUANTILES[-1]] - _QUANTILES,
-    _QUANTILES - np.r_[_QUANTILES[0], _QUANTILES[:-1]],
-    np.zeros(_N_CELLS),
-], axis=1))  # fmt: skip
+NORMAL_QUANTILES = np.ascontiguousarray(
+    np.stack(
+        [
+            _QUANTILES,
+            np.r_[_QUANTILES[1:], _QUANTILES[-1]] - _QUANTILES,
+            _QUANTILES - np.r_[_QUANTILES[0], _QUANTILES[:-1]],
+            np.zeros(_N_CELLS),
+        ],
+        axis=1,
+    )
+)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -217,9 +236,28 @@ def _normal(key, table):
 
 @njit(cache=True, nogil=True)
 def write_points(
-    idx, T, intensity, noise_key, table, n_col, k0, shift_b, ray_cos, x0, slope, apex_z,
-    noise_sigma, threshold, z_resolution, R, t, raw, points, profile, column,
-):  # fmt: skip
+    idx,
+    T,
+    intensity,
+    noise_key,
+    table,
+    n_col,
+    k0,
+    shift_b,
+    ray_cos,
+    x0,
+    slope,
+    apex_z,
+    noise_sigma,
+    threshold,
+    z_resolution,
+    R,
+    t,
+    raw,
+    points,
+    profile,
+    column,
+):
     """Noise along the ray, quantisation, the device's raw heights and the points in O, in one pass.
 
     noise_key : uint64 key of this sensor and scan (0 = exact points, no noise, no quantisation); a
@@ -293,4 +331,3 @@ def shadow_rays(T, col, shift, tri, apex_P, d_P, step_P, receiver_P, normals, of
             start[i, j] = s
             direction[i, j] = (receiver_P[j] - step) - s
     return start, direction
-

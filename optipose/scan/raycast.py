@@ -15,7 +15,18 @@ from numba import njit
 
 from optipose.model.grouping import unique_rows
 
-__all__ = ["default_threads", "RayCaster", "EmbreeCaster", "Open3DCaster", "make_caster", "face_planes", "edge_planes", "plane_numbers", "shared_planes", "BACKENDS"]
+__all__ = [
+    "default_threads",
+    "RayCaster",
+    "EmbreeCaster",
+    "Open3DCaster",
+    "make_caster",
+    "face_planes",
+    "edge_planes",
+    "plane_numbers",
+    "shared_planes",
+    "BACKENDS",
+]
 
 
 class RayCaster(Protocol):
@@ -193,7 +204,11 @@ def _edge_planes(vertices, faces, normals):
         n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
         for k in range(3):
             p, q = faces[i, k], faces[i, (k + 1) % 3]
-            d0, d1, d2 = vertices[q, 0] - vertices[p, 0], vertices[q, 1] - vertices[p, 1], vertices[q, 2] - vertices[p, 2]
+            d0, d1, d2 = (
+                vertices[q, 0] - vertices[p, 0],
+                vertices[q, 1] - vertices[p, 1],
+                vertices[q, 2] - vertices[p, 2],
+            )
             x0, x1, x2 = n1 * d2 - n2 * d1, n2 * d0 - n0 * d2, n0 * d1 - n1 * d0
             length = max(np.sqrt(x0 * x0 + x1 * x1 + x2 * x2), 1e-300)
             x0, x1, x2 = x0 / length, x1 / length, x2 / length
@@ -239,5 +254,7 @@ def shared_planes(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9):
     plane[degenerate] = len(first) + np.arange(len(degenerate))
     rep = np.concatenate([first, degenerate])[plane]  # each plane's first face (a degenerate face: itself)
     normals, offsets = np.ascontiguousarray(normals[rep]), offsets[rep]
-    edge_n, edge_c = _edge_planes(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64), normals)
+    edge_n, edge_c = _edge_planes(
+        np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64), normals
+    )
     return plane, normals, offsets, edge_n, edge_c

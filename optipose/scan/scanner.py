@@ -24,8 +24,15 @@ import numpy as np
 from optipose.model.material import Material, load_material
 from optipose.model.motion import ScanMotion
 from optipose.scan.kernels import (
-    NORMAL_QUANTILES, block_rays, fill_columns, measure_hits, shadow_rays, split_at_anchors, unsure_between_anchors, write_points,
-)  # fmt: skip
+    NORMAL_QUANTILES,
+    block_rays,
+    fill_columns,
+    measure_hits,
+    shadow_rays,
+    split_at_anchors,
+    unsure_between_anchors,
+    write_points,
+)
 from optipose.scan.hull import face_arrays
 from optipose.scan.pose import NOMINAL, PartPose
 from optipose.scan.profiles import EMPTY, ray_lines
@@ -33,10 +40,21 @@ from optipose.scan.raycast import default_threads, make_caster
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
-__all__ = ["Scan", "Scanner", "PartPose", "part_scanner", "nominal_scans", "rebuilt_with", "SCAN_PROFILES", "registered_motion"]
+__all__ = [
+    "Scan",
+    "Scanner",
+    "PartPose",
+    "part_scanner",
+    "nominal_scans",
+    "rebuilt_with",
+    "SCAN_PROFILES",
+    "registered_motion",
+]
 
 _SHADOW_OFFSET = 1e-6  # m: start shadow rays this far off the surface, along the normal
-_BLOCK_PROFILES = 8  # profiles per unit of work on a thread pool (each point's noise draw is keyed by its ray, not its block)
+_BLOCK_PROFILES = (
+    8  # profiles per unit of work on a thread pool (each point's noise draw is keyed by its ray, not its block)
+)
 _SERIAL_BLOCK_PROFILES = 32  # ... and on one thread, where smaller blocks only add per-block overhead
 COLUMN_STRIDE = 16  # cast every this many columns, and the columns between only where their anchors disagree
 # Profiles of a registered scan at most (:func:`registered_motion`): 64 mm at the default 0.5 mm step; the
@@ -112,11 +130,20 @@ class Scanner:
                 box.apply_translation((np.asarray(lo, float) + np.asarray(hi, float)) / 2)
                 boxes.append(box)
             parts = [(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))]
-            parts += [(np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)) for box in boxes]
+            parts += [
+                (np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)) for box in boxes
+            ]
             first = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])  # each body's first vertex
-            mesh = trimesh.Trimesh(np.concatenate([v for v, _ in parts]), np.concatenate([f + o for (_, f), o in zip(parts, first)]), process=False)
+            mesh = trimesh.Trimesh(
+                np.concatenate([v for v, _ in parts]),
+                np.concatenate([f + o for (_, f), o in zip(parts, first)]),
+                process=False,
+            )
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
-        self._bounds = (self.vertices.min(axis=0) - 1e-6, self.vertices.max(axis=0) + 1e-6)  # the scene's box, keep-outs included
+        self._bounds = (
+            self.vertices.min(axis=0) - 1e-6,
+            self.vertices.max(axis=0) + 1e-6,
+        )  # the scene's box, keep-outs included
         self.faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
         self.sensor = load_sensor(sensor)
         self.material = load_material(material)
@@ -124,7 +151,9 @@ class Scanner:
         self.threads = threads or default_threads()
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._block = _BLOCK_PROFILES if self._pool else _SERIAL_BLOCK_PROFILES
-        self._plane, self._normals, self._offsets, self._edge_n, self._edge_c, self._on_hull = face_arrays(mesh, self.vertices, self.faces)
+        self._plane, self._normals, self._offsets, self._edge_n, self._edge_c, self._on_hull = face_arrays(
+            mesh, self.vertices, self.faces
+        )
         self._ray_o_S, self._ray_d_S = self.sensor.laser_rays()
         self._ray_cos, self._ray_sin = self._ray_d_S[:, 2].copy(), self._ray_d_S[:, 0].copy()
         self._ray_lines = ray_lines(self._ray_o_S, self._ray_d_S)
@@ -138,13 +167,26 @@ class Scanner:
         self._intensity_grid = self.material.intensity(np.arccos(np.linspace(0.0, 1.0, 8193)))
 
     # ------------------------------------------------------------------------------------------------
-    def scan(self, T_O_S: np.ndarray, motion: ScanMotion, part_pose: PartPose = NOMINAL,
-             rng: np.random.Generator | int | None = 0, noise: bool = True) -> Scan:  # fmt: skip
+    def scan(
+        self,
+        T_O_S: np.ndarray,
+        motion: ScanMotion,
+        part_pose: PartPose = NOMINAL,
+        rng: np.random.Generator | int | None = 0,
+        noise: bool = True,
+    ) -> Scan:
         """Scan with one sensor; see :meth:`scan_many`."""
         return self.scan_many([T_O_S], motion, part_pose, rng, noise)[0]
 
-    def scan_many(self, poses: list[np.ndarray], motion: ScanMotion, part_pose: PartPose = NOMINAL,
-                  rng: np.random.Generator | int | None = 0, noise: bool = True, raw: bool = True) -> list[Scan]:  # fmt: skip
+    def scan_many(
+        self,
+        poses: list[np.ndarray],
+        motion: ScanMotion,
+        part_pose: PartPose = NOMINAL,
+        rng: np.random.Generator | int | None = 0,
+        noise: bool = True,
+        raw: bool = True,
+    ) -> list[Scan]:
         """Scan the part, standing at ``part_pose`` (its orientation about its rotation centre, and an offset),
         with every sensor in ``poses``.
 
@@ -156,9 +198,17 @@ class Scanner:
         """
         return self.scan_levels(poses, motion, (1.0,), part_pose, rng, noise, raw)[0]
 
-    def scan_levels(self, poses: list[np.ndarray], motion: ScanMotion, noise_scales: tuple[float, ...],
-                    part_pose: PartPose = NOMINAL, rng: np.random.Generator | int | None = 0, noise: bool = True,
-                    raw: bool = True, built: list[np.ndarray] | None = None) -> list[list[Scan]]:  # fmt: skip
+    def scan_levels(
+        self,
+        poses: list[np.ndarray],
+        motion: ScanMotion,
+        noise_scales: tuple[float, ...],
+        part_pose: PartPose = NOMINAL,
+        rng: np.random.Generator | int | None = 0,
+        noise: bool = True,
+        raw: bool = True,
+        built: list[np.ndarray] | None = None,
+    ) -> list[list[Scan]]:
         """:meth:`scan_many` at several noise levels at once: one list of scans per scale of ``noise_scales``,
         each as a scanner whose sensor's ``noise_sigma`` is that many times this one's would take it. The
         rays are cast once (where they hit does not depend on the noise), and every level draws the same
@@ -187,8 +237,10 @@ class Scanner:
         keys = keys if noise else [np.uint64(0)] * len(poses)
         hits = list(run(lambda blk: self._block_hits(views[blk[0]], shifts, blk[1], blk[2]), blocks))
         built = poses if built is None else [validate_pose(T, f"built pose {i + 1}") for i, T in enumerate(built)]
-        return [self._written(built, blocks, hits, keys, shifts, T_O_P, part_pose.rpy, raw, self.sensor.noise_sigma * scale)
-                for scale in noise_scales]  # fmt: skip
+        return [
+            self._written(built, blocks, hits, keys, shifts, T_O_P, part_pose.rpy, raw, self.sensor.noise_sigma * scale)
+            for scale in noise_scales
+        ]
 
     def _written(self, poses, blocks, hits, keys, shifts, T_O_P, rpy, raw: bool, sigma: float) -> list[Scan]:
         """Phase 2 of a scan: every block's hits written straight into its slice of the scans' arrays (no
@@ -199,10 +251,16 @@ class Scanner:
             mine = [(blk, h) for blk, h in zip(blocks, hits) if blk[0] == j]
             n = sum(len(h[0]) for _, h in mine)
             scan = Scan(
-                points=np.empty((n, 3)), profile=np.empty(n, np.int32), column=np.empty(n, np.int32),
-                intensity=np.empty(n, np.float32), raw=np.full((len(shifts) if raw else 0, n_col), EMPTY),
-                T_O_S=T_O_S, rpy=np.asarray(rpy, float), face=np.empty(n, np.int32), T_O_P=T_O_P,
-            )  # fmt: skip
+                points=np.empty((n, 3)),
+                profile=np.empty(n, np.int32),
+                column=np.empty(n, np.int32),
+                intensity=np.empty(n, np.float32),
+                raw=np.full((len(shifts) if raw else 0, n_col), EMPTY),
+                T_O_S=T_O_S,
+                rpy=np.asarray(rpy, float),
+                face=np.empty(n, np.int32),
+                T_O_P=T_O_P,
+            )
             start = 0
             for blk, h in mine:
                 jobs.append((scan, blk, h, slice(start, start + len(h[0]))))
@@ -213,10 +271,27 @@ class Scanner:
             scan, (j, k0, k1), (idx, T, inten, tri), sl = job
             s = self.sensor
             write_points(
-                idx, T, inten, keys[j], NORMAL_QUANTILES, n_col, k0, shifts[k0:k1], self._ray_cos, *self._ray_lines, s.apex_z,
-                sigma, s.detection_threshold, s.z_resolution, scan.T_O_S[:3, :3], scan.T_O_S[:3, 3],
-                scan.raw[k0:k1].reshape(-1), scan.points[sl], scan.profile[sl], scan.column[sl],
-            )  # fmt: skip
+                idx,
+                T,
+                inten,
+                keys[j],
+                NORMAL_QUANTILES,
+                n_col,
+                k0,
+                shifts[k0:k1],
+                self._ray_cos,
+                *self._ray_lines,
+                s.apex_z,
+                sigma,
+                s.detection_threshold,
+                s.z_resolution,
+                scan.T_O_S[:3, :3],
+                scan.T_O_S[:3, 3],
+                scan.raw[k0:k1].reshape(-1),
+                scan.points[sl],
+                scan.profile[sl],
+                scan.column[sl],
+            )
             scan.intensity[sl] = inten
             scan.face[sl] = tri
 
@@ -255,13 +330,29 @@ class Scanner:
         shift_b = shifts[k0:k1]
         ray_tri = self._first_triangles(view, shift_b)
         idx, T, inten, tri, test = measure_hits(
-            ray_tri, self.n_part_faces, n_col, shift_b, self._ray_cos, self._ray_sin, self._normals, self._offsets, view.frame,
-            self._on_hull, s.apex_z, s.z_near, s.z_far, self._intensity_grid, s.detection_threshold, s.saturation,
-        )  # fmt: skip
+            ray_tri,
+            self.n_part_faces,
+            n_col,
+            shift_b,
+            self._ray_cos,
+            self._ray_sin,
+            self._normals,
+            self._offsets,
+            view.frame,
+            self._on_hull,
+            s.apex_z,
+            s.z_near,
+            s.z_far,
+            self._intensity_grid,
+            s.detection_threshold,
+            s.saturation,
+        )
         test = np.flatnonzero(test)
         if len(test):
             keep = np.ones(len(idx), dtype=bool)
-            if self._anchors is not None:  # anchors first; between two that see the receiver on one triangle, so does every hit
+            if (
+                self._anchors is not None
+            ):  # anchors first; between two that see the receiver on one triangle, so does every hit
                 test = self._shadows_between_anchors(view, idx, T, tri, test, ray_tri, shift_b, keep)
             sub = idx[test]
             keep[test] = self._receiver_sees(view, T[test], sub % n_col, shift_b[sub // n_col], tri[test])
@@ -284,16 +375,34 @@ class Scanner:
         A profile whose fan (a trapezoid) lies outside the scene's box cannot hit anything and casts no ray."""
         n_col, caster, t_max, m = self.sensor.points_per_profile, self.caster, self._t_max, len(shift_b)
         moved = shift_b[:, None] * view.step_P
-        live = np.flatnonzero(np.all(view.fan_hi - moved >= self._bounds[0], axis=1) & np.all(view.fan_lo - moved <= self._bounds[1], axis=1))
+        live = np.flatnonzero(
+            np.all(view.fan_hi - moved >= self._bounds[0], axis=1)
+            & np.all(view.fan_lo - moved <= self._bounds[1], axis=1)
+        )
         cols = self._anchors if self._anchors is not None else np.arange(n_col)
         anchor_tri = np.full((m, len(cols)), -1, dtype=np.int32)
         if len(live):
             rays = (live[:, None] * n_col + cols[None]).ravel()
-            anchor_tri[live] = np.asarray(caster.first_triangle(*view.rays(rays, shift_b, t_max))).reshape(len(live), len(cols))
+            anchor_tri[live] = np.asarray(caster.first_triangle(*view.rays(rays, shift_b, t_max))).reshape(
+                len(live), len(cols)
+            )
         if self._anchors is None:
             return anchor_tri.ravel()
-        tri, need = fill_columns(anchor_tri, self._anchors, n_col, self._plane, shift_b, self._ray_cos, self._ray_sin,
-                                 self._normals, self._offsets, view.frame, view.d_P, self._edge_n, self._edge_c)  # fmt: skip
+        tri, need = fill_columns(
+            anchor_tri,
+            self._anchors,
+            n_col,
+            self._plane,
+            shift_b,
+            self._ray_cos,
+            self._ray_sin,
+            self._normals,
+            self._offsets,
+            view.frame,
+            view.d_P,
+            self._edge_n,
+            self._edge_c,
+        )
         if len(need):
             tri[need] = caster.first_triangle(*view.rays(need, shift_b, t_max))
         return tri
@@ -304,7 +413,9 @@ class Scanner:
         Only hits on faces off the convex hull come here: a face in a supporting plane of the part that
         faces the receiver cannot be shadowed, since the whole part lies behind that plane.
         """
-        start, direction = shadow_rays(T, col, shift, tri, view.apex_P, view.d_P, view.step_P, view.receiver_P, self._normals, _SHADOW_OFFSET)
+        start, direction = shadow_rays(
+            T, col, shift, tri, view.apex_P, view.d_P, view.step_P, view.receiver_P, self._normals, _SHADOW_OFFSET
+        )
         return ~self.caster.occluded(start, direction, np.ones(len(T), dtype=np.float32))
 
 
@@ -378,10 +489,20 @@ class _SensorView:
     fan_hi: np.ndarray
     frame: np.ndarray  # (5, 3)
 
-    def rays(self, rays: np.ndarray, shift_b: np.ndarray, t_max: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def rays(
+        self, rays: np.ndarray, shift_b: np.ndarray, t_max: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Embree's float32 origins (n, 3), directions (n, 3) and far limits (n,) of a block's rays (profile
         in the block × columns + column) at its shifts (m,): :func:`optipose.scan.kernels.block_rays`."""
-        return block_rays(np.ascontiguousarray(rays, dtype=np.int64), len(self.o_P32), shift_b, self.o_P32, self.d_P32, self.step_P, t_max)
+        return block_rays(
+            np.ascontiguousarray(rays, dtype=np.int64),
+            len(self.o_P32),
+            shift_b,
+            self.o_P32,
+            self.d_P32,
+            self.step_P,
+            t_max,
+        )
 
     @classmethod
     def build(cls, scanner: "Scanner", T_O_S: np.ndarray, T_O_P: np.ndarray) -> "_SensorView":

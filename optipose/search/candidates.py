@@ -22,8 +22,14 @@ from optipose.search.study import Stop
 __all__ = ["candidates", "distinct", "anchored", "maxmin_anchored", "kept_exactly"]
 
 
-def candidates(problem: SurrogateProblem, history: list[Evaluation], outcome: SearchOutcome, k: int, per_k: int,
-               finalists: dict[int, Found]) -> list[Found]:  # fmt: skip
+def candidates(
+    problem: SurrogateProblem,
+    history: list[Evaluation],
+    outcome: SearchOutcome,
+    k: int,
+    per_k: int,
+    finalists: dict[int, Found],
+) -> list[Found]:
     """The k-sensor candidates, ``per_k`` of the surrogate's (four times that for one sensor, twice for two:
     a one-sensor candidate costs a third of a three-sensor one), then the nested and subset ones."""
     found = [f for f in (outcome.found.get(k), outcome.greedy.get(k), outcome.joint.get(k)) if f and f.stats]
@@ -77,12 +83,22 @@ def _extended(problem: SurrogateProblem, base: Found, others: list[Found]) -> Fo
             u = np.concatenate([base.u, other.sensor(i)])
             score = problem.score(u)
             if score.feasible and (best is None or score.value < best.score):
-                best = Found(base.k + 1, f"k={base.k} finalist + 1", u, problem.space.to_poses(u), score.value, score.stats)
+                best = Found(
+                    base.k + 1, f"k={base.k} finalist + 1", u, problem.space.to_poses(u), score.value, score.stats
+                )
     return best
 
 
-def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tuple[int, ...], outcome: SearchOutcome,
-             k: int, n: int = 2, evals: int = 0, until: float = np.inf) -> list[Found]:  # fmt: skip
+def anchored(
+    problem: SurrogateProblem,
+    hand_poses: list[np.ndarray],
+    used: tuple[int, ...],
+    outcome: SearchOutcome,
+    k: int,
+    n: int = 2,
+    evals: int = 0,
+    until: float = np.inf,
+) -> list[Found]:
     """Layouts of k sensors that keep hand-placed sensors the hand layout's k-choice uses (``used``, their
     indices) in their own places and put a found sensor in each other place; the ``n`` best on the surrogate.
 
@@ -119,7 +135,12 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
         these = []
         # each free place: a found sensor, or (refined only) the hand-placed sensor of that place when it is
         # feasible alone, a start the local search can move from; a sensor fills one place at most
-        starts = [[hand_u[i]] if evals > 0 and i < len(hand_u) and not isinstance(problem.sensor(hand_u[i]), Violation) else [] for i in free]
+        starts = [
+            [hand_u[i]]
+            if evals > 0 and i < len(hand_u) and not isinstance(problem.sensor(hand_u[i]), Violation)
+            else []
+            for i in free
+        ]
         for fill in itertools.product(*[sensors + extra for extra in starts]):
             if evals > 0 and time.monotonic() > until:
                 break
@@ -134,9 +155,13 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
             for found in these:
                 values[id(found)] = _anchored_value(problem, found.u, kept, k, floors)
             if time.monotonic() < until:
-                refined = _refined(problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors, hand_poses)
+                refined = _refined(
+                    problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors, hand_poses
+                )
                 values[id(refined)] = _anchored_value(problem, refined.u, kept, k, floors)
-                these = these + [refined] if keep else [refined]  # nothing kept: the others are the search's own candidates
+                these = (
+                    these + [refined] if keep else [refined]
+                )  # nothing kept: the others are the search's own candidates
             elif not keep:
                 these = []
         out += these
@@ -145,8 +170,15 @@ def anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], used: tupl
     return distinct([f for f in out if values[id(f)] < PENALTY], 0.02, key=lambda f: values[id(f)])[:n]
 
 
-def maxmin_anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: int, n: int = 2, evals: int = 30,
-                    until: float = np.inf, pool_size: int = 1024) -> list[Found]:  # fmt: skip
+def maxmin_anchored(
+    problem: SurrogateProblem,
+    hand_poses: list[np.ndarray],
+    k: int,
+    n: int = 2,
+    evals: int = 30,
+    until: float = np.inf,
+    pool_size: int = 1024,
+) -> list[Found]:
     """Hand-anchored layouts aimed at "no worse on every statistic at every noise level": k − 1 hand sensors
     kept in their places (indices below k, as in :func:`anchored`) and the free place filled by the sensor
     pose that maximises the *smallest* ratio hand / layout over each level's per-axis median and 75th
@@ -168,7 +200,10 @@ def maxmin_anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: 
     def per_level(infos) -> np.ndarray:  # (levels, 3 axes, median and p75) of each level's best subsets, deg
         return predicted_stats(infos, noise_scales=scales, mounting=mounting).level_axis_stats
 
-    target = min((per_level([hand[i] for i in c]) for c in itertools.combinations(range(len(hand)), k)), key=lambda t: t.max(axis=0).sum())
+    target = min(
+        (per_level([hand[i] for i in c]) for c in itertools.combinations(range(len(hand)), k)),
+        key=lambda t: t.max(axis=0).sum(),
+    )
     feasible = [(key, info) for key, info in problem.cache.items() if isinstance(info, SensorInfo)]
     feasible.sort(key=lambda t: per_level([t[1]]).max(axis=0).sum())  # each pose alone, its worst over the band
     pool = distinct_sensors([np.array(key) for key, _ in feasible])[:pool_size]
@@ -193,7 +228,9 @@ def maxmin_anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: 
             return float(np.min(target / stats)), float(target[0].sum() / stats[0].sum())
 
         scored = [(r, u6) for u6 in pool if time.monotonic() < until and (r := ratios(u6)) is not None]
-        for start in [u6 for _, u6 in sorted(scored, key=lambda t: -t[0][0])[:2]]:  # the best two moved to the largest smallest ratio
+        for start in [
+            u6 for _, u6 in sorted(scored, key=lambda t: -t[0][0])[:2]
+        ]:  # the best two moved to the largest smallest ratio
             seen = []
 
             def value(x, grad=None, seen=seen, ratios=ratios) -> float:
@@ -213,11 +250,17 @@ def maxmin_anchored(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: 
     out = []
     for _, u, free in sorted(best, key=lambda t: rank(t[:2]))[:n]:
         score = problem.score(u, constrained=False)
-        out.append(Found(k, "hand-anchored, max-min", u, kept_exactly(problem, u, [free], hand_poses), score.value, score.stats))
+        out.append(
+            Found(
+                k, "hand-anchored, max-min", u, kept_exactly(problem, u, [free], hand_poses), score.value, score.stats
+            )
+        )
     return out
 
 
-def kept_exactly(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]) -> list[np.ndarray]:
+def kept_exactly(
+    problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]
+) -> list[np.ndarray]:
     """The poses of a hand-anchored layout (6k,): the found sensors' from their numbers, and every other place
     the hand sensor's pose itself. Through the [0, 1] numbers a pose comes back a few ulps off, and under
     bracket errors ICP is chaotic at that level (docs/conditions.md, 'The search under the band'): a kept sensor would then measure
@@ -226,7 +269,9 @@ def kept_exactly(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand
     return [poses[i] if i in free else np.array(hand_poses[i], dtype=float) for i in range(len(poses))]
 
 
-def _anchored_poses(problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]) -> list[np.ndarray]:
+def _anchored_poses(
+    problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]
+) -> list[np.ndarray]:
     """The poses :func:`anchored` gives its layouts: under a band the kept places hold the hand poses
     themselves (:func:`kept_exactly`); a nominal search keeps the poses its numbers give, as its answers were
     measured (nominal ICP on the thin part C moves a selection's statistic with those ulps, and
@@ -236,8 +281,9 @@ def _anchored_poses(problem: SurrogateProblem, u: np.ndarray, free: list[int], h
     return kept_exactly(problem, u, free, hand_poses)
 
 
-def _anchored_layout(problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict,
-                     hand_poses: list[np.ndarray]) -> Found | None:  # fmt: skip
+def _anchored_layout(
+    problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict, hand_poses: list[np.ndarray]
+) -> Found | None:
     """The layout of these sensors (one (6,) per place) scored on the surrogate as given (the kept heads are
     the baseline's); None when a found head is too close to another."""
     u, k = np.concatenate(u6s), len(u6s)
@@ -261,8 +307,12 @@ def _gap_violation(problem: SurrogateProblem, u: np.ndarray, free: list[int], k:
     """How far (m) the found heads come within their floor (:func:`_gap_floors`) of the others (0: far enough)."""
     poses = problem.space.to_poses(u)
     model = problem.collision.sensor
-    short = [floors.get((a, b), problem.config.head_gap) - heads_clearance(model, poses[a], model, poses[b])
-             for a in free for b in range(k) if b != a]  # fmt: skip
+    short = [
+        floors.get((a, b), problem.config.head_gap) - heads_clearance(model, poses[a], model, poses[b])
+        for a in free
+        for b in range(k)
+        if b != a
+    ]
     return max(0.0, max(short, default=0.0))
 
 
@@ -281,8 +331,16 @@ def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int
     return stats.score + problem.shortfall(k, stats)
 
 
-def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals: int, until: float, floors: dict,
-             hand_poses: list[np.ndarray]) -> Found:  # fmt: skip
+def _refined(
+    problem: SurrogateProblem,
+    start: Found,
+    kept: dict,
+    k: int,
+    evals: int,
+    until: float,
+    floors: dict,
+    hand_poses: list[np.ndarray],
+) -> Found:
     """``start`` with its found sensors moved by the local algorithm on :func:`_anchored_value`, the kept
     ones fixed; the best layout it met (``start`` itself when it met none better)."""
     slots = np.concatenate([np.arange(6 * i, 6 * i + 6) for i in range(k) if i not in kept])
@@ -304,8 +362,14 @@ def _refined(problem: SurrogateProblem, start: Found, kept: dict, k: int, evals:
     infos = [kept[i] if i in kept else problem.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
     infos = [problem.info(u[6 * i : 6 * i + 6]) if isinstance(x, Violation) else x for i, x in enumerate(infos)]
     stats = predicted_stats(infos, *problem.weights, **problem.band)
-    return Found(k, "hand-anchored, refined", u, _anchored_poses(problem, u, [i for i in range(k) if i not in kept], hand_poses),
-                 stats.score, stats)  # fmt: skip
+    return Found(
+        k,
+        "hand-anchored, refined",
+        u,
+        _anchored_poses(problem, u, [i for i in range(k) if i not in kept], hand_poses),
+        stats.score,
+        stats,
+    )
 
 
 def distinct_sensors(sensors: list[np.ndarray], min_distance: float = 0.02) -> list[np.ndarray]:

@@ -90,7 +90,9 @@ class CellModel:
     laser's apex on the sensor's z (inf: parallel rays).
     """
 
-    def __init__(self, setup, vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray, offsets: np.ndarray, apex_z: float):
+    def __init__(
+        self, setup, vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray, offsets: np.ndarray, apex_z: float
+    ):
         from optipose.cell.asmade import AsMade
         from optipose.scan.raycast import face_planes, plane_numbers
 
@@ -102,14 +104,20 @@ class CellModel:
         r = cell.robot
         self.path_sigma = np.repeat([r.path_rotation, r.path], 3)
         self.offsets = np.asarray(offsets, float)
-        self.modes = _gauss_markov_modes(self.offsets, r.path_correlation) if r.path or r.path_rotation else np.zeros((len(offsets), 0))
+        self.modes = (
+            _gauss_markov_modes(self.offsets, r.path_correlation)
+            if r.path or r.path_rotation
+            else np.zeros((len(offsets), 0))
+        )
         self.step = r.step
         self.white = e.speckle**2 + e.subsurface_sigma**2 + e.spurious_fraction * e.spurious_range**2 / 3
         self.sub_bias = e.subsurface_bias
         self.made = None
         if not p.exact:
             self.plane = plane_numbers(*face_planes(vertices, faces))
-            self.made = AsMade(p, vertices, faces, self.plane, 0)  # its planes' centroids, centre and extent (no draw is used)
+            self.made = AsMade(
+                p, vertices, faces, self.plane, 0
+            )  # its planes' centroids, centre and extent (no draw is used)
             rng = np.random.default_rng(2022_1536)  # fixed: a pose always scores the same
             d = rng.normal(size=(_FORM_FEATURES, 3))
             lam = np.exp(rng.uniform(*np.log(p.form_wavelengths), _FORM_FEATURES))
@@ -171,7 +179,9 @@ def sensor_maps(model: CellModel, turns: list[tuple], T_O_S: np.ndarray, raw_per
             faces[m, np.searchsorted(planes, p[6])] = p[7]
     f32 = lambda i: np.array([p[i] for p in parts], np.float32)  # noqa: E731
     c = model.cell
-    return CellMaps(f32(0), f32(1), f32(2), f32(3), planes, faces, f32(4), f32(5), c.robot.orientation, c.calibration.zeroed)
+    return CellMaps(
+        f32(0), f32(1), f32(2), f32(3), planes, faces, f32(4), f32(5), c.robot.orientation, c.calibration.zeroed
+    )
 
 
 def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, face, R) -> tuple:
@@ -182,7 +192,9 @@ def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, 
     L = np.einsum("ij,ijk->ik", n_O, displacement(p, T_O_S))  # (m, 6): residual per unit head error (r, t), its frame
     own = J.T @ (L * model.own_sigma)
     Rs, o = T_O_S[:3, :3], T_O_S[:3, 3]
-    frame = np.zeros((6, 6))  # the frame's error (ω, t about the centre) as this head's own: r = Rsᵀω, t = Rsᵀ(ω × (o − c) + t_F)
+    frame = np.zeros(
+        (6, 6)
+    )  # the frame's error (ω, t about the centre) as this head's own: r = Rsᵀω, t = Rsᵀ(ω × (o − c) + t_F)
     frame[:3, :3], frame[3:, 3:] = Rs.T, Rs.T
     frame[3:, :3] = -Rs.T @ _cross(o - c)
     shared = np.hstack([J.T @ (L @ frame * model.frame_sigma), J.T @ model.part_columns(v, n)])
@@ -191,7 +203,9 @@ def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, 
     if model.modes.shape[1]:
         at = np.clip(np.searchsorted(model.offsets, s), 0, len(model.offsets) - 1)  # the profile that saw each point
         JJ = J[:, :, None] * (J * model.path_sigma)[:, None, :]  # (m, 6, 6): r = J·ξ(s) for a pose error ξ at travel s
-        path = (model.modes[at].T @ JJ.reshape(len(J), 36)).reshape(-1, 6, 6).transpose(1, 0, 2).reshape(6, -1)  # Σ_m modes ⊗ JJ
+        path = (
+            (model.modes[at].T @ JJ.reshape(len(J), 36)).reshape(-1, 6, 6).transpose(1, 0, 2).reshape(6, -1)
+        )  # Σ_m modes ⊗ JJ
     if model.step:
         path = np.hstack([path, (J.T @ (n_O[:, 0] * s * model.step))[:, None]])
     cos = np.einsum("ij,ij->i", _rays(model, p, s, T_O_S), n_O)  # a move along the ray moves the point cos along n
@@ -238,14 +252,16 @@ def subset_terms(maps: list[CellMaps]) -> tuple[np.ndarray, np.ndarray]:
     faces = np.zeros((len(A), len(planes), 6, maps[0].faces.shape[3]))
     for m in maps:
         faces[:, np.searchsorted(planes, m.planes)] += m.faces
-    fixed = np.concatenate([*(m.own for m in maps), sum(m.shared for m in maps),
-                            faces.transpose(0, 2, 1, 3).reshape(len(A), 6, -1)], axis=2).astype(float)  # fmt: skip
+    fixed = np.concatenate(
+        [*(m.own for m in maps), sum(m.shared for m in maps), faces.transpose(0, 2, 1, 3).reshape(len(A), 6, -1)],
+        axis=2,
+    ).astype(float)
     per_scan = sum(m.path for m in maps).astype(float)
     white = sum(m.white for m in maps).astype(float)
     bias = -np.einsum("tij,tj->ti", P, sum(m.bias for m in maps).astype(float))
     PF = P @ fixed
     scan_var = (P @ per_scan) ** 2
-    var = scan_var.sum(axis=2) + np.einsum("tij,tjk,tik->ti", P, white, P) + maps[0].orientation**2
+    var = scan_var.sum(axis=2) + np.einsum("tij,tjk,tik->ti", P, white, P) + maps[0].orientation ** 2
     if maps[0].zeroed:
         PF, bias = PF - PF[:1], bias - bias[:1]
         var = var + var[:1]

@@ -95,10 +95,19 @@ class SearchConfig:
             raise ConfigError(f"search validation must be full or reduced, not '{self.validation}'")
         if self.strategy not in ("greedy", "joint", "both"):
             raise ConfigError(f"search strategy must be greedy, joint or both, not '{self.strategy}'")
-        if (self.verdict_scans < 0 or self.verdict_draws < 1 or not 0.5 < self.verdict_confidence < 1 or self.verdict_tolerance < 0
-                or not 0 <= self.verdict_failures < 1 or self.verdict_time < 0 or self.answer_time < 0):  # fmt: skip
-            raise ConfigError("search verdict: verdict_draws >= 1, verdict_scans >= 0, 0.5 < verdict_confidence < 1, verdict_tolerance >= 0, "
-                              "0 <= verdict_failures < 1, verdict_time >= 0, answer_time >= 0")  # fmt: skip
+        if (
+            self.verdict_scans < 0
+            or self.verdict_draws < 1
+            or not 0.5 < self.verdict_confidence < 1
+            or self.verdict_tolerance < 0
+            or not 0 <= self.verdict_failures < 1
+            or self.verdict_time < 0
+            or self.answer_time < 0
+        ):
+            raise ConfigError(
+                "search verdict: verdict_draws >= 1, verdict_scans >= 0, 0.5 < verdict_confidence < 1, verdict_tolerance >= 0, "
+                "0 <= verdict_failures < 1, verdict_time >= 0, answer_time >= 0"
+            )
         for name in (self.global_algorithm, self.local_algorithm, self.polish_algorithm):
             algorithm_code(name)  # raises ConfigError for an unknown name
 
@@ -108,19 +117,48 @@ BUDGETS: dict[str, dict] = {
     # layout's runs beside the search); a small screen finds basins DIRECT-L's 70 evaluations miss (docs/method.md,
     # "Budgets"); no check under the band, so its verdicts say they hold in the ideal cell only
     "quick": dict(
-        global_evals=70, local_evals=20, max_time=25.0, random_starts=4, select_candidates=0, strategy="greedy",
-        screen_samples=1024, screen_starts=4, screen_evals=20, verdict_draws=1,
-    ),  # fmt: skip
+        global_evals=70,
+        local_evals=20,
+        max_time=25.0,
+        random_starts=4,
+        select_candidates=0,
+        strategy="greedy",
+        screen_samples=1024,
+        screen_starts=4,
+        screen_evals=20,
+        verdict_draws=1,
+    ),
     "default": dict(
-        global_evals=400, local_evals=120, joint_evals=200, max_time=240.0, select_candidates=3, select_time=240.0,
-        polish_evals=90, confirm_candidates=3, screen_samples=4096, band="robust", verdict_time=60.0,
-    ),  # fmt: skip
+        global_evals=400,
+        local_evals=120,
+        joint_evals=200,
+        max_time=240.0,
+        select_candidates=3,
+        select_time=240.0,
+        polish_evals=90,
+        confirm_candidates=3,
+        screen_samples=4096,
+        band="robust",
+        verdict_time=60.0,
+    ),
     "thorough": dict(
-        global_evals=2000, local_evals=400, joint_evals=1000, max_time=3000.0, random_starts=16, screen_samples=16384,
-        screen_starts=12, screen_evals=60,
-        select_candidates=6, select_time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6, band="robust",
-        verdict_draws=30, verdict_time=900.0,
-    ),  # fmt: skip
+        global_evals=2000,
+        local_evals=400,
+        joint_evals=1000,
+        max_time=3000.0,
+        random_starts=16,
+        screen_samples=16384,
+        screen_starts=12,
+        screen_evals=60,
+        select_candidates=6,
+        select_time=1800.0,
+        polish_time=900.0,
+        polish_evals=200,
+        confirm_candidates=6,
+        band="robust",
+        verdict_draws=30,
+        verdict_time=900.0,
+    ),
 }
 
 
@@ -132,7 +170,9 @@ BUDGETS: dict[str, dict] = {
 BAND_BUDGETS: dict[str, dict] = {
     # a sensor pose costs the band's surrogate several nominal ones (the noise and bracket terms): 4,096 screen
     # poses would take the whole clock, and k = 1 and 2 got no greedy stage at all
-    "default": dict(max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024, anchor_evals=80),
+    "default": dict(
+        max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024, anchor_evals=80
+    ),
 }
 
 
@@ -156,18 +196,41 @@ CELL_BUDGETS: dict[str, dict] = {
     # the error rate. Its seconds are what is left of 23 s after the search started, so that with the start-up, the
     # pictures and the report the answer comes in 30 s on two cores with a second to spare for a shared machine's
     # swings: the draws, unlike the layouts, are the clock's where the seconds hold fewer than the cap
-    "quick": dict(max_time=15.0, screen_samples=64, screen_starts=3, screen_evals=15, global_algorithm="LN_BOBYQA", global_evals=20,
-                  local_evals=10, validation="reduced", verdict_draws=12, verdict_time=12.0, verdict_scans=6, answer_time=23.0),
+    "quick": dict(
+        max_time=15.0,
+        screen_samples=64,
+        screen_starts=3,
+        screen_evals=15,
+        global_algorithm="LN_BOBYQA",
+        global_evals=20,
+        local_evals=10,
+        validation="reduced",
+        verdict_draws=12,
+        verdict_time=12.0,
+        verdict_scans=6,
+        answer_time=23.0,
+    ),
     # default: the joint stage's 100 evaluations, where its clock used to stop it; the race at most 10 draws of 20
     # scans each, which its seconds hold with room, so that the looks are planned for the same draws on every run
-    "default": dict(max_time=150.0, joint_evals=100, screen_samples=1024, select_time=45.0, polish_evals=0, confirm_candidates=0, band="",
-                    verdict_scans=20, verdict_draws=10, verdict_time=60.0),
+    "default": dict(
+        max_time=150.0,
+        joint_evals=100,
+        screen_samples=1024,
+        select_time=45.0,
+        polish_evals=0,
+        confirm_candidates=0,
+        band="",
+        verdict_scans=20,
+        verdict_draws=10,
+        verdict_time=60.0,
+    ),
     "thorough": dict(band="", verdict_scans=20),
 }
 
 
-def config_from_budget(budget: str, sensors: tuple[int, ...], overrides: dict | None = None, band: bool = False,
-                       cell: bool = False) -> SearchConfig:  # fmt: skip
+def config_from_budget(
+    budget: str, sensors: tuple[int, ...], overrides: dict | None = None, band: bool = False, cell: bool = False
+) -> SearchConfig:
     """The config of a named budget for these sensor counts, with ``overrides`` (``[search]`` keys) on top;
     ``band``: the objective has a band of conditions (:data:`BAND_BUDGETS` adjusts the budget first);
     ``cell``: it runs in a real cell (:data:`CELL_BUDGETS`, after the band's)."""

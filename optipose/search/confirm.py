@@ -45,8 +45,15 @@ class Confirmer:
             self._results[key] = self.evaluator(layout.poses)
         return self._results[key]
 
-    def pick(self, k: int, pool: list[tuple[tuple, Found]], n: int, records: list[IcpEvaluation], on_stage=None,
-             near: Found | None = None) -> Found:  # fmt: skip
+    def pick(
+        self,
+        k: int,
+        pool: list[tuple[tuple, Found]],
+        n: int,
+        records: list[IcpEvaluation],
+        on_stage=None,
+        near: Found | None = None,
+    ) -> Found:
         """The best on the full protocol of the n leaders of ``pool`` (by their reduced-protocol rank) and
         ``near``, the one whose axes exceed the hand layout's least there: on 14 scans a layout that truly
         beats the hand one on every axis can miss on one axis and rank below wider but lopsided wins (B's
@@ -68,8 +75,9 @@ class Confirmer:
         self.chosen[k] = best_key
         return best
 
-    def adopt_subsets(self, problem: SurrogateProblem, finalists: dict[int, Found], records: list[IcpEvaluation],
-                      on_stage=None) -> None:  # fmt: skip
+    def adopt_subsets(
+        self, problem: SurrogateProblem, finalists: dict[int, Found], records: list[IcpEvaluation], on_stage=None
+    ) -> None:
         """A confirmed k finalist gives way to the best k sensors of a larger finalist when those do better
         on the full protocol: the per-axis assignment of a triple's evaluation is a pair result as well,
         and the validation evaluates such a nested layout inside the larger one, as here."""
@@ -82,7 +90,11 @@ class Confirmer:
                 u = np.concatenate([big.sensor(i) for i in choice.sensors])
                 score = problem.score(u)
                 new = rank(choice, reference)
-                records.append(IcpEvaluation(k, f"best {k} of the k={big.k} finalist", score.objective, "full", choice, not new[0]))
+                records.append(
+                    IcpEvaluation(k, f"best {k} of the k={big.k} finalist", score.objective, "full", choice, not new[0])
+                )
                 if score.feasible and new < key:
-                    finalists[k] = Found(k, f"best {k} of the k={big.k} finalist", u, problem.space.to_poses(u), score.value, score.stats)
+                    finalists[k] = Found(
+                        k, f"best {k} of the k={big.k} finalist", u, problem.space.to_poses(u), score.value, score.stats
+                    )
                     key = self.chosen[k] = new

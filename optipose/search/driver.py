@@ -20,8 +20,17 @@ log = logging.getLogger(__name__)
 _HUGE = 1e300  # what NLopt is told after the objective raised, until it stops
 
 
-def optimize(fn, algorithm: str, x0: np.ndarray, maxeval: int, seed: int | None, local: str | None = None,
-             step: float = 0.08, xtol_rel: float | None = 1e-5, xtol_abs: float | None = None) -> None:  # fmt: skip
+def optimize(
+    fn,
+    algorithm: str,
+    x0: np.ndarray,
+    maxeval: int,
+    seed: int | None,
+    local: str | None = None,
+    step: float = 0.08,
+    xtol_rel: float | None = 1e-5,
+    xtol_abs: float | None = None,
+) -> None:
     """One NLopt run of ``fn(u, grad)`` on [0, 1]^n from ``x0`` (n,), at most ``maxeval`` evaluations.
 
     seed : NLopt's random seed (None: leave it as it is). local : the local algorithm of a multi-start

@@ -17,14 +17,23 @@ from optipose.search.study import SurrogateStudy
 __all__ = ["greedy_stage"]
 
 
-def greedy_stage(study: SurrogateStudy, config: SearchConfig, placed: np.ndarray, hand_u: list[np.ndarray],
-                 rng: np.random.Generator, seed: int) -> np.ndarray:  # fmt: skip
+def greedy_stage(
+    study: SurrogateStudy,
+    config: SearchConfig,
+    placed: np.ndarray,
+    hand_u: list[np.ndarray],
+    rng: np.random.Generator,
+    seed: int,
+) -> np.ndarray:
     """The layout (6k,) of ``placed`` (6(k-1),) plus the best new sensor found."""
     k = len(placed) // 6 + 1
     sub = SubProblem(study, placed)
     screened = screen(sub, config, k, seed - k)  # the same points at every k: cached
     starts = [u for u in hand_u] + [rng.random(6) for _ in range(config.random_starts)] + screened[:1]
-    scored = sorted(((study.problem.score(np.concatenate([placed, u])).objective, i) for i, u in enumerate(starts)), key=lambda t: t[0])
+    scored = sorted(
+        ((study.problem.score(np.concatenate([placed, u])).objective, i) for i, u in enumerate(starts)),
+        key=lambda t: t[0],
+    )
     x0 = starts[scored[0][1]] if scored else rng.random(6)
     with study.stage_named(f"greedy:k={k}"):
         optimize(sub, config.global_algorithm, x0, config.global_evals, seed, config.local_algorithm)

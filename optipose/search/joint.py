@@ -12,16 +12,27 @@ from optipose.search.study import SurrogateStudy
 __all__ = ["joint_stage"]
 
 
-def joint_stage(study: SurrogateStudy, config: SearchConfig, k: int, greedy: Found | None, hand: Found | None,
-                rng: np.random.Generator, seed: int) -> Found:  # fmt: skip
+def joint_stage(
+    study: SurrogateStudy,
+    config: SearchConfig,
+    k: int,
+    greedy: Found | None,
+    hand: Found | None,
+    rng: np.random.Generator,
+    seed: int,
+) -> Found:
     """The best layout of a local polish of all k sensors from each start (a random one when there is none)."""
     best = None
     starts = [s for s in (greedy, hand) if s is not None] or [Found(k, "random", rng.random(6 * k), [], np.inf)]
     with study.stage_named(f"joint:k={k}"):
         for start in starts:
-            row = local_best(study, config.local_algorithm, start.u, config.joint_evals // (2 if hand and greedy else 1), seed)
+            row = local_best(
+                study, config.local_algorithm, start.u, config.joint_evals // (2 if hand and greedy else 1), seed
+            )
             if row is not None:
                 u = np.asarray(row.u)
                 if best is None or row.value < best.score:
-                    best = Found(k, "joint", u, study.problem.space.to_poses(u), row.value, study.problem.score(u).stats)
+                    best = Found(
+                        k, "joint", u, study.problem.space.to_poses(u), row.value, study.problem.score(u).stats
+                    )
     return best or Found(k, "joint", greedy.u if greedy else np.zeros(6 * k), [], np.inf, {})

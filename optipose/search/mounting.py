@@ -43,8 +43,10 @@ _MAX_STD = np.deg2rad(5.0)  # as the surrogate's weak prior: beyond it an error 
 def _cross_matrices(a: np.ndarray) -> np.ndarray:
     """(n, 3, 3) matrices [a]× with [a]× b = a × b, for a (n, 3)."""
     z = np.zeros(len(a))
-    return np.stack([np.stack([z, -a[:, 2], a[:, 1]], 1), np.stack([a[:, 2], z, -a[:, 0]], 1),
-                     np.stack([-a[:, 1], a[:, 0], z], 1)], 1)  # fmt: skip
+    return np.stack(
+        [np.stack([z, -a[:, 2], a[:, 1]], 1), np.stack([a[:, 2], z, -a[:, 0]], 1), np.stack([-a[:, 1], a[:, 0], z], 1)],
+        1,
+    )
 
 
 def displacement(points: np.ndarray, T_O_S: np.ndarray) -> np.ndarray:
@@ -57,7 +59,9 @@ def displacement(points: np.ndarray, T_O_S: np.ndarray) -> np.ndarray:
     return np.concatenate([_cross_matrices(y - o) @ R, np.broadcast_to(-R, (len(points), 3, 3))], axis=2)
 
 
-def mounting_maps(v: np.ndarray, n: np.ndarray, R: np.ndarray, centre: np.ndarray, T_O_S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def mounting_maps(
+    v: np.ndarray, n: np.ndarray, R: np.ndarray, centre: np.ndarray, T_O_S: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """A sensor's normal matrix A (6, 6) and mounting map N (6, 6) at one turn, in O about ``centre``.
 
     v, n : (m, 3) voxel centroids and CAD normals in the part's frame; R : (3, 3) the part's turn.

@@ -23,7 +23,14 @@ from dataclasses import replace
 from optipose.evaluate.conditions import band_ends
 from optipose.evaluate.objective import Objective, load_objective, reduced_objective
 
-__all__ = ["STAGES", "stage_objective", "search_objective", "reduced_objective", "validation_objective", "band_objective"]
+__all__ = [
+    "STAGES",
+    "stage_objective",
+    "search_objective",
+    "reduced_objective",
+    "validation_objective",
+    "band_objective",
+]
 
 STAGES = ("surrogate", "selection", "polish", "confirmation", "validation", "band")
 

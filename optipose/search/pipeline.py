@@ -57,7 +57,9 @@ class NoFeasibleLayout(OptiposeError):
 class ResultSink(Protocol):
     """Where a search's results go as they appear (``optipose.io.search.SearchFolder``)."""
 
-    def start(self, part, objective, config: SearchConfig, budget: str, seed: int, validation_seed: int, band=None) -> None: ...
+    def start(
+        self, part, objective, config: SearchConfig, budget: str, seed: int, validation_seed: int, band=None
+    ) -> None: ...
 
     def load_cache(self, space_version: int) -> dict: ...
 
@@ -98,8 +100,18 @@ class SearchReport:
         return self.validation is not None
 
 
-def run(part, objective, config: SearchConfig, seed: int, sink: ResultSink, budget: str = "default",
-        jobs: int = 1, resume: bool = False, on_eval=None, on_stage=None) -> SearchReport:  # fmt: skip
+def run(
+    part,
+    objective,
+    config: SearchConfig,
+    seed: int,
+    sink: ResultSink,
+    budget: str = "default",
+    jobs: int = 1,
+    resume: bool = False,
+    on_eval=None,
+    on_stage=None,
+) -> SearchReport:
     """Search, validate and hand everything to ``sink``. ``on_eval(evaluation)`` follows the surrogate
     search; ``on_stage(text)`` is told when a stage starts; ``resume`` reloads the sink's cache."""
     from threadpoolctl import threadpool_limits
@@ -117,9 +129,14 @@ def _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, 
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     if on_stage:  # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
         on_stage("searching on the surrogate")
-    with _shared_reference(part, jobs) as folder, _baseline_run(part, objective, config, seed, jobs, folder) as hand_run, \
-            _baseline_run(part, band, config, seed, jobs, folder, last=True) as band_run:  # fmt: skip
-        study = _study(part, objective, config, sink, resume, on_eval)  # after the hand layout's processes start: they set up beside it
+    with (
+        _shared_reference(part, jobs) as folder,
+        _baseline_run(part, objective, config, seed, jobs, folder) as hand_run,
+        _baseline_run(part, band, config, seed, jobs, folder, last=True) as band_run,
+    ):
+        study = _study(
+            part, objective, config, sink, resume, on_eval
+        )  # after the hand layout's processes start: they set up beside it
         return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run, started)
 
 
@@ -155,7 +172,9 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, f
     return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs, reference_dir=folder)
 
 
-def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run, started: float) -> SearchReport:
+def _run(
+    part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run, started: float
+) -> SearchReport:
     stage = on_stage or (lambda text: None)
     outcome = run_search(part, objective, config, seed, study)
     _flush(sink, study)
@@ -207,8 +226,9 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
 
         stage(f"the verdict with confidence (up to {config.verdict_draws} draws of the cell)")
         raced = replace(config, verdict_time=_verdict_seconds(config, started))
-        report.confident = confident_verdicts(part, objective, report.layouts, report.validation, first, seed, raced, jobs,
-                                              sink.verdict_draw)  # fmt: skip
+        report.confident = confident_verdicts(
+            part, objective, report.layouts, report.validation, first, seed, raced, jobs, sink.verdict_draw
+        )
         sink.verdict(report.confident)
     if band is None or not report.validation.hand:  # no band, or nothing to compare with: no check
         return report
@@ -216,7 +236,9 @@ def _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, b
 
     stage(f"checking under the band ({len(conditions(band.conditions))} conditions, held-out seed)")
     try:
-        report.band = validate(part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation, band_run)
+        report.band = validate(
+            part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation, band_run
+        )
     except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
         if not is_interrupt(exc):
             raise
@@ -250,7 +272,9 @@ def _study(part, objective, config, sink: ResultSink, resume: bool, on_eval) -> 
         # after it: a write is the whole history and cache, so counting evaluations alone made the writes
         # grow with the search until they took a large share of its time
         now = time.monotonic()
-        if len(study.history) - flushed["n"] >= _FLUSH_EVERY and now - flushed["at"] >= max(_FLUSH_GAP, 10 * flushed["took"]):
+        if len(study.history) - flushed["n"] >= _FLUSH_EVERY and now - flushed["at"] >= max(
+            _FLUSH_GAP, 10 * flushed["took"]
+        ):
             _flush(sink, study)
             flushed.update(n=len(study.history), at=time.monotonic(), took=time.monotonic() - now)
 
@@ -269,5 +293,8 @@ def _layouts(found: dict[int, Found]) -> dict[int, Layout]:
 def found_layout(found: Found) -> Layout:
     """A found layout as a :class:`Layout` of sensors F1 … Fk, named ``found_k<k>``."""
     sensors = tuple(SensorPose(f"F{i + 1}", T) for i, T in enumerate(found.poses))
-    return Layout(sensors, name=f"found_k{found.k}",
-                  description=f"found by the {found.strategy} search, surrogate score {found.score:.5f} deg")  # fmt: skip
+    return Layout(
+        sensors,
+        name=f"found_k{found.k}",
+        description=f"found by the {found.strategy} search, surrogate score {found.score:.5f} deg",
+    )

@@ -21,8 +21,16 @@ from optipose.search.records import PENALTY, Found, IcpEvaluation
 __all__ = ["polish", "hand_start"]
 
 
-def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config: SearchConfig, max_evals: int,
-           max_time: float, on_stage=None) -> tuple[Found | None, object, list[IcpEvaluation]]:  # fmt: skip
+def polish(
+    problem: SurrogateProblem,
+    evaluator,
+    start: Found,
+    reference,
+    config: SearchConfig,
+    max_evals: int,
+    max_time: float,
+    on_stage=None,
+) -> tuple[Found | None, object, list[IcpEvaluation]]:
     """Polish ``start`` against ``reference`` (the hand layout's choice of k, or None).
 
     Returns the best feasible layout seen that is no worse than ``reference`` on any axis (or the lowest
@@ -49,12 +57,16 @@ def polish(problem: SurrogateProblem, evaluator, start: Found, reference, config
         if best[0] is None or key < best[0]:
             best[:] = [key, u.copy(), choice]
         if on_stage:
-            on_stage(f"ICP polish k={k}: {len(records)} evaluations, best {best[0][1] * 1e3:.3f} mdeg"
-                     f"{'' if not best[0][0] else ' (not yet no worse than hand on every axis)'}")  # fmt: skip
+            on_stage(
+                f"ICP polish k={k}: {len(records)} evaluations, best {best[0][1] * 1e3:.3f} mdeg"
+                f"{'' if not best[0][0] else ' (not yet no worse than hand on every axis)'}"
+            )
         return value if value < PENALTY else PENALTY
 
     # its own step and an absolute tolerance; NLopt's seed is left alone (the local algorithms draw none)
-    optimize(f, config.polish_algorithm, start.u, max_evals, None, step=config.polish_step, xtol_rel=None, xtol_abs=1e-4)
+    optimize(
+        f, config.polish_algorithm, start.u, max_evals, None, step=config.polish_step, xtol_rel=None, xtol_abs=1e-4
+    )
     if best[1] is None:
         return None, None, records
     u = best[1]

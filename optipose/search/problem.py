@@ -61,34 +61,63 @@ class SurrogateProblem:
         problem's of the same part and objective.
     """
 
-    def __init__(self, part, objective, config: SearchConfig, surrogate: Surrogate | None = None,
-                 cache: dict | None = None, targets: dict[int, np.ndarray] | None = None, subsets: dict | None = None):  # fmt: skip
+    def __init__(
+        self,
+        part,
+        objective,
+        config: SearchConfig,
+        surrogate: Surrogate | None = None,
+        cache: dict | None = None,
+        targets: dict[int, np.ndarray] | None = None,
+        subsets: dict | None = None,
+    ):
         self.part, self.objective, self.config = part, objective, config
         stat = objective.statistic
         self.weights = (tuple(stat.weights), stat.median_weight, stat.p75_weight)
-        cell = None if objective.cell.ideal else CellSetup.of(objective.cell, part)  # the cell's sources, scored by the surrogate too
-        self.surrogate = surrogate or Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective),
-                                                noise_band=max(objective.conditions.noise_scales),
-                                                mounting=objective.conditions.mounted, cell=cell)  # fmt: skip
+        cell = (
+            None if objective.cell.ideal else CellSetup.of(objective.cell, part)
+        )  # the cell's sources, scored by the surrogate too
+        self.surrogate = surrogate or Surrogate(
+            part,
+            voxel=objective.registration.voxel_size,
+            turns=protocol_turns(objective),
+            noise_band=max(objective.conditions.noise_scales),
+            mounting=objective.conditions.mounted,
+            cell=cell,
+        )
         self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
         self.collision = collision_model(part)
         corners = self.collision.sensor.head_box_corners()
         middle = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
-        self._head_sphere = (middle, float(np.linalg.norm(corners - middle, axis=1).max()))  # the head box's bounding sphere in S
+        self._head_sphere = (
+            middle,
+            float(np.linalg.norm(corners - middle, axis=1).max()),
+        )  # the head box's bounding sphere in S
         self._cache: dict = {} if cache is None else cache
-        if self.surrogate.cell is not None:  # a resumed cache holds no cell term (io.search does not save it): score those poses again
-            for key in [k for k, v in self._cache.items() if isinstance(v, SensorInfo) and v.cell is None and v.n_voxels]:
+        if (
+            self.surrogate.cell is not None
+        ):  # a resumed cache holds no cell term (io.search does not save it): score those poses again
+            for key in [
+                k for k, v in self._cache.items() if isinstance(v, SensorInfo) and v.cell is None and v.n_voxels
+            ]:
                 del self._cache[key]
         self._given: dict = {}  # u key → SensorInfo of a sensor scored as given (:meth:`info`)
-        self._subsets: dict = {} if subsets is None else subsets  # sensor subsets' predicted statistics (predicted_stats' memo)
+        self._subsets: dict = (
+            {} if subsets is None else subsets
+        )  # sensor subsets' predicted statistics (predicted_stats' memo)
         self._targets = dict(targets or {})
         # the objective's band (docs/conditions.md): every predicted statistic is the worst over it, brackets off by the tolerance
         band = objective.conditions
-        self.band = dict(noise_scales=band.noise_scales, mounting=(band.mounting_translation, band.mounting_rotation) if band.mounted else None)
+        self.band = dict(
+            noise_scales=band.noise_scales,
+            mounting=(band.mounting_translation, band.mounting_rotation) if band.mounted else None,
+        )
 
     def with_targets(self, targets: dict[int, np.ndarray]) -> "SurrogateProblem":
         """The same problem (surrogate, cache) measured against these per-axis targets."""
-        return SurrogateProblem(self.part, self.objective, self.config, self.surrogate, self._cache, targets, self._subsets)
+        return SurrogateProblem(
+            self.part, self.objective, self.config, self.surrogate, self._cache, targets, self._subsets
+        )
 
     @property
     def cache(self):
@@ -161,7 +190,9 @@ class SurrogateProblem:
         the shortfall: it is the baseline.
         """
         if not constrained:
-            stats = predicted_stats([self.info(u[6 * i : 6 * i + 6]) for i in range(len(u) // 6)], *self.weights, **self.band)
+            stats = predicted_stats(
+                [self.info(u[6 * i : 6 * i + 6]) for i in range(len(u) // 6)], *self.weights, **self.band
+            )
             return LayoutScore(stats.score, stats)
         k = len(u) // 6
         keys = [_key(u[6 * i : 6 * i + 6]) for i in range(k)]  # the cache's, and the subsets' memo's
@@ -206,5 +237,9 @@ class SurrogateProblem:
         margin, weights = self.config.hand_margin, self.weights[0]
         values, target = np.atleast_2d(stats.level_axis_score), np.atleast_2d(target)
         if len(target) != len(values):
-            raise ValueError(f"hand targets for {len(target)} noise level(s), the layout's for {len(values)}: give each level's (level_axis_score)")
-        return float(self.config.hand_weight * sum(weighted_excess(v, t, margin, weights) for v, t in zip(values, target)))
+            raise ValueError(
+                f"hand targets for {len(target)} noise level(s), the layout's for {len(values)}: give each level's (level_axis_score)"
+            )
+        return float(
+            self.config.hand_weight * sum(weighted_excess(v, t, margin, weights) for v, t in zip(values, target))
+        )

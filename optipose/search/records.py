@@ -174,5 +174,7 @@ class Validation:
         ks = sorted(self.found)
         top = max(ks, default=0)
         if 1 in self.found and top in self.hand and top > 1:
-            lines.append(one_versus_many(self.found[1], self.hand[top], "hand-placed" if reference == "hand" else reference))
+            lines.append(
+                one_versus_many(self.found[1], self.hand[top], "hand-placed" if reference == "hand" else reference)
+            )
         return lines

@@ -52,8 +52,17 @@ log = logging.getLogger(__name__)
 Pool = list[tuple[tuple, Found, object]]  # (rank, layout, its choice) of every ICP evaluation of a k
 
 
-def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateStudy, seed: int, per_k: int = 3,
-                     max_time: float = np.inf, on_stage=None, jobs: int = 1) -> tuple[dict[int, Found], list[IcpEvaluation]]:  # fmt: skip
+def select_finalists(
+    part,
+    objective,
+    outcome: SearchOutcome,
+    study: SurrogateStudy,
+    seed: int,
+    per_k: int = 3,
+    max_time: float = np.inf,
+    on_stage=None,
+    jobs: int = 1,
+) -> tuple[dict[int, Found], list[IcpEvaluation]]:
     """The finalist per k (``strategy`` tells where each came from) and one record per ICP evaluation.
 
     Every ICP run here uses the selection noise seed; the validation's seed stays unseen.
@@ -62,14 +71,24 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
     config = study.problem.config
     band = not objective.conditions.trivial
     finalists, records = {}, []
-    confirmer = Confirmer(part, stage_objective(objective, "confirmation"), selection_seed(seed), jobs) if config.confirm_candidates > 0 else None
-    with make_evaluator(part, stage_objective(objective, "selection"), seed=selection_seed(seed), jobs=jobs, quiet=True) as evaluator:
+    confirmer = (
+        Confirmer(part, stage_objective(objective, "confirmation"), selection_seed(seed), jobs)
+        if config.confirm_candidates > 0
+        else None
+    )
+    with make_evaluator(
+        part, stage_objective(objective, "selection"), seed=selection_seed(seed), jobs=jobs, quiet=True
+    ) as evaluator:
         hand = evaluator(baseline(part)) if baseline(part) is not None else None
         ks = sorted(outcome.found)
         for n, k in enumerate(ks):
             reference = _reference(k, hand, confirmer, records, on_stage)
-            deadline = time.monotonic() + max(0.0, end - time.monotonic()) / (len(ks) - n)  # a fair share of what is left
-            pool = _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage)
+            deadline = time.monotonic() + max(0.0, end - time.monotonic()) / (
+                len(ks) - n
+            )  # a fair share of what is left
+            pool = _screen_candidates(
+                part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage
+            )
             if not pool:
                 continue
             key, best, choice = min(pool, key=lambda t: _order(t, reference, band))
@@ -78,9 +97,15 @@ def select_finalists(part, objective, outcome: SearchOutcome, study: SurrogateSt
                 best, choice = _polish(study, part, evaluator, pool, best, reference, records, on_stage)
             # a polish minimised these very 14-scan statistics, so its winner's are biased low: after a
             # polish, always confirm
-            if confirmer is not None and reference is not None and (polished or not clear_win(choice, reference, config)):
+            if (
+                confirmer is not None
+                and reference is not None
+                and (polished or not clear_win(choice, reference, config))
+            ):
                 pool_layouts = [(kk, f) for kk, f, _ in pool]
-                best = confirmer.pick(k, pool_layouts, config.confirm_candidates, records, on_stage, closest(pool, reference))
+                best = confirmer.pick(
+                    k, pool_layouts, config.confirm_candidates, records, on_stage, closest(pool, reference)
+                )
             finalists[k] = best
     if confirmer is not None:
         confirmer.adopt_subsets(study.problem, finalists, records, on_stage)
@@ -109,7 +134,9 @@ def _reference(k: int, hand, confirmer: Confirmer | None, records: list[IcpEvalu
     return reference
 
 
-def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage) -> Pool:
+def _screen_candidates(
+    part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage
+) -> Pool:
     """Every candidate of k on the reduced protocol, until the time is up (the best hand-anchored one and the
     surrogate's best at least): first, under a band, k − 1 hand sensors with the sensor that makes each statistic
     hold best (:func:`optipose.search.candidates.maxmin_anchored`), then the hand layout's used sensors with
@@ -120,9 +147,18 @@ def _screen_candidates(part, study, outcome, k, per_k, finalists, evaluator, ref
         used = reference.used
         cfg = study.problem.config
         if not study.problem.objective.conditions.trivial:  # under a band: each statistic asked to hold, first
-            maxmin = maxmin_anchored(study.problem, baseline(part).poses, k, until=deadline)  # the clock only as a safety net
-        first = maxmin + anchored(study.problem, baseline(part).poses, used, outcome, k, evals=cfg.anchor_evals,
-                          until=time.monotonic() + (deadline - time.monotonic()) / 2)  # fmt: skip
+            maxmin = maxmin_anchored(
+                study.problem, baseline(part).poses, k, until=deadline
+            )  # the clock only as a safety net
+        first = maxmin + anchored(
+            study.problem,
+            baseline(part).poses,
+            used,
+            outcome,
+            k,
+            evals=cfg.anchor_evals,
+            until=time.monotonic() + (deadline - time.monotonic()) / 2,
+        )
     rest = candidates(study.problem, study.history, outcome, k, per_k, finalists)
     # whatever the clock says, the best hand-anchored layout and the surrogate's own best are evaluated: a
     # selection cut after the first of them would make the answer the machine's load, not the search's
@@ -150,11 +186,20 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
     if k == 1:  # a reference means the part has a hand layout
         starts += hand_start(study.problem, baseline(part), reference)
     # under a band each evaluation runs every condition: the polish gets as many conditions' worth of work
-    evals = (config.polish_evals if k == 1 else config.polish_evals // 2) // len(conditions(evaluator.objective.conditions))
+    evals = (config.polish_evals if k == 1 else config.polish_evals // 2) // len(
+        conditions(evaluator.objective.conditions)
+    )
     starts = starts[: evals // (6 * k + 2)]  # COBYLA needs 6k + 1 evaluations before its first step
     for start in starts:
         found, choice, polish_records = polish(
-            study.problem, evaluator, start, reference, config, evals // len(starts), config.polish_time / len(starts), on_stage
+            study.problem,
+            evaluator,
+            start,
+            reference,
+            config,
+            evals // len(starts),
+            config.polish_time / len(starts),
+            on_stage,
         )
         records += polish_records
         if found is not None:
@@ -167,7 +212,9 @@ def clear_win(choice, reference, config) -> bool:
     """The choice beats the reference with room to spare: every axis at most ``polish_margin`` × the
     reference's and the sum at most ``clear_ratio`` × its sum. A win that wide on a 14-scan sample needs
     no confirmation (unless a polish produced it); anything less does."""
-    return excess(choice, reference, config.polish_margin) == 0.0 and choice.score <= config.clear_ratio * reference.score
+    return (
+        excess(choice, reference, config.polish_margin) == 0.0 and choice.score <= config.clear_ratio * reference.score
+    )
 
 
 def closest(pool: Pool, reference) -> Found:

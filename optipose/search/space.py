@@ -98,7 +98,12 @@ class PoseSpace:
         """The 6 numbers in [0, 1] of a pose (clipped into the space when it lies outside)."""
         R, alpha, beta, psi = params_from_pose(T_O_S)
         turn = lambda angle, at_0: ((angle - at_0) % (2 * np.pi)) / (2 * np.pi)  # noqa: E731
-        u = np.concatenate([(R - self.lo) / (self.hi - self.lo), [alpha / self.alpha_max / 2 + 0.5, turn(beta, _BETA_AT_0), turn(psi, _PSI_AT_0)]])
+        u = np.concatenate(
+            [
+                (R - self.lo) / (self.hi - self.lo),
+                [alpha / self.alpha_max / 2 + 0.5, turn(beta, _BETA_AT_0), turn(psi, _PSI_AT_0)],
+            ]
+        )
         return np.clip(u, 0.0, 1.0)
 
     def to_poses(self, u: np.ndarray) -> list[np.ndarray]:

@@ -120,10 +120,15 @@ class SurrogateStudy:
         if result.feasible and value < self._best.get(k, (np.inf,))[0]:
             self._best[k] = (value, np.array(u, dtype=float))
         record = Evaluation(
-            number=len(self.history), stage=self._stage, k=k, u=tuple(np.round(np.asarray(u, float), 9).tolist()),
-            state=result.state, value=value, best=self._best.get(k, (np.nan,))[0],
+            number=len(self.history),
+            stage=self._stage,
+            k=k,
+            u=tuple(np.round(np.asarray(u, float), 9).tolist()),
+            state=result.state,
+            value=value,
+            best=self._best.get(k, (np.nan,))[0],
             constraint=result.constraint if result.state is EvalState.INFEASIBLE else "",
-        )  # fmt: skip
+        )
         self.history.append(record)
         for callback in self.callbacks:
             callback(record)

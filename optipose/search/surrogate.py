@@ -70,8 +70,15 @@ from optipose.search.mounting import mounting_maps, mounting_variance
 from optipose.transforms import part_motion
 
 __all__ = [
-    "Surrogate", "SensorInfo", "Prediction", "protocol_turns", "bias_rotation", "MEDIAN_PER_SIGMA", "P75_PER_SIGMA", "predicted_stats",
-]  # fmt: skip
+    "Surrogate",
+    "SensorInfo",
+    "Prediction",
+    "protocol_turns",
+    "bias_rotation",
+    "MEDIAN_PER_SIGMA",
+    "P75_PER_SIGMA",
+    "predicted_stats",
+]
 
 MEDIAN_PER_SIGMA = 0.6745  # median of |N(0, 1)|
 # Rays of one reduced scan at most: a part longer than about 300 mm (at the default 400 columns and twice
@@ -82,7 +89,9 @@ P75_PER_SIGMA = 1.1503  # 75th percentile of |N(0, 1)|
 _PRIOR_ROTATION = np.deg2rad(5.0)
 _PRIOR_TRANSLATION = 5e-3
 # ±2° about each axis, and the protocol's corners: the turns when no objective is given
-DEFAULT_TURNS = np.deg2rad([[2, 0, 0], [-2, 0, 0], [0, 2, 0], [0, -2, 0], [0, 0, 2], [0, 0, -2], [2, 2, 2], [-2, -2, -2]])
+DEFAULT_TURNS = np.deg2rad(
+    [[2, 0, 0], [-2, 0, 0], [0, 2, 0], [0, -2, 0], [0, 0, 2], [0, 0, -2], [2, 2, 2], [-2, -2, -2]]
+)
 
 
 def protocol_turns(objective, n: int = 8) -> np.ndarray:
@@ -130,16 +139,26 @@ class Surrogate:
     """
 
     def __init__(
-        self, part, voxel: float = 0.5e-3, columns: int = 400, step_factor: float = 2.0,
-        threads: int | None = 1, extra_variance: float = 0.0, turns: np.ndarray | None = None,
-        noise_band: float = 1.0, mounting: bool = True, cell=None,
-    ):  # fmt: skip
+        self,
+        part,
+        voxel: float = 0.5e-3,
+        columns: int = 400,
+        step_factor: float = 2.0,
+        threads: int | None = 1,
+        extra_variance: float = 0.0,
+        turns: np.ndarray | None = None,
+        noise_band: float = 1.0,
+        mounting: bool = True,
+        cell=None,
+    ):
         from optipose.model.sensor import load_sensor
 
         self.part = part
         self.full_sensor = load_sensor(part.sensor)
         sensor = replace(self.full_sensor, points_per_profile=min(columns, self.full_sensor.points_per_profile))
-        self.scanner = Scanner(part.mesh, sensor, part.material, threads=threads, occluders=getattr(part, "occluders", None))
+        self.scanner = Scanner(
+            part.mesh, sensor, part.material, threads=threads, occluders=getattr(part, "occluders", None)
+        )
         step = part.motion.step * step_factor
         profiles = max(1, SURROGATE_RAYS // sensor.points_per_profile)
         if ScanMotion(part.motion.length, step).n_profiles > profiles:  # a long part: as many rays as a 300 mm one
@@ -161,7 +180,9 @@ class Surrogate:
         self.mounting = bool(mounting)
         self.cell = None
         if cell is not None and not cell.ideal and len(self.motions):
-            self.cell = CellModel(cell, part.mesh.vertices, part.mesh.faces, self.centre, self.motion.offsets(), self.full_sensor.apex_z)
+            self.cell = CellModel(
+                cell, part.mesh.vertices, part.mesh.faces, self.centre, self.motion.offsets(), self.full_sensor.apex_z
+            )
         self._reference = None
 
     def ready(self) -> None:
@@ -169,7 +190,9 @@ class Surrogate:
         if self._reference is None and len(self.motions):
             from optipose.evaluate import shared
 
-            self._reference = shared.surface(self.part.mesh.vertices, self.part.mesh.faces)  # a search's one, when it holds it
+            self._reference = shared.surface(
+                self.part.mesh.vertices, self.part.mesh.faces
+            )  # a search's one, when it holds it
 
     def info(self, T_O_S: np.ndarray) -> SensorInfo:
         """Information matrix of one sensor pose from a noise-free nominal scan."""
@@ -188,7 +211,18 @@ class Surrogate:
         A, G, A_turns, N_turns, turned = self._bias(scan.points, T_O_S)
         noisy = self._noise_bias(scan, T_O_S, G) if G is not None and self.noise_band > 1.0 else None
         cell = None if self.cell is None else sensor_maps(self.cell, turned, T_O_S, float(np.mean(counts)) * self.scale)
-        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G, A_turns, N_turns, noisy, self.noise_band, cell)
+        return SensorInfo(
+            J.T @ J,
+            int(round(len(scan) * self.scale)),
+            len(first),
+            A,
+            G,
+            A_turns,
+            N_turns,
+            noisy,
+            self.noise_band,
+            cell,
+        )
 
     def _bias(self, points: np.ndarray, T_O_S: np.ndarray) -> tuple:
         """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and
@@ -317,9 +351,16 @@ class Prediction:
     score: float
 
 
-def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_weight=1.0, p75_weight=1.0,
-                    noise_scales: tuple[float, ...] = (1.0,), mounting: tuple[float, float] | None = None,
-                    memo: dict | None = None, keys: list | None = None) -> Prediction:  # fmt: skip
+def predicted_stats(
+    infos: list[SensorInfo],
+    weights=(1.0, 1.0, 1.0),
+    median_weight=1.0,
+    p75_weight=1.0,
+    noise_scales: tuple[float, ...] = (1.0,),
+    mounting: tuple[float, float] | None = None,
+    memo: dict | None = None,
+    keys: list | None = None,
+) -> Prediction:
     """The surrogate's Table 1 for a layout (:class:`Prediction`): every non-empty subset's predicted
     per-axis median and 75th percentile (degrees), each axis's best subset, its per-axis score and the
     weighted score of the per-axis best, and the same per noise level.
@@ -374,8 +415,14 @@ def predicted_stats(infos: list[SensorInfo], weights=(1.0, 1.0, 1.0), median_wei
     level_stats = np.array([[lv[s, :, a] for a, s in enumerate(_best_subsets(lv[:, 0], lv[:, 1]))] for lv in per_level])
     level_axis = median_weight * level_stats[:, :, 0] + p75_weight * level_stats[:, :, 1]
     return Prediction(
-        subsets=tuple(subsets), median_deg=median, p75_deg=p75, best_subset=tuple(subsets[s] for s in best),
-        axis_score=axis, level_axis_score=level_axis, level_axis_stats=level_stats, score=float(np.dot(weights, axis)),
+        subsets=tuple(subsets),
+        median_deg=median,
+        p75_deg=p75,
+        best_subset=tuple(subsets[s] for s in best),
+        axis_score=axis,
+        level_axis_score=level_axis,
+        level_axis_stats=level_stats,
+        score=float(np.dot(weights, axis)),
     )
 
 

@@ -27,7 +27,9 @@ __all__ = ["run_search", "best_hand_subsets"]
 log = logging.getLogger(__name__)
 
 
-def run_search(part, objective, config: SearchConfig, seed: int = 0, study: SurrogateStudy | None = None) -> SearchOutcome:
+def run_search(
+    part, objective, config: SearchConfig, seed: int = 0, study: SurrogateStudy | None = None
+) -> SearchOutcome:
     """Greedy then joint NLopt search for every k in ``config.sensors`` (see the module doc).
 
     study : the live search to record into (e.g. with a resumed cache and callbacks); default a new one.
@@ -49,17 +51,26 @@ def run_search(part, objective, config: SearchConfig, seed: int = 0, study: Surr
         unplaced = [k for k in ks if study.best(k) is None]
         cut = f", the clock having ended the surrogate's {', '.join(study.cut)}" if study.cut and unplaced else ""
         (log.warning if unplaced else log.info)(
-            "search stopped: %s%s", why, f"; no layout of {unplaced} sensor(s) yet{cut} (raise max_time)" if unplaced else ""
+            "search stopped: %s%s",
+            why,
+            f"; no layout of {unplaced} sensor(s) yet{cut} (raise max_time)" if unplaced else "",
         )
-    if study.cut and not unplaced:  # the layouts are then the machine's speed's as well as the seed's: say so where the user reads
-        log.warning("the clock ended the surrogate's %s before its evaluations: another run of this seed may place other "
-                    "sensors (a larger [search] max_time, with --search-config, gives the seed's own answer)", ", ".join(study.cut))
+    if (
+        study.cut and not unplaced
+    ):  # the layouts are then the machine's speed's as well as the seed's: say so where the user reads
+        log.warning(
+            "the clock ended the surrogate's %s before its evaluations: another run of this seed may place other "
+            "sensors (a larger [search] max_time, with --search-config, gives the seed's own answer)",
+            ", ".join(study.cut),
+        )
     found = {}
     for k in ks:
         options = [f for f in (greedy.get(k), joint.get(k), _as_found(study, k)) if f and f.stats]
         if options:
             found[k] = min(options, key=lambda f: f.score)
-    return SearchOutcome(found, greedy, joint, hand, study.history, study.interrupted, time.monotonic() - t0, tuple(study.cut))
+    return SearchOutcome(
+        found, greedy, joint, hand, study.history, study.interrupted, time.monotonic() - t0, tuple(study.cut)
+    )
 
 
 def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict) -> None:
@@ -100,9 +111,13 @@ def _scans(config: SearchConfig, k: int) -> int:
     ones are cached), a joint one all k; the screen's poses are the same at every k, so only k = 1 scans
     them. (Counting evaluations times k instead gave k = 1 a sixth of the default budget's clock, less than
     its 4,096 screen poses take: on a busy machine the clock, not the seed, decided B's k = 1.)"""
-    greedy = config.global_evals + config.local_evals + config.random_starts + config.screen_starts * config.screen_evals
+    greedy = (
+        config.global_evals + config.local_evals + config.random_starts + config.screen_starts * config.screen_evals
+    )
     greedy += config.screen_samples if k == 1 else 0
-    return (greedy if config.strategy in ("greedy", "both") or k == 1 else 0) + (k * config.joint_evals if k > 1 and config.strategy != "greedy" else 0)
+    return (greedy if config.strategy in ("greedy", "both") or k == 1 else 0) + (
+        k * config.joint_evals if k > 1 and config.strategy != "greedy" else 0
+    )
 
 
 def _found(study, k: int, stage: str, u: np.ndarray) -> Found:

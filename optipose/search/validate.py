@@ -48,8 +48,16 @@ class BaselineRun:
     this machine (:mod:`optipose.evaluate.shared`), mapped by the processes instead of built by each.
     """
 
-    def __init__(self, part, objective, seed: int, protocol: str = "full", last: bool = False, processes: int = 1,
-                 reference_dir: str | None = None):  # fmt: skip
+    def __init__(
+        self,
+        part,
+        objective,
+        seed: int,
+        protocol: str = "full",
+        last: bool = False,
+        processes: int = 1,
+        reference_dir: str | None = None,
+    ):
         import multiprocessing
         import pickle
 
@@ -64,7 +72,9 @@ class BaselineRun:
         self._part, self._seed, self._layout = part, validation_seed(seed), layout
         self._shares = _shares(self._conditions, processes)
         try:
-            the_part = pickle.dumps(part, protocol=pickle.HIGHEST_PROTOCOL)  # once, not once a process: a dense mesh takes seconds
+            the_part = pickle.dumps(
+                part, protocol=pickle.HIGHEST_PROTOCOL
+            )  # once, not once a process: a dense mesh takes seconds
             for under, scans in self._shares:
                 args = (the_part, objective, self._seed, layout, under, scans, reference_dir)
                 self._calls.append(Background(_evaluate, *args, nice=_LAST if last else _NICE))
@@ -83,8 +93,14 @@ class BaselineRun:
                     raws.setdefault(condition, []).append(raw)
             with Evaluator(self._part, self._objective, seed=self._seed, quiet=True) as evaluator:
                 each = [evaluator.result(self._layout, raws[c]) for c in self._conditions]
-            self._result = each[0] if self._objective.conditions.trivial else robust_result(list(zip(self._conditions, each)), self._objective)
-            for result in each:  # it ran quiet in its own process: say here what the validation's own evaluation would have said
+            self._result = (
+                each[0]
+                if self._objective.conditions.trivial
+                else robust_result(list(zip(self._conditions, each)), self._objective)
+            )
+            for (
+                result
+            ) in each:  # it ran quiet in its own process: say here what the validation's own evaluation would have said
                 log_failures(result.per_scan, what="hand layout: ")
         except WorkerError as exc:  # the validation evaluates the hand layout itself instead
             log.warning("the hand layout's evaluation beside the search failed (%s); evaluating it again", exc)
@@ -120,17 +136,29 @@ def _shares(conditions: list, processes: int) -> list[tuple[list, tuple[int, int
     return [(list(conditions), (i, n)) for i in range(n)]
 
 
-def _evaluate(part: bytes, objective, seed: int, layout, under: list, scans: tuple[int, int], reference_dir: str | None) -> list:
+def _evaluate(
+    part: bytes, objective, seed: int, layout, under: list, scans: tuple[int, int], reference_dir: str | None
+) -> list:
     """The hand layout's raw evaluation under some conditions, on some of its scans (``scans``: first,
     every), in a process of its own; ``part`` pickled."""
     import pickle
 
-    with Evaluator(pickle.loads(part), objective, seed=seed, jobs=1, quiet=True, reference_dir=reference_dir) as evaluator:
+    with Evaluator(
+        pickle.loads(part), objective, seed=seed, jobs=1, quiet=True, reference_dir=reference_dir
+    ) as evaluator:
         return evaluator.raw(layout, under, scans)
 
 
-def validate(part, objective, layouts: dict[int, Layout], seed: int, jobs: int = 1, protocol: str = "full",
-             on_evaluation=None, hand_run=None) -> Validation:  # fmt: skip
+def validate(
+    part,
+    objective,
+    layouts: dict[int, Layout],
+    seed: int,
+    jobs: int = 1,
+    protocol: str = "full",
+    on_evaluation=None,
+    hand_run=None,
+) -> Validation:
     """Evaluate ``layouts`` (k → found layout) and the part's hand layout on the held-out seed of ``seed``.
 
     on_evaluation(name, result) : told of each evaluation as it ends (``found_k3``, ``hand``), so it can
@@ -179,7 +207,9 @@ def indices_in(layout: Layout, big: Layout) -> list[int]:
     return [next(i for i, P in enumerate(big.poses) if np.allclose(T, P)) for T in layout.poses]
 
 
-def hand_where_better(layouts: dict[int, Layout], validation: Validation, hand: Layout) -> tuple[dict[int, Layout], Validation]:
+def hand_where_better(
+    layouts: dict[int, Layout], validation: Validation, hand: Layout
+) -> tuple[dict[int, Layout], Validation]:
     """In a real cell, the search's answer for each k whose found layout the baseline's choice of k sensors beat on
     the validation's draw (a lower score): that choice's own sensors (the baseline's names and poses, in a layout
     ``found_k<k>``), with the baseline's choice restated in it (the inputs themselves where no k is replaced).
@@ -197,8 +227,13 @@ def hand_where_better(layouts: dict[int, Layout], validation: Validation, hand: 
         why = f"{hand.name}'s {h.name}: no found layout of {k} sensor{'s' * (k > 1)} beat it on the validation's draw"
         out[k] = Layout(tuple(hand.sensors[i] for i in h.sensors), name=f"found_k{k}", description=why)
         found[k] = _restated(h, hand, out[k])
-        log.info("k=%d: %s (%.3f deg) beat the found layout (%.3f deg) on the validation's draw: the search answers with it",
-                 k, h.name, np.rad2deg(h.score), np.rad2deg(f.score))  # fmt: skip
+        log.info(
+            "k=%d: %s (%.3f deg) beat the found layout (%.3f deg) on the validation's draw: the search answers with it",
+            k,
+            h.name,
+            np.rad2deg(h.score),
+            np.rad2deg(f.score),
+        )
     if not replaced:
         return layouts, validation
     # a choice names the sensors of its group's largest layout, which may have been replaced
@@ -211,10 +246,16 @@ def hand_where_better(layouts: dict[int, Layout], validation: Validation, hand: 
 
 def _restated(choice, old: Layout, new: Layout):
     """``choice`` (sensor indices and names of ``old``) restated in ``new``, which holds the sensors it uses (by pose)."""
-    at = {i: indices_in(Layout((old.sensors[i],)), new)[0] for i in {*choice.sensors, *(i for a in choice.axes for i in a.subset)}}
+    at = {
+        i: indices_in(Layout((old.sensors[i],)), new)[0]
+        for i in {*choice.sensors, *(i for a in choice.axes for i in a.subset)}
+    }
 
     def name(indices) -> str:
         return "".join(new.names[j] for j in sorted(at[i] for i in indices))
 
-    axes = tuple(replace(a, subset=tuple(sorted(at[i] for i in a.subset)), name=name(a.subset) if a.subset else a.name) for a in choice.axes)
+    axes = tuple(
+        replace(a, subset=tuple(sorted(at[i] for i in a.subset)), name=name(a.subset) if a.subset else a.name)
+        for a in choice.axes
+    )
     return replace(choice, sensors=tuple(sorted(at[i] for i in choice.sensors)), name=name(choice.sensors), axes=axes)

@@ -57,8 +57,17 @@ def choice_draw_counts(objective) -> bool:
     return objective.cell.ideal
 
 
-def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: Validation, first: dict[str, EvaluationResult],
-                       seed: int, config, jobs: int = 1, on_draw=None) -> dict:  # fmt: skip
+def confident_verdicts(
+    part,
+    objective,
+    layouts: dict[int, Layout],
+    validation: Validation,
+    first: dict[str, EvaluationResult],
+    seed: int,
+    config,
+    jobs: int = 1,
+    on_draw=None,
+) -> dict:
     """k → the confident verdict of ``layouts[k]`` against the part's baseline layout, and under ``FEWER``
     one found sensor against the baseline's largest choice (on the same draws, without holding the race:
     :data:`~optipose.evaluate.confidence.FEWER`).
@@ -79,12 +88,25 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
     if hand is None or not ks or not objective.conditions.trivial or missing:
         return {}
-    rules = Rules(tolerance=config.verdict_tolerance, failures=config.verdict_failures, confidence=config.verdict_confidence,
-                  seed=int(seed), statistic=objective.statistic)
+    rules = Rules(
+        tolerance=config.verdict_tolerance,
+        failures=config.verdict_failures,
+        confidence=config.verdict_confidence,
+        seed=int(seed),
+        statistic=objective.statistic,
+    )
     label = baseline_label(hand)
-    labels = {k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True) if k in kept
-              else dict(k=k, found_name=_found_name(layouts[k], choice, evaluated[name]), hand_name=validation.hand[k].name, reference=label)
-              for k, (name, choice) in side.items()}  # fmt: skip
+    labels = {
+        k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True)
+        if k in kept
+        else dict(
+            k=k,
+            found_name=_found_name(layouts[k], choice, evaluated[name]),
+            hand_name=validation.hand[k].name,
+            reference=label,
+        )
+        for k, (name, choice) in side.items()
+    }
     done = on_draw or (lambda i, name, result: None)
 
     top = max(validation.hand)
@@ -93,12 +115,17 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
         labels[FEWER] = dict(labels[1], hand_name=validation.hand[top].name, hand_k=top)
 
     def pairs(results: dict[str, EvaluationResult]) -> dict:
-        return {key: paired_draw(results[side[f][0]], side[f][1], results["hand"], validation.hand[h])
-                for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items() if side[f][0] in results}  # fmt: skip
+        return {
+            key: paired_draw(results[side[f][0]], side[f][1], results["hand"], validation.hand[h])
+            for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items()
+            if side[f][0] in results
+        }
 
     draws = {k: [p] for k, p in pairs(first).items()} if counted else None
     if counted and config.verdict_draws <= 1:
-        return race_many(lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer))
+        return race_many(
+            lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer)
+        )
     executor = make_executor(jobs)
 
     # a draw registers only the subsets the choices use (of the 2^n - 1 a layout has)
@@ -109,7 +136,9 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
         t0, i = time.perf_counter(), n + (not counted)  # draw i's seed and folder: 0 is the validation's
         # a decided k's layout is not evaluated again
         wanted = [name for name in evaluated if keys is None or any(side[k][0] == name for k in keys if k in side)]
-        with Evaluator(part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans) as evaluator:
+        with Evaluator(
+            part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans
+        ) as evaluator:
             results = {"hand": evaluator(hand, subsets=used["hand"])}
             results |= {name: evaluator(evaluated[name], subsets=used[name]) for name in wanted}
         for name, result in results.items():
@@ -122,8 +151,16 @@ def confident_verdicts(part, objective, layouts: dict[int, Layout], validation: 
     riders = frozenset(fewer) | (frozenset(kept) if kept != set(ks) else frozenset())
     try:
         seconds = config.verdict_time if config.verdict_time > 0 else math.inf
-        return race_many(next_draws, rules, min_draws=config.verdict_draws if kept == set(ks) else first_look(objective),
-                         max_draws=config.verdict_draws, seconds=seconds, draws=draws, names=labels, passengers=riders)  # fmt: skip
+        return race_many(
+            next_draws,
+            rules,
+            min_draws=config.verdict_draws if kept == set(ks) else first_look(objective),
+            max_draws=config.verdict_draws,
+            seconds=seconds,
+            draws=draws,
+            names=labels,
+            passengers=riders,
+        )
     finally:
         executor.close()
 
@@ -157,4 +194,4 @@ def _found_name(layout: Layout, choice, big: Layout) -> str:
 def _natural(name: str) -> tuple:
     """``F10`` after ``F9``: a name's letters, then its number."""
     head = name.rstrip(string.digits)
-    return (head, int(name[len(head):] or 0))
+    return (head, int(name[len(head) :] or 0))

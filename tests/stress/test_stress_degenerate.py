@@ -37,7 +37,9 @@ def _seen_from_above(mesh, tmp_path, name, sidecar=False):
     mesh.export(tmp_path / f"{name}.stl")
     if sidecar:
         rows = ", ".join(str(list(row)) for row in down.tolist())
-        (tmp_path / f"{name}.toml").write_text(f'[part]\nunits = "m"\n[[layouts.hand.sensors]]\nname = "S2"\nT_O_S = [{rows}]\n')
+        (tmp_path / f"{name}.toml").write_text(
+            f'[part]\nunits = "m"\n[[layouts.hand.sensors]]\nname = "S2"\nT_O_S = [{rows}]\n'
+        )
     part = load_part(tmp_path / f"{name}.stl", units="m")
     assert ("hand" if sidecar else CONVENTIONAL) in part.layouts  # every bare STL gets a baseline, flat ones included
     with Evaluator(part, _short(), seed=1) as evaluator:
@@ -56,7 +58,9 @@ def _max_deg(per_scan, axis) -> float:
 
 FLAT = {
     # two triangles of zero thickness (its convex hull is flat: loading it crashed in trimesh before)
-    "plane": lambda: trimesh.Trimesh([[-15e-3, -15e-3, 0], [15e-3, -15e-3, 0], [15e-3, 15e-3, 0], [-15e-3, 15e-3, 0]], [[0, 1, 2], [0, 2, 3]]),
+    "plane": lambda: trimesh.Trimesh(
+        [[-15e-3, -15e-3, 0], [15e-3, -15e-3, 0], [15e-3, 15e-3, 0], [-15e-3, 15e-3, 0]], [[0, 1, 2], [0, 2, 3]]
+    ),
     # 300 mm across the 35 mm laser line: the line never reaches an edge
     "plate_300mm": lambda: trimesh.creation.box((0.04, 0.3, 0.005)),
 }
@@ -76,7 +80,9 @@ def test_a_flat_face_shows_its_tilt_and_nothing_else(name, tmp_path):
 
 def test_a_smooth_cylinder_along_the_motion_hides_its_roll(tmp_path):
     # 2048 facets: turning about its own axis (the rotation centre's x line) changes nothing the scan sees
-    per_scan, choice = _seen_from_above(trimesh.creation.cylinder(0.01, 0.04, sections=2048, transform=ALONG_X), tmp_path, "cyl", sidecar=True)
+    per_scan, choice = _seen_from_above(
+        trimesh.creation.cylinder(0.01, 0.04, sections=2048, transform=ALONG_X), tmp_path, "cyl", sidecar=True
+    )
     assert _blind(per_scan, ("roll",))
     assert not per_scan[["unobservable_pitch", "unobservable_yaw"]].any().any()
     assert _max_deg(per_scan, "pitch") < 0.001 and _max_deg(per_scan, "yaw") < 0.001
@@ -86,7 +92,9 @@ def test_a_smooth_cylinder_along_the_motion_hides_its_roll(tmp_path):
 def test_a_faceted_cylinder_does_not_report_its_roll_as_a_small_error(tmp_path):
     # 128 facets (2.8° each) make roll weakly observable (H's roll eigenvalue ~1e-4 of the largest, over the
     # 1e-6 tolerance), and the ICP can lock onto a neighbouring facet: the roll it reports must show that
-    per_scan, choice = _seen_from_above(trimesh.creation.cylinder(0.01, 0.04, sections=128, transform=ALONG_X), tmp_path, "cyl128")
+    per_scan, choice = _seen_from_above(
+        trimesh.creation.cylinder(0.01, 0.04, sections=128, transform=ALONG_X), tmp_path, "cyl128"
+    )
     roll = choice.axes[0]
     assert not roll.observable or np.rad2deg(roll.p75) > 0.5
     assert _max_deg(per_scan, "pitch") < 0.001 and _max_deg(per_scan, "yaw") < 0.001
@@ -108,7 +116,9 @@ def test_a_thin_sheet_turned_past_its_thickness_registers_wrong_and_says_so(tmp_
 def test_a_faceted_sphere_pins_its_centre(tmp_path):
     # 5120 facets: the centre is fixed by the surface (translations to a few µm); rotations about it are
     # seen only through the facets, and whatever is reported for them stays within a facet's reach
-    per_scan, _ = _seen_from_above(trimesh.creation.icosphere(subdivisions=4, radius=0.015), tmp_path, "sphere", sidecar=True)
+    per_scan, _ = _seen_from_above(
+        trimesh.creation.icosphere(subdivisions=4, radius=0.015), tmp_path, "sphere", sidecar=True
+    )
     assert not per_scan[["unobservable_x", "unobservable_y", "unobservable_z"]].any().any()
     assert per_scan[["err_x", "err_y", "err_z"]].abs().max().max() < 5e-6
     for axis in ROTATIONS:
@@ -127,14 +137,34 @@ def test_the_search_says_when_no_layout_of_k_sensors_observes_an_axis(tmp_path):
     (tmp_path / "small.toml").write_text(SMALL_SEARCH)
     (tmp_path / "short.toml").write_text(SHORT)
     out = tmp_path / "searched"
-    result = run("search", str(tmp_path / "plane.stl"), "--units", "m", "--sensors", "1", "--search-config", str(tmp_path / "small.toml"),
-                 "--objective", str(tmp_path / "short.toml"), "--seed", "4", "--out", str(out), "--no-report")  # fmt: skip
+    result = run(
+        "search",
+        str(tmp_path / "plane.stl"),
+        "--units",
+        "m",
+        "--sensors",
+        "1",
+        "--search-config",
+        str(tmp_path / "small.toml"),
+        "--objective",
+        str(tmp_path / "short.toml"),
+        "--seed",
+        "4",
+        "--out",
+        str(out),
+        "--no-report",
+    )
     assert result.returncode == 0, result.stderr
     said = " ".join(result.stdout.split())  # the terminal's 80 columns fold the line
-    assert "k=1: yaw unobservable: no layout of 1 sensor the search found observes it; conventional S2 does not either" in said
+    assert (
+        "k=1: yaw unobservable: no layout of 1 sensor the search found observes it; conventional S2 does not either"
+        in said
+    )
     found = load_result(out).validation.found[1]
     assert [a.label for a in found.axes] == ["F1", "F1", "unobservable"] and np.isnan(found.axes[2].median)
-    assert any(line.startswith("k=1: yaw unobservable") for line in load_result(out).verdict_lines())  # the report's lines too
+    assert any(
+        line.startswith("k=1: yaw unobservable") for line in load_result(out).verdict_lines()
+    )  # the report's lines too
 
 
 def test_an_unmeasured_axis_compares_as_the_penalty_not_as_nan():
@@ -142,7 +172,11 @@ def test_an_unmeasured_axis_compares_as_the_penalty_not_as_nan():
     from optipose.evaluate.compare import Verdict, dominates, excess, unmeasured_line
 
     def choice(name, yaw_reason=""):
-        yaw = AxisChoice("yaw", (), "", float("nan"), float("nan"), yaw_reason) if yaw_reason else AxisChoice("yaw", (0,), name, 2e-6, 3e-6)
+        yaw = (
+            AxisChoice("yaw", (), "", float("nan"), float("nan"), yaw_reason)
+            if yaw_reason
+            else AxisChoice("yaw", (0,), name, 2e-6, 3e-6)
+        )
         axes = (AxisChoice("roll", (0,), name, 1e-6, 2e-6), AxisChoice("pitch", (0,), name, 1e-6, 2e-6), yaw)
         return Choice(1, (0,), name, axes, 0.0)
 
@@ -152,6 +186,10 @@ def test_an_unmeasured_axis_compares_as_the_penalty_not_as_nan():
     assert excess(blind, seeing) == pytest.approx(2 * np.deg2rad(10.0) - 5e-6)
     assert [(g.axis, g.statistic) for g in Verdict(1, blind, seeing).worse] == [("yaw", "median"), ("yaw", "p75")]
     assert unmeasured_line(1, seeing, blind) == ""
-    assert unmeasured_line(1, blind, seeing) == ("k=1: yaw unobservable: no layout of 1 sensor the search found observes it; "
-                                                 "hand S2 measures yaw (the error is unknown, not small)")  # fmt: skip
-    assert unmeasured_line(2, failing, None).startswith("k=2: yaw not measured: the registrations of found F1 that observe it failed")
+    assert unmeasured_line(1, blind, seeing) == (
+        "k=1: yaw unobservable: no layout of 1 sensor the search found observes it; "
+        "hand S2 measures yaw (the error is unknown, not small)"
+    )
+    assert unmeasured_line(2, failing, None).startswith(
+        "k=2: yaw not measured: the registrations of found F1 that observe it failed"
+    )

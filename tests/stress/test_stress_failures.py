@@ -31,8 +31,15 @@ def _per_scan(errors_urad: np.ndarray, failed: set[int]) -> pd.DataFrame:
     rows = []
     for i, e in enumerate(errors_urad):
         ok = i not in failed
-        rows.append({"scan": i, "subset": "S1", "ok": ok, **{f"err_{a}": (1e-6 * e if ok else np.nan) for a in AXES},
-                     **{f"unobservable_{a}": False for a in AXES}})  # fmt: skip
+        rows.append(
+            {
+                "scan": i,
+                "subset": "S1",
+                "ok": ok,
+                **{f"err_{a}": (1e-6 * e if ok else np.nan) for a in AXES},
+                **{f"unobservable_{a}": False for a in AXES},
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -51,17 +58,23 @@ def test_a_layout_whose_registrations_fail_loses_to_an_equal_one_that_does_not()
     # the median (ranks 9, 10) stays (10 + 11) / 2; the p75 (rank 14.25) goes from 15.25 to 17.25 µrad
     roll = failing_stats.set_index("axis").loc["roll"]
     assert roll["median"] == pytest.approx(10.5e-6) and roll["p75"] == pytest.approx(17.25e-6)
-    assert roll["mean"] == pytest.approx(survivors.mean() * 1e-6) and roll["max"] == pytest.approx(20e-6)  # the converged ones
+    assert roll["mean"] == pytest.approx(survivors.mean() * 1e-6) and roll["max"] == pytest.approx(
+        20e-6
+    )  # the converged ones
     assert roll.n_failed == 2 and all(a.observable for a in failing.axes)  # eligible, and
     assert failing.score > sound.score  # it loses: 3 × (10.5 + 17.25) µrad against 3 × (10.5 + 15.25)
-    assert failing.score == pytest.approx(3 * (10.5 + 17.25) * 1e-6) and sound.score == pytest.approx(3 * (10.5 + 15.25) * 1e-6)
+    assert failing.score == pytest.approx(3 * (10.5 + 17.25) * 1e-6) and sound.score == pytest.approx(
+        3 * (10.5 + 15.25) * 1e-6
+    )
 
 
 def test_with_no_failure_the_order_statistics_are_the_measured_ones():
     errors = np.random.default_rng(3).exponential(5.0, 77)
     stats = summarize(_per_scan(errors, set())).set_index("axis")
     for axis in AXES:
-        assert stats.loc[axis, "median"] == np.median(errors * 1e-6) and stats.loc[axis, "p75"] == np.percentile(errors * 1e-6, 75)
+        assert stats.loc[axis, "median"] == np.median(errors * 1e-6) and stats.loc[axis, "p75"] == np.percentile(
+            errors * 1e-6, 75
+        )
 
 
 def test_an_axis_without_a_subset_says_why():
@@ -83,12 +96,28 @@ def test_the_cli_table_the_saved_result_and_the_report_say_registrations_failed(
 
     (tmp_path / "capped.toml").write_text(CAPPED)
     out = tmp_path / "capped"
-    result = run("evaluate", "part_b", "--objective", str(tmp_path / "capped.toml"), "--seed", "2", "--out", str(out), "--no-report")
+    result = run(
+        "evaluate",
+        "part_b",
+        "--objective",
+        str(tmp_path / "capped.toml"),
+        "--seed",
+        "2",
+        "--out",
+        str(out),
+        "--no-report",
+    )
     assert result.returncode == 0, result.stderr
     # a cell of 3 k × 3 axes each (an 80-column table wraps the words)
-    assert result.stdout.count("registrations") == 9 and result.stdout.count("failed") == 9 and "unobservable" not in result.stdout
+    assert (
+        result.stdout.count("registrations") == 9
+        and result.stdout.count("failed") == 9
+        and "unobservable" not in result.stdout
+    )
     loaded = load_result(out)
     assert all(a.reason == FAILED for c in loaded.table for a in c.axes)
-    assert (pd.read_csv(out / "table1.csv")["roll_subset"].isna()).all()  # no subset in the CSV; the reason comes from stats.csv
+    assert (
+        pd.read_csv(out / "table1.csv")["roll_subset"].isna()
+    ).all()  # no subset in the CSV; the reason comes from stats.csv
     markdown = render_markdown(*build_blocks(out, views=False), "figures")
     assert "registrations failed" in markdown and "unobservable" not in markdown

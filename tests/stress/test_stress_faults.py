@@ -92,7 +92,18 @@ def _check_whole(folder: Path, complete: Path) -> list[str]:
 def test_an_evaluation_killed_part_way_leaves_only_whole_files(files, complete, kill_when):
     # SIGKILL the moment `kill_when` appears: writing the tables, starting the report, writing its figures
     out = files / f"killed-{kill_when}"
-    args = ["-m", "optipose", "evaluate", "part_b", "--objective", str(files / "short.toml"), "--seed", "5", "--out", str(out)]
+    args = [
+        "-m",
+        "optipose",
+        "evaluate",
+        "part_b",
+        "--objective",
+        str(files / "short.toml"),
+        "--seed",
+        "5",
+        "--out",
+        str(out),
+    ]
     process = subprocess.Popen([sys.executable, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 120
@@ -112,12 +123,33 @@ def test_an_evaluation_killed_part_way_leaves_only_whole_files(files, complete, 
 
 def test_a_full_disk_is_one_line_and_keeps_what_was_written(files, complete):
     out = files / "full"
-    result = subprocess.run([sys.executable, str(files / "full_disk.py"), "table1.csv", "evaluate", "part_b", "--objective",
-                             str(files / "short.toml"), "--seed", "5", "--out", str(out), "--no-report"],
-                            capture_output=True, text=True, timeout=120)  # fmt: skip
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(files / "full_disk.py"),
+            "table1.csv",
+            "evaluate",
+            "part_b",
+            "--objective",
+            str(files / "short.toml"),
+            "--seed",
+            "5",
+            "--out",
+            str(out),
+            "--no-report",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert_one_line_error(result, f"No space left on device: {out / 'table1.csv'}")
     present = sorted(p.name for p in out.iterdir())
-    assert present == ["per_scan.csv", "per_scan.parquet", "points.csv", "stats.csv"]  # no half table1.csv, no temporary file
+    assert present == [
+        "per_scan.csv",
+        "per_scan.parquet",
+        "points.csv",
+        "stats.csv",
+    ]  # no half table1.csv, no temporary file
     _check_whole(out, complete)
 
 
@@ -127,7 +159,9 @@ def test_a_failed_write_keeps_the_file_it_would_have_replaced(tmp_path, monkeypa
     from optipose.search.records import EvalState, Evaluation
 
     folder = SearchFolder(tmp_path)
-    history = [Evaluation(i, "greedy k=1", 1, (0.5,) * 6, EvalState.FEASIBLE, 1.0 / (i + 1), 1.0 / (i + 1)) for i in range(3)]
+    history = [
+        Evaluation(i, "greedy k=1", 1, (0.5,) * 6, EvalState.FEASIBLE, 1.0 / (i + 1), 1.0 / (i + 1)) for i in range(3)
+    ]
     cache = {(0.5,) * 6: Violation("clearance", 0.25)}
     folder.flush(history, cache, 2)
     before = {name: (tmp_path / name).read_bytes() for name in ("history.csv", "cache.npz")}
@@ -160,7 +194,9 @@ def search_config(tmp_path_factory) -> dict:
     from optipose.search.config import config_from_budget
 
     folder = tmp_path_factory.mktemp("search_config")
-    SearchFolder(folder).start(load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1)
+    SearchFolder(folder).start(
+        load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1
+    )
     return tomllib.loads((folder / "config.toml").read_text())
 
 
@@ -182,7 +218,12 @@ def test_a_search_folder_of_this_version_is_resumable(search_config, tmp_path):
 
     assert search_config["format"] == RESULT_FORMAT and search_config["command"] == "search"
     part, config, budget, seed, objective, units = _resumed_settings(_search_folder(tmp_path, "ok", search_config))
-    assert part.endswith("part_b/part.toml") and (config.sensors, budget, seed, objective.name) == ((1,), "quick", 0, "paper")
+    assert part.endswith("part_b/part.toml") and (config.sensors, budget, seed, objective.name) == (
+        (1,),
+        "quick",
+        0,
+        "paper",
+    )
     assert units is None  # loaded without --units
 
 
@@ -208,7 +249,10 @@ def _older(table: dict, **changes) -> dict:
         ("newer", "written by another optipose (optipose 0.1.0, result format 99)"),
         ("older_unknown_key", "cannot be resumed by this version: unknown search setting(s) retired_knob"),
         ("older_no_objective", "cannot be resumed by this version: no 'objective_file' in it"),
-        ("older_bad_objective", "cannot be resumed by this version: objective [registration]: max_iterations must be a number"),
+        (
+            "older_bad_objective",
+            "cannot be resumed by this version: objective [registration]: max_iterations must be a number",
+        ),
     ],
 )
 def test_resume_of_a_folder_it_cannot_take_is_one_line(search_config, tmp_path, case, fragment):
@@ -220,8 +264,10 @@ def test_resume_of_a_folder_it_cannot_take_is_one_line(search_config, tmp_path, 
         "newer": {"table": {**search_config, "format": 99}},
         "older_unknown_key": {"table": _older(search_config, search={**search_config["search"], "retired_knob": 3})},
         "older_no_objective": {"table": _older(search_config, objective_file=None)},
-        "older_bad_objective": {"table": _older(search_config, objective_file='[registration]\nmax_iterations = "many"\n')},
-    }  # fmt: skip
+        "older_bad_objective": {
+            "table": _older(search_config, objective_file='[registration]\nmax_iterations = "many"\n')
+        },
+    }
     if case == "a_file":
         target = tmp_path / "a_file"
         target.write_text("not a folder\n")
@@ -232,8 +278,24 @@ def test_resume_of_a_folder_it_cannot_take_is_one_line(search_config, tmp_path, 
 
 # -- a killed search --------------------------------------------------------------------------------------
 def _search(files: Path, out: Path, *more: str) -> list[str]:
-    return ["-m", "optipose", "search", "part_b", "--sensors", "1", "--search-config", str(files / "small_search.toml"),
-            "--objective", str(files / "short.toml"), "--seed", "4", "--out", str(out), "--no-report", *more]  # fmt: skip
+    return [
+        "-m",
+        "optipose",
+        "search",
+        "part_b",
+        "--sensors",
+        "1",
+        "--search-config",
+        str(files / "small_search.toml"),
+        "--objective",
+        str(files / "short.toml"),
+        "--seed",
+        "4",
+        "--out",
+        str(out),
+        "--no-report",
+        *more,
+    ]
 
 
 @pytest.mark.slow
@@ -245,7 +307,9 @@ def test_a_search_killed_part_way_resumes_to_the_uninterrupted_result(files):
     whole, killed = files / "search_whole", files / "search_killed"
     done = subprocess.run([sys.executable, *_search(files, whole)], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
-    process = subprocess.Popen([sys.executable, *_search(files, killed)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    process = subprocess.Popen(
+        [sys.executable, *_search(files, killed)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     try:
         while not (killed / "history.csv").exists() and process.poll() is None:
             time.sleep(0.001)

@@ -56,7 +56,9 @@ def test_scan_hits_match_a_float64_intersection(shift_m, bound_m):
     points, exact, face, face64 = scan_against_float64(np.full(3, shift_m))
     assert len(points) > 1000 and np.all(face64 >= 0)  # every measured ray hits the sphere in float64 too
     error = np.linalg.norm(points - exact, axis=1)
-    print(f"shift {shift_m} m: {len(points)} hits, {np.mean(face != face64):.2%} on another face, max error {error.max():.3g} m")
+    print(
+        f"shift {shift_m} m: {len(points)} hits, {np.mean(face != face64):.2%} on another face, max error {error.max():.3g} m"
+    )
     # near O the faces Embree names are the float64 ones and the hits are exact; at 10 m Embree's
     # float32 (an ulp of 10 m is ~1 µm) can name a neighbouring facet near an edge, whose plane is
     # micrometres off there: that, not the distance along the ray, is what float32 costs

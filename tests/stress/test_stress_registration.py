@@ -29,7 +29,9 @@ def _at(offset_deg: float, max_iterations: int = 100):
     objective = load_objective("paper").in_cell("ideal")
     start, stop = -np.deg2rad(offset_deg), np.deg2rad(offset_deg)
     protocol = replace(objective.protocol, sequences=("R", "P", "Y", "RPY"), start=start, stop=stop, step=stop - start)
-    return replace(objective, protocol=protocol, registration=replace(objective.registration, max_iterations=max_iterations))
+    return replace(
+        objective, protocol=protocol, registration=replace(objective.registration, max_iterations=max_iterations)
+    )
 
 
 def test_ten_degree_offsets_are_recovered(part_b):
@@ -61,7 +63,9 @@ def test_registrations_cut_short_are_counted_not_dropped(part_b):
         assert row.n_ok + row.n_failed == 8 and row.n_failed == (~rows["ok"]).sum()
         ok = rows.loc[rows["ok"], f"err_{axis}"].abs()
         ranked = np.concatenate([ok, np.full(row.n_failed, np.deg2rad(10.0))])  # a failure: a 10° error
-        assert row["median"] == pytest.approx(np.median(ranked), rel=1e-12) and row["p75"] == pytest.approx(np.percentile(ranked, 75), rel=1e-12)
+        assert row["median"] == pytest.approx(np.median(ranked), rel=1e-12) and row["p75"] == pytest.approx(
+            np.percentile(ranked, 75), rel=1e-12
+        )
         assert (np.isnan(row["max"]) and ok.empty) or row["max"] == ok.max()  # mean and max: the converged ones
     # Table 1 takes no subset that failed in more than a tenth of the scans, and says that is why
     too_many = set(stats.loc[stats["n_failed"] > MAX_FAILED_FRACTION * 8, "subset"])
@@ -76,7 +80,9 @@ def test_registrations_cut_short_are_counted_not_dropped(part_b):
 def s1_cloud(part_b):
     """Part B turned 2° in roll, seen by the hand layout's S1, down-sampled as the evaluator does."""
     cfg = load_objective("paper").in_cell("ideal").registration
-    scan = part_scanner(part_b).scan(part_b.layouts["hand"].poses[0], part_b.motion, PartPose(np.deg2rad([2, 0, 0]), part_b.rotation_centre))
+    scan = part_scanner(part_b).scan(
+        part_b.layouts["hand"].poses[0], part_b.motion, PartPose(np.deg2rad([2, 0, 0]), part_b.rotation_centre)
+    )
     return voxel_down(scan.points, cfg.voxel_size), cfg
 
 

@@ -37,8 +37,9 @@ def _evaluate(part, mesh, objective, jobs):
 
 def test_part_b_split_at_its_centroids_gives_the_same_table_on_a_short_protocol():
     """Part B, 1,596 triangles against 4,788 (the same surface), on 9 orientations of the paper's range."""
-    objective = objective_from_table({"protocol": {"sequences": ["RP", "PY", "RPY"], "start_deg": -2.0, "stop_deg": 2.0,
-                                                   "step_deg": 2.0}})  # fmt: skip
+    objective = objective_from_table(
+        {"protocol": {"sequences": ["RP", "PY", "RPY"], "start_deg": -2.0, "stop_deg": 2.0, "step_deg": 2.0}}
+    )
     part = load_part("part_b")
     shipped = _evaluate(part, part.mesh, objective, 1)
     other = _evaluate(part, centroid_split(part.mesh), objective, 1)

@@ -10,7 +10,16 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from optipose.search.space import PoseSpace, params_from_pose, pose_from_params
-from optipose.transforms import invert_T, make_T, matrix_to_rpy, mean_pose, part_motion, rpy_to_matrix, transform_points, validate_pose
+from optipose.transforms import (
+    invert_T,
+    make_T,
+    matrix_to_rpy,
+    mean_pose,
+    part_motion,
+    rpy_to_matrix,
+    transform_points,
+    validate_pose,
+)
 
 HALF_PI = np.pi / 2
 turn = st.floats(-np.pi, np.pi)
@@ -32,7 +41,9 @@ def rpy_quietly(R: np.ndarray) -> np.ndarray:
 
 @settings(max_examples=300, deadline=None)
 @given(turn, near_gimbal, turn, st.sampled_from([1.0, -1.0]))
-@example(0.0, 1.570_796_304_159_418, 1.0, 1.0)  # 2.3e-8 rad short of 90°: scipy's gimbal branch gave R back to 2e-8 only
+@example(
+    0.0, 1.570_796_304_159_418, 1.0, 1.0
+)  # 2.3e-8 rad short of 90°: scipy's gimbal branch gave R back to 2e-8 only
 def test_matrix_round_trip_at_pitch_90(r, p, y, sign):
     R = rpy_to_matrix([r, sign * p, y])
     rpy = rpy_quietly(R)
