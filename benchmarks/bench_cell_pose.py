@@ -67,7 +67,7 @@ def child(poses: int, scans: int, jobs: int) -> None:
     from threadpoolctl import threadpool_limits
 
     from optipose.evaluate.evaluator import Evaluator
-    from optipose.evaluate.executors import make_executor
+    from optipose.parallel.executors import make_executor
     from optipose.evaluate.objective import load_objective
     from optipose.model.baseline import baseline
     from optipose.model.layout import load_layout

@@ -157,7 +157,7 @@ def icp_check(part, objective, problem, hand, kept: tuple[int, ...], k: int, sco
     """The ``--icp`` best poses of this k and kept set by the surrogate (see the module doc), and the hand
     layout, by ICP under the band (full protocol, seed + 1): per pose and noise level, hand / layout in sum
     and whether it is no worse on every statistic; then how many statistics it loses, and by how much at most."""
-    from optipose.evaluate.compare import Verdict
+    from optipose.verdict.compare import Verdict
     from optipose.evaluate.robust import choice_of, make_evaluator
     from optipose.model.layout import Layout, SensorPose
 

@@ -8,7 +8,7 @@ end (the idle workers, the interpreter's last collections).
   alone. Also ``warm_kernels.py`` itself, cold and warm.
 - ``exit``: a child process that evaluates B's hand layout in the paper's cell on 4 scans with two loky workers
   and writes the report of ``results/reference/part_b`` (in a copy), then ends: as it is, after
-  :func:`optipose.evaluate.executors.stop_workers`, and after that and ``gc.freeze()`` (what the ``optipose``
+  :func:`optipose.parallel.executors.stop_workers`, and after that and ``gc.freeze()`` (what the ``optipose``
   command does at its end, :func:`optipose.cli.main`): the seconds from the end of its work to the end of the
   process, interleaved in ``--repeats`` rounds.
 
@@ -35,7 +35,7 @@ CHILD = """
 import gc, shutil, sys, tempfile, time
 from pathlib import Path
 from optipose.evaluate.evaluator import Evaluator
-from optipose.evaluate.executors import stop_workers
+from optipose.parallel.executors import stop_workers
 from optipose.model.baseline import baseline
 from optipose.model.part import load_part
 from optipose.report.build import write_report

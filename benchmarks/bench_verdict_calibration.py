@@ -7,7 +7,7 @@ set orientation and noise from each scan's seed), and once more per seed as its 
 instance with the scans' own draws of seed + 1000. All of it is cached to ``--cache``. Each of ``--trials``
 trials then compares, per k, the hand layout's k-sensor choice (that of the first seed, held fixed) with a
 "found" side on paired draws picked from the pool by the trial's seed
-(:func:`optipose.evaluate.confidence.compare_draws`, or :func:`~optipose.evaluate.racing.race`):
+(:func:`optipose.verdict.confidence.compare_draws`, or :func:`~optipose.verdict.racing.race`):
 
 - ``copy, same draws``: the hand layout itself on the same draws (common random numbers: an exact tie);
 - ``copy, own scans``: its twin, the same cell with other scan draws (what a second, equal layout would
@@ -86,8 +86,8 @@ def _found_seeds(rng: np.random.Generator, hand: list[int], seeds: list[int]) ->
 
 
 def main() -> None:
-    from optipose.evaluate.confidence import BUY, DECISIONS, PairedDraw, Rules, compare_draws, scan_errors
-    from optipose.evaluate.racing import race
+    from optipose.verdict.confidence import BUY, DECISIONS, PairedDraw, Rules, compare_draws, scan_errors
+    from optipose.verdict.racing import race
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", default="part_b")

@@ -1,6 +1,6 @@
 """What one draw of the verdict costs in a real cell (issue #33), and what its two savings buy.
 
-A draw of the verdict (:mod:`optipose.search.verdict`) is a new cell instance: an evaluator on its own seed
+A draw of the verdict (:mod:`optipose.search.draws`) is a new cell instance: an evaluator on its own seed
 that evaluates the hand layout and a found one. Two things make it cheaper than a plain evaluation:
 
 - ``form``: the part as made's form field on its grid (:meth:`optipose.cell.asmade.AsMade.form_grid`), which each
@@ -27,12 +27,12 @@ import numpy as np
 from optipose.cell.asmade import AsMade
 from optipose.cell.scans import CellSetup
 from optipose.evaluate.evaluator import Evaluator
-from optipose.evaluate.executors import make_executor
+from optipose.parallel.executors import make_executor
 from optipose.evaluate.objective import load_objective
 from optipose.model.baseline import baseline
 from optipose.model.layout import load_layout
 from optipose.model.part import load_part
-from optipose.scan.raycast import face_planes, plane_numbers
+from optipose.model.planes import face_planes, plane_numbers
 from optipose.search.objectives import stage_objective
 from optipose.seeds import verdict_seed
 

@@ -4,7 +4,7 @@ The search's verdict compares a found layout with the hand-placed one on a held-
 median and 75th percentile at every noise level of the band (each the worst over its bracket draws) must
 be at most the hand layout's. Both are single draws: the noise of 77 scans and, under a band, two random
 bracket errors per sensor. This script evaluates the *same* layout (default: the part's hand layout) at
-several seeds and applies the product's own test (``evaluate.compare.dominates``) to every ordered pair of
+several seeds and applies the product's own test (``verdict.compare.dominates``) to every ordered pair of
 seeds: how often a layout is "no worse" than an exact copy of itself, and how much better on every
 statistic a layout must be to pass. Only the evaluations' total time is printed, for the record.
 
@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from optipose.evaluate.compare import dominates
+from optipose.verdict.compare import dominates
 from optipose.evaluate.robust import make_evaluator
 from optipose.model.baseline import baseline
 from optipose.model.layout import load_layout

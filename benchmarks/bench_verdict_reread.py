@@ -1,9 +1,9 @@
 """The draws searches stored, raced again at another confidence: would a laxer reading of "95 %" answer more?
 
 Each BUY or KEEP test reads one side of a two-sided interval, so at the shipped 95 % it is one-sided at 97.5 %
-(:mod:`optipose.evaluate.confidence`). Read one-sided at 95 % (the two-sided 90 % interval), each look decides
+(:mod:`optipose.verdict.confidence`). Read one-sided at 95 % (the two-sided 90 % interval), each look decides
 sooner. Per search folder given, its verdict's draws (``verdict/draw-*``) are raced again in their order, with
-the choices the search made, by :func:`optipose.evaluate.racing.race_many` (first look at three, looks planned
+the choices the search made, by :func:`optipose.verdict.racing.race_many` (first look at three, looks planned
 for every stored draw, no clock) at each ``--confidence``: the decision per k and the draw it came at.
 
     .venv/bin/python benchmarks/bench_verdict_reread.py FOLDER [FOLDER ...] [--confidence 0.95,0.90]
@@ -15,11 +15,11 @@ import argparse
 import tomllib
 from pathlib import Path
 
-from optipose.evaluate.confidence import Rules, paired_draw
+from optipose.verdict.confidence import Rules, paired_draw
 from optipose.evaluate.objective import objective_from_table
-from optipose.evaluate.racing import race_many
+from optipose.verdict.racing import race_many
 from optipose.io.load import load_result
-from optipose.search.verdict import sides
+from optipose.search.draws import sides
 
 
 def stored_draws(folder: Path, result) -> list[dict]:

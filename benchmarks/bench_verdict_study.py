@@ -17,7 +17,7 @@ parts are the shipped A, B, C (hand layouts) and the three of ``scripts/make_stu
 baselines; ``studies/parts/``).
 ``holdout``: per search folder, its found layouts and its baseline evaluated again on a run seed the search never
 used (the search's seed + ``--offset``: another held-out validation seed, other cell instances, other noise),
-and the verdict raced as the search's was (:func:`optipose.search.verdict.confident_verdicts`, the search's own
+and the verdict raced as the search's was (:func:`optipose.search.draws.confident_verdicts`, the search's own
 settings, or up to ``--draws``) — into ``OUT/<part>/holdout.csv`` (or ``--file``). ``--choices kept`` (the default)
 keeps each layout's choice (its subset per axis) as the search made it: what a BUY mounts, checked on draws the
 search never saw (in a real cell without a held-out validation, whose draw the race would not read). ``--choices remade`` makes the choices again on the held-out validation's draw: whether another
@@ -95,14 +95,14 @@ def run(args) -> None:
 def holdout(args) -> None:
     import tomllib
 
-    from optipose.evaluate.confidence import split
+    from optipose.verdict.confidence import split
     from optipose.evaluate.objective import objective_from_table
     from optipose.io.load import load_result
     from optipose.io.tables import verdict_frame
     from optipose.model.part import load_part
     from optipose.search.config import SearchConfig
     from optipose.search.validate import validate
-    from optipose.search.verdict import choice_draw_counts, confident_verdicts
+    from optipose.search.draws import choice_draw_counts, confident_verdicts
 
     wanted = set(args.parts.split(","))
     for folder in sorted(_folders(args.out, wanted).values()):
@@ -138,7 +138,7 @@ def holdout(args) -> None:
 
 
 def table(args) -> None:
-    from optipose.evaluate.confidence import split
+    from optipose.verdict.confidence import split
     from optipose.io.load import load_result, read_verdicts
     from optipose.report.confidence import interval_cell  # "not measured" for an axis a layout does not see
 
@@ -177,10 +177,10 @@ def draws(args) -> None:
 
     import numpy as np
 
-    from optipose.evaluate.confidence import Rules, compare_draws, paired_draw
+    from optipose.verdict.confidence import Rules, compare_draws, paired_draw
     from optipose.evaluate.objective import objective_from_table
     from optipose.io.load import load_result
-    from optipose.search.verdict import sides
+    from optipose.search.draws import sides
 
     print("| part | k | validation's draw | verdict's draws (mean, range) | draws |")
     print("| --- | ---: | ---: | --- | ---: |")

@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from optipose.evaluate.compare import Verdict
+from optipose.verdict.compare import Verdict
 from optipose.evaluate.conditions import ConditionsConfig
 from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import load_objective

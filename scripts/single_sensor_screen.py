@@ -89,7 +89,7 @@ def icp_check(part, objective, problem, scored, target, args) -> None:
     from dataclasses import replace
 
     from optipose.evaluate.evaluator import Evaluator
-    from optipose.evaluate.compare import dominates, rank
+    from optipose.verdict.compare import dominates, rank
     from optipose.evaluate.objective import reduced_objective
     from optipose.search.driver import apart, local_best
     from optipose.search.study import SurrogateStudy

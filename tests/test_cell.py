@@ -24,14 +24,14 @@ from optipose.cell.robot import (
 )
 from optipose.cell.scans import CellSetup, LiveCell
 from optipose.errors import ConfigError
-from optipose.evaluate.compare import Verdict
+from optipose.verdict.compare import Verdict
 from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import OBJECTIVES_DIR, load_objective, objective_from_dict
 from optipose.model.layout import Layout
 from optipose.model.material import MaterialEffects, load_material
 from optipose.model.part import load_part
 from optipose.model.sensor import load_sensor
-from optipose.scan.raycast import face_planes, plane_numbers
+from optipose.model.planes import face_planes, plane_numbers
 from optipose.scan.scanner import Scan
 from optipose.transforms import invert_T, matrix_to_rpy
 

@@ -1,4 +1,4 @@
-"""The verdict with confidence (optipose/evaluate/confidence.py and racing.py, issue #33) on synthetic per-scan errors:
+"""The verdict with confidence (optipose/verdict/confidence.py and racing.py, issue #33) on synthetic per-scan errors:
 a layout against itself on the same draws is an exact tie, a BUY needs the interval, racing stops when the
 interval is clear, the intervals cover the true ratio at their nominal rate, and all of it is reproducible."""
 
@@ -11,9 +11,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from optipose.evaluate import racing
+from optipose.verdict import racing
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
-from optipose.evaluate.confidence import (
+from optipose.verdict.confidence import (
     BUY,
     KEEP,
     TIE,
@@ -25,7 +25,7 @@ from optipose.evaluate.confidence import (
     paired_draws,
     scan_errors,
 )
-from optipose.evaluate.racing import looks, race
+from optipose.verdict.racing import looks, race
 from optipose.evaluate.statistics import FAILED_ERROR
 
 N_SCANS = 77
@@ -273,7 +273,7 @@ def test_an_early_looks_wide_interval_does_not_hang_on_a_few_replicates():
 
 def test_an_interval_widened_past_any_scale_stays_finite():
     """Two draws of few scans can widen an early look's deviations a thousandfold: the sides stay numbers."""
-    from optipose.evaluate.confidence import _interval
+    from optipose.verdict.confidence import _interval
 
     samples = np.random.default_rng(0).normal(-4.6, 0.25, 2000)
     with warnings.catch_warnings():

@@ -17,7 +17,7 @@ from optipose.model.motion import ScanMotion
 from optipose.model.part import Part, load_part
 from optipose.report.views import drawn_mesh
 from optipose.scan.hull import supporting_faces
-from optipose.scan.raycast import shared_planes
+from optipose.model.planes import shared_planes
 from optipose.scan.scanner import SCAN_PROFILES, part_scanner, registered_motion
 
 R = 0.03  # m, the sphere's radius

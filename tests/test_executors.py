@@ -14,7 +14,7 @@ import trimesh
 
 from optipose.errors import ConfigError
 from optipose.evaluate.evaluator import Evaluator
-from optipose.evaluate.executors import (
+from optipose.parallel.executors import (
     EXECUTORS,
     DaskExecutor,
     JoblibExecutor,
@@ -195,7 +195,7 @@ def test_a_worker_that_dies_is_replaced_and_its_work_run_again(tmp_path, caplog)
     marker = tmp_path / "died"
     executor = JoblibExecutor(2)
     try:
-        with caplog.at_level("WARNING", logger="optipose.evaluate.executors"):
+        with caplog.at_level("WARNING", logger="optipose.parallel.executors"):
             out = executor.map(_dies_once, [(v, str(marker), False) for v in range(8)])
     finally:
         executor.close()
@@ -226,7 +226,7 @@ def test_stop_workers_ends_the_idle_workers_and_a_later_map_starts_new_ones():
     interpreter's exit), and a map after it still runs, on new workers."""
     import os
 
-    from optipose.evaluate.executors import stop_workers
+    from optipose.parallel.executors import stop_workers
 
     executor = JoblibExecutor(2)
     before = set(executor.map(_pid, range(8)))
@@ -244,7 +244,7 @@ def test_stop_workers_ends_the_idle_workers_and_a_later_map_starts_new_ones():
 def test_a_background_call_answers_from_another_process_with_its_threads_capped():
     import os
 
-    from optipose.evaluate.background import Background
+    from optipose.parallel.background import Background
 
     with Background(os.getenv, "NUMBA_NUM_THREADS") as call:
         assert call.result() == "1"
@@ -260,7 +260,7 @@ def test_a_background_call_that_raises_or_dies_says_so_instead_of_waiting():
     import time
 
     from optipose.errors import WorkerError
-    from optipose.evaluate.background import Background
+    from optipose.parallel.background import Background
 
     with pytest.raises(WorkerError, match="ValueError"):
         Background(int, "not a number").result()

@@ -459,7 +459,7 @@ def test_a_part_in_inches_is_loaded_with_its_units_for_the_report_views(files, t
 
 def test_a_verdict_on_failed_registrations_says_so_instead_of_ranking():
     from optipose.evaluate.assignment import FAILED, AxisChoice, Choice
-    from optipose.evaluate.compare import Verdict, bought
+    from optipose.verdict.compare import Verdict, bought
 
     def choice(name, failed=()):
         axes = tuple(

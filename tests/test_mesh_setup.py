@@ -15,7 +15,7 @@ from optipose.model.grouping import closed_and_wound, unique_rows
 from optipose.model.mesh import load_mesh
 from optipose.model.part import load_part
 from optipose.scan import hull
-from optipose.scan.raycast import edge_planes, face_planes, shared_planes
+from optipose.model.planes import edge_planes, face_planes, shared_planes
 
 SHIPPED = ("part_a", "part_b", "part_c")
 

@@ -175,7 +175,7 @@ def test_conventional_placement_clears_the_part_and_sees_it(spec, tmp_path):
 
 # --- what the report says ------------------------------------------------------------------------------
 def test_the_report_says_the_verdicts_of_the_result(results):
-    from optipose.evaluate.confidence import split
+    from optipose.verdict.confidence import split
 
     result = load_result(results["search"])
     text = (results["search"] / "report.html").read_text()

@@ -7,7 +7,7 @@ import pytest
 
 from optipose.errors import ConfigError
 from optipose.evaluate.assignment import AxisChoice, Choice
-from optipose.evaluate.compare import Verdict, dominates, excess, one_versus_many, rank
+from optipose.verdict.compare import Verdict, dominates, excess, one_versus_many, rank
 from optipose.io import load_result
 from optipose.io.folders import write_config
 from optipose.io.results import SearchResult
@@ -72,7 +72,7 @@ def test_a_found_layout_that_ties_the_hand_one_is_not_bought():
     # a found triple whose choice measures every axis on the hand sensors it keeps ties the hand layout:
     # no worse, but nothing gained, so the answer is to keep the hand layout, not to buy a bracket
     from optipose.cli.search import verdict_headline
-    from optipose.evaluate.compare import bought
+    from optipose.verdict.compare import bought
 
     hand = _choice((0, 1, 2), S, [(0.1, 0.2), (0.05, 0.1), (0.1, 0.3)])
     tie = Verdict(3, Choice(3, (0, 1, 2), "F1F2F3", hand.axes, hand.score), hand)

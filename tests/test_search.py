@@ -353,8 +353,8 @@ def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
 def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the_hand_layout():
     from optipose.evaluate.evaluator import Evaluator
     from optipose.evaluate.objective import load_objective as load
-    from optipose.evaluate.compare import dominates as _dominates
-    from optipose.evaluate.compare import excess as _excess
+    from optipose.verdict.compare import dominates as _dominates
+    from optipose.verdict.compare import excess as _excess
     from optipose.search.polish import polish
 
     part = load_part("part_b")
@@ -754,7 +754,7 @@ def test_each_stage_objective_is_derived_in_one_place():
 
 def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought():
     from optipose.cli.search import verdict_headline
-    from optipose.evaluate.compare import Verdict
+    from optipose.verdict.compare import Verdict
 
     found, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)])
     nominal = Verdict(1, found, hand)
@@ -770,7 +770,7 @@ def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought(
 
 
 def test_an_answer_never_checked_under_a_band_is_not_a_buy():
-    from optipose.evaluate.compare import Verdict
+    from optipose.verdict.compare import Verdict
     from optipose.io.config import run_config
     from optipose.io.results import SearchResult
     from optipose.report.verdict import verdict_table
@@ -802,7 +802,7 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
 
 
 def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():
-    from optipose.evaluate.compare import Verdict, bought
+    from optipose.verdict.compare import Verdict, bought
 
     good, bad, hand = (
         _choice([(1, 2), (1, 2), (1, 2)]),

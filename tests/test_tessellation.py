@@ -44,7 +44,7 @@ def test_a_reference_mapped_from_its_files_answers_as_the_one_built():
     """save_reference / load_reference: the same closest points, normals and faces, from read-only maps."""
     import os
 
-    from optipose.evaluate import shared
+    from optipose.parallel import shared
     from optipose.model.part import load_part
     from optipose.registration.reference import load_reference
 
@@ -77,7 +77,7 @@ def test_a_killed_process_reference_folder_is_swept_and_the_others_are_left(tmp_
     import subprocess
     import sys
 
-    from optipose.evaluate import shared
+    from optipose.parallel import shared
 
     gone = int(
         subprocess.run(

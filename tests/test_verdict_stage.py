@@ -1,4 +1,4 @@
-"""The search's verdict with confidence (search/verdict.py): common random numbers through the real evaluator,
+"""The search's verdict with confidence (search/draws.py): common random numbers through the real evaluator,
 the race over several k, and verdict.csv read back as written."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from optipose.evaluate.confidence import BUY, FEWER, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, split
-from optipose.evaluate.racing import race_many
+from optipose.verdict.confidence import BUY, FEWER, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, split
+from optipose.verdict.racing import race_many
 from optipose.evaluate.objective import load_objective
 from optipose.io.folders import write_csv
 from optipose.io.load import read_verdicts
@@ -19,7 +19,7 @@ from optipose.model.layout import Layout, SensorPose
 from optipose.model.part import load_part
 from optipose.search.config import SearchConfig
 from optipose.search.validate import validate
-from optipose.search.verdict import confident_verdicts
+from optipose.search.draws import confident_verdicts
 from optipose.seeds import validation_seed, verdict_seed
 
 FAST = Rules(replicates=400)
@@ -203,7 +203,7 @@ def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
     # larger layout of four whose first is not the k layout's)
     from optipose.evaluate.assignment import AxisChoice, Choice
     from optipose.report.confidence import mount_line
-    from optipose.search.verdict import _found_name
+    from optipose.search.draws import _found_name
 
     hand = load_part("part_b").layouts["hand"]
     poses = [np.eye(4) for _ in range(4)]

@@ -7,7 +7,7 @@ trials on C cores run ``workers × C`` threads of each kind. :func:`plan` splits
 each trial gets ``cores // workers`` (at least 1) for its threads and its evaluator's jobs.
 
 The caps reach a worker in two ways: as environment variables given to its process when it starts
-(:func:`optipose.evaluate.executors.thread_env`; BLAS and OpenMP read them only when they load), and in
+(:func:`optipose.parallel.executors.thread_env`; BLAS and OpenMP read them only when they load), and in
 the trial itself (:func:`cap_threads`: the ray threads and numba, which read theirs at use).
 """
 
@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from optipose.evaluate.executors import THREAD_VARIABLES, thread_env
+from optipose.parallel.executors import THREAD_VARIABLES, thread_env
 
 __all__ = ["Plan", "plan", "usable_cores", "thread_env", "cap_threads", "current_caps", "THREAD_VARIABLES"]
 

@@ -72,7 +72,7 @@ class AsMade:
     """One instance of a part as made by ``process``, drawn from ``seed``.
 
     vertices (v, 3) m, faces (f, 3): the CAD mesh in its own frame. ``plane`` (f,): each face's plane number
-    (:func:`optipose.scan.raycast.plane_numbers`); faces of one plane are one face of the part and move
+    (:func:`optipose.model.planes.plane_numbers`); faces of one plane are one face of the part and move
     together.
     """
 

@@ -86,7 +86,7 @@ class LiveCell:
         self.setup, self.centre, self.seed = setup, np.asarray(centre, float), int(seed)
         self.as_made = None
         if not setup.process.exact:
-            from optipose.scan.raycast import face_planes, plane_numbers
+            from optipose.model.planes import face_planes, plane_numbers
 
             plane = plane_numbers(*face_planes(vertices, faces))
             self.as_made = AsMade(setup.process, vertices, faces, plane, derived_seed(seed, _CELL + _INSTANCE))

@@ -15,7 +15,7 @@ def main() -> None:
         import contextlib
         import gc
 
-        from optipose.evaluate.executors import stop_workers
+        from optipose.parallel.executors import stop_workers
 
         with contextlib.suppress(Exception):  # a pool that will not stop now is stopped at the exit, as before
             stop_workers()

@@ -169,7 +169,7 @@ def _conditions(objective):
 
 def _verdicts(results: dict) -> list[str]:
     """Per given layout, the verdict on the robust statistic against the hand layout's choice of as many sensors."""
-    from optipose.evaluate.compare import Verdict
+    from optipose.verdict.compare import Verdict
     from optipose.model.baseline import baseline_label
 
     hand, lines = results["hand"], []

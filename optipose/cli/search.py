@@ -339,8 +339,8 @@ def _print_report(console, report, part, unchecked: bool = False, ideal: bool = 
     lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
     ``unchecked``: the answer was never checked under a band (a nominal search without the check); ``ideal``:
     the search ran in the ideal cell (its verdicts say so)."""
-    from optipose.evaluate.compare import mdeg
-    from optipose.evaluate.confidence import split
+    from optipose.verdict.compare import mdeg
+    from optipose.verdict.confidence import split
     from optipose.model.baseline import baseline, baseline_label
     from optipose.report.confidence import IDEAL_CELL, mount_line
 
@@ -364,7 +364,7 @@ def _print_report(console, report, part, unchecked: bool = False, ideal: bool = 
         if confident:
             console.print(_confident_table(confident, part))
         if unchecked and not confident and any(v.no_worse for v in verdicts):
-            from optipose.evaluate.compare import UNCHECKED
+            from optipose.verdict.compare import UNCHECKED
 
             console.print(UNCHECKED, style="yellow", highlight=False)
         for line in report.validation.unmeasured_lines(label):
@@ -407,10 +407,10 @@ def verdict_headline(verdict, label: str = "hand", band=None, checked: bool = Tr
     """The verdict for one k in one short line (under 80 characters for the hand layout and names up to 6):
     buy or keep. ``band``: the same k's verdict under the band of the check after the validation; a found
     layout no worse at the preset's noise but worse somewhere in the band is not bought
-    (:func:`optipose.evaluate.compare.bought`). ``checked=False``: the answer was never checked under a
+    (:func:`optipose.verdict.compare.bought`). ``checked=False``: the answer was never checked under a
     band (a nominal search without the check), so a layout no worse in the ideal cell is better there, not
     yet bought. Where registrations failed on some axis of either layout: no verdict, and whose."""
-    from optipose.evaluate.compare import bought
+    from optipose.verdict.compare import bought
 
     ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
     mine, theirs = verdict.failed  # registrations failed on some axis: nothing to rank (Verdict.failed_line says more)
@@ -483,7 +483,7 @@ def _confident_table(confident: dict, part):
 
 def _validation_table(validation, part, label: str = "hand"):
     """One row per k and layout (found, baseline): median/p75 per axis and the score, in mdeg."""
-    from optipose.evaluate.compare import mdeg
+    from optipose.verdict.compare import mdeg
 
     protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans)"
     band = ", worst over the band" if any(c.under for c in validation.found.values()) else ""

@@ -6,7 +6,7 @@ sensor's scan is voxel-down-sampled once, and each subset's floating cloud is th
 down-sampled scans; the reference and its search structure are built once per part (per worker process),
 and the first closest-point search at identity is done once per sensor and shared by every subset
 (:mod:`optipose.evaluate.worker`). Orientations are spread over the workers of an executor
-(:mod:`optipose.evaluate.executors`); each scan's noise seed comes from the run's seed and its index, so
+(:mod:`optipose.parallel.executors`); each scan's noise seed comes from the run's seed and its index, so
 the result does not depend on the executor or its number of workers.
 
 For the search, :class:`Evaluator` keeps the part, objective and workers' state between calls:
@@ -24,11 +24,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from optipose.evaluate import shared
+from optipose.parallel import shared
 from optipose.cell.scans import CellSetup
 from optipose.evaluate.conditions import Condition, by_draw
 from optipose.evaluate.assignment import Choice, best_choices
-from optipose.evaluate.executors import Executor, make_executor
+from optipose.parallel.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
@@ -109,13 +109,13 @@ class Evaluator:
     jobs : worker processes over orientations (1 = in this process), when no ``executor`` is given.
     quiet : report failed registrations at INFO instead of WARNING (a search's hundreds of internal
         evaluations; the counts stay in ``per_scan`` and ``stats``).
-    executor : where the orientations run (:mod:`optipose.evaluate.executors`); default
+    executor : where the orientations run (:mod:`optipose.parallel.executors`); default
         ``make_executor(jobs)``. An executor given here is the caller's to close; one made from
         ``jobs`` is closed with the evaluator.
     condition : the noise scale and bracket errors to scan under (:mod:`optipose.evaluate.conditions`);
         default the nominal one, the objective's own numbers.
     scans : evaluate this many of the protocol's scans, drawn by the seed (0: all; :meth:`Perturbations.sample`).
-    reference_dir : a folder of the CAD-surface reference already on this machine (:mod:`optipose.evaluate.shared`),
+    reference_dir : a folder of the CAD-surface reference already on this machine (:mod:`optipose.parallel.shared`),
         which the workers map instead of building it (a search's, for the hand layout's processes).
     """
 

@@ -5,7 +5,7 @@ same protocol and noise seed each time: only the condition differs) and aggregat
 axis, each statistic over the conditions with the objective's ``aggregate`` (the worst by default). The
 robust Table 1 is the paper's assignment on those aggregated statistics: a subset is chosen for an axis
 because it is good at every noise level and bracket draw, not at the nominal one alone. Layouts are
-compared (:mod:`optipose.evaluate.compare`) at each noise level, over its bracket draws (:func:`by_level`).
+compared (:mod:`optipose.verdict.compare`) at each noise level, over its bracket draws (:func:`by_level`).
 """
 
 from __future__ import annotations

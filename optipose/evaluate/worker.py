@@ -54,7 +54,7 @@ class WorkerSetup:
     condition : the noise scale and bracket errors the layouts are scanned under (default: nominal).
     column_stride : the scanners' anchor columns (:class:`optipose.scan.scanner.Scanner`).
     reference_dir : where the evaluator wrote the CAD-surface reference for its workers to map
-        (:mod:`optipose.evaluate.shared`); ``None`` or absent on this machine: each worker builds its own.
+        (:mod:`optipose.parallel.shared`); ``None`` or absent on this machine: each worker builds its own.
     """
 
     token: str
@@ -72,7 +72,7 @@ class WorkerSetup:
     condition: Condition = field(default_factory=Condition)
     column_stride: int = ScanConfig.column_stride
     reference_dir: str | None = (
-        None  # the CAD-surface reference's arrays, shared by this machine's workers (evaluate.shared)
+        None  # the CAD-surface reference's arrays, shared by this machine's workers (parallel.shared)
     )
     cell: CellSetup | None = None  # a real cell's error sources (optipose.cell); None or an ideal one: none
 

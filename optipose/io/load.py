@@ -93,9 +93,9 @@ def load_search(folder: Path, config: RunConfig | None = None):
 
 
 def read_verdicts(path: Path) -> dict:
-    """k → :class:`~optipose.evaluate.confidence.ConfidentVerdict` from ``verdict.csv`` ({} without one), and
+    """k → :class:`~optipose.verdict.confidence.ConfidentVerdict` from ``verdict.csv`` ({} without one), and
     the comparison of fewer found sensors with more hand ones under ``FEWER``."""
-    from optipose.evaluate.confidence import FEWER, AxisError, AxisRatio, ConfidentVerdict, Interval
+    from optipose.verdict.confidence import FEWER, AxisError, AxisRatio, ConfidentVerdict, Interval
 
     if not path.is_file():
         return {}

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from optipose.evaluate.compare import Verdict
+from optipose.verdict.compare import Verdict
 from optipose.evaluate.evaluator import EvaluationResult
 from optipose.io.config import RunConfig
 from optipose.model.layout import Layout
@@ -55,7 +55,7 @@ class SearchResult:
 
     def band_verdicts(self) -> dict[int, Verdict]:
         """k → found vs. hand under the band of the check after a nominal search (empty without one); with
-        :meth:`verdicts`, what :func:`optipose.evaluate.compare.bought` decides on."""
+        :meth:`verdicts`, what :func:`optipose.verdict.compare.bought` decides on."""
         return self.band.by_k() if self.band is not None else {}
 
     @property

@@ -123,7 +123,7 @@ def check_mesh(mesh, name: str = "mesh", watertight: bool = True) -> None:
         mesh._cache["is_watertight"], mesh._cache["is_winding_consistent"] = known
     # warned, not refused: an open surface (a sheet, a scanned face) is scanned and registered as any other;
     # a soup of loose triangles is too, but its registrations may fail, and every verdict then says so
-    # (evaluate.compare.Verdict.failed_line)
+    # (verdict.compare.Verdict.failed_line)
     problems = [
         w
         for w, bad in (

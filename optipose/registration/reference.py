@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from optipose.scan.raycast import edge_planes
+from optipose.model.planes import edge_planes
 
 __all__ = ["SurfaceReference", "SampledReference", "sample_surface", "save_reference", "load_reference"]
 
@@ -258,7 +258,7 @@ def _surface_arrays(vertices: np.ndarray, faces: np.ndarray) -> dict:
     and the smooth surface's normals at its corners in float32 (:func:`optipose.registration.smooth.corner_normals`)."""
     from optipose.registration.closest_surface import adjacent_faces, face_boxes, face_grid
     from optipose.registration.smooth import CREASE_DEG, corner_normals
-    from optipose.scan.raycast import plane_numbers
+    from optipose.model.planes import plane_numbers
 
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)

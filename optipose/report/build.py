@@ -255,7 +255,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
 
 
 def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
-    from optipose.evaluate.compare import mdeg
+    from optipose.verdict.compare import mdeg
     from optipose.io.folders import read_config
     from optipose.report.layouts import layout_section
     from optipose.report.provenance import provenance_blocks

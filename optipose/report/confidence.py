@@ -2,14 +2,14 @@
 
 Per k: the decision (BUY, KEEP, TIE, UNDECIDED), the found choice and the baseline's, baseline / found in sum
 with its interval, and each layout's predicted median |error| per axis in the cell with its interval; the
-picture draws the same medians per axis. Reads :class:`~optipose.evaluate.confidence.ConfidentVerdict`
+picture draws the same medians per axis. Reads :class:`~optipose.verdict.confidence.ConfidentVerdict`
 records only; the lines are the ones the terminal prints (:meth:`ConfidentVerdict.line`).
 """
 
 from __future__ import annotations
 
 from optipose.evaluate.assignment import not_measured
-from optipose.evaluate.confidence import BUY, KEEP, TIE, split
+from optipose.verdict.confidence import BUY, KEEP, TIE, split
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
 

@@ -176,7 +176,7 @@ def layout_views(part, layout_name: str) -> bytes:
 
 def verdict_intervals(verdicts: list) -> bytes:
     """Per axis (a panel each) and k, the predicted median |error| in the cell (mdeg, log) of the found layout
-    and the baseline, each with its interval; ``verdicts``: :class:`~optipose.evaluate.confidence.ConfidentVerdict`."""
+    and the baseline, each with its interval; ``verdicts``: :class:`~optipose.verdict.confidence.ConfidentVerdict`."""
     plt = _plt()
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharey=True)
     ks = [v.k for v in verdicts]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from optipose.evaluate.compare import mdeg
+from optipose.verdict.compare import mdeg
 from optipose.report import figures
 from optipose.report.document import Block, Figure, Heading, Paragraph, Table
 
@@ -18,7 +18,7 @@ def band_blocks(name: str, verdict, label: str) -> list[Block]:
     found, reference = verdict.found, verdict.reference
     if not found.under or len(found.under) != len(reference.under):
         return []
-    from optipose.evaluate.compare import dominates
+    from optipose.verdict.compare import dominates
 
     rows, bars = [], []
     for (condition, f), (_, r) in zip(found.under, reference.under):

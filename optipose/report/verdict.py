@@ -1,13 +1,13 @@
 """The verdict first: per k, found vs. the baseline (hand-placed, or the conventional placement) in sum and
 per axis, whether one found sensor beats the baseline's three, and the paper's Table 1 side by side.
 
-Reads :class:`~optipose.evaluate.compare.Verdict` and :class:`~optipose.evaluate.assignment.Choice`
+Reads :class:`~optipose.verdict.compare.Verdict` and :class:`~optipose.evaluate.assignment.Choice`
 records only; the lines are the ones the terminal prints (:meth:`Verdict.line`).
 """
 
 from __future__ import annotations
 
-from optipose.evaluate.compare import UNCHECKED, Verdict, bought, mdeg, one_versus_many, unmeasured_line
+from optipose.verdict.compare import UNCHECKED, Verdict, bought, mdeg, one_versus_many, unmeasured_line
 from optipose.report.document import Block, Heading, Paragraph, Table
 
 __all__ = ["verdict_css", "verdict_blocks", "verdict_table", "table1_rows", "table1_side_by_side", "table1_alone"]

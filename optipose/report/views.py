@@ -81,7 +81,7 @@ def render_layouts(part, names: list[str], folder: Path, jobs: int = 1) -> list[
     import logging
     from functools import partial
 
-    from optipose.evaluate.executors import make_executor
+    from optipose.parallel.executors import make_executor
 
     executor = make_executor(jobs)  # the pool the search's evaluations warmed, reused
     try:

@@ -50,9 +50,9 @@ def supporting_faces(mesh, normals: np.ndarray, offsets: np.ndarray, tol: float 
 
 def face_arrays(mesh, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, ...]:
     """The scanner's per-face arrays of ``mesh`` (its ``vertices`` float64, ``faces`` int64): those of
-    :func:`optipose.scan.raycast.shared_planes` and :func:`supporting_faces`; a dense mesh's once per machine
+    :func:`optipose.model.planes.shared_planes` and :func:`supporting_faces`; a dense mesh's once per machine
     (:func:`optipose.model.machine.per_machine`), the same arrays."""
-    from optipose.scan.raycast import shared_planes
+    from optipose.model.planes import shared_planes
 
     def compute():
         planes = shared_planes(vertices, faces)

@@ -88,7 +88,7 @@ def fill_columns(anchor_tri, cols, n_col, plane, shift_b, ray_cos, ray_sin, norm
     triangle too: the rays lie in the laser plane between the two, so their hits lie on the segment
     between the anchors' hits, inside the (convex) triangle; only a feature thinner than the anchors'
     spacing could stand in between. When the two anchors hit two triangles of one plane (``plane``
-    (f,): faces in one plane share a number, :func:`optipose.scan.raycast.shared_planes`), the rays
+    (f,): faces in one plane share a number, :func:`optipose.model.planes.shared_planes`), the rays
     between meet that plane on the same segment, and a ray whose point there lies inside either
     triangle hits it, for the same reason; the rest (a gap or a third triangle between) are cast.
     For the point: a ray of column c at shift s meets face f's plane ``T = (q_f + s·b_f)/(cos_c·nu_f +

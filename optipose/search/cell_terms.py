@@ -94,7 +94,7 @@ class CellModel:
         self, setup, vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray, offsets: np.ndarray, apex_z: float
     ):
         from optipose.cell.asmade import AsMade
-        from optipose.scan.raycast import face_planes, plane_numbers
+        from optipose.model.planes import face_planes, plane_numbers
 
         cell, p, e = setup.cell, setup.process, setup.effects
         self.cell, self.process, self.centre, self.apex_z = cell, p, np.asarray(centre, float), float(apex_z)

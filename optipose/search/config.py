@@ -73,7 +73,7 @@ class SearchConfig:
     # at the preset's noise with perfect brackets is not bought. Skipped when the search's own objective
     # has a band (its validation is under it already)
     band: str = ""
-    # the verdict with confidence (search/verdict.py): draws of the cell after the validation's, raced until
+    # the verdict with confidence (search/draws.py): draws of the cell after the validation's, raced until
     # every k is BUY, KEEP or TIE, at most verdict_draws in all and while another draw ends within verdict_time
     # s (0: no limit); an axis may be worse by verdict_tolerance (0.1: 10 %) with verdict_confidence
     verdict_draws: int = 12
@@ -84,7 +84,7 @@ class SearchConfig:
     verdict_scans: int = 0  # the protocol's scans a draw after the validation's evaluates, drawn by its seed (0: all)
     verdict_tolerance: float = 0.10
     # and found may fail an axis's registration on at most this share of scans more than hand (a failed
-    # registration is a part scanned again: evaluate/confidence.py)
+    # registration is a part scanned again: verdict/confidence.py)
     verdict_failures: float = 0.01
     verdict_confidence: float = 0.95
 

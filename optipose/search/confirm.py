@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from optipose.evaluate.compare import rank
+from optipose.verdict.compare import rank
 from optipose.evaluate.robust import make_evaluator
 from optipose.search.candidates import distinct
 from optipose.search.driver import apart

@@ -15,7 +15,7 @@
    (``[search] validation = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
    hand layout's part of it starts with step 2, in ``jobs`` processes of its own (``jobs`` ≥ 2), and is waited
    for before step 3;
-5. the verdict with confidence (:mod:`optipose.search.verdict`): the validation's evaluations are its first
+5. the verdict with confidence (:mod:`optipose.search.draws`): the validation's evaluations are its first
    draw in the ideal cell (in a real cell the choices were made on them), and further draws of the cell on
    seeds of their own are raced until every k is BUY, KEEP or TIE, before the check under the band.
 
@@ -93,7 +93,7 @@ class SearchReport:
     validation: Validation | None = None
     band: Validation | None = None  # the check under the band (SearchConfig.band), when there was one
     band_interrupted: bool = False  # Ctrl-C stopped the check under the band (the validation is complete)
-    confident: dict = field(default_factory=dict)  # k -> ConfidentVerdict (search/verdict.py)
+    confident: dict = field(default_factory=dict)  # k -> ConfidentVerdict (search/draws.py)
 
     @property
     def validated(self) -> bool:
@@ -142,10 +142,10 @@ def _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, 
 
 @contextmanager
 def _shared_reference(part, jobs: int):
-    """The folder of the part's CAD-surface reference on this machine (:mod:`optipose.evaluate.shared`), built
+    """The folder of the part's CAD-surface reference on this machine (:mod:`optipose.parallel.shared`), built
     once for the search's processes: its surrogate, the hand layout's processes and the validation's workers
     map it. ``None`` in one process (``jobs`` 1): the surrogate builds its own, as the evaluator's one worker."""
-    from optipose.evaluate import shared
+    from optipose.parallel import shared
 
     if jobs < 2:
         yield None
@@ -204,7 +204,7 @@ def _run(
     if outcome.interrupted:
         return report
     from optipose.search.validate import hand_where_better, validate
-    from optipose.search.verdict import choice_draw_counts
+    from optipose.search.draws import choice_draw_counts
 
     stage(f"validating on the {config.validation} protocol (held-out noise seed)")
     first: dict = {}
@@ -222,7 +222,7 @@ def _run(
             sink.layouts(report.layouts, hand)
     sink.validation(report.validation)
     if report.validation.hand:
-        from optipose.search.verdict import confident_verdicts
+        from optipose.search.draws import confident_verdicts
 
         stage(f"the verdict with confidence (up to {config.verdict_draws} draws of the cell)")
         raced = replace(config, verdict_time=_verdict_seconds(config, started))

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from optipose.evaluate.compare import dominates, excess
+from optipose.verdict.compare import dominates, excess
 from optipose.search.config import SearchConfig
 from optipose.search.driver import optimize
 from optipose.search.problem import SurrogateProblem

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from optipose.cell.scans import CellSetup
-from optipose.evaluate.compare import weighted_excess
+from optipose.verdict.compare import weighted_excess
 from optipose.model.collision import collision_model, heads_clearance
 from optipose.search.config import SearchConfig
 from optipose.search.records import LayoutScore

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from optipose.evaluate.compare import Verdict, one_versus_many, unmeasured_line
+from optipose.verdict.compare import Verdict, one_versus_many, unmeasured_line
 
 if TYPE_CHECKING:  # importing the surrogate loads the scanner; the records only name its type
     from optipose.search.surrogate import Prediction
@@ -162,7 +162,7 @@ class Validation:
 
     def unmeasured_lines(self, reference: str = "hand") -> list[str]:
         """Per k whose found choice leaves an axis unmeasured, one line saying so
-        (:func:`~optipose.evaluate.compare.unmeasured_line`): no found layout of k sensors observes it."""
+        (:func:`~optipose.verdict.compare.unmeasured_line`): no found layout of k sensors observes it."""
         lines = (unmeasured_line(k, self.found[k], self.hand.get(k), reference) for k in sorted(self.found))
         return [line for line in lines if line]
 

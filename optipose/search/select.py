@@ -33,7 +33,7 @@ import time
 
 import numpy as np
 
-from optipose.evaluate.compare import excess, rank
+from optipose.verdict.compare import excess, rank
 from optipose.evaluate.conditions import conditions
 from optipose.evaluate.robust import make_evaluator
 from optipose.search.candidates import anchored, candidates, maxmin_anchored

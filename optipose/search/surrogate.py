@@ -188,7 +188,7 @@ class Surrogate:
     def ready(self) -> None:
         """Build what :meth:`info` builds on first use (the CAD reference), e.g. before calling it from threads."""
         if self._reference is None and len(self.motions):
-            from optipose.evaluate import shared
+            from optipose.parallel import shared
 
             self._reference = shared.surface(
                 self.part.mesh.vertices, self.part.mesh.faces

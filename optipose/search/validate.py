@@ -35,7 +35,7 @@ _LAST = 19  # ... and its check under the band, which runs on through the select
 
 class BaselineRun:
     """The hand layout's validation evaluation (:func:`optipose.model.baseline.baseline`), running in
-    processes of its own from the moment it is made (:class:`optipose.evaluate.background.Background`, one
+    processes of its own from the moment it is made (:class:`optipose.parallel.background.Background`, one
     thread each) at a low priority, so it takes the cores the search leaves idle.
 
     ``result()`` waits for it: ``None`` when the part has no baseline, or the evaluation failed or was
@@ -45,7 +45,7 @@ class BaselineRun:
     processes — its bracket draws where there are enough of them (each draw's noise levels scanned together),
     else its scans (:func:`_shares`) — so that once the search and the found layouts' validation are done the
     hand layout's takes every core, not one. ``reference_dir``: the CAD-surface reference the search holds on
-    this machine (:mod:`optipose.evaluate.shared`), mapped by the processes instead of built by each.
+    this machine (:mod:`optipose.parallel.shared`), mapped by the processes instead of built by each.
     """
 
     def __init__(
@@ -61,7 +61,7 @@ class BaselineRun:
         import multiprocessing
         import pickle
 
-        from optipose.evaluate.background import Background
+        from optipose.parallel.background import Background
 
         self._calls, self._result = [], None
         layout = baseline(part)
@@ -217,7 +217,7 @@ def hand_where_better(
     baseline's sensors staying in their brackets (docs/method.md, "The verdict with confidence"). The found layouts
     that stay keep their choices, restated in the largest of them that holds them where the one they were validated
     inside was replaced. In the ideal cell the validation's draw is the race's first and is not also used to choose
-    (:func:`optipose.search.verdict.choice_draw_counts`)."""
+    (:func:`optipose.search.draws.choice_draw_counts`)."""
     out, found, replaced = dict(layouts), dict(validation.found), set()
     for k, h in validation.hand.items():
         f = found.get(k)

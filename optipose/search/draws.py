@@ -6,13 +6,13 @@ not, since each layout's choice was made on them (:func:`choice_draw_counts`). E
 and the hand one are evaluated with the validation's objective: one evaluator per draw, so both sides get the
 same cell instance (the part as made, the calibration), the same protocol orientations, robot paths and
 scan noise (common random numbers). Each layout keeps the choice the validation made for it (its subset per
-axis); a draw gives that choice's per-scan errors (:func:`optipose.evaluate.confidence.scan_errors`), and
+axis); a draw gives that choice's per-scan errors (:func:`optipose.verdict.confidence.scan_errors`), and
 registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``). A k the search answered with
 the hand layout's own choice (:func:`optipose.search.validate.hand_where_better`) is not evaluated: its side is the
 hand layout's evaluation with that choice, an exact TIE that rides along without holding the race (when every k is
 one, they are the race, decided at one look at its last draw: the draws go to the hand layout's predicted error).
 
-Draws are added (:func:`optipose.evaluate.racing.race_many`) until every k is BUY, KEEP or TIE, or
+Draws are added (:func:`optipose.verdict.racing.race_many`) until every k is BUY, KEEP or TIE, or
 ``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
 ideal cell a draw differs from the next only in its noise and orientations, which the scans' own spread
 already measures: the first look is at one draw. In a real cell each draw is another instance of the cell,
@@ -28,10 +28,10 @@ import math
 import string
 import time
 
-from optipose.evaluate.confidence import FEWER, Rules, paired_draw
-from optipose.evaluate.racing import race_many
+from optipose.verdict.confidence import FEWER, Rules, paired_draw
+from optipose.verdict.racing import race_many
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
-from optipose.evaluate.executors import make_executor
+from optipose.parallel.executors import make_executor
 from optipose.model.baseline import baseline, baseline_label
 from optipose.model.layout import Layout, is_part_of
 from optipose.search.objectives import stage_objective
@@ -70,7 +70,7 @@ def confident_verdicts(
 ) -> dict:
     """k → the confident verdict of ``layouts[k]`` against the part's baseline layout, and under ``FEWER``
     one found sensor against the baseline's largest choice (on the same draws, without holding the race:
-    :data:`~optipose.evaluate.confidence.FEWER`).
+    :data:`~optipose.verdict.confidence.FEWER`).
 
     first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``), the
     race's first draw where :func:`choice_draw_counts` (else not read);

@@ -1,6 +1,6 @@
 """Racing: paired draws added until a verdict is clear or a budget ends (issue #33).
 
-:func:`race` adds draws until the decision (:func:`optipose.evaluate.confidence.compare_draws`) is not
+:func:`race` adds draws until the decision (:func:`optipose.verdict.confidence.compare_draws`) is not
 UNDECIDED or a budget ends, deciding only at a few :func:`looks`, planned at the first from the draws the
 time holds, each at the share of the error rate :func:`spent` gives it; :func:`race_many` does it for several k at once (one draw
 evaluates every found layout and the hand one).
@@ -13,7 +13,7 @@ import time
 from dataclasses import replace
 from typing import Callable, Sequence
 
-from optipose.evaluate.confidence import UNDECIDED, ConfidentVerdict, PairedDraw, Rules, compare_draws
+from optipose.verdict.confidence import UNDECIDED, ConfidentVerdict, PairedDraw, Rules, compare_draws
 
 __all__ = ["SPENDING", "looks", "race", "race_many", "spent"]
 

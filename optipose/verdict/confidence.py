@@ -36,7 +36,7 @@ decision:
 - UNDECIDED: none of these, with how many more draws would settle it (the interval's width ∝ 1/√draws).
 
 Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is one-sided at 97.5 %.
-:mod:`optipose.evaluate.racing` adds draws until the decision is not UNDECIDED or a budget ends. The same
+:mod:`optipose.verdict.racing` adds draws until the decision is not UNDECIDED or a budget ends. The same
 draws and :class:`Rules` give the same verdict.
 """
 

@@ -1,7 +1,7 @@
 """One call run in a process of its own while this one goes on: ``Background(fn, *args).result()``.
 
 The process is a fresh interpreter (``spawn``: no thread or lock of this one is copied into it) whose
-thread pools are capped before anything is imported (:func:`optipose.evaluate.executors.thread_env`:
+thread pools are capped before anything is imported (:func:`optipose.parallel.executors.thread_env`:
 the call and its arguments travel as bytes and are unpickled only after the caps are set), so a call
 given one thread takes one core. The answer comes back through a pipe; if the process dies (killed, out
 of memory) the pipe says so at once, and :meth:`Background.result` raises
@@ -26,7 +26,7 @@ class Background:
     both want a core this one goes first."""
 
     def __init__(self, fn, *args, threads: int = 1, nice: int = 0):
-        from optipose.evaluate.executors import thread_env
+        from optipose.parallel.executors import thread_env
 
         context = multiprocessing.get_context("spawn")
         payload = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
