@@ -2,8 +2,8 @@
 time linear in the rows.
 
 ``np.unique(..., axis=0)`` and trimesh's ``unique_rows`` sort the rows: n log n, and on a mesh of millions
-of faces the sort leaves the caches and is the largest part of loading it (benchmarks/README.md,
-"bench_dense.py"). Here each row is hashed to 64 bits (pandas' ``hash_array`` per column, combined), the
+of faces the sort leaves the caches and was the largest part of loading it (CHANGELOG.md, the dense meshes'
+entries). Here each row is hashed to 64 bits (pandas' ``hash_array`` per column, combined), the
 hashes are numbered by a hash table (``pandas.factorize``) and the result is checked against the rows
 themselves: two different rows with one hash (about n² / 2⁶⁵, 10⁻⁶ for 5 M rows) fall back to the sort.
 """
