@@ -1,9 +1,17 @@
 #!/usr/bin/env bash
-# One-shot set-up on a fresh Debian machine (root): system library for Open3D, Debian's chromium (the report
-# test opens report.html in it headless; playwright drives it, no browser download), uv, and the locked .venv.
-# Idempotent: a second run only checks. Usage: bash scripts/setup.sh
+# One-shot set-up on a fresh Debian machine (root): the system library Open3D needs, uv, and the locked .venv.
+# With --tests, also what the tests need: the dev and bench extras and Debian's chromium (the report test opens
+# report.html in it headless; playwright drives it, no browser download). Idempotent: a second run only checks.
+# Usage: bash scripts/setup.sh [--tests]
 set -euo pipefail
 cd "$(dirname "$0")/.."
+TESTS=""
+for arg in "$@"; do
+    case "$arg" in
+        --tests) TESTS=1 ;;
+        *) echo "setup: unknown option '$arg' (use --tests)" >&2; exit 2 ;;
+    esac
+done
 
 if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
 APT_UPDATED=""
@@ -16,7 +24,7 @@ apt_install() {  # apt_install PACKAGE WHY
 if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
     apt_install libusb-1.0-0 "needed by Open3D"
 fi
-if [ ! -x /usr/bin/chromium ]; then
+if [ -n "$TESTS" ] && [ ! -x /usr/bin/chromium ]; then
     apt_install chromium "the headless browser of tests/test_report.py"
 fi
 
@@ -28,7 +36,10 @@ fi
 # The lock file pins every package; --frozen refuses to drift from it. Byte-code is compiled here, once:
 # where PYTHONDONTWRITEBYTECODE is set (this machine sets it) every process, each evaluator worker
 # included, would otherwise compile every module it imports from source (benchmarks/README.md, "Start-up").
-uv sync --frozen --extra dev --extra bench -q --compile-bytecode
+# --inexact: the tests' extras, once installed, stay when the main command's set-up runs after them.
+if [ -n "$TESTS" ]; then EXTRAS="--extra dev --extra bench"; else EXTRAS=""; fi
+# shellcheck disable=SC2086
+uv sync --frozen --inexact $EXTRAS -q --compile-bytecode
 .venv/bin/python -m compileall -q optipose >/dev/null
 # The compiled kernels (numba) are cached beside their modules on first use: compiled here, once, so that a
 # fresh clone's first command does not spend its first seconds on them (a second run finds them cached).

@@ -311,7 +311,7 @@ def test_a_study_table_links_each_trials_report(results, tmp_path):
 @pytest.fixture(scope="module")
 def browser():
     if not CHROMIUM.exists():
-        pytest.fail("no /usr/bin/chromium: run scripts/setup.sh")
+        pytest.fail("no /usr/bin/chromium: run scripts/setup.sh --tests")
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p, tempfile.TemporaryDirectory() as profile:
