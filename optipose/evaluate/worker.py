@@ -98,7 +98,8 @@ class _Worker:
     def __init__(self, setup: WorkerSetup):
         import trimesh
 
-        from optipose.registration.reference import SampledReference, SurfaceReference, load_reference, sample_surface
+        from optipose.registration.reference import SurfaceReference, load_reference
+        from optipose.registration.sampled import SampledReference, sample_surface
 
         self.setup = setup
         self.condition = setup.condition  # the condition of the chunk being run (run_chunk sets it)
@@ -264,7 +265,7 @@ class _Worker:
         return self._nominal[key]
 
     def _nominal_references(self, models, poses, subsets) -> list:
-        from optipose.registration.reference import SampledReference
+        from optipose.registration.sampled import SampledReference
 
         cfg = self.setup.registration
         scans = self.scan(models, poses, nominal_reference_seed(self.setup.seed))
