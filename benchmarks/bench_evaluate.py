@@ -108,7 +108,7 @@ def main() -> None:
     from optipose.evaluate.evaluator import Evaluator
     from optipose.evaluate.objective import load_objective
     from optipose.model.part import load_part
-    from optipose.registration.reference import sample_surface
+    from optipose.registration.sampled import sample_surface
     from optipose.scan.scanner import Scanner
 
     part = load_part("part_b")

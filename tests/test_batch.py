@@ -24,7 +24,7 @@ import pytest
 
 from optipose.batch.index import read_index
 from optipose.batch.pools import DaskPool, LokyPool, SerialPool, make_pool
-from optipose.batch.spec import load_study, study_from_table
+from optipose.batch.spec import load_study_spec, study_from_table
 from optipose.batch.study import run_study
 from optipose.batch.summary import summary_frame
 from optipose.batch.threads import THREAD_VARIABLES, current_caps, plan
@@ -49,7 +49,7 @@ def _study_file(folder: Path, parts: list[str], sensors=(1, 2), seeds=(0, 1)) ->
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    return load_study(_study_file(tmp_path_factory.mktemp("study"), ["part_c", "broken.stl"]))
+    return load_study_spec(_study_file(tmp_path_factory.mktemp("study"), ["part_c", "broken.stl"]))
 
 
 # -- the study file ---------------------------------------------------------------------------------------
@@ -395,11 +395,11 @@ def test_an_existing_study_is_not_overwritten_without_resume(tmp_path):
 
 
 def test_the_shipped_studies_load():
-    reference = load_study(REPO / "studies" / "reference.toml")
+    reference = load_study_spec(REPO / "studies" / "reference.toml")
     assert {(t.part, t.sensors, t.budget, t.task) for t in reference.trials} == {
         (p, k, "default", "search") for p in ("part_a", "part_b", "part_c") for k in (1, 2, 3)
     }
-    assert len(load_study(REPO / "studies" / "tiny.toml").trials) == 4
+    assert len(load_study_spec(REPO / "studies" / "tiny.toml").trials) == 4
 
 
 # -- the other tasks: each row is what its folder says ----------------------------------------------------
@@ -510,7 +510,7 @@ def test_a_ctrl_c_a_trial_swallowed_whole_still_stops_the_study(tmp_path, monkey
         errors.note_interrupts()
         with pytest.raises(KeyboardInterrupt):
             run_study(
-                load_study(_study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0, 1))),
+                load_study_spec(_study_file(tmp_path, ["part_c"], sensors=(1,), seeds=(0, 1))),
                 tmp_path / "out",
                 SerialPool(),
             )

@@ -32,7 +32,7 @@ from optipose.model.material import MaterialEffects, load_material
 from optipose.model.part import load_part
 from optipose.model.sensor import load_sensor
 from optipose.model.planes import face_planes, plane_numbers
-from optipose.scan.scanner import Scan
+from optipose.scan.cloud import Scan
 from optipose.transforms import invert_T, matrix_to_rpy
 
 DEG = np.pi / 180

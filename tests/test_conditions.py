@@ -16,7 +16,8 @@ from optipose.evaluate.objective import StatisticConfig, load_objective, reduced
 from optipose.evaluate.robust import evaluate_robust, robust_stats
 from optipose.model.part import load_part
 from optipose.model.sensor import load_sensor
-from optipose.scan.scanner import PartPose, part_scanner, rebuilt_with
+from optipose.scan.cloud import rebuilt_with
+from optipose.scan.scanner import PartPose, part_scanner
 from optipose.scan.profiles import profiles_to_points
 from optipose.transforms import matrix_to_rpy
 

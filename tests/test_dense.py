@@ -153,7 +153,7 @@ def test_a_dense_meshs_hull_is_shared_through_a_file(tmp_path, monkeypatch):
 
 
 def test_a_dense_meshs_scanner_arrays_are_shared_through_a_file(tmp_path, monkeypatch):
-    from optipose.scan import raycast
+    from optipose.model import planes
     from optipose.scan.hull import face_arrays
 
     monkeypatch.setattr(machine, "SHARED_FACES", 0)
@@ -161,7 +161,7 @@ def test_a_dense_meshs_scanner_arrays_are_shared_through_a_file(tmp_path, monkey
     monkeypatch.setattr(machine, "_WRITTEN", [])
     scanner = part_scanner(load_part("part_c"))  # the part with its keep-outs, written by the scanner
     assert len(list(tmp_path.glob("optipose-faces-*.npz"))) == 1
-    monkeypatch.setattr(raycast, "shared_planes", lambda *a: pytest.fail("computed again"))
+    monkeypatch.setattr(planes, "shared_planes", lambda *a: pytest.fail("computed again"))
     mesh = trimesh.Trimesh(scanner.vertices.copy(), scanner.faces.copy(), process=False)  # another process's
     read = face_arrays(mesh, scanner.vertices, scanner.faces)
     held = (scanner._plane, scanner._normals, scanner._offsets, scanner._edge_n, scanner._edge_c, scanner._on_hull)

@@ -13,7 +13,8 @@ from optipose.evaluate.evaluator import Evaluator
 from optipose.model.layout import Layout, SensorPose
 from optipose.evaluate.objective import StatisticConfig, load_objective, objective_from_table
 from optipose.evaluate.protocol import perturbations
-from optipose.registration.reference import SurfaceReference, sample_surface
+from optipose.registration.reference import SurfaceReference
+from optipose.registration.sampled import sample_surface
 from optipose.registration import information_matrix, voxel_down
 from optipose.model.motion import ScanMotion
 from optipose.evaluate.statistics import unobservable_axes

@@ -337,10 +337,10 @@ class _DyingOnce:
 
 
 def test_leftovers_of_a_dead_worker_are_removed_when_the_study_succeeds(files, tmp_path):
-    from optipose.batch.spec import load_study
+    from optipose.batch.spec import load_study_spec
     from optipose.batch.study import run_study
 
-    spec = load_study(files / "study.toml")
+    spec = load_study_spec(files / "study.toml")
     spec = replace(spec, trials=spec.trials[:1])
     out = tmp_path / "study"
     index = run_study(spec, out, _DyingOnce(out))

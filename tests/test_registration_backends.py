@@ -21,7 +21,8 @@ from meshes import centroid_split, distance_to_every_face
 from optipose.errors import ConfigError
 from optipose.evaluate.objective import load_objective
 from optipose.registration import BACKENDS, Matches, Registration, backend_for, get_backend, register, register_backend
-from optipose.registration.reference import SampledReference, SurfaceReference, sample_surface
+from optipose.registration.reference import SurfaceReference
+from optipose.registration.sampled import SampledReference, sample_surface
 from optipose.transforms import invert_T, matrix_to_rpy, part_motion, transform_points
 
 DEG = np.pi / 180

@@ -144,7 +144,7 @@ def test_the_prediction_record_is_consistent(hand_b_infos):
 
 def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
     # independent reference: the scanner's own rebuild of a cloud whose sensor stood off its drawn pose
-    from optipose.scan.scanner import rebuilt_with
+    from optipose.scan.cloud import rebuilt_with
     from optipose.search.mounting import displacement
     from optipose.transforms import make_T, rpy_to_matrix
 

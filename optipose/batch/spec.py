@@ -33,7 +33,7 @@ from pathlib import Path
 
 from optipose.errors import ConfigError, read_toml
 
-__all__ = ["TASKS", "TrialSpec", "StudySpec", "load_study", "study_from_table"]
+__all__ = ["TASKS", "TrialSpec", "StudySpec", "load_study_spec", "study_from_table"]
 
 TASKS = ("search", "evaluate", "robustness")
 _DEFAULT_OBJECTIVE = {"search": "paper", "evaluate": "paper", "robustness": "robust"}
@@ -90,7 +90,7 @@ class StudySpec:
     trials: tuple[TrialSpec, ...]
 
 
-def load_study(path: str | Path) -> StudySpec:
+def load_study_spec(path: str | Path) -> StudySpec:
     """The study in a TOML file; paths in it are relative to the file."""
     path = Path(path)
     if not path.is_file():

@@ -15,12 +15,12 @@ import pandas as pd
 
 from optipose.evaluate.objective import AXES
 
-__all__ = ["summary_frame", "load_study", "SETTING"]
+__all__ = ["summary_frame", "read_study_index", "SETTING"]
 
 SETTING = ["part", "task", "objective", "budget", "sensors"]
 
 
-def load_study(folder: str | Path) -> pd.DataFrame:
+def read_study_index(folder: str | Path) -> pd.DataFrame:
     """A study folder's index (one row per trial; see :mod:`optipose.batch.results` for the columns)."""
     from optipose.batch.index import read_index
 

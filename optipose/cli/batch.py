@@ -78,9 +78,9 @@ def batch(
     own result folder; an index lists all of them (index.parquet, index.csv), and the study report
     (study.html, study.md) shows them."""
     if summary:
-        from optipose.batch.spec import load_study
+        from optipose.batch.spec import load_study_spec
 
-        study_command(out or Path("results") / load_study(study_file).name, report=not no_report)
+        study_command(out or Path("results") / load_study_spec(study_file).name, report=not no_report)
         return
     batch_command(
         study_file,
@@ -123,11 +123,11 @@ def batch_command(
     from optipose.batch.pools import make_pool
     from optipose.batch.scheduler import NoWorkers, WorkerWatch
     from optipose.errors import note_interrupts
-    from optipose.batch.spec import load_study
+    from optipose.batch.spec import load_study_spec
     from optipose.batch.study import prepare_folder
 
     WorkerWatch("", no_workers, no_workers_after)  # its options checked before anything starts
-    spec = load_study(study_file)
+    spec = load_study_spec(study_file)
     folder = Path(out) if out else Path("results") / spec.name
     check_output(folder)
     prepare_folder(folder, resume)
@@ -198,11 +198,11 @@ def study_command(folder: Path, report: bool = True) -> None:
     """Print the table per part and setting of a study folder, and (``report``) write its study report."""
     from rich.console import Console
 
-    from optipose.batch.summary import load_study, summary_frame
+    from optipose.batch.summary import read_study_index, summary_frame
 
     if not Path(folder).is_dir():
         raise ConfigError(f"study folder not found: {folder}")
-    index = load_study(folder)
+    index = read_study_index(folder)
     Console().print(_summary_table(summary_frame(index), Path(folder).name))
     if report:
         html, _ = write_study_report(folder, index)

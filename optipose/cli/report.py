@@ -52,10 +52,10 @@ def report_command(result_dir: Path, views: bool = True) -> Path:
     check_output(Path(result_dir), what="report into")
     console = make_console(stderr=True)
     if (Path(result_dir) / "index.parquet").is_file():  # a batch study: its table of trials, linking their reports
-        from optipose.batch.summary import load_study
+        from optipose.batch.summary import read_study_index
         from optipose.cli.batch import write_study_report
 
-        html, md = write_study_report(Path(result_dir), load_study(result_dir))
+        html, md = write_study_report(Path(result_dir), read_study_index(result_dir))
         console.print(f"study report: {html} (and {md.name})")
         return html
     with status(console, f"writing the report of {result_dir}"):

@@ -1,6 +1,7 @@
 """Registration of a scan (source, floating) onto a reference (target, fixed): ICP from identity.
 
-- :mod:`~optipose.registration.reference` — the reference and its search structure, built once per part;
+- :mod:`~optipose.registration.reference` — the CAD surface's reference, its search structure built once per part
+  (:mod:`~optipose.registration.surface_index`), and :mod:`~optipose.registration.sampled` — a sampled one;
 - :mod:`~optipose.registration.preprocess` — voxel down-sampling, outlier removal, the information matrix;
 - :mod:`~optipose.registration.backends` — :func:`register` and the back-ends by name
   (:mod:`~optipose.registration.fast`, :mod:`~optipose.registration.open3d_icp`);

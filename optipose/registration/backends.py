@@ -40,7 +40,8 @@ class RegistrationBackend(Protocol):
     takes_initial : it uses ``initial`` (the source's :class:`Matches` at identity) when given, so a
         caller registering many subsets of the same clouds may search them once.
     register : ICP of ``source`` (n, 3) m onto ``reference`` from identity, under ``cfg``. ``reference``
-        is a :class:`optipose.registration.reference.SurfaceReference` or ``SampledReference``
+        is a :class:`optipose.registration.reference.SurfaceReference` or
+        :class:`optipose.registration.sampled.SampledReference`
         (``closest``, ``follow``, ``nearest``, ``sample``). It returns a failed :class:`Registration`
         (``ok`` False, ``failure`` saying why), never raises, for a problem in the data.
     """

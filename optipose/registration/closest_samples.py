@@ -1,7 +1,7 @@
 """Compiled nearest reference samples (numba, ``nogil``): a grid over a sampled reference's points, each
 point's nearest sample in it, each sample's neighbours, and an ICP's points tracked from step to step
 (searched again only once they may have left their sample's bisector planes). The arithmetic is documented
-in :mod:`optipose.registration.reference` (:class:`~optipose.registration.reference.SampledReference`);
+in :mod:`optipose.registration.sampled` (:class:`~optipose.registration.sampled.SampledReference`);
 compiled once per machine and cached next to this file (``cache=True``).
 """
 

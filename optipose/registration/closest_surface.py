@@ -1,5 +1,6 @@
-"""Compiled closest points on a planar-faced mesh (numba, ``nogil``): the faces that cross each cell of a grid
-over the part, and each point's closest point on them, starting from the face it had at the last step (walking
+"""Compiled closest points on a planar-faced mesh (numba, ``nogil``): each point's closest point on the faces
+that cross the cells of a grid over the part around it (the grid and the other arrays searched are built once per
+part in :mod:`optipose.registration.surface_index`), starting from the face it had at the last step (walking
 across the edge it left by) before its grid cell's faces are searched. The arithmetic is documented in
 :mod:`optipose.registration.reference` (:class:`~optipose.registration.reference.SurfaceReference`);
 compiled once per machine and cached next to this file (``cache=True``).
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["face_grid", "face_boxes", "nearest_into", "edge_normal", "adjacent_faces", "CREASE_DEG"]
+__all__ = ["nearest_into", "edge_normal", "CREASE_DEG"]
 
 _WALK = 4  # faces a point that left its face's guess walks across before the grid is searched
 CREASE_DEG = (
@@ -163,51 +164,6 @@ def _folds_away(h, f, h0, tri, planes, plane_c):
         if abs(s) > abs(far):
             far = s
     return far * h0 < 0.0 and abs(far) > _FOLD  # a face in the plane to rounding (a sliver, a flipped face) is not
-
-
-@njit(cache=True, nogil=True)
-def face_grid(tri, normals, offsets, origin, cell, shape):
-    """Faces listed per cell of a grid (origin (3,), cube side ``cell``, ``shape`` (3,) cells): every face
-    whose bounding box overlaps the cell and whose plane passes within the cell's half-diagonal of its
-    centre (a superset of the faces that meet the cell). Returns the CSR start (cells + 1,) int64 and the
-    face list (int32). A face is listed in the few cells it crosses, whatever the mesh's density: the
-    search (:func:`nearest_into`) looks at the cells around a point, ring by ring."""
-    n_cells = shape[0] * shape[1] * shape[2]
-    start = np.zeros(n_cells + 1, np.int64)
-    _grid_pass(tri, normals, offsets, origin, cell, shape, start[1:], np.empty(0, np.int32))
-    for c in range(n_cells):
-        start[c + 1] += start[c]
-    faces = np.empty(start[n_cells], np.int32)
-    _grid_pass(tri, normals, offsets, origin, cell, shape, start[:-1].copy(), faces)
-    return start, faces
-
-
-@njit(cache=True, nogil=True)
-def _grid_pass(tri, normals, offsets, origin, cell, shape, slot, faces):
-    """Count faces per cell into ``slot`` (faces empty), or write them at ``slot`` (advanced)."""
-    write = faces.shape[0] > 0
-    half_diag = 0.5 * np.sqrt(3.0) * cell * (1.0 + 1e-9)
-    pad = 1e-9 * cell
-    lo_c = np.empty(3, np.int64)
-    hi_c = np.empty(3, np.int64)
-    for f in range(tri.shape[0]):
-        for j in range(3):
-            lo_v = min(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) - pad  # a hair over: no cell lost to rounding
-            hi_v = max(tri[f, 0, j], tri[f, 1, j], tri[f, 2, j]) + pad
-            lo_c[j] = max(0, np.int64(np.floor((lo_v - origin[j]) / cell)))
-            hi_c[j] = min(shape[j] - 1, np.int64(np.floor((hi_v - origin[j]) / cell)))
-        for i in range(lo_c[0], hi_c[0] + 1):
-            for j in range(lo_c[1], hi_c[1] + 1):
-                for k in range(lo_c[2], hi_c[2] + 1):
-                    cx = origin[0] + (i + 0.5) * cell
-                    cy = origin[1] + (j + 0.5) * cell
-                    cz = origin[2] + (k + 0.5) * cell
-                    if abs(normals[f, 0] * cx + normals[f, 1] * cy + normals[f, 2] * cz - offsets[f]) > half_diag:
-                        continue
-                    c = (i * shape[1] + j) * shape[2] + k
-                    if write:
-                        faces[slot[c]] = f
-                    slot[c] += 1
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -450,34 +406,3 @@ def edge_normal(p, i, q, nrm):
     if dx * nrm[i, 0] + dy * nrm[i, 1] + dz * nrm[i, 2] < 0.0:
         d = -d
     nrm[i, 0], nrm[i, 1], nrm[i, 2] = dx / d, dy / d, dz / d
-
-
-def adjacent_faces(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(f, 3) int32: the face across each face's edge k (corner k to corner k + 1), -1 on a boundary;
-    where more than two faces share an edge, one of the others. And (f,) uint8: bit k set where edge k
-    has exactly one face across (the mesh is a 2-manifold there)."""
-    f = len(faces)
-    following = np.roll(faces, -1, axis=1)
-    # each half-edge as one int64 key (its lower vertex, then its higher), row 3·face + k: sorted in linear memory
-    key = (np.minimum(faces, following) * (int(faces.max(initial=0)) + 1) + np.maximum(faces, following)).ravel()
-    order = np.argsort(key, kind="stable")
-    adjacent = np.full(3 * f, -1, dtype=np.int32)
-    same = key[order[1:]] == key[order[:-1]]  # consecutive half-edges of one edge: each the other's neighbour
-    a, b = order[:-1][same], order[1:][same]
-    adjacent[a], adjacent[b] = b // 3, a // 3
-    # an edge of exactly two faces: a pair of equal keys with no third before or after it
-    alone = same & ~np.r_[False, same[:-1]] & ~np.r_[same[1:], False]
-    two = np.zeros(3 * f, dtype=np.uint8)
-    two[order[:-1][alone]] = two[order[1:][alone]] = 1
-    paired = (two.reshape(f, 3) << np.arange(3, dtype=np.uint8)).sum(axis=1).astype(np.uint8)
-    return adjacent.reshape(f, 3), paired
-
-
-def face_boxes(tri: np.ndarray) -> np.ndarray:
-    """(f, 6) float32: each face's bounding box, lowest corner then highest, rounded outward so that it
-    contains the float64 box of ``tri`` (f, 3, 3): the first test of :func:`nearest_into`'s search."""
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)
-    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
-    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
-    return np.ascontiguousarray(np.hstack([lo32, hi32]))

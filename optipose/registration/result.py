@@ -21,7 +21,7 @@ MIN_POINTS = 6  # fewest points (and inliers) a registration is attempted with
 class Matches:
     """Closest reference points ``q`` (n, 3) m, their unit normals ``n`` (n, 3) and ids ``ids`` (n,) int64
     for a cloud of n points at identity; ``margin`` (n,) m, when the reference gives it: how far each point
-    can move before another reference point may be closer (:class:`~optipose.registration.reference.SampleTracker`)."""
+    can move before another reference point may be closer (:class:`~optipose.registration.sampled.SampleTracker`)."""
 
     q: np.ndarray
     n: np.ndarray

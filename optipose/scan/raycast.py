@@ -1,4 +1,5 @@
-"""Ray casting back-ends behind one interface: Embree through embreex, or Open3D's RaycastingScene.
+"""Ray casting back-ends behind one interface: Embree through embreex, or Open3D's RaycastingScene; and the
+scene a scanner casts into, the part with its keep-outs (:func:`scene_mesh`).
 
 Both build the acceleration structure once per mesh and then answer batches of rays. Embree works in
 float32; the scanner recomputes each hit in float64 from the triangle Embree names (:func:`optipose.model.planes.face_planes`).
@@ -19,6 +20,7 @@ __all__ = [
     "EmbreeCaster",
     "Open3DCaster",
     "make_caster",
+    "scene_mesh",
     "BACKENDS",
 ]
 
@@ -155,3 +157,27 @@ def make_caster(
     if name not in BACKENDS:
         raise ValueError(f"unknown ray-casting backend '{backend}' (use auto, embreex or open3d)")
     return EmbreeCaster(vertices, faces, threads) if name == "embreex" else BACKENDS[name](vertices, faces)
+
+
+def scene_mesh(mesh, occluders: list[tuple[np.ndarray, np.ndarray]] | None = None):
+    """The mesh a scanner casts its rays into: ``mesh`` itself, or with ``occluders`` (axis-aligned boxes
+    ``(lo (3,), hi (3,))`` m, the part's keep-outs) a ``trimesh.Trimesh`` of the part's faces and then each
+    box's. The boxes block the laser and the receiver but return no points (the scanner measures only the
+    part's faces, the first ``len(mesh.faces)``)."""
+    if not occluders:
+        return mesh
+    import trimesh
+
+    boxes = []
+    for lo, hi in occluders:
+        box = trimesh.creation.box(np.asarray(hi, float) - np.asarray(lo, float))
+        box.apply_translation((np.asarray(lo, float) + np.asarray(hi, float)) / 2)
+        boxes.append(box)
+    parts = [(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))]
+    parts += [(np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)) for box in boxes]
+    first = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])  # each body's first vertex
+    return trimesh.Trimesh(
+        np.concatenate([v for v, _ in parts]),
+        np.concatenate([f + o for (_, f), o in zip(parts, first)]),
+        process=False,
+    )

@@ -11,21 +11,22 @@ Embree in one call. A point is measured when
 
 Noise is Gaussian along the laser ray with σ growing as intensity falls, then Z is quantised to the
 device's output resolution. Profiles are turned into points in O with the motion undone (paper eq. 4),
-through the same code that reads real raw profiles (:mod:`optipose.scan.profiles`).
+through the same code that reads real raw profiles (:mod:`optipose.scan.profiles`). Each sensor is cast
+through its view from the part (:class:`optipose.scan.view.SensorView`); each scan is a
+:class:`optipose.scan.cloud.Scan`.
 """
 
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from optipose.model.material import Material, load_material
 from optipose.model.motion import ScanMotion
+from optipose.scan.cloud import Scan
 from optipose.scan.kernels import (
     NORMAL_QUANTILES,
-    block_rays,
     fill_columns,
     measure_hits,
     shadow_rays,
@@ -36,17 +37,16 @@ from optipose.scan.kernels import (
 from optipose.scan.hull import face_arrays
 from optipose.scan.pose import NOMINAL, PartPose
 from optipose.scan.profiles import EMPTY, ray_lines
-from optipose.scan.raycast import default_threads, make_caster
+from optipose.scan.raycast import default_threads, make_caster, scene_mesh
+from optipose.scan.view import SensorView
 from optipose.model.sensor import SensorModel, load_sensor
 from optipose.transforms import part_motion, validate_pose
 
 __all__ = [
-    "Scan",
     "Scanner",
     "PartPose",
     "part_scanner",
     "nominal_scans",
-    "rebuilt_with",
     "SCAN_PROFILES",
     "registered_motion",
 ]
@@ -60,36 +60,6 @@ COLUMN_STRIDE = 16  # cast every this many columns, and the columns between only
 # Profiles of a registered scan at most (:func:`registered_motion`): 64 mm at the default 0.5 mm step; the
 # shipped parts' scans (12-60 mm of travel) take 24-120.
 SCAN_PROFILES = 128
-
-
-@dataclass
-class Scan:
-    """One sensor's scan of the part at one orientation.
-
-    points : (n, 3) float64, metres, in O with the scan motion undone (a cloud of the rotated part).
-    profile, column : (n,) int32, which profile and which of the sensor's columns each point came from.
-    intensity : (n,) float32, relative returned intensity.
-    raw : (n_profiles, points_per_profile) float64, device-format heights in mm (EMPTY where nothing); (0, points_per_profile) when not kept.
-    face : (n,) int32, the mesh triangle each point lies on (see :meth:`Scanner.normals`).
-    """
-
-    points: np.ndarray
-    profile: np.ndarray
-    column: np.ndarray
-    intensity: np.ndarray
-    raw: np.ndarray
-    T_O_S: np.ndarray = field(repr=False)
-    rpy: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    face: np.ndarray | None = field(default=None, repr=False)  # (n,) int32, the mesh triangle of each point
-    T_O_P: np.ndarray | None = field(default=None, repr=False)  # the part's pose (rotation about the centre)
-
-    def __len__(self) -> int:
-        return len(self.points)
-
-    def __repr__(self) -> str:
-        n_prof, n_col = self.raw.shape
-        where = f"{n_prof} profiles x {n_col} columns" if n_prof else f"{n_col} columns (raw profiles not kept)"
-        return f"Scan({len(self)} points from {where}, rpy_deg={np.rad2deg(self.rpy).round(3).tolist()})"
 
 
 class Scanner:
@@ -121,24 +91,7 @@ class Scanner:
         column_stride: int = COLUMN_STRIDE,
     ):
         self.n_part_faces = len(mesh.faces)
-        if occluders:  # keep-outs (the flange) block the laser and the receiver but return no points
-            import trimesh
-
-            boxes = []
-            for lo, hi in occluders:
-                box = trimesh.creation.box(np.asarray(hi, float) - np.asarray(lo, float))
-                box.apply_translation((np.asarray(lo, float) + np.asarray(hi, float)) / 2)
-                boxes.append(box)
-            parts = [(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))]
-            parts += [
-                (np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)) for box in boxes
-            ]
-            first = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])  # each body's first vertex
-            mesh = trimesh.Trimesh(
-                np.concatenate([v for v, _ in parts]),
-                np.concatenate([f + o for (_, f), o in zip(parts, first)]),
-                process=False,
-            )
+        mesh = scene_mesh(mesh, occluders)  # keep-outs (the flange) block the laser and the receiver
         self.vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
         self._bounds = (
             self.vertices.min(axis=0) - 1e-6,
@@ -216,15 +169,15 @@ class Scanner:
 
         built : per sensor, the pose (4×4 ``T_O_S``) its cloud is built with when it is not the pose it scans
             from — a bracket off its drawing: the device measures in its own frame and the cell turns that into
-            O with the pose it believes (:func:`rebuilt_with` of the scan, without the round trip through the
-            true pose); each scan's ``T_O_S`` is then that pose."""
+            O with the pose it believes (:func:`optipose.scan.cloud.rebuilt_with` of the scan, without the round
+            trip through the true pose); each scan's ``T_O_S`` is then that pose."""
         if not isinstance(part_pose, PartPose):  # a caller of the old (rpy, centre, offset) arguments
             raise TypeError(f"part_pose must be a PartPose, not {type(part_pose).__name__}")
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
         seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
         T_O_P = part_pose.T_O_P
         shifts = motion.offsets()
-        views = [_SensorView.build(self, T, T_O_P) for T in poses]
+        views = [self._view(T, T_O_P) for T in poses]
         blocks = [
             (j, k0, min(k0 + self._block, len(shifts)))
             for j in range(len(poses))
@@ -298,11 +251,15 @@ class Scanner:
         list(run(write, jobs))
         return scans
 
+    def _view(self, T_O_S: np.ndarray, T_O_P: np.ndarray) -> SensorView:
+        """One sensor at ``T_O_S`` seen from the part at ``T_O_P`` (:class:`~optipose.scan.view.SensorView`)."""
+        return SensorView.build(self.sensor, self._ray_o_S, self._ray_d_S, self._t_max, T_O_S, T_O_P)
+
     def primary_rays(self, T_O_S: np.ndarray, motion: ScanMotion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The laser rays of a whole scan at the nominal orientation, as the scanner casts them (part frame,
         float32): origins (n, 3), directions (n, 3) and far limits (n,), n = profiles × points per profile.
         For benchmarks that cast the same rays with another ray caster."""
-        view = _SensorView.build(self, T_O_S, part_motion(np.zeros(3), np.zeros(3)))
+        view = self._view(T_O_S, part_motion(np.zeros(3), np.zeros(3)))
         shifts = motion.offsets()
         return view.rays(np.arange(len(shifts) * self.sensor.points_per_profile), shifts, self._t_max)
 
@@ -316,7 +273,7 @@ class Scanner:
         return self._normals[scan.face] @ scan.T_O_P[:3, :3].T
 
     # ------------------------------------------------------------------------------------------------
-    def _block_hits(self, view: "_SensorView", shifts: np.ndarray, k0: int, k1: int):
+    def _block_hits(self, view: SensorView, shifts: np.ndarray, k0: int, k1: int):
         """Profiles k0..k1-1 of one sensor: the measured hits as (ray index in the block (n,), distance from
         the apex (n,) float64, intensity (n,), triangle (n,)).
 
@@ -370,7 +327,7 @@ class Scanner:
         keep[first] = self._receiver_sees(view, T[first], sub % n_col, shift_b[sub // n_col], tri[first])
         return unsure_between_anchors(idx, tri, keep, rest, ray_tri, n_col, stride, self._plane) if len(rest) else rest
 
-    def _first_triangles(self, view: "_SensorView", shift_b: np.ndarray) -> np.ndarray:
+    def _first_triangles(self, view: SensorView, shift_b: np.ndarray) -> np.ndarray:
         """The first triangle (-1: none) of each ray of a block's profiles × columns (see ``column_stride``).
         A profile whose fan (a trapezoid) lies outside the scene's box cannot hit anything and casts no ray."""
         n_col, caster, t_max, m = self.sensor.points_per_profile, self.caster, self._t_max, len(shift_b)
@@ -419,19 +376,6 @@ class Scanner:
         return ~self.caster.occluded(start, direction, np.ones(len(T), dtype=np.float32))
 
 
-def rebuilt_with(scan: Scan, T_O_S: np.ndarray, shifts: np.ndarray) -> Scan:
-    """The scan of a sensor that stood at ``scan.T_O_S`` rebuilt as if it stood at ``T_O_S``: what a cell
-    reports when a bracket is off its drawing (the device measures in its own frame; the cell turns that
-    into O with the pose it believes). ``shifts`` (n_profiles,) m are the motion's offsets."""
-    T_true, s = scan.T_O_S, np.asarray(shifts, dtype=float)[scan.profile]
-    moved = scan.points.copy()
-    moved[:, 0] += s  # back to where the part was when the profile was taken
-    p_S = (moved - T_true[:3, 3]) @ T_true[:3, :3]
-    points = p_S @ T_O_S[:3, :3].T + T_O_S[:3, 3]
-    points[:, 0] -= s
-    return replace(scan, points=points, T_O_S=T_O_S)
-
-
 def registered_motion(motion: ScanMotion) -> ScanMotion:
     """The motion a scan that is registered (an evaluation's) takes: ``motion`` itself up to
     :data:`SCAN_PROFILES` profiles, else the same travel in the least whole multiple of its step that
@@ -467,64 +411,3 @@ def nominal_scans(part, layout: str = "hand") -> dict:
             scanners[model] = part_scanner(part, model)
         out[pose.name] = scanners[model].scan(pose.T_O_S, part.motion, PartPose(centre=part.rotation_centre))
     return out
-
-
-@dataclass(frozen=True)
-class _SensorView:
-    """One sensor's fan and receiver in the part's frame at shift 0.
-
-    ``frame`` (5, 3) holds the fan's axis, the line's direction, the apex, ``step_P`` (the part's +x_O motion
-    seen from the part) and the receiver: the kernels form a hit face's scalars from it
-    (:func:`optipose.scan.kernels.face_terms`), so building a view does not grow with the mesh.
-    """
-
-    T_O_S: np.ndarray
-    apex_P: np.ndarray  # (3,)
-    d_P: np.ndarray  # (n_col, 3) unit ray directions
-    o_P32: np.ndarray  # (n_col, 3) ray origins on the window line, float32 for Embree
-    d_P32: np.ndarray
-    receiver_P: np.ndarray  # (3,)
-    step_P: np.ndarray  # (3,)
-    fan_lo: np.ndarray  # (3,) the box of the fan's trapezoid (window to far limit) at shift 0
-    fan_hi: np.ndarray
-    frame: np.ndarray  # (5, 3)
-
-    def rays(
-        self, rays: np.ndarray, shift_b: np.ndarray, t_max: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Embree's float32 origins (n, 3), directions (n, 3) and far limits (n,) of a block's rays (profile
-        in the block × columns + column) at its shifts (m,): :func:`optipose.scan.kernels.block_rays`."""
-        return block_rays(
-            np.ascontiguousarray(rays, dtype=np.int64),
-            len(self.o_P32),
-            shift_b,
-            self.o_P32,
-            self.d_P32,
-            self.step_P,
-            t_max,
-        )
-
-    @classmethod
-    def build(cls, scanner: "Scanner", T_O_S: np.ndarray, T_O_P: np.ndarray) -> "_SensorView":
-        R_PO, t_OP = T_O_P[:3, :3].T, T_O_P[:3, 3]
-        R_PS = R_PO @ T_O_S[:3, :3]
-        to_P = lambda p_S: R_PO @ (T_O_S[:3, :3] @ p_S + T_O_S[:3, 3] - t_OP)  # noqa: E731
-        apex_P = to_P(np.array([0.0, 0.0, scanner.sensor.apex_z]))
-        receiver_P = to_P(scanner.sensor.receiver)
-        o_P = scanner._ray_o_S @ R_PS.T + (to_P(np.zeros(3)))
-        d_P = scanner._ray_d_S @ R_PS.T
-        step_P = R_PO[:, 0].copy()
-        t_far = scanner._t_max[[0, -1]]
-        corners = np.vstack([o_P[[0, -1]], o_P[[0, -1]] + t_far[:, None] * d_P[[0, -1]]])
-        return cls(
-            T_O_S=T_O_S,
-            apex_P=apex_P,
-            d_P=d_P,
-            o_P32=o_P.astype(np.float32),
-            d_P32=d_P.astype(np.float32),
-            receiver_P=receiver_P,
-            step_P=step_P,
-            fan_lo=corners.min(axis=0) - 1e-6,
-            fan_hi=corners.max(axis=0) + 1e-6,
-            frame=np.array([R_PS[:, 2], R_PS[:, 0], apex_P, step_P, receiver_P]),
-        )
