@@ -4,7 +4,7 @@ orientation when the sensors' brackets are off their drawings (docs/conditions.m
 A sensor whose true pose is ``T_O_S @ E`` (E a small rigid error, rotation r and translation t in the
 sensor's frame) measures a surface point y (where it was, in O, when its profile was taken) as
 ``E⁻¹ T_O_S⁻¹ y``; the cell rebuilds it with the drawn pose and undoes the scan's travel s along x_O
-(:func:`optipose.scan.scanner.rebuilt_with`). To first order the rebuilt point moves by
+(:func:`optipose.scan.cloud.rebuilt_with`). To first order the rebuilt point moves by
 
     u = (y − o) × (R_S r) − R_S t,   y = p + s(p)·x_O,   s(p) = y_S·(o − p) / (y_S·x_O)
 
