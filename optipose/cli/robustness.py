@@ -290,8 +290,7 @@ def _axis_rows(sens, k: int) -> list[tuple[str, ...]]:
 
 
 def _mdeg(rad: float, signed: bool = False) -> str:
-    import numpy as np
+    """A rotation's cell: millidegrees to two places, ``n/a`` where not finite."""
+    from optipose.verdict.words import mdeg_text
 
-    if not np.isfinite(rad):
-        return "n/a"
-    return f"{1e3 * np.rad2deg(rad):+.2f}" if signed else f"{1e3 * np.rad2deg(rad):.2f}"
+    return mdeg_text(rad, 2, signed, missing="n/a")
