@@ -169,8 +169,9 @@ def _conditions(objective):
 
 def _verdicts(results: dict) -> list[str]:
     """Per given layout, the verdict on the robust statistic against the hand layout's choice of as many sensors."""
-    from optipose.verdict.compare import Verdict
     from optipose.model.baseline import baseline_label
+    from optipose.verdict.compare import Verdict
+    from optipose.verdict.words import verdict_line
 
     hand, lines = results["hand"], []
     label = baseline_label(hand.layout)  # "conventional" for a part without a hand-placed layout
@@ -178,7 +179,7 @@ def _verdicts(results: dict) -> list[str]:
         if name == "hand":
             continue
         k = min(len(result.layout), len(hand.table))
-        line = Verdict(k, result.table[k - 1], hand.table[k - 1]).line(label)
+        line = verdict_line(Verdict(k, result.table[k - 1], hand.table[k - 1]), label)
         lines.append(f"{name} (worst over the band): {line}")
     return lines
 

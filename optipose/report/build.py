@@ -298,13 +298,14 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     from optipose.report.provenance import provenance_blocks
     from optipose.report.robustness import band_blocks, bracket_blocks
     from optipose.report.verdict import table1_side_by_side, verdict_css
+    from optipose.verdict.words import verdict_line
 
     label = baseline_label(result.layouts.get("hand"))
     title = f"{result.part}: layouts under every condition of the band (robustness, seed {result.seed})"
     blocks: list[Block] = [Heading("Verdict")]
     verdicts = result.verdicts()
     for v in verdicts:
-        blocks.append(Paragraph(f"{v.layout} (worst over the band): {v.line(label)}", verdict_css(v)))
+        blocks.append(Paragraph(f"{v.layout} (worst over the band): {verdict_line(v, label)}", verdict_css(v)))
     if not verdicts:
         blocks.append(Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed"))
     blocks.append(Heading("Per axis (the paper's Table 1), the robust statistic over the band"))

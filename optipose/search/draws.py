@@ -43,8 +43,6 @@ __all__ = ["choice_draw_counts", "confident_verdicts", "first_look", "sides"]
 
 log = logging.getLogger(__name__)
 
-_FEWER = "fewer"  # the race's key, beside each k, of one found sensor against the baseline's largest choice
-
 
 def first_look(objective) -> int:
     """The draws the first look of the race waits for: one in the ideal cell, three in a real one."""
@@ -98,7 +96,9 @@ def confident_verdicts(
     )
     label = baseline_label(hand)
     labels = {
-        k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True)
+        (k, k): dict(
+            k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True
+        )
         if k in kept
         else dict(
             k=k,
@@ -110,15 +110,18 @@ def confident_verdicts(
     }
     done = on_draw or (lambda i, name, result: None)
 
+    # the race's keys, (found k, hand k): each k against the hand's choice of as many, and one found sensor against
+    # the hand's largest choice (``fewer``), which rides along
     top = max(validation.hand)
-    fewer = {_FEWER: (1, top)} if 1 in ks and top > 1 else {}
-    if fewer:
-        labels[_FEWER] = dict(labels[1], hand_name=validation.hand[top].name, hand_k=top)
+    fewer = frozenset({(1, top)} if 1 in ks and top > 1 else ())
+    compared = [(k, k) for k in ks] + sorted(fewer)
+    for key in fewer:
+        labels[key] = dict(labels[(1, 1)], hand_name=validation.hand[top].name, hand_k=top)
 
     def pairs(results: dict[str, EvaluationResult]) -> dict:
         return {
-            key: paired_draw(results[side[f].evaluation], side[f].choice, results["hand"], validation.hand[h])
-            for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items()
+            (f, h): paired_draw(results[side[f].evaluation], side[f].choice, results["hand"], validation.hand[h])
+            for f, h in compared
             if side[f].evaluation in results
         }
 
@@ -132,20 +135,20 @@ def confident_verdicts(
                 max_draws=1,
                 draws=draws,
                 names=labels,
-                passengers=frozenset(fewer),
+                passengers=fewer,
             )
         )
     executor = make_executor(jobs)
 
     # a draw registers only the subsets the choices use (of the 2^n - 1 a layout has)
-    used = {"hand": _used(validation.hand[h] for _, h in ({k: (k, k) for k in ks} | fewer).values())}
+    used = {"hand": _used(validation.hand[h] for _, h in compared)}
     used |= {name: _used(s.choice for s in side.values() if s.evaluation == name) for name in evaluated}
 
     def next_draws(n: int, keys) -> dict:
         t0, i = time.perf_counter(), n + (not counted)  # draw i's seed and folder: 0 is the validation's
         # a decided k's layout is not evaluated again
         wanted = [
-            name for name in evaluated if keys is None or any(side[k].evaluation == name for k in keys if k in side)
+            name for name in evaluated if keys is None or any(side[f].evaluation == name for f, h in keys if f == h)
         ]
         with Evaluator(
             part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans
@@ -159,7 +162,7 @@ def confident_verdicts(
 
     # a k answered with the baseline's own choice is an exact TIE from the first draw: it rides along without
     # holding the race, and when every k is one, the draws go to its predicted error (one look, at the end)
-    riders = frozenset(fewer) | (frozenset(kept) if kept != set(ks) else frozenset())
+    riders = fewer | (frozenset((k, k) for k in kept) if kept != set(ks) else frozenset())
     try:
         seconds = config.verdict_time if config.verdict_time > 0 else math.inf
         raced = race_many(
@@ -178,8 +181,9 @@ def confident_verdicts(
 
 
 def _verdicts(raced: dict) -> Verdicts:
-    """The race's verdicts by key (each k, and :data:`_FEWER`) as one record."""
-    return Verdicts({k: v for k, v in raced.items() if k != _FEWER}, raced.get(_FEWER))
+    """The race's verdicts by key, (found k, hand k), as one record: by k, and one found sensor against more."""
+    fewer = [v for (f, h), v in raced.items() if f != h]
+    return Verdicts({f: v for (f, h), v in raced.items() if f == h}, fewer[0] if fewer else None)
 
 
 def sides(layouts: dict[int, Layout], validation: Validation, hand: Layout | None) -> dict[int, Side]:
@@ -204,7 +208,7 @@ def _used(choices) -> list[tuple[int, ...]] | None:
 def _found_name(layout: Layout, choice, big: Layout) -> str:
     """The found sensors the choice's axes use, in the k layout's own sensor names (F1 … Fk as its file and the
     report's poses say, not those of the larger layout it was evaluated inside): a sensor of the k layout that
-    no axis measures on is not one to buy (what a BUY mounts is these, :func:`optipose.report.confidence.mount_line`).
+    no axis measures on is not one to buy (what a BUY mounts is these, :func:`optipose.verdict.words.mount_line`).
     The choice's k sensors when no axis is measured."""
     own = {big.names[i]: name for i, name in zip(indices_in(layout, big), layout.names)}
     return "".join(sorted((own.get(big.names[i], big.names[i]) for i in choice.used or choice.sensors), key=_natural))
