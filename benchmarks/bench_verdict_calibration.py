@@ -86,7 +86,7 @@ def _found_seeds(rng: np.random.Generator, hand: list[int], seeds: list[int]) ->
 
 
 def main() -> None:
-    from optipose.verdict.confidence import BUY, DECISIONS, PairedDraw, Rules, compare_draws, scan_errors
+    from optipose.verdict.confidence import Decision, PairedDraw, Rules, compare_draws, scan_errors
     from optipose.verdict.racing import race
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -125,7 +125,9 @@ def main() -> None:
         for where, how in sources.items()
     ]
     print(
-        f"{'case':23} {'draws':>6} {'k':>2} {'BUY':>6} " + " ".join(f"{d:>4}" for d in DECISIONS[1:3]) + " UNDEC  ratio"
+        f"{'case':23} {'draws':>6} {'k':>2} {'BUY':>6} "
+        + " ".join(f"{d:>4}" for d in tuple(Decision)[1:3])
+        + " UNDEC  ratio"
     )
     spread = []
     for k in range(1, len(layout) + 1):
@@ -136,7 +138,7 @@ def main() -> None:
         spread.append(f"k={k} {choice.name} {float(np.std(np.log(scores), ddof=1)):.2f}")
         for name, how, better in cases:
             for n_draws in [int(d) for d in args.draws.split(",")] + ([-args.race] if args.race else []):
-                counts, ratios, used = dict.fromkeys(DECISIONS, 0), [], []
+                counts, ratios, used = dict.fromkeys(Decision, 0), [], []
                 for trial in range(args.trials):
                     rng = np.random.default_rng([trial, abs(n_draws)])
                     hand = [int(s) for s in rng.permutation(seeds)]
@@ -160,9 +162,9 @@ def main() -> None:
                     ratios.append(verdict.score.estimate)
                     used.append(verdict.n_draws)
                 label = str(n_draws) if n_draws > 0 else f"{np.mean(used):.1f}r"
-                rest = " ".join(f"{counts[d]:>4}" for d in DECISIONS[1:])
+                rest = " ".join(f"{counts[d]:>4}" for d in tuple(Decision)[1:])
                 print(
-                    f"{name:23} {label:>6} {k:>2} {counts[BUY]:>3}/{args.trials:<2} {rest:>4}  {np.median(ratios):.2f}",
+                    f"{name:23} {label:>6} {k:>2} {counts[Decision.BUY]:>3}/{args.trials:<2} {rest:>4}  {np.median(ratios):.2f}",
                     flush=True,
                 )
     print(f"the hand's score from seed to seed, sd of its log: {'; '.join(spread)}")

@@ -15,7 +15,7 @@ import argparse
 import tomllib
 from pathlib import Path
 
-from optipose.verdict.confidence import Rules, paired_draw
+from optipose.verdict.confidence import Decision, Rules, paired_draw
 from optipose.evaluate.objective import objective_from_table
 from optipose.verdict.racing import race_many
 from optipose.io.load import load_result
@@ -29,13 +29,13 @@ def stored_draws(folder: Path, result) -> list[dict]:
     draws = []
     for d in sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:])):
         stored = {
-            n: load_result(d / n) for n in {"hand", *(name for name, _ in side.values())} if (d / n).is_dir()
+            n: load_result(d / n) for n in {"hand", *(s.evaluation for s in side.values())} if (d / n).is_dir()
         }  # each once
         draws.append(
             {
-                k: paired_draw(stored[name], choice, stored["hand"], v.hand[k])
-                for k, (name, choice) in side.items()
-                if name in stored
+                k: paired_draw(stored[s.evaluation], s.choice, stored["hand"], v.hand[k])
+                for k, s in side.items()
+                if s.evaluation in stored
             }
         )
     return draws
@@ -70,7 +70,7 @@ def main() -> None:
         draws, cells = stored_draws(folder, result), []
         for j, c in enumerate(levels):
             verdicts = reraced(result, draws, c)
-            answered[j] += any(v.decision != "UNDECIDED" for v in verdicts.values())
+            answered[j] += any(v.decision != Decision.UNDECIDED for v in verdicts.values())
             cells.append(
                 ", ".join(
                     f"k={k} {v.decision} ({v.n_draws})" for k, v in sorted(verdicts.items(), key=lambda kv: str(kv[0]))

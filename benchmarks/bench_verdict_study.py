@@ -95,7 +95,6 @@ def run(args) -> None:
 def holdout(args) -> None:
     import tomllib
 
-    from optipose.verdict.confidence import split
     from optipose.evaluate.objective import objective_from_table
     from optipose.io.load import load_result
     from optipose.io.tables import verdict_frame
@@ -103,6 +102,7 @@ def holdout(args) -> None:
     from optipose.search.config import SearchConfig
     from optipose.search.validate import validate
     from optipose.search.draws import choice_draw_counts, confident_verdicts
+    from optipose.verdict.words import confident_line
 
     wanted = set(args.parts.split(","))
     for folder in sorted(_folders(args.out, wanted).values()):
@@ -130,17 +130,16 @@ def holdout(args) -> None:
                 validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
         pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / args.file, index=False)
-        by_k, _ = split(verdicts)
         print(
-            f"{folder.name} ({time.perf_counter() - t0:.0f} s): " + "; ".join(v.line() for v in by_k.values()),
+            f"{folder.name} ({time.perf_counter() - t0:.0f} s): "
+            + "; ".join(confident_line(v) for v in verdicts.by_k.values()),
             flush=True,
         )
 
 
 def table(args) -> None:
-    from optipose.verdict.confidence import split
     from optipose.io.load import load_result, read_verdicts
-    from optipose.report.confidence import interval_cell  # "not measured" for an axis a layout does not see
+    from optipose.verdict.words import interval_cell, ratio_cell  # "not measured" for an axis a layout does not see
 
     folders = _folders(args.out, set(PARTS))
     remade = args.remade_file and any((folder / args.remade_file).is_file() for folder in folders.values())
@@ -150,21 +149,15 @@ def table(args) -> None:
     )
     print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |" + (" --- |" if remade else ""))
     for name, folder in folders.items():
-        by_k, _ = split(load_result(folder).confident)
-        held = [
-            split(read_verdicts(folder / file))[0] for file in ([args.file] + ([args.remade_file] if remade else []))
-        ]
+        by_k = load_result(folder).confident.by_k
+        held = [read_verdicts(folder / file).by_k for file in ([args.file] + ([args.remade_file] if remade else []))]
         for k, v in by_k.items():
             axes = [f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.hand)]
             others = [
-                f"{h.decision} {h.score.estimate:.2f}x [{h.score.low:.2f}, {h.score.high:.2f}] ({h.n_draws})"
-                if h
-                else "-"
-                for h in (by.get(k) for by in held)
+                f"{h.decision} {ratio_cell(h.score)} ({h.n_draws})" if h else "-" for h in (by.get(k) for by in held)
             ]
-            s = v.score
             print(
-                f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}] | "
+                f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {ratio_cell(v.score)} | "
                 + " | ".join(axes)
                 + f" | {v.n_draws} | "
                 + " | ".join(others)
@@ -192,11 +185,11 @@ def draws(args) -> None:
         stored = [folder / "validation"] + sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:]))
         v = result.validation
         loaded = functools.cache(load_result)  # a nested group's evaluation serves each of its k
-        for k, (evaluation, choice) in sides(result.layouts, v, result.hand).items():
+        for k, side in sides(result.layouts, v, result.hand).items():
             ratios = []
             for d in stored:
-                if (d / evaluation).is_dir():
-                    pair = paired_draw(loaded(d / evaluation), choice, loaded(d / "hand"), v.hand[k])
+                if (d / side.evaluation).is_dir():
+                    pair = paired_draw(loaded(d / side.evaluation), side.choice, loaded(d / "hand"), v.hand[k])
                     ratios.append(compare_draws([pair], rules).score.estimate)
             rest = np.array(ratios[1:])
             spread = f"{rest.mean():.2f}x ({rest.min():.2f}-{rest.max():.2f})" if len(rest) else "-"

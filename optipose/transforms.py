@@ -16,6 +16,7 @@ __all__ = [
     "mean_pose",
     "rpy_to_matrix",
     "matrix_to_rpy",
+    "xyz_rpy",
     "make_T",
     "invert_T",
     "transform_points",
@@ -53,6 +54,13 @@ def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
         roll = np.arctan2(sy * m[0, 2] - cy * m[1, 2], cy * m[1, 1] - sy * m[0, 1])
         out[i] = roll, np.arctan2(-m[2, 0], np.hypot(m[0, 0], m[1, 0])), yaw
     return out.reshape(rpy.shape)
+
+
+def xyz_rpy(T_O_S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A pose (4×4, metres) as a robot program takes it: the position (3,) in mm and roll, pitch, yaw (3,) in
+    degrees (:func:`matrix_to_rpy`)."""
+    T = np.asarray(T_O_S, dtype=float)
+    return T[:3, 3] * 1e3, np.rad2deg(matrix_to_rpy(T[:3, :3]))
 
 
 def make_T(R: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:

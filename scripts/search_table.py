@@ -9,17 +9,12 @@ from __future__ import annotations
 
 import sys
 
-import numpy as np
-
 from optipose.io import load_result
-
-
-def mdeg(rad: float) -> float:
-    return 1e3 * float(np.rad2deg(rad))
+from optipose.verdict.words import mdeg_text
 
 
 def cells(choice) -> str:
-    return " | ".join(f"{mdeg(a.median):.3f} / {mdeg(a.p75):.3f} ({a.label})" for a in choice.axes)
+    return " | ".join(f"{mdeg_text(a.median)} / {mdeg_text(a.p75)} ({a.label})" for a in choice.axes)
 
 
 def main(folders: list[str]) -> None:
@@ -31,11 +26,11 @@ def main(folders: list[str]) -> None:
         result = load_result(folder)
         for v in result.verdicts():
             print(
-                f"| {result.part} | {v.k} | found {v.found.name} | {cells(v.found)} | {mdeg(v.found.score):.3f} | "
+                f"| {result.part} | {v.k} | found {v.found.name} | {cells(v.found)} | {mdeg_text(v.found.score)} | "
                 f"{v.ratio:.2f}x | {'yes' if v.no_worse else 'no'} |"
             )
             print(
-                f"| {result.part} | {v.k} | hand {v.reference.name} | {cells(v.reference)} | {mdeg(v.reference.score):.3f} |  |  |"
+                f"| {result.part} | {v.k} | hand {v.reference.name} | {cells(v.reference)} | {mdeg_text(v.reference.score)} |  |  |"
             )
         lines = result.verdict_lines()
         if lines and lines[-1].startswith("one found sensor"):

@@ -14,10 +14,7 @@ import pytest
 from optipose.verdict import racing
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 from optipose.verdict.confidence import (
-    BUY,
-    KEEP,
-    TIE,
-    UNDECIDED,
+    Decision,
     PairedDraw,
     Rules,
     compare_draws,
@@ -26,6 +23,7 @@ from optipose.verdict.confidence import (
     scan_errors,
 )
 from optipose.verdict.racing import looks, race
+from optipose.verdict.words import axis_lines, confident_line, fewer_line
 from optipose.evaluate.statistics import FAILED_ERROR
 
 N_SCANS = 77
@@ -49,12 +47,12 @@ def test_a_layout_against_itself_on_the_same_draws_is_an_exact_tie():
     rng = np.random.default_rng(1)
     same = [PairedDraw(d.seed, d.hand.copy(), d.hand) for d in _draws(rng, 4)]
     verdict = compare_draws(same, FAST, k=2, found_name="S1S2", hand_name="S1S2")
-    assert verdict.decision == TIE
+    assert verdict.decision == Decision.TIE
     assert (verdict.score.estimate, verdict.score.low, verdict.score.high) == (1.0, 1.0, 1.0)
     assert all((a.ratio.low, a.ratio.high, a.median.low, a.p75.high) == (1.0, 1.0, 1.0, 1.0) for a in verdict.axes)
     assert verdict.found == verdict.hand  # the predicted errors too
     for n in (1, 2, 3):  # with any number of draws, even one
-        assert compare_draws(same[:n], FAST).decision == TIE
+        assert compare_draws(same[:n], FAST).decision == Decision.TIE
 
 
 def test_a_buy_needs_the_interval_not_the_point_estimate():
@@ -65,25 +63,25 @@ def test_a_buy_needs_the_interval_not_the_point_estimate():
     assert verdict.score.estimate == pytest.approx(3 / (1 / 1.6 + 1 / 0.85 + 1 / 0.95))
     assert 1.04 < verdict.score.estimate < 1.06
     assert verdict.score.low < 1.0 < verdict.score.high
-    assert verdict.decision == UNDECIDED and verdict.more_draws > 0
+    assert verdict.decision == Decision.UNDECIDED and verdict.more_draws > 0
     # the same 5 % on every draw and scan: the interval is the point, and found is bought
     tight = [PairedDraw(i, hand / 1.05, hand) for i in range(3)]
     verdict = compare_draws(tight, FAST)
-    assert verdict.decision == BUY and verdict.score.low == pytest.approx(1.05)
+    assert verdict.decision == Decision.BUY and verdict.score.low == pytest.approx(1.05)
 
 
 def test_keep_when_hand_is_better_in_sum_or_an_axis_is_worse_beyond_the_tolerance():
     hand = _draws(np.random.default_rng(3), 1)[0].hand
-    assert compare_draws([PairedDraw(0, hand * 1.3, hand)], FAST).decision == KEEP
+    assert compare_draws([PairedDraw(0, hand * 1.3, hand)], FAST).decision == Decision.KEEP
     # 2x better on roll and pitch, 1.5x worse on yaw: better in sum, and yaw's error alone adds about a sixth
     # to the hand layout's total (each axis about a third of it): worse on yaw beyond 10 %
     found = hand / np.array([2.0, 2.0, 1 / 1.5])
     verdict = compare_draws([PairedDraw(0, found, hand)], FAST, k=1, found_name="F1", hand_name="S2")
-    assert verdict.score.low > 1.0 and verdict.decision == KEEP
-    assert "worse on yaw" in verdict.line()
+    assert verdict.score.low > 1.0 and verdict.decision == Decision.KEEP
+    assert "worse on yaw" in confident_line(verdict)
     # 5 % worse on yaw, within the tolerance, and better in sum: bought
     found = hand / np.array([1.5, 1.5, 1 / 1.05])
-    assert compare_draws([PairedDraw(0, found, hand)], FAST).decision == BUY
+    assert compare_draws([PairedDraw(0, found, hand)], FAST).decision == Decision.BUY
 
 
 def test_a_layout_that_fails_more_registrations_is_not_bought_for_a_better_score():
@@ -109,20 +107,20 @@ def test_a_layout_that_fails_more_registrations_is_not_bought_for_a_better_score
     assert pitch.estimate == pytest.approx(shares.mean())
     assert (pitch.low, pitch.high) == pytest.approx((shares.mean() - half, shares.mean() + half), rel=1e-4)
     assert pitch.low < 0.01 < pitch.high  # found may fail more than one scan in a hundred: not bought
-    assert verdict.decision == UNDECIDED and verdict.more_draws > 0
-    assert verdict.line() == "k=3: UNDECIDED F1F2F3 1.60x [1.58, 1.60] vs hand S1S2S3; pitch fails +0.9 %"
+    assert verdict.decision == Decision.UNDECIDED and verdict.more_draws > 0
+    assert confident_line(verdict) == "k=3: UNDECIDED F1F2F3 1.60x [1.58, 1.60] vs hand S1S2S3; pitch fails +0.9 %"
     assert all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in (verdict.axes[0], verdict.axes[2]))
     # found failing 5 of 77 pitch scans on every draw: more than 1 % with confidence, so the hand layout is kept
     for d in draws:
         d.found[:5, 1] = FAILED_ERROR
     verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
-    assert verdict.decision == KEEP and "fails 6.5 % more pitch" in verdict.line()
+    assert verdict.decision == Decision.KEEP and "fails 6.5 % more pitch" in confident_line(verdict)
     # failures beyond a tolerance of 10 %: bought, as on its score alone
-    assert compare_draws(draws, Rules(replicates=400, failures=0.1)).decision == BUY
+    assert compare_draws(draws, Rules(replicates=400, failures=0.1)).decision == Decision.BUY
     # the same failures on both sides, scan for scan, are no difference at all
     same = [PairedDraw(d.seed, d.found, np.where(d.found == FAILED_ERROR, FAILED_ERROR, d.found * 1.6)) for d in draws]
     verdict = compare_draws(same, FAST)
-    assert verdict.decision == BUY and all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in verdict.axes)
+    assert verdict.decision == Decision.BUY and all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in verdict.axes)
 
 
 def test_a_keep_for_failures_says_why_in_80_columns_and_a_zero_tolerance_still_counts_the_draws_to_add():
@@ -133,14 +131,16 @@ def test_a_keep_for_failures_says_why_in_80_columns_and_a_zero_tolerance_still_c
         f[:5, 1] = FAILED_ERROR  # and failing it on 5 of 77 scans where hand never does
         draws.append(PairedDraw(i, f, d.hand))
     verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3", reference="conventional")
-    line = verdict.line()
-    assert verdict.decision == KEEP and len(line) <= 80, line
+    line = confident_line(verdict)
+    assert verdict.decision == Decision.KEEP and len(line) <= 80, line
     assert "worse on pitch" in line and "fails 6.5 % more pitch" in line  # the reasons kept, the ratio left out
     # a tolerance of 0 with no failure on either side: met (its test is <=), and the draws to add come from the rest
     close = [PairedDraw(d.seed, d.hand / 1.02, d.hand) for d in _draws(np.random.default_rng(9), 3)]
     strict = compare_draws(close, Rules(replicates=400, tolerance=0.0, failures=0.0))
     assert all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in strict.axes)
-    assert strict.decision in (BUY, UNDECIDED) and (strict.decision == BUY or strict.more_draws is not None)
+    assert strict.decision in (Decision.BUY, Decision.UNDECIDED) and (
+        strict.decision == Decision.BUY or strict.more_draws is not None
+    )
 
 
 def test_an_axis_is_worse_by_what_it_adds_to_the_hand_layouts_total():
@@ -153,21 +153,21 @@ def test_an_axis_is_worse_by_what_it_adds_to_the_hand_layouts_total():
     h, f = share(hand), share(found)
     assert verdict.axes[0].ratio.estimate == pytest.approx(h.sum() / (h.sum() - h[0] + f[0]))
     assert verdict.axes[0].ratio.estimate > 1 / 1.1 and verdict.axes[0].median.estimate == pytest.approx(0.5)
-    assert verdict.decision == BUY
+    assert verdict.decision == Decision.BUY
     # roll doubled where it is a third of the total adds a third: found is kept, though better in sum
     hand = _draws(np.random.default_rng(3), 1)[0].hand
     verdict = compare_draws([PairedDraw(0, hand / np.array([0.5, 3.0, 3.0]), hand)], FAST)
-    assert verdict.score.low > 1.0 and verdict.decision == KEEP and "worse on roll" in verdict.line()
+    assert verdict.score.low > 1.0 and verdict.decision == Decision.KEEP and "worse on roll" in confident_line(verdict)
 
 
 def test_racing_stops_when_the_interval_is_clear():
     rng = np.random.default_rng(4)
     verdict = race(lambda i: _draws(rng, 1, ratio=2.0, start=i)[0], FAST, min_draws=3, max_draws=40, k=2)
-    assert verdict.decision == BUY and verdict.n_draws <= 5  # the first or second look
+    assert verdict.decision == Decision.BUY and verdict.n_draws <= 5  # the first or second look
     assert verdict.confidence > 0.95  # each look spends a share of the 5 %
     # an exact copy on the same draws: a tie at the first look
     verdict = race(lambda i: PairedDraw(i, *(2 * [_draws(rng, 1)[0].hand])), FAST, max_draws=40)
-    assert verdict.decision == TIE and verdict.n_draws == 3
+    assert verdict.decision == Decision.TIE and verdict.n_draws == 3
 
 
 def test_a_race_whose_draws_leave_out_an_undecided_key_says_so_instead_of_waiting_forever():
@@ -187,7 +187,7 @@ def test_racing_an_equal_layout_runs_to_the_budget():
 
     verdict = race(equal, FAST, min_draws=3, max_draws=8)
     assert calls == list(range(8)) and verdict.n_draws == 8
-    assert verdict.decision == UNDECIDED and verdict.more_draws > 0
+    assert verdict.decision == Decision.UNDECIDED and verdict.more_draws > 0
     assert verdict.score.low < 1.0 < verdict.score.high  # as the rules say: neither better nor within 10 %
     assert not verdict.score.within(1 / 1.1, 1.1)
 
@@ -201,9 +201,9 @@ def test_racing_stops_before_a_draw_would_end_past_the_time_budget():
 
     verdict = race(slow, FAST, min_draws=3, max_draws=40, seconds=45.0, clock=lambda: now[0])
     assert verdict.n_draws == 4 and verdict.seconds_per_draw == 10.0  # a fifth would end at 50 s
-    if verdict.decision == UNDECIDED:
+    if verdict.decision == Decision.UNDECIDED:
         assert verdict.more_minutes == pytest.approx(verdict.more_draws * 10.0 / 60.0)
-        assert f"+{verdict.more_draws}, " in verdict.line() and " min)" in verdict.line()
+        assert f"+{verdict.more_draws}, " in confident_line(verdict) and " min)" in confident_line(verdict)
 
 
 def test_the_race_plans_its_looks_for_the_draws_its_time_holds():
@@ -236,7 +236,7 @@ def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
 
     def undecided(draws, rules, **names):
         spent.append(1.0 - rules.confidence)
-        return SimpleNamespace(decision=UNDECIDED)
+        return SimpleNamespace(decision=Decision.UNDECIDED)
 
     monkeypatch.setattr(racing, "compare_draws", undecided)
 
@@ -273,13 +273,14 @@ def test_an_early_looks_wide_interval_does_not_hang_on_a_few_replicates():
 
 def test_an_interval_widened_past_any_scale_stays_finite():
     """Two draws of few scans can widen an early look's deviations a thousandfold: the sides stay numbers."""
-    from optipose.verdict.confidence import _interval
+    from optipose.verdict.bootstrap import log_interval
+    from optipose.verdict.confidence import Interval
 
     samples = np.random.default_rng(0).normal(-4.6, 0.25, 2000)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        iv = _interval(-4.6, samples, 1443.9, 0.9998)
-        deg = _interval(-4.6, samples, 1443.9, 0.9998, lambda v: np.rad2deg(np.exp(v)))
+        iv = Interval(*log_interval(-4.6, samples, 1443.9, 0.9998))
+        deg = Interval(*log_interval(-4.6, samples, 1443.9, 0.9998, lambda v: np.rad2deg(np.exp(v))))
     assert 0.0 <= iv.low < iv.estimate < iv.high < np.inf and deg.high < np.inf
 
 
@@ -324,11 +325,11 @@ def test_reproducible_from_the_seed():
 def test_one_line_of_at_most_80_columns_naming_the_sensors():
     rng = np.random.default_rng(9)
     hand = _draws(rng, 1)[0].hand
-    cases = {BUY: hand / 1.5, KEEP: hand * 1.5, TIE: hand}
+    cases = {Decision.BUY: hand / 1.5, Decision.KEEP: hand * 1.5, Decision.TIE: hand}
     for decision, found in cases.items():
         verdict = compare_draws([PairedDraw(0, found, hand)] * 2, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
         assert verdict.decision == decision
-        line = verdict.line()
+        line = confident_line(verdict)
         assert len(line) <= 80 and line.startswith(f"k=3: {decision}") and "F1F2F3" in line and "S1S2S3" in line
     verdict = race(
         lambda i: _draws(rng, 1, start=i)[0],
@@ -339,13 +340,17 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
         hand_name="S1S2S3",
         reference="conventional",
     )
-    assert verdict.decision == UNDECIDED and len(verdict.line()) <= 80 and "conventional S1S2S3" in verdict.line()
-    assert all(len(line) <= 80 for line in verdict.axis_lines())
+    assert (
+        verdict.decision == Decision.UNDECIDED
+        and len(confident_line(verdict)) <= 80
+        and "conventional S1S2S3" in confident_line(verdict)
+    )
+    assert all(len(line) <= 80 for line in axis_lines(verdict))
     # one found sensor against the conventional placement's three: the long names fit, the ratio whole
-    for decision, found in {**cases, UNDECIDED: None}.items():
+    for decision, found in {**cases, Decision.UNDECIDED: None}.items():
         draws = [PairedDraw(0, found, hand)] * 2 if found is not None else _draws(rng, 2, extra=0.5)
         fewer = compare_draws(draws, FAST, k=1, found_name="F1", hand_name="S1S2S3", reference="conventional", hand_k=3)
-        line, s = fewer.fewer_line(), fewer.score
+        line, s = fewer_line(fewer), fewer.score
         assert fewer.decision == decision and len(line) <= 80, line
         assert (
             "F1 alone" in line
@@ -400,7 +405,7 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
         [PairedDraw(i, blind, blind) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
     )
     assert verdict.unmeasured == ["roll", "pitch", "yaw"]
-    assert verdict.line() == "k=2: nothing measured: F1F2 and hand S1S2 see no roll/pitch/yaw"
+    assert confident_line(verdict) == "k=2: nothing measured: F1F2 and hand S1S2 see no roll/pitch/yaw"
     wide = compare_draws(
         [PairedDraw(i, blind, blind) for i in range(2)],
         FAST,
@@ -409,9 +414,9 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
         hand_name="S1S2S3",
         reference="conventional",
     )
-    assert wide.line() == "k=3: nothing measured: F1F2F3 and conventional S1S2S3 see no roll/pitch/yaw"
-    assert len(wide.line()) <= 80
-    from optipose.report.confidence import interval_cell
+    assert confident_line(wide) == "k=3: nothing measured: F1F2F3 and conventional S1S2S3 see no roll/pitch/yaw"
+    assert len(confident_line(wide)) <= 80
+    from optipose.verdict.words import interval_cell
 
     assert interval_cell(verdict.found[0].median_deg) == "not measured"
     # one axis measured: the usual line, and that axis's cell a number
@@ -420,5 +425,5 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
     verdict = compare_draws(
         [PairedDraw(i, seen, seen) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
     )
-    assert verdict.unmeasured == ["pitch", "yaw"] and verdict.line().startswith("k=2: TIE")
+    assert verdict.unmeasured == ["pitch", "yaw"] and confident_line(verdict).startswith("k=2: TIE")
     assert interval_cell(verdict.found[0].median_deg) != "not measured"

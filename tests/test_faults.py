@@ -460,6 +460,7 @@ def test_a_part_in_inches_is_loaded_with_its_units_for_the_report_views(files, t
 def test_a_verdict_on_failed_registrations_says_so_instead_of_ranking():
     from optipose.evaluate.assignment import FAILED, AxisChoice, Choice
     from optipose.verdict.compare import Verdict, bought
+    from optipose.verdict.words import failed_line, verdict_headline, verdict_line
 
     def choice(name, failed=()):
         axes = tuple(
@@ -472,14 +473,13 @@ def test_a_verdict_on_failed_registrations_says_so_instead_of_ranking():
 
     found_failed = Verdict(1, choice("F1", ("roll", "pitch")), choice("S1"))
     assert found_failed.failed == (("roll", "pitch"), ())
-    assert found_failed.line().startswith(
+    assert verdict_line(found_failed).startswith(
         "k=1: no verdict: the registrations of found F1 failed on roll, pitch in over a tenth"
     )
-    assert found_failed.line().endswith("keep S1 until they succeed") and not bought(found_failed)
+    assert verdict_line(found_failed).endswith("keep S1 until they succeed") and not bought(found_failed)
     hand_failed = Verdict(1, choice("F1"), choice("S1", ("yaw",)))
-    assert "those of hand S1 on yaw" in hand_failed.line() and "keep" not in hand_failed.line()
-    assert Verdict(1, choice("F1"), choice("S1")).failed_line() == ""  # nothing failed: ranked as before
-    from optipose.cli.search import verdict_headline
+    assert "those of hand S1 on yaw" in verdict_line(hand_failed) and "keep" not in verdict_line(hand_failed)
+    assert failed_line(Verdict(1, choice("F1"), choice("S1"))) == ""  # nothing failed: ranked as before
 
     assert verdict_headline(found_failed) == "k=1: NO VERDICT: registrations of found F1 failed (roll, pitch)"
     assert verdict_headline(hand_failed) == "k=1: NO VERDICT: registrations of hand S1 failed (yaw)"

@@ -20,6 +20,7 @@ from optipose.io import load_result
 from optipose.model.baseline import conventional_layout
 from optipose.model.collision import DEFAULT_MARGIN, clearance, heads_clearance
 from optipose.model.part import PARTS_DIR, load_part
+from optipose.verdict.words import confident_line, verdict_line
 
 CHROMIUM = Path("/usr/bin/chromium")
 FLAGS = [
@@ -120,7 +121,7 @@ def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
     verdicts, band = result.verdicts(), result.band_verdicts()
     assert set(band) == {v.k for v in verdicts}  # checked under the band
     # the verdict with confidence first, one line per k, then the predicted errors with their intervals
-    assert lines[: len(verdicts)] == [result.confident[v.k].line() for v in verdicts]
+    assert lines[: len(verdicts)] == [confident_line(result.confident.by_k[v.k]) for v in verdicts]
     assert all(any(f"{w} conventional" in line for w in ("vs", "than", "KEEP")) for line in lines[:2])
     assert "predicted median |error| in the cell" in results["stdout"]
     assert "these verdicts hold in the ideal cell" in results["stdout"]  # the search ran in the ideal cell: it says so
@@ -175,14 +176,12 @@ def test_conventional_placement_clears_the_part_and_sees_it(spec, tmp_path):
 
 # --- what the report says ------------------------------------------------------------------------------
 def test_the_report_says_the_verdicts_of_the_result(results):
-    from optipose.verdict.confidence import split
-
     result = load_result(results["search"])
     text = (results["search"] / "report.html").read_text()
     md = (results["search"] / "report.md").read_text()
-    by_k, _ = split(result.confident)
+    by_k = result.confident.by_k
     assert by_k  # a search with a baseline races its verdict on draws: its lines, not the first draw's hedges, decide
-    for line in [v.line() for v in by_k.values()]:
+    for line in [confident_line(v) for v in by_k.values()]:
         assert html.escape(line) in text and line in md
     for line in result.verdict_lines():  # checked under a band, the first draw's lines stay beside it
         assert html.escape(line) in text and line in md
@@ -193,7 +192,7 @@ def test_the_report_says_the_verdicts_of_the_result(results):
         < text.index("Where the sensors go")
     )
     for v in result.band_verdicts().values():  # each k's verdict under the band, and its table per level
-        assert html.escape("under the band: " + v.line("conventional")) in text
+        assert html.escape("under the band: " + verdict_line(v, "conventional")) in text
         assert f"found (k={v.k}) at every condition of the band" in md
 
 

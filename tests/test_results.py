@@ -7,7 +7,8 @@ import pytest
 
 from optipose.errors import ConfigError
 from optipose.evaluate.assignment import AxisChoice, Choice
-from optipose.verdict.compare import Verdict, dominates, excess, one_versus_many, rank
+from optipose.verdict.compare import Verdict, dominates, excess, rank
+from optipose.verdict.words import one_versus_many, verdict_line
 from optipose.io import load_result
 from optipose.io.folders import write_config
 from optipose.io.results import SearchResult
@@ -42,13 +43,13 @@ def test_the_verdict_names_every_worse_axis_and_what_to_keep():
     # by hand: hand 3 + 5 + 0.1 + 0.2 + 0.1 + 0.2 = 8.6 mdeg, found 0.1 + 0.2 + 0.1 + 0.25 + 0.05 + 0.1 = 0.8
     assert one.ratio == pytest.approx(8.6 / 0.8) and not one.no_worse
     assert [(g.axis, g.statistic) for g in one.worse] == [("pitch", "p75")]
-    assert one.line() == (
+    assert verdict_line(one) == (
         "k=1: found F1 10.75x better in sum than hand S1, but worse on pitch p75 0.250 vs 0.200 mdeg: "
         "keep S1 if no axis may get worse"
     )
     assert (
         three.no_worse
-        and three.line() == "k=3: found F1F2F3 2.00x better in sum than hand S1S2S3, no worse on any axis"
+        and verdict_line(three) == "k=3: found F1F2F3 2.00x better in sum than hand S1S2S3, no worse on any axis"
     )
     assert (
         VALIDATION.verdict_lines()[-1] == "one found sensor beats the hand-placed S1S2S3 in sum (0.800 vs 0.900 mdeg)"
@@ -71,13 +72,13 @@ def test_a_found_layout_worse_in_sum_says_keep_and_a_bare_part_gets_no_verdict()
 def test_a_found_layout_that_ties_the_hand_one_is_not_bought():
     # a found triple whose choice measures every axis on the hand sensors it keeps ties the hand layout:
     # no worse, but nothing gained, so the answer is to keep the hand layout, not to buy a bracket
-    from optipose.cli.search import verdict_headline
     from optipose.verdict.compare import bought
+    from optipose.verdict.words import verdict_headline
 
     hand = _choice((0, 1, 2), S, [(0.1, 0.2), (0.05, 0.1), (0.1, 0.3)])
     tie = Verdict(3, Choice(3, (0, 1, 2), "F1F2F3", hand.axes, hand.score), hand)
     assert tie.no_worse and tie.tie and not bought(tie)
-    assert tie.line() == "k=3: found F1F2F3 ties hand S1S2S3 on every axis: keep S1S2S3"
+    assert verdict_line(tie) == "k=3: found F1F2F3 ties hand S1S2S3 on every axis: keep S1S2S3"
     assert verdict_headline(tie) == "k=3: KEEP hand S1S2S3: found F1F2F3 ties it on every axis"
     better = Verdict(
         3, _choice((0, 1, 2), F, [(0.1, 0.2), (0.05, 0.1), (0.1, 0.25)]), hand
@@ -93,8 +94,8 @@ def test_dominance_excess_and_rank_agree():
     assert rank(VALIDATION.found[3], VALIDATION.hand[3]) < rank(found, hand)  # no worse anywhere ranks first
     assert rank(found, None) == (False, found.score)
     worse = Verdict(1, hand, found)  # the other way round: worse in sum and on axes
-    assert worse.line().startswith("k=1: found S1 10.75x worse in sum than hand F1 and worse on roll median")
-    assert worse.line().endswith(": keep F1")
+    assert verdict_line(worse).startswith("k=1: found S1 10.75x worse in sum than hand F1 and worse on roll median")
+    assert verdict_line(worse).endswith(": keep F1")
     assert one_versus_many(hand, VALIDATION.hand[3]).startswith("one found sensor does not beat")
 
 
@@ -237,7 +238,7 @@ def test_under_a_band_a_choice_must_be_no_worse_at_every_condition():
     assert [(g.axis, g.statistic, g.condition) for g in verdict.worse] == [("roll", "median", hi), ("roll", "p75", hi)]
     assert [label for label, _ in verdict.ratios()] == [lo, hi]
     assert verdict.ratios()[0][1] == pytest.approx(2.8 / 1.1) and verdict.ratios()[1][1] == pytest.approx(1.9 / 2.3)
-    assert "at the worst over the band" in verdict.line() and "(noise x5)" in verdict.line()
+    assert "at the worst over the band" in verdict_line(verdict) and "(noise x5)" in verdict_line(verdict)
 
 
 def test_a_band_validation_reads_back_with_every_condition(tmp_path):

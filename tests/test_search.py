@@ -753,8 +753,8 @@ def test_each_stage_objective_is_derived_in_one_place():
 
 
 def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought():
-    from optipose.cli.search import verdict_headline
     from optipose.verdict.compare import Verdict
+    from optipose.verdict.words import verdict_headline
 
     found, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)])
     nominal = Verdict(1, found, hand)
@@ -803,6 +803,7 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
 
 def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():
     from optipose.verdict.compare import Verdict, bought
+    from optipose.verdict.words import band_advice
 
     good, bad, hand = (
         _choice([(1, 2), (1, 2), (1, 2)]),
@@ -812,23 +813,23 @@ def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs()
     x1, x3, x5 = (f"noise x{s}, worst of 2 bracket draws" for s in (1, 3, 5))
     levels = lambda *cs: replace(cs[0], under=tuple(zip((x1, x5) if len(cs) == 2 else (x1, x3, x5), cs)))  # noqa: E731
     holds_low = Verdict(1, levels(good, bad), levels(hand, hand))
-    assert holds_low.band_advice("hand", nominal_no_worse=True) == (
+    assert band_advice(holds_low, "hand", nominal_no_worse=True) == (
         "k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), worse on some axis at "
         "noise x5 (1.24x in sum): it is the better buy only if the sensor's noise on this part, measured on the bench, "
         "is no more than the preset's"
     )
-    assert holds_low.band_advice("hand") == ""  # worse in the nominal cell already: no advice to buy it at any noise
+    assert band_advice(holds_low, "hand") == ""  # worse in the nominal cell already: no advice to buy it at any noise
     holds_high = Verdict(1, levels(bad, good), levels(hand, hand))  # worse at the preset's noise with the brackets off
-    assert "its win rests on brackets more precise than the band's" in holds_high.band_advice(
-        "hand", nominal_no_worse=True
+    assert "its win rests on brackets more precise than the band's" in band_advice(
+        holds_high, "hand", nominal_no_worse=True
     )
     # a level that holds between two that do not is not listed as lost
-    three = Verdict(1, levels(good, bad, good), levels(hand, hand, hand)).band_advice("hand", nominal_no_worse=True)
+    three = band_advice(Verdict(1, levels(good, bad, good), levels(hand, hand, hand)), "hand", nominal_no_worse=True)
     assert "worse on some axis at noise x3 (1.24x in sum): " in three and "at most 1x" not in three
     assert (
-        Verdict(1, levels(good, good), levels(hand, hand)).band_advice(nominal_no_worse=True) == ""
+        band_advice(Verdict(1, levels(good, good), levels(hand, hand)), nominal_no_worse=True) == ""
     )  # no worse everywhere
-    assert Verdict(1, good, hand).band_advice(nominal_no_worse=True) == ""  # no band
+    assert band_advice(Verdict(1, good, hand), nominal_no_worse=True) == ""  # no band
     nominal = Verdict(1, good, hand)
     assert (
         bought(nominal)

@@ -1,6 +1,7 @@
 """The rules the tree keeps (ARCHITECTURE.md, "Rules the tree keeps"), checked on the source: no import cycle
 between optipose's modules (imports inside functions count: a lazy import hides a cycle, it does not remove
-it), no module over 450 lines, no private name imported from another module."""
+it), no module over 450 lines, no private name imported from another module, and the verdict's names imported
+from the verdict package only."""
 
 from __future__ import annotations
 
@@ -112,6 +113,73 @@ def test_no_private_name_imported_from_another_module():
         if what.startswith("_") and not what.startswith("__") and target != name
     ]
     assert private == []
+
+
+VERDICT = "optipose.verdict"
+
+
+def _defined(path: Path) -> set[str]:
+    """The names a module defines at its top level itself (functions, classes, assignments), not those it imports."""
+    out = set()
+    for node in ast.parse(path.read_text(), str(path)).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            out |= {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+    return out
+
+
+def _verdict_names() -> set[str]:
+    """The public names of optipose.verdict's modules (what each defines without a leading _)."""
+    return {
+        name
+        for module, path in _modules().items()
+        if module.startswith(VERDICT + ".")
+        for name in _defined(path)
+        if not name.startswith("_")
+    }
+
+
+def _reexported_verdict_imports(files: list[Path], names: set[str]) -> list[str]:
+    """``file:line: module.name`` of every import of a verdict name from an optipose module outside the verdict
+    package that does not define it itself (a module that re-exports it); a namesake defined there is its own."""
+    modules, out = _modules(), []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if not isinstance(node, ast.ImportFrom) or node.level or not (node.module or "").startswith("optipose"):
+                continue
+            source = node.module
+            if source == VERDICT or source.startswith(VERDICT + ".") or source not in modules:
+                continue
+            own = _defined(modules[source])
+            out += [
+                f"{path}:{node.lineno}: {source}.{alias.name}"
+                for alias in node.names
+                if alias.name in names and alias.name not in own
+            ]
+    return out
+
+
+def test_the_verdict_is_imported_from_its_own_package():
+    """Every import of a verdict name (Decision, ConfidentVerdict, Verdicts, Verdict, Rules, race, the words …) comes
+    from an optipose.verdict module, in the library, the tests, the benchmarks and the scripts: never through a
+    package that re-exports it."""
+    names = _verdict_names()
+    assert {"Decision", "ConfidentVerdict", "Verdicts", "Verdict", "Rules", "race", "confident_line"} <= names
+    files = [
+        f for name in ("optipose", "tests", "benchmarks", "scripts") for f in sorted((ROOT.parent / name).rglob("*.py"))
+    ]
+    assert _reexported_verdict_imports(files, names) == []
+
+
+def test_the_verdict_import_check_finds_a_re_export(tmp_path):
+    """optipose.io.results imports Verdict for its own records: importing Verdict from there is a re-export."""
+    bad = tmp_path / "bad.py"
+    bad.write_text(
+        "from optipose.io.results import SearchResult, Verdict\nfrom optipose.verdict.compare import bought\n"
+    )
+    assert _reexported_verdict_imports([bad], _verdict_names()) == [f"{bad}:1: optipose.io.results.Verdict"]
 
 
 def test_the_code_is_formatted():

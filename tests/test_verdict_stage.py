@@ -9,8 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from optipose.verdict.confidence import BUY, FEWER, TIE, UNDECIDED, PairedDraw, Rules, compare_draws, split
+from optipose.verdict.confidence import Decision, PairedDraw, Rules, Verdicts, compare_draws
 from optipose.verdict.racing import race_many
+from optipose.verdict.words import axis_lines, confident_line, fewer_line
 from optipose.evaluate.objective import load_objective
 from optipose.io.folders import write_csv
 from optipose.io.load import read_verdicts
@@ -51,7 +52,7 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
         config,
         on_draw=lambda i, name, result: draws.append((i, name, result.seed)),
     )
-    by_k, fewer = split(verdicts)
+    by_k, fewer = verdicts.by_k, verdicts.fewer
     assert sorted(by_k) == [1, 2, 3]
     # one found sensor against the hand's three rides along on the same draws, without holding the race
     last = max(v.n_draws for v in by_k.values())
@@ -63,7 +64,7 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
     assert 3 in same
     for k in same:
         v = by_k[k]
-        assert v.decision == TIE, v.line()
+        assert v.decision == Decision.TIE, confident_line(v)
         assert (v.score.estimate, v.score.low, v.score.high) == (1.0, 1.0, 1.0)
         # the found sensors its axes use (a copy of the hand's: the hand's used ones), the hand's k sensors
         used = validation.hand[k].used
@@ -82,7 +83,7 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
         cell != "ideal"
     ):  # the real cell's race never reads the validation's evaluations: without them, the same verdicts
         again = confident_verdicts(part, objective, layouts, validation, {}, 5, config)
-        assert [v.line() for v in again.values()] == [v.line() for v in verdicts.values()]
+        assert [confident_line(v) for v in again.in_order()] == [confident_line(v) for v in verdicts.in_order()]
 
 
 def _pairs(rng, i, ratio):
@@ -100,8 +101,8 @@ def test_racing_several_k_stops_each_at_its_own_look_and_ends_when_all_are_decid
         return {1: _pairs(rng, i, 3.0), 2: PairedDraw(i, *(2 * [_pairs(rng, i, 1.0).hand]))}
 
     verdicts = race_many(next_draws, FAST, min_draws=2, max_draws=6, names={1: dict(k=1), 2: dict(k=2)})
-    assert verdicts[1].decision == BUY and verdicts[1].n_draws == 2  # clear at the first look
-    assert verdicts[2].decision == TIE and verdicts[2].n_draws == 2  # an exact copy: a tie as soon as it looks
+    assert verdicts[1].decision == Decision.BUY and verdicts[1].n_draws == 2  # clear at the first look
+    assert verdicts[2].decision == Decision.TIE and verdicts[2].n_draws == 2  # an exact copy: a tie as soon as it looks
     assert calls == [(0, None), (1, frozenset({1, 2}))]  # before any draw every key; then the undecided ones
 
     asked = []
@@ -111,9 +112,9 @@ def test_racing_several_k_stops_each_at_its_own_look_and_ends_when_all_are_decid
         return {key: _pairs(rng, i, 3.0 if key == 1 else 1.0) for key in (keys or (1, 2))}
 
     verdicts = race_many(undecided, replace(FAST, tolerance=0.0), min_draws=2, max_draws=6)
-    assert verdicts[1].decision == BUY and verdicts[1].n_draws < 6
+    assert verdicts[1].decision == Decision.BUY and verdicts[1].n_draws < 6
     assert (
-        verdicts[2].decision == UNDECIDED and verdicts[2].n_draws == 6
+        verdicts[2].decision == Decision.UNDECIDED and verdicts[2].n_draws == 6
     )  # no tie within a zero tolerance: to the budget
     # once k=1 is bought its layouts are not asked for again, and the race goes on for k=2 alone
     assert asked[verdicts[1].n_draws :] == [frozenset({2})] * (6 - verdicts[1].n_draws)
@@ -132,29 +133,29 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
         )
         for k in (1, 2)
     }
-    verdicts[3] = replace(compare_draws([_pairs(rng, 0, 1.01)], FAST, k=3), decision=UNDECIDED, more_draws=7)
-    verdicts[FEWER] = compare_draws(
+    verdicts[3] = replace(compare_draws([_pairs(rng, 0, 1.01)], FAST, k=3), decision=Decision.UNDECIDED, more_draws=7)
+    fewer = compare_draws(
         [_pairs(rng, i, 0.5) for i in range(3)], FAST, k=1, found_name="F1", hand_name="S1S2S3", hand_k=3
     )
-    write_csv(verdict_frame(verdicts), tmp_path / "verdict.csv")
+    write_csv(verdict_frame(Verdicts(verdicts, fewer)), tmp_path / "verdict.csv")
     back = read_verdicts(tmp_path / "verdict.csv")
-    assert set(back) == {1, 2, 3, FEWER} and back[FEWER].hand_k == 3
-    for k, v in verdicts.items():
+    assert set(back.by_k) == {1, 2, 3} and back.fewer.hand_k == 3
+    for read, v in [*((back.by_k[k], v) for k, v in verdicts.items()), (back.fewer, fewer)]:
         assert (
-            back[k].line() == v.line()
-            and back[k].axis_lines() == v.axis_lines()
-            and back[k].fewer_line() == v.fewer_line()
+            confident_line(read) == confident_line(v)
+            and axis_lines(read) == axis_lines(v)
+            and fewer_line(read) == fewer_line(v)
         )
-        assert back[k].score.low == pytest.approx(v.score.low, rel=1e-12) and back[k].more_draws == v.more_draws
-    assert read_verdicts(tmp_path / "none.csv") == {}
+        assert read.score.low == pytest.approx(v.score.low, rel=1e-12) and read.more_draws == v.more_draws
+    assert read_verdicts(tmp_path / "none.csv") == Verdicts()
     # a verdict.csv from before the failures' rule: its failed shares and tolerance unknown (NaN), not taken as applied
     old = pd.read_csv(tmp_path / "verdict.csv").drop(
         columns=["failed", "failed_low", "failed_high", "failures", "kept"]
     )
     old.to_csv(tmp_path / "old.csv", index=False)
     before = read_verdicts(tmp_path / "old.csv")
-    assert all(np.isnan(v.failures) and np.isnan(v.axes[0].failed.high) and not v.kept for v in before.values())
-    assert [v.line() for v in before.values()] == [v.line() for v in back.values()]
+    assert all(np.isnan(v.failures) and np.isnan(v.axes[0].failed.high) and not v.kept for v in before.in_order())
+    assert [confident_line(v) for v in before.in_order()] == [confident_line(v) for v in back.in_order()]
     from optipose.report.confidence import confident_blocks
     from optipose.report.document import Table
 
@@ -179,7 +180,7 @@ def test_a_draw_of_fewer_scans_keeps_the_protocols_orientations_in_proportion():
 
 def test_a_buy_says_which_bracket_to_move_and_which_hand_sensors_stay():
     from optipose.model.layout import kept_sensors
-    from optipose.report.confidence import mount_line
+    from optipose.verdict.words import mount_line
 
     hand = load_part("part_b").layouts["hand"]
     moved = hand.sensors[0].T_O_S.copy()
@@ -190,10 +191,10 @@ def test_a_buy_says_which_bracket_to_move_and_which_hand_sensors_stay():
         compare_draws(
             [_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
         ),
-        decision=BUY,
+        decision=Decision.BUY,
     )
     assert mount_line(buy, found, hand) == "k=2: mount F1 (new), keep S2; S1 freed"
-    assert mount_line(replace(buy, decision=TIE), found, hand) == ""
+    assert mount_line(replace(buy, decision=Decision.TIE), found, hand) == ""
     assert mount_line(replace(buy, found_name="F2", hand_name="S2S3"), found, hand) == "k=2: keep S2; S3 freed"
 
 
@@ -202,7 +203,7 @@ def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
     # all three. The name is the sensors the choice's axes use, in the k layout's own names (here inside a
     # larger layout of four whose first is not the k layout's)
     from optipose.evaluate.assignment import AxisChoice, Choice
-    from optipose.report.confidence import mount_line
+    from optipose.verdict.words import mount_line
     from optipose.search.draws import _found_name
 
     hand = load_part("part_b").layouts["hand"]
@@ -236,7 +237,7 @@ def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
             found_name=_found_name(triple, choice, big),
             hand_name="S1S2S3",
         ),
-        decision=BUY,
+        decision=Decision.BUY,
     )
     assert mount_line(buy, triple, hand) == "k=3: mount F1, F2 (new); S1, S2, S3 freed"
 
@@ -340,14 +341,14 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     verdicts = confident_verdicts(
         part, objective, answered, v, first, 5, config, on_draw=lambda i, name, result: names.append(name)
     )
-    by_k, fewer = split(verdicts)
+    by_k, fewer = verdicts.by_k, verdicts.fewer
     one = by_k[1]
-    assert one.decision == TIE and (one.score.estimate, one.score.low, one.score.high) == (1.0, 1.0, 1.0)
+    assert one.decision == Decision.TIE and (one.score.estimate, one.score.low, one.score.high) == (1.0, 1.0, 1.0)
     assert one.found == one.hand and one.found_name == one.hand_name == validation.hand[1].name
-    assert one.line().startswith(f"k=1: TIE keep hand {one.hand_name}: no found layout beat it")
+    assert confident_line(one).startswith(f"k=1: TIE keep hand {one.hand_name}: no found layout beat it")
     assert set(names) == {"hand", "found_k3"}  # the single is not evaluated: its side is the hand's evaluation
     assert one.n_draws == max(v.n_draws for v in by_k.values())  # it rode along to the race's last look
-    assert fewer.fewer_line().startswith(f"fewer sensors: {one.hand_name} alone")
+    assert fewer_line(fewer).startswith(f"fewer sensors: {one.hand_name} alone")
 
     # the folder: layouts/found_k1.toml holds the hand's sensor, comparison.csv its choice, both read back
     sink = SearchFolder(tmp_path)

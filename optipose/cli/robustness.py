@@ -169,8 +169,9 @@ def _conditions(objective):
 
 def _verdicts(results: dict) -> list[str]:
     """Per given layout, the verdict on the robust statistic against the hand layout's choice of as many sensors."""
-    from optipose.verdict.compare import Verdict
     from optipose.model.baseline import baseline_label
+    from optipose.verdict.compare import Verdict
+    from optipose.verdict.words import verdict_line
 
     hand, lines = results["hand"], []
     label = baseline_label(hand.layout)  # "conventional" for a part without a hand-placed layout
@@ -178,7 +179,7 @@ def _verdicts(results: dict) -> list[str]:
         if name == "hand":
             continue
         k = min(len(result.layout), len(hand.table))
-        line = Verdict(k, result.table[k - 1], hand.table[k - 1]).line(label)
+        line = verdict_line(Verdict(k, result.table[k - 1], hand.table[k - 1]), label)
         lines.append(f"{name} (worst over the band): {line}")
     return lines
 
@@ -290,8 +291,7 @@ def _axis_rows(sens, k: int) -> list[tuple[str, ...]]:
 
 
 def _mdeg(rad: float, signed: bool = False) -> str:
-    import numpy as np
+    """A rotation's cell: millidegrees to two places, ``n/a`` where not finite."""
+    from optipose.verdict.words import mdeg_text
 
-    if not np.isfinite(rad):
-        return "n/a"
-    return f"{1e3 * np.rad2deg(rad):+.2f}" if signed else f"{1e3 * np.rad2deg(rad):.2f}"
+    return mdeg_text(rad, 2, signed, missing="n/a")

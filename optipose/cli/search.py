@@ -29,7 +29,7 @@ from optipose.cli.progress import make_console
 from optipose.cli.report import NoReport
 from optipose.errors import ConfigError, is_interrupt, read_toml
 
-__all__ = ["search", "search_command", "verdict_headline", "stage_budget"]
+__all__ = ["search", "search_command", "stage_budget"]
 
 
 @friendly_errors
@@ -91,6 +91,7 @@ def search_command(
     """
     from rich.console import Console
 
+    from optipose.cli.answer import print_answer
     from optipose.evaluate.objective import load_objective
     from optipose.io.folders import RESULTS_DIR, make_result_dir
     from optipose.model.part import load_part
@@ -140,7 +141,7 @@ def search_command(
         and searched.band is None
         and not searched.band_interrupted
     )
-    _print_report(Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal)
+    print_answer(Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal)
     ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:
         console.print(
@@ -330,220 +331,3 @@ def _draw_layouts(folder: Path, part, layouts, jobs: int):
     thread = threading.Thread(target=render_layouts, args=(shown, list(named), folder / "layouts", jobs), daemon=True)
     thread.start()
     return thread
-
-
-def _print_report(console, report, part, unchecked: bool = False, ideal: bool = True) -> None:
-    """The verdict first, one line per k (:func:`verdict_headline`), then the details: found vs. the
-    baseline per axis on the validation protocol (the records ``comparison.csv`` was written from, which
-    :func:`optipose.io.load_result` reads back), the subsets each axis uses, the band, the full verdict
-    lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
-    ``unchecked``: the answer was never checked under a band (a nominal search without the check); ``ideal``:
-    the search ran in the ideal cell (its verdicts say so)."""
-    from optipose.verdict.compare import mdeg
-    from optipose.verdict.confidence import split
-    from optipose.model.baseline import baseline, baseline_label
-    from optipose.report.confidence import IDEAL_CELL, mount_line
-
-    label = baseline_label(baseline(part))
-    if report.validated:
-        verdicts = report.validation.verdicts()
-        band = report.band.by_k() if report.band is not None else {}
-        confident, fewer = split(getattr(report, "confident", {}))
-        for v in confident.values() or verdicts:
-            console.print(
-                v.line() if confident else verdict_headline(v, label, band.get(v.k), checked=not unchecked),
-                highlight=False,
-            )
-        for v in confident.values():
-            if line := mount_line(v, report.layouts.get(v.k), baseline(part)):
-                console.print(line, highlight=False)
-        if fewer is not None:
-            console.print(fewer.fewer_line(), highlight=False)
-        if confident and ideal:
-            console.print("these verdicts hold " + IDEAL_CELL, style="yellow", highlight=False)
-        if confident:
-            console.print(_confident_table(confident, part))
-        if unchecked and not confident and any(v.no_worse for v in verdicts):
-            from optipose.verdict.compare import UNCHECKED
-
-            console.print(UNCHECKED, style="yellow", highlight=False)
-        for line in report.validation.unmeasured_lines(label):
-            console.print(line, style="bold red", highlight=False)
-        lines = report.validation.verdict_lines(label)
-        found, hand = report.validation.found, report.validation.hand
-        if 1 in found and max(hand, default=0) > 1 and fewer is None:  # the headline: fewer sensors to buy
-            top = hand[max(hand)]
-            beats = "beats" if found[1].score < top.score else "does not beat"
-            console.print(
-                f"one found sensor {beats} {label} {top.name} in sum ({mdeg(found[1].score):.3f} vs "
-                f"{mdeg(top.score):.3f} mdeg)",
-                highlight=False,
-            )
-        console.print(_validation_table(report.validation, part, label))
-        console.print(_subsets_table(report.validation, label))
-        if any(v.ratios() for v in verdicts):
-            console.print(_band_table(report.validation, part, label))
-        for line in (
-            lines[: len(verdicts)] if band or not confident else ()
-        ):  # the validation draw's own lines, before the band's check
-            console.print(line, highlight=False)
-        if band:
-            console.print(_band_table(report.band, part, label, "under the band"))
-            for v in band.values():
-                console.print(f"under the band: {v.line(label)}", highlight=False)
-            nominal = {v.k: v.no_worse for v in verdicts}
-            for v in band.values():
-                if advice := v.band_advice(label, nominal.get(v.k, False)):
-                    console.print(advice, highlight=False)
-    console.print(_strategies_table(report.outcome, label))
-    for k, layout in sorted(report.layouts.items()):
-        console.print(f"[bold]found k={k}[/] (T_O_S, metres; X Y Z mm, roll pitch yaw deg):")
-        for name, T in zip(layout.names, layout.poses):
-            console.print(f"  {name}:\n" + "\n".join("    [" + "  ".join(f"{v: .5f}" for v in row) + "]" for row in T))
-            console.print(f"    {_xyz_rpy(T)}", highlight=False)
-
-
-def verdict_headline(verdict, label: str = "hand", band=None, checked: bool = True) -> str:
-    """The verdict for one k in one short line (under 80 characters for the hand layout and names up to 6):
-    buy or keep. ``band``: the same k's verdict under the band of the check after the validation; a found
-    layout no worse at the preset's noise but worse somewhere in the band is not bought
-    (:func:`optipose.verdict.compare.bought`). ``checked=False``: the answer was never checked under a
-    band (a nominal search without the check), so a layout no worse in the ideal cell is better there, not
-    yet bought. Where registrations failed on some axis of either layout: no verdict, and whose."""
-    from optipose.verdict.compare import bought
-
-    ratio, found, ref = verdict.ratio, verdict.found.name, verdict.reference.name
-    mine, theirs = verdict.failed  # registrations failed on some axis: nothing to rank (Verdict.failed_line says more)
-    if mine or theirs:
-        who = f"found {found}" if mine else f"{label} {ref}"
-        return f"k={verdict.k}: NO VERDICT: registrations of {who} failed ({', '.join(mine or theirs)})"
-    if verdict.tie:
-        return f"k={verdict.k}: KEEP {label} {ref}: found {found} ties it on every axis"
-    if verdict.no_worse and not bought(verdict, band):
-        return f"k={verdict.k}: KEEP {label} {ref}: {found} {ratio:.2f}x better, but worse under the band"
-    if verdict.no_worse and not checked:
-        return f"k={verdict.k}: found {found} {ratio:.2f}x better, no axis worse, in the ideal cell"
-    if verdict.no_worse:
-        return f"k={verdict.k}: BUY found {found}: {ratio:.2f}x better in sum than {label} {ref}, no axis worse"
-    if ratio < 1:
-        return f"k={verdict.k}: KEEP {label} {ref}: found {found} is {1 / ratio:.2f}x worse in sum"
-    axes = ", ".join(dict.fromkeys(g.axis for g in verdict.worse))
-    return f"k={verdict.k}: found {found} {ratio:.2f}x better in sum than {label} {ref}, worse on {axes}"
-
-
-def _xyz_rpy(T) -> str:
-    import numpy as np
-
-    from optipose.transforms import matrix_to_rpy
-
-    xyz, rpy = np.asarray(T)[:3, 3] * 1e3, np.rad2deg(matrix_to_rpy(np.asarray(T)[:3, :3]))
-    return "XYZ " + " ".join(f"{v:.3f}" for v in xyz) + " mm, RPY " + " ".join(f"{v:.3f}" for v in rpy) + " deg"
-
-
-def _compact(value: float) -> str:
-    """Millidegrees in at most 6 characters: 3 significant digits."""
-    return f"{value:.3g}" if value < 1e4 else f"{value:.0f}"
-
-
-def _short_reason(axis) -> str:
-    """Why an axis has no number, in a 6-character cell."""
-    return "failed" if axis.label == "registrations failed" else "unobs."
-
-
-def _short(label: str) -> str:
-    """A layout's label in a table column: ``conventional`` as ``conv.``."""
-    return "conv." if label == "conventional" else label
-
-
-def _narrow_table(title: str, columns: list[tuple[str, str]]):
-    """A rich table that keeps every row on one line of an 80-column terminal."""
-    from rich import box
-    from rich.table import Table
-
-    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
-    for name, justify in columns:
-        table.add_column(name, justify=justify, no_wrap=True)
-    return table
-
-
-def _confident_table(confident: dict, part):
-    """Per k, found and the baseline: the predicted median |error| per axis in the cell with its interval (mdeg)."""
-    from optipose.report.confidence import interval_cell
-
-    v = next(iter(confident.values()))
-    table = _narrow_table(
-        f"{part.name}: predicted median |error| in the cell, mdeg [{100 * v.confidence:.1f} % interval]",
-        [("k", "right"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"), ("yaw", "right")],
-    )
-    for k, v in sorted(confident.items()):
-        for name, axes in ((v.found_name, v.found), (v.hand_name, v.hand)):
-            table.add_row(str(k), name, *(interval_cell(a.median_deg, digits=2) for a in axes))
-    return table
-
-
-def _validation_table(validation, part, label: str = "hand"):
-    """One row per k and layout (found, baseline): median/p75 per axis and the score, in mdeg."""
-    from optipose.verdict.compare import mdeg
-
-    protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans)"
-    band = ", worst over the band" if any(c.under for c in validation.found.values()) else ""
-    table = _narrow_table(
-        f"{part.name}: found vs. {label}, {protocol}, held-out seed{band}; mdeg median/p75",
-        [
-            ("k", "right"),
-            ("layout", "left"),
-            ("sensors", "left"),
-            ("roll", "right"),
-            ("pitch", "right"),
-            ("yaw", "right"),
-            ("score", "right"),
-        ],
-    )
-    for k in sorted({*validation.found, *validation.hand}):
-        for name, choices in (("found", validation.found), (label, validation.hand)):
-            if k in choices:
-                choice = choices[k]
-                cells = [
-                    f"{_compact(mdeg(a.median))}/{_compact(mdeg(a.p75))}" if a.observable else _short_reason(a)
-                    for a in choice.axes
-                ]
-                table.add_row(str(k), _short(name), choice.name, *cells, _compact(mdeg(choice.score)))
-    return table
-
-
-def _subsets_table(validation, label: str = "hand"):
-    """The sensor subset each axis uses, per k and layout."""
-    table = _narrow_table(
-        "the subset each axis uses",
-        [("k", "right"), ("layout", "left"), ("roll", "left"), ("pitch", "left"), ("yaw", "left")],
-    )
-    for k in sorted({*validation.found, *validation.hand}):
-        for name, choices in (("found", validation.found), (label, validation.hand)):
-            if k in choices:
-                table.add_row(str(k), _short(name), *(a.label for a in choices[k].axes))
-    return table
-
-
-def _band_table(validation, part, label: str = "hand", title: str = "per condition"):
-    """Per k and noise level of the band: baseline / found in sum, and whether found is no worse on every axis."""
-    verdicts = [v for v in validation.verdicts() if v.levels()]
-    table = _narrow_table(
-        f"{part.name}: {label} / found {title} (* found worse on some axis)",
-        [("condition", "left")] + [(f"k={v.k}", "right") for v in verdicts],
-    )
-    for row in zip(*(v.levels() for v in verdicts)):
-        table.add_row(row[0][0], *(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row))
-    return table
-
-
-def _strategies_table(outcome, label: str = "hand"):
-    """The surrogate's predicted score per k for greedy, joint and the baseline, and which strategy won."""
-    strategies = _narrow_table(
-        f"surrogate: predicted score (mdeg), greedy vs. joint vs. {label}",
-        [("k", "right"), ("greedy", "right"), ("joint", "right"), (_short(label), "right"), ("winner", "right")],
-    )
-    for k in sorted(outcome.found):
-        g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
-        fmt = lambda f: f"{1e3 * f.stats.score:.3f}" if f is not None and f.stats else "-"  # noqa: E731
-        strategies.add_row(str(k), fmt(g), fmt(j), fmt(h), outcome.found[k].strategy)
-    return strategies

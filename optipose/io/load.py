@@ -24,6 +24,7 @@ from optipose.files import reading
 from optipose.io.choices import axis_choice, choices_from_comparison
 from optipose.io.config import RunConfig, given
 from optipose.io.folders import read_config
+from optipose.verdict.confidence import AxisError, AxisRatio, ConfidentVerdict, Decision, Interval, Verdicts
 
 __all__ = ["load_result", "load_search", "load_history", "load_selection", "load_surrogate_scores"]
 
@@ -92,14 +93,12 @@ def load_search(folder: Path, config: RunConfig | None = None):
     )
 
 
-def read_verdicts(path: Path) -> dict:
-    """k → :class:`~optipose.verdict.confidence.ConfidentVerdict` from ``verdict.csv`` ({} without one), and
-    the comparison of fewer found sensors with more hand ones under ``FEWER``."""
-    from optipose.verdict.confidence import FEWER, AxisError, AxisRatio, ConfidentVerdict, Interval
-
+def read_verdicts(path: Path) -> Verdicts:
+    """The :class:`~optipose.verdict.confidence.Verdicts` of ``verdict.csv`` (none without one): per k, and the
+    comparison of fewer found sensors with more hand ones (a row whose ``hand_k`` exceeds its ``k``)."""
     if not path.is_file():
-        return {}
-    out = {}
+        return Verdicts()
+    by_k, fewer = {}, None
     with reading(path):
         rows = pd.read_csv(path, keep_default_na=False, na_values=[""])
         if "hand_k" not in rows:
@@ -122,10 +121,10 @@ def read_verdicts(path: Path) -> dict:
                 return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
 
             more = int(score["more_draws"])
-            fewer = int(hand_k) != int(k)
-            out[FEWER if fewer else int(k)] = ConfidentVerdict(
+            against_more = int(hand_k) != int(k)
+            verdict = ConfidentVerdict(
                 k=int(k),
-                decision=str(score["decision"]),
+                decision=Decision(str(score["decision"])),
                 found_name=str(score["found"]),
                 hand_name=str(score["hand"]),
                 score=iv(score, "ratio"),
@@ -148,11 +147,15 @@ def read_verdicts(path: Path) -> dict:
                 more_draws=None if more < 0 else more,
                 seconds_per_draw=float(score["seconds_per_draw"]),
                 reference=str(score["reference"]),
-                hand_k=int(hand_k) if fewer else 0,
+                hand_k=int(hand_k) if against_more else 0,
                 failures=float(score["failures"]),
                 kept=str(score["kept"]) == "True",
             )
-    return out
+            if against_more:
+                fewer = verdict
+            else:
+                by_k[int(k)] = verdict
+    return Verdicts(by_k, fewer)
 
 
 def load_history(folder: str | Path) -> list:

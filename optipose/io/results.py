@@ -20,6 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from optipose.verdict.compare import Verdict
+from optipose.verdict.confidence import Verdicts
 from optipose.evaluate.evaluator import EvaluationResult
 from optipose.io.config import RunConfig
 from optipose.model.layout import Layout
@@ -35,7 +36,7 @@ class SearchResult:
     layouts : k → the found layout (sensors F1 … Fk); hand : the hand-placed layout, when the part has one;
     validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
     band : the same under the band of the check after a nominal search (``SearchConfig.band``), or None;
-    confident : k → the verdict with confidence (``verdict.csv``; empty for a search without one).
+    confident : the verdicts with confidence (``verdict.csv``; none for a search without one).
     """
 
     folder: Path | None
@@ -47,7 +48,7 @@ class SearchResult:
     hand: Layout | None = field(default=None, repr=False)
     validation: Validation | None = None
     band: Validation | None = None
-    confident: dict = field(default_factory=dict)
+    confident: Verdicts = field(default_factory=Verdicts)
 
     def verdicts(self) -> list[Verdict]:
         """Found vs. hand per k (empty when there is no hand layout or no validation)."""

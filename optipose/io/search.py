@@ -28,6 +28,7 @@ from optipose.io.tables import (
 )
 from optipose.model.baseline import baseline_label
 from optipose.model.layout import Layout, write_layout
+from optipose.verdict.confidence import Verdicts
 
 __all__ = ["SearchFolder", "save_cache", "load_cache"]
 
@@ -83,9 +84,10 @@ class SearchFolder:
         soon as it ends."""
         _write_evaluations(self.folder / "verdict" / f"draw-{draw}" / name, result)
 
-    def verdict(self, verdicts: dict) -> None:
-        """``verdict.csv``: the verdict with confidence per k, its intervals per axis."""
-        if verdicts:
+    def verdict(self, verdicts: Verdicts) -> None:
+        """``verdict.csv``: the verdict with confidence per k (and one found sensor against the baseline's largest
+        choice), its intervals per axis; nothing without verdicts."""
+        if verdicts.in_order():
             write_csv(verdict_frame(verdicts), self.folder / "verdict.csv")
 
     def band_evaluation(self, name: str, result) -> None:

@@ -243,19 +243,20 @@ VERDICT_COLUMNS = (
 )
 
 
-def verdict_frame(verdicts: dict) -> pd.DataFrame:
-    """The verdicts with confidence (``verdict.csv``): per k a row for the score (axis ``score``: hand / found
+def verdict_frame(verdicts) -> pd.DataFrame:
+    """The verdicts with confidence (``verdict.csv``; a :class:`~optipose.verdict.confidence.Verdicts`, by k, then
+    one found sensor against the baseline's largest choice): per k a row for the score (axis ``score``: hand / found
     in sum, found's and hand's score in the ``*_median_deg`` columns) and one per axis (hand / found of its
     share of the score, of its median and p75; ``failed``: the share of scans on which found's registration
     failed less hand's; each layout's predicted median and p75, degrees), each with its interval (``_low``,
     ``_high``); the decision and what it rests on (``failures``: the share found may fail beyond hand's) repeated on every row. A row whose
     ``hand_k`` exceeds its ``k`` compares fewer found sensors with more hand ones."""
     rows = []
-    for v in sorted(verdicts.values(), key=lambda v: (v.hand_k > v.k, v.k)):
+    for v in verdicts.in_order():
         head = {
             "k": v.k,
             "hand_k": v.hand_k or v.k,
-            "decision": v.decision,
+            "decision": v.decision.value,
             "found": v.found_name,
             "reference": v.reference,
             "hand": v.hand_name,

@@ -198,7 +198,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
         band = result.band_verdicts()
         verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, band, result.unchecked)
         if (
-            result.confident
+            result.confident.by_k
         ):  # the verdict on draws decides; the validation draw's own lines only where the band's check follows them
             verdict = (
                 verdict[:1]
@@ -212,7 +212,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
                 f"{'hand-placed layout' if label == 'hand' else 'conventional placement (the part has no hand-placed layout)'}. "
                 + (
                     "The table below is that draw alone, on which each layout's subset per axis was chosen."
-                    if result.confident
+                    if result.confident.by_k
                     else "A verdict says 'better in sum' from the summed per-axis medians and 75th percentiles, and 'no worse on "
                     "any axis' only when every one of them is at most the baseline's."
                 ),
@@ -255,7 +255,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
 
 
 def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
-    from optipose.verdict.compare import mdeg
+    from optipose.verdict.words import mdeg_text
     from optipose.io.folders import read_config
     from optipose.report.layouts import layout_section
     from optipose.report.provenance import provenance_blocks
@@ -269,8 +269,8 @@ def _evaluation(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     blocks: list[Block] = [
         Heading("Summary"),
         Paragraph(
-            f"with all {best.k} sensors the best per-axis choice scores {mdeg(best.score):.3f} mdeg (sum of per-axis median and p75); "
-            + "; ".join(f"k={c.k}: {c.name} {mdeg(c.score):.3f} mdeg" for c in result.table),
+            f"with all {best.k} sensors the best per-axis choice scores {mdeg_text(best.score)} mdeg (sum of per-axis median and p75); "
+            + "; ".join(f"k={c.k}: {c.name} {mdeg_text(c.score)} mdeg" for c in result.table),
             "verdict info",
         ),
     ]
@@ -298,13 +298,14 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     from optipose.report.provenance import provenance_blocks
     from optipose.report.robustness import band_blocks, bracket_blocks
     from optipose.report.verdict import table1_side_by_side, verdict_css
+    from optipose.verdict.words import verdict_line
 
     label = baseline_label(result.layouts.get("hand"))
     title = f"{result.part}: layouts under every condition of the band (robustness, seed {result.seed})"
     blocks: list[Block] = [Heading("Verdict")]
     verdicts = result.verdicts()
     for v in verdicts:
-        blocks.append(Paragraph(f"{v.layout} (worst over the band): {v.line(label)}", verdict_css(v)))
+        blocks.append(Paragraph(f"{v.layout} (worst over the band): {verdict_line(v, label)}", verdict_css(v)))
     if not verdicts:
         blocks.append(Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed"))
     blocks.append(Heading("Per axis (the paper's Table 1), the robust statistic over the band"))

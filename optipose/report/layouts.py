@@ -6,15 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from optipose.report.document import Block, Code, Heading, Paragraph, Table
-from optipose.transforms import matrix_to_rpy
+from optipose.transforms import xyz_rpy
 
-__all__ = ["xyz_rpy", "layout_section", "pose_text"]
-
-
-def xyz_rpy(T_O_S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R's position (3,) mm and roll, pitch, yaw (3,) deg of a pose (4×4, metres)."""
-    T = np.asarray(T_O_S, dtype=float)
-    return T[:3, 3] * 1e3, np.rad2deg(matrix_to_rpy(T[:3, :3]))
+__all__ = ["layout_section", "pose_text"]
 
 
 def pose_text(name: str, T_O_S: np.ndarray) -> str:

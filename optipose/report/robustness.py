@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from optipose.verdict.compare import mdeg
 from optipose.report import figures
 from optipose.report.document import Block, Figure, Heading, Paragraph, Table
+from optipose.verdict.words import mdeg_text
 
 __all__ = ["band_blocks", "bracket_blocks"]
 
@@ -26,8 +26,8 @@ def band_blocks(name: str, verdict, label: str) -> list[Block]:
         rows.append(
             (
                 condition,
-                f"{mdeg(f.score):.3f}",
-                f"{mdeg(r.score):.3f}",
+                mdeg_text(f.score),
+                mdeg_text(r.score),
                 f"{r.score / f.score:.2f}x",
                 "yes"
                 if ok
@@ -38,8 +38,8 @@ def band_blocks(name: str, verdict, label: str) -> list[Block]:
     rows.append(
         (
             "robust (over the band)",
-            f"{mdeg(found.score):.3f}",
-            f"{mdeg(reference.score):.3f}",
+            mdeg_text(found.score),
+            mdeg_text(reference.score),
             f"{verdict.ratio:.2f}x",
             "yes" if verdict.no_worse else "no",
         )

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from optipose.files import write_text
 from optipose.report.document import Block, Details, Heading, Paragraph, Table, render_html, render_markdown
+from optipose.verdict.words import mdeg_column
 
 __all__ = ["study_report", "study_table", "summary_table", "trial_details", "TRIAL_COLUMNS"]
 
@@ -48,7 +49,7 @@ def study_table(rows: list[dict], folders: list[str | Path | None], out_dir: Pat
     shown = [(h, c) for h, c in TRIAL_COLUMNS if any(c in r for r in rows)]
     folded = any("key" in r for r in rows) and len(shown) < len(_columns(rows))
     if not folded:
-        shown = [(_mdeg_name(c), c) for c in _columns(rows)]
+        shown = [(mdeg_column(c), c) for c in _columns(rows)]
     cells, links = [], {}
     for i, (row, folder) in enumerate(zip(rows, folders)):
         cells.append(tuple(_cell(row, c) for _, c in shown) + (_report_cell(folder),))
@@ -76,7 +77,7 @@ def trial_details(rows: list[dict]) -> list[Details]:
     """Per trial, every column it has (angles in mdeg), folded under its name, state and score."""
     out = []
     for row in rows:
-        fields = tuple((_mdeg_name(c), _value(c, row.get(c))) for c in _columns(rows))
+        fields = tuple((mdeg_column(c), _value(c, row.get(c))) for c in _columns(rows))
         score = _value("score_deg", row.get("score_deg"))
         head = ", ".join(
             p
@@ -221,10 +222,6 @@ def _value(column: str, value, digits: int = 4) -> str:
     if isinstance(value, float):
         return f"{value:.{digits}g}"
     return str(value)
-
-
-def _mdeg_name(column: str) -> str:
-    return column[: -len("_deg")] + "_mdeg" if column.endswith("_deg") else column
 
 
 def _two_decimals(value) -> str:

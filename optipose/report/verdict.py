@@ -2,13 +2,14 @@
 per axis, whether one found sensor beats the baseline's three, and the paper's Table 1 side by side.
 
 Reads :class:`~optipose.verdict.compare.Verdict` and :class:`~optipose.evaluate.assignment.Choice`
-records only; the lines are the ones the terminal prints (:meth:`Verdict.line`).
+records only; the lines are :mod:`optipose.verdict.words`', the ones the terminal prints.
 """
 
 from __future__ import annotations
 
-from optipose.verdict.compare import UNCHECKED, Verdict, bought, mdeg, one_versus_many, unmeasured_line
 from optipose.report.document import Block, Heading, Paragraph, Table
+from optipose.verdict.compare import Verdict, bought
+from optipose.verdict.words import UNCHECKED, band_advice, mdeg_text, one_versus_many, unmeasured_line, verdict_line
 
 __all__ = ["verdict_css", "verdict_blocks", "verdict_table", "table1_rows", "table1_side_by_side", "table1_alone"]
 
@@ -48,10 +49,10 @@ def verdict_blocks(
         blocks.append(Paragraph(UNCHECKED[0].upper() + UNCHECKED[1:] + ".", "verdict mixed"))
     for v in verdicts:
         refused = v.no_worse and not bought(v, band.get(v.k))  # no worse nominally, worse under the band (or a tie)
-        blocks.append(Paragraph(v.line(label), "verdict mixed" if refused else verdict_css(v)))
+        blocks.append(Paragraph(verdict_line(v, label), "verdict mixed" if refused else verdict_css(v)))
         if v.k in band:
-            blocks.append(Paragraph("under the band: " + band[v.k].line(label), verdict_css(band[v.k])))
-            if advice := band[v.k].band_advice(label, v.no_worse):
+            blocks.append(Paragraph("under the band: " + verdict_line(band[v.k], label), verdict_css(band[v.k])))
+            if advice := band_advice(band[v.k], label, v.no_worse):
                 blocks.append(Paragraph(advice, "verdict mixed"))
     top = max(reference, default=0)
     if 1 in found and top > 1:
@@ -106,12 +107,12 @@ def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None,
 def _cell(axis) -> str:
     if not axis.observable:
         return axis.label
-    return f"{mdeg(axis.median):.3f} / {mdeg(axis.p75):.3f} ({axis.name})"
+    return f"{mdeg_text(axis.median)} / {mdeg_text(axis.p75)} ({axis.name})"
 
 
 def table1_rows(label: str, choice) -> tuple[str, ...]:
     """A Table 1 row: k, layout, sensors, per axis median / p75 mdeg (subset), score mdeg."""
-    return (str(choice.k), label, choice.name, *(_cell(a) for a in choice.axes), f"{mdeg(choice.score):.3f}")
+    return (str(choice.k), label, choice.name, *(_cell(a) for a in choice.axes), mdeg_text(choice.score))
 
 
 def table1_side_by_side(found: dict, reference: dict, label: str, caption: str) -> Table:

@@ -28,16 +28,16 @@ import math
 import string
 import time
 
-from optipose.verdict.confidence import FEWER, Rules, paired_draw
-from optipose.verdict.racing import race_many
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
-from optipose.parallel.executors import make_executor
 from optipose.model.baseline import baseline, baseline_label
 from optipose.model.layout import Layout, is_part_of
+from optipose.parallel.executors import make_executor
 from optipose.search.objectives import stage_objective
-from optipose.search.records import Validation
+from optipose.search.records import Side, Validation
 from optipose.search.validate import indices_in, nested_groups
 from optipose.seeds import verdict_seed
+from optipose.verdict.confidence import Rules, Verdicts, paired_draw
+from optipose.verdict.racing import race_many
 
 __all__ = ["choice_draw_counts", "confident_verdicts", "first_look", "sides"]
 
@@ -67,10 +67,9 @@ def confident_verdicts(
     config,
     jobs: int = 1,
     on_draw=None,
-) -> dict:
-    """k → the confident verdict of ``layouts[k]`` against the part's baseline layout, and under ``FEWER``
-    one found sensor against the baseline's largest choice (on the same draws, without holding the race:
-    :data:`~optipose.verdict.confidence.FEWER`).
+) -> Verdicts:
+    """The confident verdicts: per k ``layouts[k]`` against the part's baseline layout, and ``fewer``: one found
+    sensor against the baseline's largest choice (on the same draws, without holding the race).
 
     first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``), the
     race's first draw where :func:`choice_draw_counts` (else not read);
@@ -80,14 +79,14 @@ def confident_verdicts(
     hand = baseline(part)
     side = sides(layouts, validation, hand)
     ks = sorted(side)
-    kept = {k for k, (name, _) in side.items() if name == "hand"}
-    evaluated = {name: layouts[int(name.removeprefix("found_k"))] for name, _ in side.values() if name != "hand"}
+    kept = {k for k, s in side.items() if s.kept}
+    evaluated = {s.evaluation: layouts[int(s.evaluation.removeprefix("found_k"))] for s in side.values() if not s.kept}
     names = ["hand", *evaluated]
     objective = stage_objective(objective, "validation", config.validation)
     counted = choice_draw_counts(objective)
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
     if hand is None or not ks or not objective.conditions.trivial or missing:
-        return {}
+        return Verdicts()
     rules = Rules(
         tolerance=config.verdict_tolerance,
         failures=config.verdict_failures,
@@ -97,45 +96,60 @@ def confident_verdicts(
     )
     label = baseline_label(hand)
     labels = {
-        k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True)
+        (k, k): dict(
+            k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True
+        )
         if k in kept
         else dict(
             k=k,
-            found_name=_found_name(layouts[k], choice, evaluated[name]),
+            found_name=_found_name(layouts[k], s.choice, evaluated[s.evaluation]),
             hand_name=validation.hand[k].name,
             reference=label,
         )
-        for k, (name, choice) in side.items()
+        for k, s in side.items()
     }
     done = on_draw or (lambda i, name, result: None)
 
+    # the race's keys, (found k, hand k): each k against the hand's choice of as many, and one found sensor against
+    # the hand's largest choice (``fewer``), which rides along
     top = max(validation.hand)
-    fewer = {FEWER: (1, top)} if 1 in ks and top > 1 else {}
-    if fewer:
-        labels[FEWER] = dict(labels[1], hand_name=validation.hand[top].name, hand_k=top)
+    fewer = frozenset({(1, top)} if 1 in ks and top > 1 else ())
+    compared = [(k, k) for k in ks] + sorted(fewer)
+    for key in fewer:
+        labels[key] = dict(labels[(1, 1)], hand_name=validation.hand[top].name, hand_k=top)
 
     def pairs(results: dict[str, EvaluationResult]) -> dict:
         return {
-            key: paired_draw(results[side[f][0]], side[f][1], results["hand"], validation.hand[h])
-            for key, (f, h) in ({k: (k, k) for k in ks} | fewer).items()
-            if side[f][0] in results
+            (f, h): paired_draw(results[side[f].evaluation], side[f].choice, results["hand"], validation.hand[h])
+            for f, h in compared
+            if side[f].evaluation in results
         }
 
     draws = {k: [p] for k, p in pairs(first).items()} if counted else None
     if counted and config.verdict_draws <= 1:
-        return race_many(
-            lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer)
+        return _verdicts(
+            race_many(
+                lambda i, keys: {},
+                rules,
+                min_draws=1,
+                max_draws=1,
+                draws=draws,
+                names=labels,
+                passengers=fewer,
+            )
         )
     executor = make_executor(jobs)
 
     # a draw registers only the subsets the choices use (of the 2^n - 1 a layout has)
-    used = {"hand": _used(validation.hand[h] for _, h in ({k: (k, k) for k in ks} | fewer).values())}
-    used |= {name: _used(c for n, c in side.values() if n == name) for name in evaluated}
+    used = {"hand": _used(validation.hand[h] for _, h in compared)}
+    used |= {name: _used(s.choice for s in side.values() if s.evaluation == name) for name in evaluated}
 
     def next_draws(n: int, keys) -> dict:
         t0, i = time.perf_counter(), n + (not counted)  # draw i's seed and folder: 0 is the validation's
         # a decided k's layout is not evaluated again
-        wanted = [name for name in evaluated if keys is None or any(side[k][0] == name for k in keys if k in side)]
+        wanted = [
+            name for name in evaluated if keys is None or any(side[f].evaluation == name for f, h in keys if f == h)
+        ]
         with Evaluator(
             part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans
         ) as evaluator:
@@ -148,10 +162,10 @@ def confident_verdicts(
 
     # a k answered with the baseline's own choice is an exact TIE from the first draw: it rides along without
     # holding the race, and when every k is one, the draws go to its predicted error (one look, at the end)
-    riders = frozenset(fewer) | (frozenset(kept) if kept != set(ks) else frozenset())
+    riders = fewer | (frozenset((k, k) for k in kept) if kept != set(ks) else frozenset())
     try:
         seconds = config.verdict_time if config.verdict_time > 0 else math.inf
-        return race_many(
+        raced = race_many(
             next_draws,
             rules,
             min_draws=config.verdict_draws if kept == set(ks) else first_look(objective),
@@ -163,18 +177,27 @@ def confident_verdicts(
         )
     finally:
         executor.close()
+    return _verdicts(raced)
 
 
-def sides(layouts: dict[int, Layout], validation: Validation, hand: Layout | None) -> dict[int, tuple[str, object]]:
-    """k (each with a found and a hand choice) → the evaluation a draw pairs with the hand layout's for it, and the
-    choice read from it: ``hand`` and the hand's choice for a k the search answered with the hand layout's own
-    sensors (:func:`optipose.search.validate.hand_where_better`), else ``found_k<m>`` (the largest found layout
-    that holds it, evaluated once for its nested group) and its found choice. The one rule the verdict and the
-    benchmarks that read its stored draws pair by."""
+def _verdicts(raced: dict) -> Verdicts:
+    """The race's verdicts by key, (found k, hand k), as one record: by k, and one found sensor against more."""
+    fewer = [v for (f, h), v in raced.items() if f != h]
+    return Verdicts({f: v for (f, h), v in raced.items() if f == h}, fewer[0] if fewer else None)
+
+
+def sides(layouts: dict[int, Layout], validation: Validation, hand: Layout | None) -> dict[int, Side]:
+    """k (each with a found and a hand choice) → the :class:`~optipose.search.records.Side` a draw pairs with the
+    hand layout's evaluation for it: the evaluation ``hand`` and the hand's choice for a k the search answered with
+    the hand layout's own sensors (:func:`optipose.search.validate.hand_where_better`), else ``found_k<m>`` (the
+    largest found layout that holds it, evaluated once for its nested group) and its found choice. The one rule the
+    verdict and the benchmarks that read its stored draws pair by."""
     ks = [k for k in sorted(validation.found) if k in validation.hand]
     kept = {k for k in ks if is_part_of(layouts[k], hand)}
     big = {k: max(g) for g in nested_groups({k: lay for k, lay in layouts.items() if k not in kept}) for k in g}
-    return {k: ("hand", validation.hand[k]) if k in kept else (f"found_k{big[k]}", validation.found[k]) for k in ks}
+    return {
+        k: Side("hand", validation.hand[k]) if k in kept else Side(f"found_k{big[k]}", validation.found[k]) for k in ks
+    }
 
 
 def _used(choices) -> list[tuple[int, ...]] | None:
@@ -185,7 +208,7 @@ def _used(choices) -> list[tuple[int, ...]] | None:
 def _found_name(layout: Layout, choice, big: Layout) -> str:
     """The found sensors the choice's axes use, in the k layout's own sensor names (F1 … Fk as its file and the
     report's poses say, not those of the larger layout it was evaluated inside): a sensor of the k layout that
-    no axis measures on is not one to buy (what a BUY mounts is these, :func:`optipose.report.confidence.mount_line`).
+    no axis measures on is not one to buy (what a BUY mounts is these, :func:`optipose.verdict.words.mount_line`).
     The choice's k sensors when no axis is measured."""
     own = {big.names[i]: name for i, name in zip(indices_in(layout, big), layout.names)}
     return "".join(sorted((own.get(big.names[i], big.names[i]) for i in choice.used or choice.sensors), key=_natural))

@@ -41,6 +41,7 @@ from optipose.search.space import SPACE_VERSION
 from optipose.search.study import SurrogateStudy
 from optipose.search.surrogate_search import run_search
 from optipose.seeds import validation_seed
+from optipose.verdict.confidence import Verdicts
 from optipose.model.baseline import baseline
 
 __all__ = ["SearchReport", "ResultSink", "run", "found_layout", "NoFeasibleLayout"]
@@ -77,7 +78,7 @@ class ResultSink(Protocol):
 
     def verdict_draw(self, draw: int, name: str, result) -> None: ...
 
-    def verdict(self, verdicts: dict) -> None: ...
+    def verdict(self, verdicts: Verdicts) -> None: ...
 
     def band_evaluation(self, name: str, result) -> None: ...
 
@@ -93,7 +94,7 @@ class SearchReport:
     validation: Validation | None = None
     band: Validation | None = None  # the check under the band (SearchConfig.band), when there was one
     band_interrupted: bool = False  # Ctrl-C stopped the check under the band (the validation is complete)
-    confident: dict = field(default_factory=dict)  # k -> ConfidentVerdict (search/draws.py)
+    confident: Verdicts = field(default_factory=Verdicts)  # the verdicts with confidence (search/draws.py)
 
     @property
     def validated(self) -> bool:

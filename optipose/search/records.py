@@ -16,12 +16,24 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from optipose.verdict.compare import Verdict, one_versus_many, unmeasured_line
+from optipose.evaluate.assignment import Choice
+from optipose.verdict.compare import Verdict
+from optipose.verdict.words import one_versus_many, unmeasured_line, verdict_line
 
 if TYPE_CHECKING:  # importing the surrogate loads the scanner; the records only name its type
     from optipose.search.surrogate import Prediction
 
-__all__ = ["EvalState", "LayoutScore", "Evaluation", "Found", "IcpEvaluation", "SearchOutcome", "Validation", "PENALTY"]
+__all__ = [
+    "EvalState",
+    "LayoutScore",
+    "Evaluation",
+    "Found",
+    "IcpEvaluation",
+    "SearchOutcome",
+    "Validation",
+    "Side",
+    "PENALTY",
+]
 
 # what an optimiser sees for an infeasible layout: PENALTY + violation (the global NLopt algorithms worth
 # using here take no constraints, so infeasibility is a wall that slopes back toward feasibility)
@@ -162,15 +174,15 @@ class Validation:
 
     def unmeasured_lines(self, reference: str = "hand") -> list[str]:
         """Per k whose found choice leaves an axis unmeasured, one line saying so
-        (:func:`~optipose.verdict.compare.unmeasured_line`): no found layout of k sensors observes it."""
+        (:func:`~optipose.verdict.words.unmeasured_line`): no found layout of k sensors observes it."""
         lines = (unmeasured_line(k, self.found[k], self.hand.get(k), reference) for k in sorted(self.found))
         return [line for line in lines if line]
 
     def verdict_lines(self, reference: str = "hand") -> list[str]:
-        """One line per k (:meth:`Verdict.line`), then the axes a found layout does not measure
+        """One line per k (:func:`~optipose.verdict.words.verdict_line`), then the axes a found layout does not measure
         (:meth:`unmeasured_lines`), then whether one found sensor beats the hand's largest choice;
         ``reference`` names the baseline (``hand``, ``conventional``)."""
-        lines = [v.line(reference) for v in self.verdicts()] + self.unmeasured_lines(reference)
+        lines = [verdict_line(v, reference) for v in self.verdicts()] + self.unmeasured_lines(reference)
         ks = sorted(self.found)
         top = max(ks, default=0)
         if 1 in self.found and top in self.hand and top > 1:
@@ -178,3 +190,18 @@ class Validation:
                 one_versus_many(self.found[1], self.hand[top], "hand-placed" if reference == "hand" else reference)
             )
         return lines
+
+
+@dataclass(frozen=True)
+class Side:
+    """The found side of a k's verdict draw (:func:`optipose.search.draws.sides`): the evaluation it is read from
+    (``hand``: the hand layout's own, for a k the search answered with the hand sensors; else ``found_k<m>``, the
+    largest found layout that holds the k one) and the choice (its subset per axis) read from it."""
+
+    evaluation: str
+    choice: Choice
+
+    @property
+    def kept(self) -> bool:
+        """The search answered this k with the hand layout's own choice: an exact TIE with it."""
+        return self.evaluation == "hand"

@@ -13,7 +13,7 @@ import time
 from dataclasses import replace
 from typing import Callable, Sequence
 
-from optipose.verdict.confidence import UNDECIDED, ConfidentVerdict, PairedDraw, Rules, compare_draws
+from optipose.verdict.confidence import ConfidentVerdict, Decision, PairedDraw, Rules, compare_draws
 
 __all__ = ["SPENDING", "looks", "race", "race_many", "spent"]
 
@@ -118,7 +118,7 @@ def race_many(
             used += share
             for key in taken.keys() - done.keys() - passengers:
                 verdict = compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
-                if verdict.decision != UNDECIDED or last:
+                if verdict.decision != Decision.UNDECIDED or last:
                     done[key] = verdict
             if not taken.keys() - done.keys() - passengers:
                 riders = {

@@ -169,7 +169,8 @@ def test_the_search_says_when_no_layout_of_k_sensors_observes_an_axis(tmp_path):
 
 def test_an_unmeasured_axis_compares_as_the_penalty_not_as_nan():
     from optipose.evaluate.assignment import FAILED, UNOBSERVABLE, AxisChoice, Choice
-    from optipose.verdict.compare import Verdict, dominates, excess, unmeasured_line
+    from optipose.verdict.compare import Verdict, dominates, excess
+    from optipose.verdict.words import unmeasured_line
 
     def choice(name, yaw_reason=""):
         yaw = (

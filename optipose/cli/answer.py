@@ -1,0 +1,177 @@
+"""What ``optipose search`` prints at its end: the verdict first, then found vs. the baseline per axis, the
+subsets each axis uses, the band, the surrogate's strategies and the found poses (:func:`print_answer`). The
+lines are :mod:`optipose.verdict.words`'; every table fits an 80-column terminal.
+"""
+
+from __future__ import annotations
+
+__all__ = ["print_answer"]
+
+
+def print_answer(console, report, part, unchecked: bool = False, ideal: bool = True) -> None:
+    """The verdict first, one line per k (:func:`optipose.verdict.words.verdict_headline`, or with confidence
+    :func:`~optipose.verdict.words.confident_line`), then the details: found vs. the
+    baseline per axis on the validation protocol (the records ``comparison.csv`` was written from, which
+    :func:`optipose.io.load_result` reads back), the subsets each axis uses, the band, the full verdict
+    lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
+    ``unchecked``: the answer was never checked under a band (a nominal search without the check); ``ideal``:
+    the search ran in the ideal cell (its verdicts say so)."""
+    from optipose.model.baseline import baseline, baseline_label
+    from optipose.verdict import words
+
+    label = baseline_label(baseline(part))
+    if report.validated:
+        verdicts = report.validation.verdicts()
+        band = report.band.by_k() if report.band is not None else {}
+        confident = report.confident.by_k
+        for v in confident.values() or verdicts:
+            console.print(
+                words.confident_line(v)
+                if confident
+                else words.verdict_headline(v, label, band.get(v.k), checked=not unchecked),
+                highlight=False,
+            )
+        for v in confident.values():
+            if line := words.mount_line(v, report.layouts.get(v.k), baseline(part)):
+                console.print(line, highlight=False)
+        if report.confident.fewer is not None:
+            console.print(words.fewer_line(report.confident.fewer), highlight=False)
+        if confident and ideal:
+            console.print("these verdicts hold " + words.IDEAL_CELL, style="yellow", highlight=False)
+        if confident:
+            console.print(_confident_table(confident, part))
+        if unchecked and not confident and any(v.no_worse for v in verdicts):
+            console.print(words.UNCHECKED, style="yellow", highlight=False)
+        for line in report.validation.unmeasured_lines(label):
+            console.print(line, style="bold red", highlight=False)
+        lines = report.validation.verdict_lines(label)
+        found, hand = report.validation.found, report.validation.hand
+        if 1 in found and max(hand, default=0) > 1 and report.confident.fewer is None:  # fewer sensors to buy
+            console.print(words.one_versus_many(found[1], hand[max(hand)], label, the=False), highlight=False)
+        console.print(_validation_table(report.validation, part, label))
+        console.print(_subsets_table(report.validation, label))
+        if any(v.ratios() for v in verdicts):
+            console.print(_band_table(report.validation, part, label))
+        for line in (
+            lines[: len(verdicts)] if band or not confident else ()
+        ):  # the validation draw's own lines, before the band's check
+            console.print(line, highlight=False)
+        if band:
+            console.print(_band_table(report.band, part, label, "under the band"))
+            for v in band.values():
+                console.print(f"under the band: {words.verdict_line(v, label)}", highlight=False)
+            nominal = {v.k: v.no_worse for v in verdicts}
+            for v in band.values():
+                if advice := words.band_advice(v, label, nominal.get(v.k, False)):
+                    console.print(advice, highlight=False)
+    console.print(_strategies_table(report.outcome, label))
+    for k, layout in sorted(report.layouts.items()):
+        console.print(f"[bold]found k={k}[/] (T_O_S, metres; X Y Z mm, roll pitch yaw deg):")
+        for name, T in zip(layout.names, layout.poses):
+            console.print(f"  {name}:\n" + "\n".join("    [" + "  ".join(f"{v: .5f}" for v in row) + "]" for row in T))
+            console.print(f"    {words.xyz_rpy_text(T)}", highlight=False)
+
+
+def _short_reason(axis) -> str:
+    """Why an axis has no number, in a 6-character cell."""
+    return "failed" if axis.label == "registrations failed" else "unobs."
+
+
+def _short(label: str) -> str:
+    """A layout's label in a table column: ``conventional`` as ``conv.``."""
+    return "conv." if label == "conventional" else label
+
+
+def _narrow_table(title: str, columns: list[tuple[str, str]]):
+    """A rich table that keeps every row on one line of an 80-column terminal."""
+    from rich import box
+    from rich.table import Table
+
+    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True)
+    for name, justify in columns:
+        table.add_column(name, justify=justify, no_wrap=True)
+    return table
+
+
+def _confident_table(confident: dict, part):
+    """Per k (``confident``: k → its verdict with confidence), found and the baseline: the predicted median |error|
+    per axis in the cell with its interval (mdeg)."""
+    from optipose.verdict.words import interval_cell
+
+    v = next(iter(confident.values()))
+    table = _narrow_table(
+        f"{part.name}: predicted median |error| in the cell, mdeg [{100 * v.confidence:.1f} % interval]",
+        [("k", "right"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"), ("yaw", "right")],
+    )
+    for k, v in sorted(confident.items()):
+        for name, axes in ((v.found_name, v.found), (v.hand_name, v.hand)):
+            table.add_row(str(k), name, *(interval_cell(a.median_deg, digits=2) for a in axes))
+    return table
+
+
+def _validation_table(validation, part, label: str = "hand"):
+    """One row per k and layout (found, baseline): median/p75 per axis and the score, in mdeg."""
+    from optipose.verdict.words import mdeg_compact
+
+    protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans)"
+    band = ", worst over the band" if any(c.under for c in validation.found.values()) else ""
+    table = _narrow_table(
+        f"{part.name}: found vs. {label}, {protocol}, held-out seed{band}; mdeg median/p75",
+        [
+            ("k", "right"),
+            ("layout", "left"),
+            ("sensors", "left"),
+            ("roll", "right"),
+            ("pitch", "right"),
+            ("yaw", "right"),
+            ("score", "right"),
+        ],
+    )
+    for k in sorted({*validation.found, *validation.hand}):
+        for name, choices in (("found", validation.found), (label, validation.hand)):
+            if k in choices:
+                choice = choices[k]
+                cells = [
+                    f"{mdeg_compact(a.median)}/{mdeg_compact(a.p75)}" if a.observable else _short_reason(a)
+                    for a in choice.axes
+                ]
+                table.add_row(str(k), _short(name), choice.name, *cells, mdeg_compact(choice.score))
+    return table
+
+
+def _subsets_table(validation, label: str = "hand"):
+    """The sensor subset each axis uses, per k and layout."""
+    table = _narrow_table(
+        "the subset each axis uses",
+        [("k", "right"), ("layout", "left"), ("roll", "left"), ("pitch", "left"), ("yaw", "left")],
+    )
+    for k in sorted({*validation.found, *validation.hand}):
+        for name, choices in (("found", validation.found), (label, validation.hand)):
+            if k in choices:
+                table.add_row(str(k), _short(name), *(a.label for a in choices[k].axes))
+    return table
+
+
+def _band_table(validation, part, label: str = "hand", title: str = "per condition"):
+    """Per k and noise level of the band: baseline / found in sum, and whether found is no worse on every axis."""
+    verdicts = [v for v in validation.verdicts() if v.levels()]
+    table = _narrow_table(
+        f"{part.name}: {label} / found {title} (* found worse on some axis)",
+        [("condition", "left")] + [(f"k={v.k}", "right") for v in verdicts],
+    )
+    for row in zip(*(v.levels() for v in verdicts)):
+        table.add_row(row[0][0], *(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row))
+    return table
+
+
+def _strategies_table(outcome, label: str = "hand"):
+    """The surrogate's predicted score per k for greedy, joint and the baseline, and which strategy won."""
+    strategies = _narrow_table(
+        f"surrogate: predicted score (mdeg), greedy vs. joint vs. {label}",
+        [("k", "right"), ("greedy", "right"), ("joint", "right"), (_short(label), "right"), ("winner", "right")],
+    )
+    for k in sorted(outcome.found):
+        g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
+        fmt = lambda f: f"{1e3 * f.stats.score:.3f}" if f is not None and f.stats else "-"  # noqa: E731
+        strategies.add_row(str(k), fmt(g), fmt(j), fmt(h), outcome.found[k].strategy)
+    return strategies

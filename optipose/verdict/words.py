@@ -1,0 +1,364 @@
+"""The verdict in words: every line the terminal, the report and the scripts say about a verdict, and every angle
+they show, written here once.
+
+Numbers: angles in millidegrees (:func:`mdeg`, :func:`mdeg_text`, :func:`mdeg_compact`, :func:`interval_cell`),
+ratios with their interval (:func:`ratio_cell`), a pose as XYZ + RPY (:func:`xyz_rpy_text`). Lines: the verdict
+with confidence (:func:`confident_line`, :func:`fewer_line`, :func:`axis_lines`, :func:`mount_line`), the
+validation draw's verdict (:func:`verdict_line`, :func:`failed_line`, :func:`band_advice`,
+:func:`verdict_headline`), an axis no found layout measures (:func:`unmeasured_line`), one found sensor against
+the baseline's largest choice (:func:`one_versus_many`), and what a verdict holds in (:data:`IDEAL_CELL`,
+:data:`UNCHECKED`). The records they read are :mod:`optipose.verdict.confidence`'s and
+:mod:`optipose.verdict.compare`'s; each line fits 80 columns where its docstring says so.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, Choice, not_measured
+from optipose.model.layout import kept_sensors
+from optipose.transforms import xyz_rpy
+from optipose.verdict.compare import Verdict, bought
+from optipose.verdict.confidence import ConfidentVerdict, Decision, Interval
+
+__all__ = [
+    "IDEAL_CELL",
+    "UNCHECKED",
+    "mdeg",
+    "mdeg_text",
+    "mdeg_compact",
+    "mdeg_column",
+    "interval_cell",
+    "ratio_cell",
+    "xyz_rpy_text",
+    "confident_line",
+    "fewer_line",
+    "axis_lines",
+    "mount_line",
+    "verdict_line",
+    "failed_line",
+    "band_advice",
+    "verdict_headline",
+    "unmeasured_line",
+    "one_versus_many",
+]
+
+# what a verdict with confidence from the ideal cell says it holds in
+IDEAL_CELL = (
+    "in the ideal cell (the CAD part, an exact robot and calibration): run without --cell ideal, or "
+    "with a cell file of yours, for the errors of a real cell before buying"
+)
+
+# what a nominal search's verdict says when it never checked its answer under a band (``--budget quick``)
+UNCHECKED = (
+    "checked in the ideal cell only (the preset's noise, every bracket exact), not under the band of a real "
+    "cell: run --budget default before buying"
+)
+
+
+def mdeg(rad: float) -> float:
+    """Radians in millidegrees, the unit every table and line shows angles in."""
+    return 1e3 * float(np.rad2deg(rad))
+
+
+def mdeg_text(rad: float, decimals: int = 3, signed: bool = False, missing: str | None = None) -> str:
+    """``0.250``: radians as millidegrees to ``decimals`` places (``+0.25`` with ``signed``); ``missing`` (when
+    given) for a value that is not finite."""
+    if missing is not None and not np.isfinite(rad):
+        return missing
+    return f"{mdeg(rad):{'+' if signed else ''}.{decimals}f}"
+
+
+def mdeg_compact(rad: float) -> str:
+    """Radians as millidegrees in at most 6 characters: 3 significant digits."""
+    value = mdeg(rad)
+    return f"{value:.3g}" if value < 1e4 else f"{value:.0f}"
+
+
+def mdeg_column(column: str) -> str:
+    """A table's ``<name>_deg`` column as it is shown, in millidegrees: ``<name>_mdeg``."""
+    return column[: -len("_deg")] + "_mdeg" if column.endswith("_deg") else column
+
+
+def _sig_mdeg(deg: float) -> str:
+    """Degrees as millidegrees to 3 significant digits."""
+    return f"{1e3 * deg:.3g}"
+
+
+def interval_cell(interval: Interval, scale: float = 1e3, digits: int = 3) -> str:
+    """``0.203 [0.151, 0.262]``: an estimate and its interval (scale 1e3: degrees shown in mdeg; ``digits``
+    significant ones)."""
+    if not_measured(interval):
+        return "not measured"
+    # rounded to ``digits`` significant ones but written out (110, not 1.1e+02: a column of mdeg reads at a glance)
+    e, lo, hi = (f"{float(f'{scale * x:.{digits}g}'):g}" for x in (interval.estimate, interval.low, interval.high))
+    return f"{e} [{lo}, {hi}]" if digits > 2 else f"{e} [{lo}-{hi}]"
+
+
+def ratio_cell(interval: Interval) -> str:
+    """``1.42x [1.21, 1.66]``: a ratio and its interval."""
+    return f"{interval.estimate:.2f}x [{interval.low:.2f}, {interval.high:.2f}]"
+
+
+def xyz_rpy_text(T_O_S) -> str:
+    """``XYZ 1.000 2.000 3.000 mm, RPY 0.000 90.000 0.000 deg``: a pose (4×4, metres) as one line."""
+    xyz, rpy = xyz_rpy(T_O_S)
+    return "XYZ " + " ".join(f"{v:.3f}" for v in xyz) + " mm, RPY " + " ".join(f"{v:.3f}" for v in rpy) + " deg"
+
+
+def confident_line(v: ConfidentVerdict) -> str:
+    """One line of at most 80 columns: the decision, hand / found in sum with its interval, the draws (and
+    under UNDECIDED how many more would settle it), e.g.
+    ``k=2: BUY F1F3 1.42x [1.21, 1.66] better than hand S1S2 (12 draws)``."""
+    ratio, ref = ratio_cell(v.score), f"{v.reference} {v.hand_name}"
+    head = f"k={v.k}: {v.decision}"
+    if len(v.unmeasured) == len(v.found):  # equal because neither measures anything: say that
+        text = f"k={v.k}: nothing measured: {v.found_name} and {ref} see no {'/'.join(v.unmeasured)}"
+        return text if len(text) <= 80 else f"k={v.k}: nothing measured: {v.found_name} and {ref} see no axis"
+    tail = f"{v.n_draws} draw{'s' if v.n_draws != 1 else ''}"
+    if v.decision == Decision.UNDECIDED and v.more_draws is not None:
+        minutes = v.more_minutes
+        took = (f", {minutes:.0f} min" if minutes >= 1 else f", {60 * minutes:.0f} s") if math.isfinite(minutes) else ""
+        tail += f"; +{v.more_draws}{took}"
+    if v.decision == Decision.KEEP:
+        worse = [a.axis for a in v.axes if a.ratio.high < 1.0 / (1.0 + v.tolerance)]
+        fails = [a for a in v.axes if a.failed.low > v.failures]
+        why = (f", worse on {'/'.join(worse)}" if worse else "") + "".join(
+            f", fails {100 * a.failed.estimate:.1f} % more {a.axis}" for a in fails[:1]
+        )
+        # the reasons before the ratio where both do not fit
+        texts = [
+            f"{head} {ref}; {v.found_name} {ratio}{why}",
+            f"{head} {ref}; {v.found_name}{why}",
+            f"{head} {ref}{why}",
+        ]
+        text = next(
+            (t for t in texts if len(f"{t} ({tail})") <= 80), next((t for t in texts if len(t) <= 80), texts[-1])
+        )
+    elif v.decision == Decision.BUY:
+        text = f"{head} {v.found_name} {ratio} better than {ref}"
+    elif v.decision == Decision.TIE and v.kept:
+        text = f"{head} keep {ref}: no found layout beat it"  # the search answered with the baseline's own choice
+    elif v.decision == Decision.TIE:
+        text = f"{head} {v.found_name} {ratio} vs {ref}: keep {v.hand_name}"
+    else:
+        text = f"{head} {v.found_name} {ratio} vs {ref}"
+    # undecided: the axis whose interval straddles the tolerance, where it fits
+    open_ = [a for a in v.axes if a.ratio.low < 1.0 / (1.0 + v.tolerance) <= a.ratio.high]
+    axis = "".join(f"; {a.axis} {ratio_cell(a.ratio)}" for a in open_[:1])
+    failing = [a for a in v.axes if a.failed.low <= v.failures < a.failed.high]  # found may fail more than allowed
+    fails = "".join(f"; {a.axis} fails {100 * a.failed.estimate:+.1f} %" for a in failing[:1])
+    axis = (axis or fails) if v.decision == Decision.UNDECIDED else ""
+    # the failed share is in no table: it goes before the draws to add where both do not fit
+    order = (f"{text}{axis}", f"{text} ({tail})") if axis == fails else (f"{text} ({tail})", f"{text}{axis}")
+    fits = [line for line in (f"{text}{axis} ({tail})", *order) if len(line) <= 80]
+    return fits[0] if fits else text[:80]
+
+
+def fewer_line(v: ConfidentVerdict) -> str:
+    """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line of at most 80
+    columns, e.g. ``fewer sensors: found F1 alone matches hand S1S2S3 within 10 % (1.02x [0.95, 1.08])``
+    (shorter where the names are long: ``fewer: F1 alone matches conventional S1S2S3 within 10 % …``)."""
+    ratio, ref = ratio_cell(v.score), f"{v.reference} {v.hand_name}"
+    template = (
+        "nothing measured by {who} or {ref}"
+        if len(v.unmeasured) == len(v.found)
+        else {
+            Decision.BUY: "{who} is better than {ref}: {ratio}",
+            Decision.KEEP: "{who} does not match {ref} ({ratio})",
+            Decision.TIE: "{who} matches {ref} within " + f"{100 * v.tolerance:.0f}" + " % ({ratio})",
+        }.get(v.decision, "{who} vs {ref}: {ratio}, not settled")
+    )
+    found = "" if v.kept else "found "  # the search answered with one of the baseline's own
+    lines = [
+        f"{head}: " + template.format(who=who, ref=ref, ratio=ratio)
+        for head, who in (
+            ("fewer sensors", f"{found}{v.found_name} alone"),
+            ("fewer sensors", f"{v.found_name} alone"),
+            ("fewer", f"{v.found_name} alone"),
+        )
+    ]
+    return next((line for line in lines if len(line) <= 80), lines[-1][:80])
+
+
+def axis_lines(v: ConfidentVerdict) -> list[str]:
+    """Per axis, found's and hand's predicted median / p75 (mdeg) with intervals, each ≤ 80 columns."""
+    out = []
+    for f, h in zip(v.found, v.hand):
+        cells = [
+            f"{_sig_mdeg(i.estimate)} [{_sig_mdeg(i.low)}, {_sig_mdeg(i.high)}]"
+            for i in (f.median_deg, h.median_deg, f.p75_deg, h.p75_deg)
+        ]
+        out.append(f"  {f.axis:5} median found {cells[0]} hand {cells[1]} mdeg")
+        out.append(f"  {'':5} p75    found {cells[2]} hand {cells[3]} mdeg")
+    return out
+
+
+def mount_line(v: ConfidentVerdict, found, hand) -> str:
+    """What a BUY asks of the cell, in one line: the found sensors its choice uses that are new (their poses
+    follow in the layouts), the baseline's it keeps in their brackets and those it frees, e.g.
+    ``k=2: mount F1 (new), keep S2; S1 freed``; "" for another decision. ``found``, ``hand``: the
+    :class:`~optipose.model.layout.Layout` of the found k sensors and the baseline's."""
+    if v.decision != Decision.BUY or found is None or hand is None:
+        return ""
+    used = [n for n in found.names if n in v.found_name]
+    kept = kept_sensors(found, hand)
+    new = [n for n in used if n not in kept]
+    keep = [kept[n] for n in used if n in kept]
+    freed = [n for n in hand.names if n in v.hand_name and n not in keep]
+    parts = ([f"mount {', '.join(new)} (new)"] if new else []) + ([f"keep {', '.join(keep)}"] if keep else [])
+    return f"k={v.k}: " + ", ".join(parts) + (f"; {', '.join(freed)} freed" if freed else "")
+
+
+def _mdeg_or_unmeasured(rad: float) -> str:
+    return "unmeasured" if rad == UNOBSERVABLE_PENALTY else mdeg_text(rad)
+
+
+def verdict_line(v: Verdict, reference: str = "hand") -> str:
+    """The validation draw's verdict in one line for a terminal or a report: ratio, every worse axis (mdeg), and
+    keep or replace; ``reference`` names the baseline (``hand``, ``conventional``). Where registrations failed,
+    no ranking: :func:`failed_line`."""
+    if failed := failed_line(v, reference):
+        return failed
+    ratio, name, ref = v.ratio, v.found.name, v.reference.name
+    gaps = sorted(v.worse, key=lambda g: g.reference / g.found)  # the widest first
+    worse = [
+        f"{g.axis} {g.statistic} {_mdeg_or_unmeasured(g.found)} vs {_mdeg_or_unmeasured(g.reference)}"
+        + (f" ({g.condition})" if g.condition else "")
+        for g in gaps[:3]
+    ]
+    if len(gaps) > 3:
+        worse.append(f"{len(gaps) - 3} more")
+    robust = " at the worst over the band" if v.ratios() else ""
+    than = f"x {'better' if ratio >= 1 else 'worse'} in sum{robust} than {reference} {ref}"
+    head = f"k={v.k}: found {name} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
+    if v.tie:
+        return f"k={v.k}: found {name} ties {reference} {ref} on every axis: keep {ref}"
+    if worse and ratio < 1:
+        return f"{head} and worse on {'; '.join(worse)} mdeg: keep {ref}"
+    if worse:
+        return f"{head}, but worse on {'; '.join(worse)} mdeg: keep {ref} if no axis may get worse"
+    return f"{head}, no worse on any axis"
+
+
+def failed_line(v: Verdict, reference: str = "hand") -> str:
+    """The verdict when registrations failed on some axis of either choice ("" when none did): no ranking, what
+    failed and where to look (the mesh of a part that is not a closed solid, most often)."""
+    mine, theirs = v.failed
+    if not mine and not theirs:
+        return ""
+    name, ref = v.found.name, v.reference.name
+    what = [f"the registrations of found {name} failed on {', '.join(mine)}"] if mine else []
+    what += [f"those of {reference} {ref} on {', '.join(theirs)}"] if theirs else []
+    then = f"keep {ref} until they succeed" if mine else f"found {name} is not shown better there"
+    return (
+        f"k={v.k}: no verdict: {' and '.join(what)} in over a tenth of the scans (see per_scan.csv's failure "
+        f"column; is the part's mesh a closed solid?): {then}"
+    )
+
+
+def band_advice(v: Verdict, reference: str = "hand", nominal_no_worse: bool = False) -> str:
+    """Under a band, for a found layout the nominal validation found no worse on every axis (``nominal_no_worse``)
+    but the band does not: what it needs to be the better buy, in one line —
+
+    - no worse at the lowest noise level(s) but not at some higher one: a bet on the sensor's noise on this part;
+    - worse at the preset's noise (×1) once the brackets are off, though no worse with every bracket exact: its
+      win rests on the brackets.
+
+    "" otherwise (no band, no worse everywhere, or not no worse in the nominal cell either). The noise scale is
+    read from the level's label (``evaluate.robust.by_level``: ``noise x<scale>…``)."""
+    levels = [
+        (float(m.group(1)), label.split(",")[0], ratio, ok, "bracket" in label)
+        for label, ratio, ok in v.levels()
+        if (m := re.match(r"noise x([0-9.]+)", label))
+    ]
+    levels.sort()
+    if not nominal_no_worse or not levels or all(level[3] for level in levels):
+        return ""
+    head = f"k={v.k}: found {v.found.name}"
+    if not levels[0][3]:
+        scale, name, ratio, _, brackets = levels[0]
+        if not (scale == 1.0 and brackets):
+            return ""
+        return (
+            f"{head} is worse on some axis than {reference} {v.reference.name} at {name} ({ratio:.2f}x in sum) once the "
+            f"brackets are off by the tolerance, though no worse with them exact: its win rests on brackets more precise "
+            f"than the band's (optipose robustness --layout ... ranks which to make precise)"
+        )
+    n = next(i for i, level in enumerate(levels) if not level[3])
+    held = ", ".join(f"{name} ({ratio:.2f}x better in sum)" for _, name, ratio, _, _ in levels[:n])
+    lost = ", ".join(f"{name} ({ratio:.2f}x in sum)" for _, name, ratio, ok, _ in levels[n:] if not ok)
+    return (
+        f"{head} is no worse than {reference} {v.reference.name} on every axis at {held}, "
+        f"worse on some axis at {lost}: it is the better buy only if the sensor's noise on this part, measured on the bench, "
+        f"is {'no more than' if levels[n - 1][0] == 1 else f'at most {levels[n - 1][0]:g}x'} the preset's"
+    )
+
+
+def verdict_headline(v: Verdict, label: str = "hand", band: Verdict | None = None, checked: bool = True) -> str:
+    """The verdict for one k in one short line (under 80 characters for the hand layout and names up to 6): buy
+    or keep. ``band``: the same k's verdict under the band of the check after the validation; a found layout no
+    worse at the preset's noise but worse somewhere in the band is not bought
+    (:func:`optipose.verdict.compare.bought`). ``checked=False``: the answer was never checked under a band (a
+    nominal search without the check), so a layout no worse in the ideal cell is better there, not yet bought.
+    Where registrations failed on some axis of either layout: no verdict, and whose."""
+    ratio, found, ref = v.ratio, v.found.name, v.reference.name
+    mine, theirs = v.failed  # registrations failed on some axis: nothing to rank (failed_line says more)
+    if mine or theirs:
+        who = f"found {found}" if mine else f"{label} {ref}"
+        return f"k={v.k}: NO VERDICT: registrations of {who} failed ({', '.join(mine or theirs)})"
+    if v.tie:
+        return f"k={v.k}: KEEP {label} {ref}: found {found} ties it on every axis"
+    if v.no_worse and not bought(v, band):
+        return f"k={v.k}: KEEP {label} {ref}: {found} {ratio:.2f}x better, but worse under the band"
+    if v.no_worse and not checked:
+        return f"k={v.k}: found {found} {ratio:.2f}x better, no axis worse, in the ideal cell"
+    if v.no_worse:
+        return f"k={v.k}: BUY found {found}: {ratio:.2f}x better in sum than {label} {ref}, no axis worse"
+    if ratio < 1:
+        return f"k={v.k}: KEEP {label} {ref}: found {found} is {1 / ratio:.2f}x worse in sum"
+    axes = ", ".join(dict.fromkeys(g.axis for g in v.worse))
+    return f"k={v.k}: found {found} {ratio:.2f}x better in sum than {label} {ref}, worse on {axes}"
+
+
+def unmeasured_line(k: int, found: Choice, reference: Choice | None = None, label: str = "hand") -> str:
+    """One line when the found choice of k sensors measures some axis with none of its subsets ("" when it
+    measures all three): the axes no found layout of k sensors observes, and those whose registrations
+    failed too often — their error is unknown, not small — and whether the reference (``label``) does."""
+    out = []
+    for reason in dict.fromkeys(a.reason for a in found.axes if not a.observable):
+        axes = [a.axis for a in found.axes if not a.observable and a.reason == reason]
+        names = " and ".join(axes)
+        theirs = [a for a in (reference.axes if reference is not None else ()) if a.axis in axes]
+        also = ""
+        if theirs:
+            seen = [a.axis for a in theirs if a.observable]
+            also = (
+                f"; {label} {reference.name} does not either"
+                if not seen
+                else f"; {label} {reference.name} measures {' and '.join(seen)}"
+            )
+        if reason == UNOBSERVABLE:
+            sensors = f"{k} sensor{'s' if k > 1 else ''}"
+            out.append(
+                f"{names} unobservable: no layout of {sensors} the search found observes {'it' if len(axes) == 1 else 'them'}{also}"
+            )
+        else:
+            out.append(
+                f"{names} not measured: the registrations of found {found.name} that observe {'it' if len(axes) == 1 else 'them'} "
+                f"failed in over a tenth of the scans{also}"
+            )
+    return f"k={k}: " + "; ".join(out) + " (the error is unknown, not small)" if out else ""
+
+
+def one_versus_many(one: Choice, many: Choice, reference: str = "hand-placed", the: bool = True) -> str:
+    """Whether one found sensor beats the reference's largest choice in sum: fewer sensors to buy, e.g. ``one
+    found sensor beats the hand-placed S1S2S3 in sum (0.800 vs 0.900 mdeg)`` (without "the": ``the=False``)."""
+    beats = one.score < many.score
+    return (
+        f"one found sensor {'beats' if beats else 'does not beat'} {'the ' if the else ''}{reference} {many.name} "
+        f"in sum ({mdeg_text(one.score)} vs {mdeg_text(many.score)} mdeg)"
+    )
