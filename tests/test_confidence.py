@@ -19,13 +19,13 @@ from optipose.verdict.confidence import (
     TIE,
     UNDECIDED,
     PairedDraw,
-    Rules,
     compare_draws,
     paired_draw,
     paired_draws,
     scan_errors,
 )
 from optipose.verdict.racing import looks, race
+from optipose.verdict.rules import Rules
 from optipose.evaluate.statistics import FAILED_ERROR
 
 N_SCANS = 77

@@ -13,11 +13,11 @@ hand layout's evaluation with that choice, an exact TIE that rides along without
 one, they are the race, decided at one look at its last draw: the draws go to the hand layout's predicted error).
 
 Draws are added (:func:`optipose.verdict.racing.race_many`) until every k is BUY, KEEP or TIE, or
-``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
+``SearchConfig.verdict.draws`` are in, or another draw would end past ``SearchConfig.verdict.time``. In the
 ideal cell a draw differs from the next only in its noise and orientations, which the scans' own spread
 already measures: the first look is at one draw. In a real cell each draw is another instance of the cell,
 whose spread only draws show: the first look is at three, and a draw may evaluate a seeded
-share of the protocol's scans (``SearchConfig.verdict_scans``): more instances of fewer scans (docs/method.md,
+share of the protocol's scans (``SearchConfig.verdict.scans``): more instances of fewer scans (docs/method.md,
 "The verdict with confidence").
 """
 
@@ -28,7 +28,7 @@ import math
 import string
 import time
 
-from optipose.verdict.confidence import FEWER, Rules, paired_draw
+from optipose.verdict.confidence import FEWER, paired_draw
 from optipose.verdict.racing import race_many
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 from optipose.parallel.executors import make_executor
@@ -83,18 +83,12 @@ def confident_verdicts(
     kept = {k for k, (name, _) in side.items() if name == "hand"}
     evaluated = {name: layouts[int(name.removeprefix("found_k"))] for name, _ in side.values() if name != "hand"}
     names = ["hand", *evaluated]
-    objective = stage_objective(objective, "validation", config.validation)
+    objective = stage_objective(objective, "validation", config.validation.protocol)
     counted = choice_draw_counts(objective)
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
     if hand is None or not ks or not objective.conditions.trivial or missing:
         return {}
-    rules = Rules(
-        tolerance=config.verdict_tolerance,
-        failures=config.verdict_failures,
-        confidence=config.verdict_confidence,
-        seed=int(seed),
-        statistic=objective.statistic,
-    )
+    rules = config.verdict.rules(int(seed), objective.statistic)
     label = baseline_label(hand)
     labels = {
         k: dict(k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True)
@@ -122,7 +116,7 @@ def confident_verdicts(
         }
 
     draws = {k: [p] for k, p in pairs(first).items()} if counted else None
-    if counted and config.verdict_draws <= 1:
+    if counted and config.verdict.draws <= 1:
         return race_many(
             lambda i, keys: {}, rules, min_draws=1, max_draws=1, draws=draws, names=labels, passengers=frozenset(fewer)
         )
@@ -137,7 +131,7 @@ def confident_verdicts(
         # a decided k's layout is not evaluated again
         wanted = [name for name in evaluated if keys is None or any(side[k][0] == name for k in keys if k in side)]
         with Evaluator(
-            part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans
+            part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict.scans
         ) as evaluator:
             results = {"hand": evaluator(hand, subsets=used["hand"])}
             results |= {name: evaluator(evaluated[name], subsets=used[name]) for name in wanted}
@@ -150,12 +144,12 @@ def confident_verdicts(
     # holding the race, and when every k is one, the draws go to its predicted error (one look, at the end)
     riders = frozenset(fewer) | (frozenset(kept) if kept != set(ks) else frozenset())
     try:
-        seconds = config.verdict_time if config.verdict_time > 0 else math.inf
+        seconds = config.verdict.time if config.verdict.time > 0 else math.inf
         return race_many(
             next_draws,
             rules,
-            min_draws=config.verdict_draws if kept == set(ks) else first_look(objective),
-            max_draws=config.verdict_draws,
+            min_draws=config.verdict.draws if kept == set(ks) else first_look(objective),
+            max_draws=config.verdict.draws,
             seconds=seconds,
             draws=draws,
             names=labels,

@@ -9,10 +9,10 @@
    band's ends (:func:`optipose.search.objectives.search_objective`) and compare with the hand layout condition by condition;
 4. validation on a noise seed the search never saw (:mod:`optipose.search.validate`), under every
    condition of the band: the numbers reported. A search whose objective has no band then checks the
-   found layouts and the hand one under the band of ``SearchConfig.band`` (the ``default`` and ``thorough`` budgets in the ideal cell:
+   found layouts and the hand one under the band of ``SearchConfig.validation.band_objective`` (the ``default`` and ``thorough`` budgets in the ideal cell:
    ``objectives/robust.toml``'s noise levels and bracket tolerance), on the same held-out seed: a layout
    that wins only in the simulation's ideal cell is not a layout to buy. Every budget validates on the objective's protocol
-   (``[search] validation = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
+   (``[search.validation] protocol = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
    hand layout's part of it starts with step 2, in ``jobs`` processes of its own (``jobs`` ≥ 2), and is waited
    for before step 3;
 5. the verdict with confidence (:mod:`optipose.search.draws`): the validation's evaluations are its first
@@ -91,7 +91,7 @@ class SearchReport:
     outcome: SearchOutcome
     layouts: dict[int, Layout] = field(default_factory=dict)
     validation: Validation | None = None
-    band: Validation | None = None  # the check under the band (SearchConfig.band), when there was one
+    band: Validation | None = None  # the check under the band (validation.band_objective), when there was one
     band_interrupted: bool = False  # Ctrl-C stopped the check under the band (the validation is complete)
     confident: dict = field(default_factory=dict)  # k -> ConfidentVerdict (search/draws.py)
 
@@ -125,7 +125,9 @@ def run(
 
 def _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, on_stage) -> SearchReport:
     started = time.monotonic()  # answer_time counts from here
-    band = stage_objective(objective, "band", band=config.band)  # a bad name fails here, before any work
+    band = stage_objective(
+        objective, "band", band=config.validation.band_objective
+    )  # a bad name fails here, before any work
     sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
     if on_stage:  # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
         on_stage("searching on the surrogate")
@@ -169,7 +171,9 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, f
 
     if objective is None or jobs < 2:
         return nullcontext()
-    return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs, reference_dir=folder)
+    return BaselineRun(
+        part, objective, seed, config.validation.protocol, last=last, processes=jobs, reference_dir=folder
+    )
 
 
 def _run(
@@ -181,13 +185,13 @@ def _run(
     if not outcome.found:
         raise NoFeasibleLayout(
             f"no feasible layout for '{part.name}': in {len(outcome.history)} evaluations no sensor pose returned "
-            f"{config.min_points} points without its head hitting the part or a keep-out (can the sensors see "
-            f"this part at all? check --units, the material and the part's size against the {config.clearance * 1e3:.0f} mm clearance)"
+            f"{config.constraints.min_points} points without its head hitting the part or a keep-out (can the sensors see "
+            f"this part at all? check --units, the material and the part's size against the {config.constraints.clearance * 1e3:.0f} mm clearance)"
         )
     hand = baseline(part)
     report = SearchReport(outcome, _layouts(outcome.found))
     sink.layouts(report.layouts, hand)  # the surrogate's best, on disk before anything slower
-    if config.select_candidates > 0 and not outcome.interrupted:
+    if config.selection.candidates > 0 and not outcome.interrupted:
         from optipose.search.select import select_finalists
 
         if hand_run is not None:  # the selection's clock is wall time: it runs alone on the cores
@@ -195,7 +199,7 @@ def _run(
             hand_run.wait()
         stage("selecting finalists by ICP on a reduced protocol")
         finalists, records = select_finalists(
-            part, objective, outcome, study, seed, config.select_candidates, config.select_time, on_stage, jobs
+            part, objective, outcome, study, seed, config.selection.candidates, config.selection.time, on_stage, jobs
         )
         sink.selection(records)
         report.layouts = _layouts({**outcome.found, **finalists})
@@ -206,14 +210,16 @@ def _run(
     from optipose.search.validate import hand_where_better, validate
     from optipose.search.draws import choice_draw_counts
 
-    stage(f"validating on the {config.validation} protocol (held-out noise seed)")
+    stage(f"validating on the {config.validation.protocol} protocol (held-out noise seed)")
     first: dict = {}
 
     def evaluation(name, result) -> None:
         first[name] = result
         sink.evaluation(name, result)
 
-    report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, evaluation, hand_run)
+    report.validation = validate(
+        part, objective, report.layouts, seed, jobs, config.validation.protocol, evaluation, hand_run
+    )
     # a real cell: the baseline's choice where it did better (under a band the verdict is the band's, not raced)
     if report.validation.hand and not choice_draw_counts(objective) and objective.conditions.trivial:
         answered, report.validation = hand_where_better(report.layouts, report.validation, hand)
@@ -224,8 +230,8 @@ def _run(
     if report.validation.hand:
         from optipose.search.draws import confident_verdicts
 
-        stage(f"the verdict with confidence (up to {config.verdict_draws} draws of the cell)")
-        raced = replace(config, verdict_time=_verdict_seconds(config, started))
+        stage(f"the verdict with confidence (up to {config.verdict.draws} draws of the cell)")
+        raced = replace(config, verdict=replace(config.verdict, time=_verdict_seconds(config.verdict, started)))
         report.confident = confident_verdicts(
             part, objective, report.layouts, report.validation, first, seed, raced, jobs, sink.verdict_draw
         )
@@ -237,7 +243,7 @@ def _run(
     stage(f"checking under the band ({len(conditions(band.conditions))} conditions, held-out seed)")
     try:
         report.band = validate(
-            part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation, band_run
+            part, band, report.layouts, seed, jobs, config.validation.protocol, sink.band_evaluation, band_run
         )
     except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
         if not is_interrupt(exc):
@@ -248,13 +254,13 @@ def _run(
     return report
 
 
-def _verdict_seconds(config, started: float) -> float:
-    """The verdict's ``verdict_time`` (0: no limit), ended by ``answer_time`` s after ``started`` when that is set:
+def _verdict_seconds(verdict, started: float) -> float:
+    """The verdict's ``time`` (0: no limit), ended by ``answer_time`` s after ``started`` when that is set:
     what is left then, at least a moment (the race adds one draw and looks at what it has)."""
-    if config.answer_time <= 0:
-        return config.verdict_time
-    left = max(1e-3, config.answer_time - (time.monotonic() - started))
-    return min(config.verdict_time, left) if config.verdict_time > 0 else left
+    if verdict.answer_time <= 0:
+        return verdict.time
+    left = max(1e-3, verdict.answer_time - (time.monotonic() - started))
+    return min(verdict.time, left) if verdict.time > 0 else left
 
 
 def _study(part, objective, config, sink: ResultSink, resume: bool, on_eval) -> SurrogateStudy:

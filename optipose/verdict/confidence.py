@@ -43,7 +43,7 @@ draws and :class:`Rules` give the same verdict.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -53,6 +53,7 @@ from scipy.stats import t as stats_t
 from optipose.evaluate.assignment import UNOBSERVABLE_PENALTY, Choice, not_measured
 from optipose.evaluate.objective import AXES, StatisticConfig
 from optipose.evaluate.statistics import FAILED_ERROR
+from optipose.verdict.rules import Rules
 
 __all__ = [
     "BUY",
@@ -60,7 +61,6 @@ __all__ = [
     "TIE",
     "UNDECIDED",
     "DECISIONS",
-    "Rules",
     "PairedDraw",
     "Interval",
     "AxisError",
@@ -80,20 +80,6 @@ DECISIONS = (BUY, KEEP, TIE, UNDECIDED)
 _QUANTILES = (0.5, 0.75)  # median and p75, np.median's and np.percentile(75)'s linear interpolation
 _READ = 0.95  # the widest interval read off the bootstrap replicates; a wider one is scaled from it (_interval)
 _LOG_BOUND = 600.0  # an interval's sides in logs at most this far out: exp stays finite, in degrees too
-
-
-@dataclass(frozen=True)
-class Rules:
-    """How a verdict is reached: the tolerance an axis may be worse by (0.1: 10 %), the share of an axis's scans
-    the found layout may fail on beyond the hand one's (0.01: one in a hundred), the intervals' two-sided
-    confidence, the bootstrap's replicates and seed, and the objective's statistic (its weights)."""
-
-    tolerance: float = 0.10
-    failures: float = 0.01
-    confidence: float = 0.95
-    replicates: int = 2000
-    seed: int = 0
-    statistic: StatisticConfig = field(default_factory=StatisticConfig)
 
 
 @dataclass(frozen=True, eq=False)
