@@ -334,7 +334,12 @@ def test_the_head_gap_shortcut_gives_the_exact_tests_verdict(part_b_problem, hea
 def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
     part, objective, cfg = part_b_problem
     problem = SurrogateProblem(part, objective, cfg)
-    loose = SurrogateProblem(part, objective, replace(cfg, line_skew_max_deg=90.0), surrogate=problem.surrogate)
+    loose = SurrogateProblem(
+        part,
+        objective,
+        replace(cfg, constraints=replace(cfg.constraints, line_skew_max_deg=90.0)),
+        surrogate=problem.surrogate,
+    )
     R, alpha, beta, _ = params_from_pose(part.layouts["hand"].poses[0])
     for psi, allowed in ((0.0, True), (55.0, True), (-65.0, False), (180.0 + 59.0, True), (180.0 - 70.0, False)):
         T = pose_from_params(R, alpha, beta, np.deg2rad(psi))
