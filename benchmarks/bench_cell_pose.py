@@ -35,7 +35,7 @@ def trig() -> None:
     from optipose.model.part import load_part
     from optipose.search.cell_terms import _FORM_FEATURES
     from optipose.search.problem import SurrogateProblem
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     part = load_part("part_b")
     model = SurrogateProblem(part, load_objective("paper"), config_from_budget("quick", (1,), cell=True)).surrogate.cell
@@ -72,7 +72,7 @@ def child(poses: int, scans: int, jobs: int) -> None:
     from optipose.model.baseline import baseline
     from optipose.model.layout import load_layout
     from optipose.model.part import load_part
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
     from optipose.search.objectives import stage_objective
     from optipose.search.problem import SurrogateProblem
     from optipose.seeds import verdict_seed

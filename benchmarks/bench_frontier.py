@@ -39,7 +39,7 @@ import numpy as np
 from optipose.evaluate.objective import load_objective
 from optipose.model.baseline import baseline
 from optipose.model.part import load_part
-from optipose.search.config import config_from_budget
+from optipose.search.budgets import config_from_budget
 from optipose.search.driver import optimize
 from optipose.search.problem import SurrogateProblem
 from optipose.search.surrogate import SensorInfo, predicted_stats

@@ -86,7 +86,8 @@ def _found_seeds(rng: np.random.Generator, hand: list[int], seeds: list[int]) ->
 
 
 def main() -> None:
-    from optipose.verdict.confidence import Decision, PairedDraw, Rules, compare_draws, scan_errors
+    from optipose.verdict.confidence import Decision, PairedDraw, compare_draws, scan_errors
+    from optipose.verdict.rules import Rules
     from optipose.verdict.racing import race
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

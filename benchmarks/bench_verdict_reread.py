@@ -15,7 +15,8 @@ import argparse
 import tomllib
 from pathlib import Path
 
-from optipose.verdict.confidence import Decision, Rules, paired_draw
+from optipose.verdict.confidence import Decision, paired_draw
+from optipose.verdict.rules import Rules
 from optipose.evaluate.objective import objective_from_table
 from optipose.verdict.racing import race_many
 from optipose.io.load import load_result

@@ -99,7 +99,7 @@ def holdout(args) -> None:
     from optipose.io.load import load_result
     from optipose.io.tables import verdict_frame
     from optipose.model.part import load_part
-    from optipose.search.config import SearchConfig
+    from optipose.search.config import Preset, SearchConfig, search_preset
     from optipose.search.validate import validate
     from optipose.search.draws import choice_draw_counts, confident_verdicts
     from optipose.verdict.words import confident_line
@@ -109,11 +109,11 @@ def holdout(args) -> None:
         result = load_result(folder)
         saved = result.config
         objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(saved.cell_name)
-        config = SearchConfig(**{**saved.search, "sensors": tuple(saved.search["sensors"])})
+        config = search_preset(saved.search).apply(SearchConfig())  # sectioned or flat, as the folder has it
         if args.verdict_time is not None:  # 0: race on draws alone, whatever the machine's load
-            config = replace(config, verdict_time=args.verdict_time)
+            config = Preset(verdict={"time": args.verdict_time}).apply(config)
         if args.draws:  # a longer race than the search's, to settle what its draws left open
-            config = replace(config, verdict_draws=args.draws)
+            config = Preset(verdict={"draws": args.draws}).apply(config)
         part = load_part(saved.part_source or saved.part_name)
         seed = int(saved.seed) + args.offset
         first: dict = {}
@@ -124,7 +124,7 @@ def holdout(args) -> None:
             validation = result.validation
         else:
             validation = validate(
-                part, objective, result.layouts, seed, args.jobs, config.validation, first.__setitem__
+                part, objective, result.layouts, seed, args.jobs, config.validation.protocol, first.__setitem__
             )
             if args.choices == "kept":  # what the search bought, on the held-out draws (the ideal cell's first)
                 validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
@@ -170,7 +170,8 @@ def draws(args) -> None:
 
     import numpy as np
 
-    from optipose.verdict.confidence import Rules, compare_draws, paired_draw
+    from optipose.verdict.confidence import compare_draws, paired_draw
+    from optipose.verdict.rules import Rules
     from optipose.evaluate.objective import objective_from_table
     from optipose.io.load import load_result
     from optipose.search.draws import sides

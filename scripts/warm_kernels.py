@@ -14,7 +14,7 @@ from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import load_objective
 from optipose.model.baseline import baseline
 from optipose.model.part import load_part
-from optipose.search.config import config_from_budget
+from optipose.search.budgets import config_from_budget
 from optipose.search.objectives import stage_objective
 from optipose.search.problem import SurrogateProblem
 

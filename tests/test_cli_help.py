@@ -168,12 +168,12 @@ def test_a_spinner_off_a_terminal_is_a_line_at_its_start_and_end():
 
 def test_each_search_stage_budget_bounds_its_evaluations():
     from optipose.cli.search import stage_budget
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     quick = config_from_budget("quick", (1, 2, 3))
-    assert stage_budget(quick, "screen:k=2") == quick.screen_samples == 1024
-    assert stage_budget(quick, "greedy:k=3") == quick.global_evals
-    assert stage_budget(quick, "screen-polish:k=1") == quick.screen_starts * quick.screen_evals
+    assert stage_budget(quick, "screen:k=2") == quick.surrogate.screen_samples == 1024
+    assert stage_budget(quick, "greedy:k=3") == quick.surrogate.global_evals
+    assert stage_budget(quick, "screen-polish:k=1") == quick.surrogate.screen_starts * quick.surrogate.screen_evals
     assert stage_budget(quick, "selecting finalists") is None
 
 

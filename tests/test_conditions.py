@@ -320,7 +320,8 @@ def test_the_surrogate_predicts_across_the_noise_band_without_rescanning():
 
 def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():
     from optipose.evaluate.conditions import ConditionsConfig, band_ends
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
+    from optipose.search.config import search_preset
     from optipose.search.objectives import search_objective
 
     band = ConditionsConfig((3.0, 1.0, 5.0, 2.0), 2e-4, 1e-3, 2)
@@ -330,8 +331,8 @@ def test_the_search_scores_the_bands_ends_and_spends_its_budget_there():
     assert search_objective(paper) is paper
     assert search_objective(replace(paper, conditions=band)).conditions.noise_scales == (1.0, 5.0)
     nominal, banded = config_from_budget("default", (1, 2, 3)), config_from_budget("default", (1, 2, 3), band=True)
-    assert nominal.polish_evals > 0 and banded.polish_evals == 0 and banded.confirm_candidates == 0
-    assert (
-        config_from_budget("default", (1,), {"polish_evals": 12}, band=True).polish_evals == 12
-    )  # the user's word last
+    assert nominal.selection.polish_evals > 0 and banded.selection.polish_evals == 0
+    assert banded.selection.confirm_candidates == 0
+    user = search_preset({"polish_evals": 12})
+    assert config_from_budget("default", (1,), user, band=True).selection.polish_evals == 12  # the user's word last
     assert config_from_budget("quick", (1,), band=True) == config_from_budget("quick", (1,))

@@ -16,7 +16,6 @@ from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, Axi
 from optipose.verdict.confidence import (
     Decision,
     PairedDraw,
-    Rules,
     compare_draws,
     paired_draw,
     paired_draws,
@@ -24,6 +23,7 @@ from optipose.verdict.confidence import (
 )
 from optipose.verdict.racing import looks, race
 from optipose.verdict.words import axis_lines, confident_line, fewer_line
+from optipose.verdict.rules import Rules
 from optipose.evaluate.statistics import FAILED_ERROR
 
 N_SCANS = 77

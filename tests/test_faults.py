@@ -418,7 +418,7 @@ def test_search_resume_with_a_damaged_cache_is_one_line_and_keeps_it(tmp_path):
     from optipose.evaluate.objective import load_objective
     from optipose.io.search import SearchFolder
     from optipose.model.part import load_part
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     SearchFolder(tmp_path).start(
         load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1

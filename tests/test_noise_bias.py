@@ -246,11 +246,13 @@ def test_the_refinement_places_the_found_sensor_for_the_kept_ones(part_b):
 def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
     # under a band, an axis lost at the preset's noise is penalised even when the worst over the band
     # (the top level's) is no worse than the hand layout's; one level: the old per-axis penalty exactly
-    from optipose.search.config import SearchConfig
+    from optipose.search.config import SearchConfig, SurrogateConfig
     from optipose.search.problem import SurrogateProblem
 
     problem = SurrogateProblem(
-        part_b, load_objective("paper").in_cell("ideal"), SearchConfig(hand_margin=1.0, hand_weight=1.0)
+        part_b,
+        load_objective("paper").in_cell("ideal"),
+        SearchConfig(surrogate=SurrogateConfig(hand_margin=1.0, hand_weight=1.0)),
     )
     stats = replace(_STATED, axis_score=np.array([1.0, 2.0, 3.0]), level_axis_score=np.array([[1.0, 2.0, 3.0]]))
     one = problem.with_targets({1: np.array([[1.0, 1.0, 4.0]])})

@@ -15,7 +15,7 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.search.space import PoseSpace, params_from_pose, pose_from_params
 from optipose.model.sensor import load_sensor
-from optipose.search.config import SearchConfig
+from optipose.search.config import Preset, SearchConfig, SelectionConfig, SurrogateConfig, ValidationConfig
 from optipose.search.driver import optimize
 from optipose.search.problem import SurrogateProblem, Violation
 from optipose.search.records import PENALTY, Found, LayoutScore
@@ -184,7 +184,7 @@ def test_screen_finds_the_basin_a_local_search_from_the_centre_misses():
     optimize(local, "LN_BOBYQA", centre, 200, seed=0)
     assert min(r.value for r in local.history) == pytest.approx(1.0)  # stuck in the centre's bowl
 
-    cfg = SearchConfig(screen_samples=512, screen_starts=3, screen_evals=80)
+    cfg = SearchConfig(surrogate=SurrogateConfig(screen_samples=512, screen_starts=3, screen_evals=80))
     problem = _recorder(f)
     starts = screen(problem, cfg, 1, seed=4)
     stages = [r.stage for r in problem.history]
@@ -200,15 +200,17 @@ def test_screen_finds_the_basin_a_local_search_from_the_centre_misses():
 @pytest.fixture(scope="module")
 def part_b_problem():
     cfg = SearchConfig(
-        global_evals=40,
-        local_evals=15,
-        joint_evals=20,
-        max_time=120,
-        random_starts=2,
         sensors=(1, 2),
-        screen_samples=64,
-        screen_starts=2,
-        screen_evals=8,
+        surrogate=SurrogateConfig(
+            global_evals=40,
+            local_evals=15,
+            joint_evals=20,
+            max_time=120,
+            random_starts=2,
+            screen_samples=64,
+            screen_starts=2,
+            screen_evals=8,
+        ),
     )
     return load_part("part_b"), load_objective("paper").in_cell("ideal"), cfg
 
@@ -228,18 +230,18 @@ def test_quick_in_a_real_cell_runs_every_stage_to_its_evaluations_and_a_seed_giv
     # of every k is reached, none runs past its count, and the same seed gives the same layouts and history
     from collections import Counter
 
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     part, objective = load_part("part_c"), load_objective("paper")
     assert not objective.cell.ideal
-    cfg = replace(config_from_budget("quick", (1, 2, 3), cell=True), max_time=np.inf)
+    cfg = Preset(surrogate={"max_time": np.inf}).apply(config_from_budget("quick", (1, 2, 3), cell=True))
     a = run_search(part, objective, cfg, seed=4)
     stages = Counter(r.stage for r in a.history)
     for k in (1, 2, 3):
-        assert stages[f"screen:k={k}"] == cfg.screen_samples
-        assert 0 < stages[f"screen-polish:k={k}"] <= cfg.screen_starts * cfg.screen_evals
-        assert 0 < stages[f"greedy:k={k}"] <= cfg.global_evals
-        assert 0 < stages[f"greedy-polish:k={k}"] <= cfg.local_evals + cfg.local_evals // 2
+        assert stages[f"screen:k={k}"] == cfg.surrogate.screen_samples
+        assert 0 < stages[f"screen-polish:k={k}"] <= cfg.surrogate.screen_starts * cfg.surrogate.screen_evals
+        assert 0 < stages[f"greedy:k={k}"] <= cfg.surrogate.global_evals
+        assert 0 < stages[f"greedy-polish:k={k}"] <= cfg.surrogate.local_evals + cfg.surrogate.local_evals // 2
     b = run_search(part, objective, cfg, seed=4)
     assert all(np.array_equal(a.found[k].u, b.found[k].u) for k in (1, 2, 3))
     assert [r.value for r in a.history] == [r.value for r in b.history]
@@ -249,10 +251,10 @@ def test_quick_in_a_real_cell_runs_every_stage_to_its_evaluations_and_a_seed_giv
 def test_a_clock_that_ends_a_stage_is_recorded_and_said(caplog):
     # a clock that ends the surrogate's stages before their evaluations makes the layouts the machine's as well as the
     # seed's: the outcome names the stages it cut, in order, and the search says so in a warning
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     part, objective = load_part("part_c"), load_objective("paper")
-    cfg = replace(config_from_budget("quick", (1, 2, 3), cell=True), max_time=0.3)
+    cfg = Preset(surrogate={"max_time": 0.3}).apply(config_from_budget("quick", (1, 2, 3), cell=True))
     with caplog.at_level("WARNING", logger="optipose.search.surrogate_search"):
         out = run_search(part, objective, cfg, seed=4)
     assert out.clock_cut and out.clock_cut[0].endswith("k=1")  # the first k's share is the first to end
@@ -261,11 +263,11 @@ def test_a_clock_that_ends_a_stage_is_recorded_and_said(caplog):
         re.fullmatch(r"(screen|screen-polish|greedy|greedy-polish|joint):k=[123]", stage) for stage in out.clock_cut
     )
     counts = {
-        "screen": cfg.screen_samples,
-        "screen-polish": cfg.screen_starts * cfg.screen_evals,
-        "greedy": cfg.global_evals,
-        "greedy-polish": cfg.local_evals + cfg.local_evals // 2,
-        "joint": cfg.joint_evals,
+        "screen": cfg.surrogate.screen_samples,
+        "screen-polish": cfg.surrogate.screen_starts * cfg.surrogate.screen_evals,
+        "greedy": cfg.surrogate.global_evals,
+        "greedy-polish": cfg.surrogate.local_evals + cfg.surrogate.local_evals // 2,
+        "joint": cfg.surrogate.joint_evals,
     }
     first = out.clock_cut[0]
     assert sum(r.stage == first for r in out.history) < counts[first.split(":")[0]]  # cut before its evaluations
@@ -277,10 +279,10 @@ def test_a_clock_that_ends_a_stage_is_recorded_and_said(caplog):
 
 def test_a_clock_that_stops_the_search_before_any_layout_says_so_once(caplog):
     # a clock too short for any layout: one warning names what is missing and the stage the clock ended, not two
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     part, objective = load_part("part_c"), load_objective("paper")
-    cfg = replace(config_from_budget("quick", (1, 2, 3), cell=True), max_time=1e-6)
+    cfg = Preset(surrogate={"max_time": 1e-6}).apply(config_from_budget("quick", (1, 2, 3), cell=True))
     with caplog.at_level("WARNING", logger="optipose.search.surrogate_search"):
         out = run_search(part, objective, cfg, seed=4)
     said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
@@ -302,9 +304,11 @@ def test_results_never_violate_the_constraints(part_b_problem):
     for found in out.found.values():
         assert found.score < PENALTY
         for T in found.poses:
-            assert problem.collision.clearance(T).distance >= cfg.clearance
-            assert problem.surrogate.info(T).n_points >= cfg.min_points
-            assert abs(T[0, 0]) <= np.sin(np.deg2rad(cfg.line_skew_max_deg)) + 1e-9  # the line's turn toward the motion
+            assert problem.collision.clearance(T).distance >= cfg.constraints.clearance
+            assert problem.surrogate.info(T).n_points >= cfg.constraints.min_points
+            assert (
+                abs(T[0, 0]) <= np.sin(np.deg2rad(cfg.constraints.line_skew_max_deg)) + 1e-9
+            )  # the line's turn toward the motion
 
 
 @pytest.mark.parametrize("head_gap", [-0.003, 0.0, 0.004, 0.03])
@@ -313,7 +317,7 @@ def test_the_head_gap_shortcut_gives_the_exact_tests_verdict(part_b_problem, hea
     from optipose.model.collision import heads_clearance
 
     part, objective, cfg = part_b_problem
-    problem = SurrogateProblem(part, objective, replace(cfg, head_gap=head_gap))
+    problem = SurrogateProblem(part, objective, replace(cfg, constraints=replace(cfg.constraints, head_gap=head_gap)))
     rng = np.random.default_rng(7)
     base = rng.random((400, 6))
     near = np.clip(base + rng.normal(0.0, 0.04, base.shape), 0.0, 1.0)  # a second head close to the first
@@ -330,7 +334,12 @@ def test_the_head_gap_shortcut_gives_the_exact_tests_verdict(part_b_problem, hea
 def test_a_laser_line_turned_toward_the_motion_is_infeasible(part_b_problem):
     part, objective, cfg = part_b_problem
     problem = SurrogateProblem(part, objective, cfg)
-    loose = SurrogateProblem(part, objective, replace(cfg, line_skew_max_deg=90.0), surrogate=problem.surrogate)
+    loose = SurrogateProblem(
+        part,
+        objective,
+        replace(cfg, constraints=replace(cfg.constraints, line_skew_max_deg=90.0)),
+        surrogate=problem.surrogate,
+    )
     R, alpha, beta, _ = params_from_pose(part.layouts["hand"].poses[0])
     for psi, allowed in ((0.0, True), (55.0, True), (-65.0, False), (180.0 + 59.0, True), (180.0 - 70.0, False)):
         T = pose_from_params(R, alpha, beta, np.deg2rad(psi))
@@ -371,7 +380,7 @@ def test_icp_polish_returns_only_feasible_layouts_and_says_whether_they_beat_the
             ),
         }
     )
-    cfg = SearchConfig(polish_evals=8, polish_time=120.0, polish_step=0.2)
+    cfg = SearchConfig(selection=SelectionConfig(polish_evals=8, polish_time=120.0, polish_step=0.2))
     problem = SurrogateProblem(part, objective, cfg)
     with Evaluator(part, short, seed=5) as evaluator:
         reference = evaluator(part.layouts["hand"]).table[0]
@@ -402,7 +411,7 @@ def _choice(per_axis_mdeg, k=1):
 def test_a_narrow_win_is_not_clear_and_needs_confirmation():
     from optipose.search.select import clear_win as _clear
 
-    cfg = SearchConfig(polish_margin=0.9, clear_ratio=0.4)
+    cfg = SearchConfig(selection=SelectionConfig(polish_margin=0.9, clear_ratio=0.4))
     hand = _choice([(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])  # sum 8.6
     assert _clear(_choice([(1.0, 1.5), (0.05, 0.1), (0.05, 0.1)]), hand, cfg)  # every axis <= 0.9x, sum 2.85 <= 3.44
     assert not _clear(_choice([(1.0, 1.5), (0.05, 0.1), (0.095, 0.1)]), hand, cfg)  # yaw median 0.95x the hand's
@@ -506,13 +515,10 @@ def test_a_tight_time_budget_still_places_every_sensor_count():
     """Evaluations enough for minutes and 8 s on the clock: each k gets its share of the clock instead of
     k = 1 using all of it, so k = 1, 2 and 3 all have a feasible layout, and the search keeps to its clock."""
     cfg = SearchConfig(
-        global_evals=5000,
-        local_evals=2000,
-        joint_evals=2000,
-        max_time=8.0,
-        random_starts=2,
         sensors=(1, 2, 3),
-        screen_samples=0,
+        surrogate=SurrogateConfig(
+            global_evals=5000, local_evals=2000, joint_evals=2000, max_time=8.0, random_starts=2, screen_samples=0
+        ),
     )
     out = run_search(load_part("part_b"), load_objective("paper").in_cell("ideal"), cfg, seed=1)
     assert sorted(out.found) == [1, 2, 3]
@@ -626,12 +632,8 @@ def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_p
     part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     config = SearchConfig(
         sensors=(1, 2),
-        global_evals=20,
-        local_evals=6,
-        joint_evals=8,
-        random_starts=2,
-        select_candidates=1,
-        select_time=60.0,
+        surrogate=SurrogateConfig(global_evals=20, local_evals=6, joint_evals=8, random_starts=2),
+        selection=SelectionConfig(candidates=1, time=60.0),
     )
     stages = []
     report = run(part, objective, config, 2, SearchFolder(tmp_path), jobs=2, on_stage=stages.append)
@@ -682,12 +684,9 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
     part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     config = SearchConfig(
         sensors=(1, 2),
-        global_evals=20,
-        local_evals=6,
-        joint_evals=8,
-        random_starts=2,
-        select_candidates=0,
-        band=str(band_file),
+        surrogate=SurrogateConfig(global_evals=20, local_evals=6, joint_evals=8, random_starts=2),
+        selection=SelectionConfig(candidates=0),
+        validation=ValidationConfig(band_objective=str(band_file)),
     )
     out = tmp_path / "search"
     stages = []
@@ -859,7 +858,10 @@ def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, m
     band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
     part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     config = SearchConfig(
-        sensors=(1,), global_evals=12, local_evals=4, random_starts=1, select_candidates=0, band=str(band_file)
+        sensors=(1,),
+        surrogate=SurrogateConfig(global_evals=12, local_evals=4, random_starts=1),
+        selection=SelectionConfig(candidates=0),
+        validation=ValidationConfig(band_objective=str(band_file)),
     )
     report = run(part, objective, config, 3, SearchFolder(tmp_path / "search"), jobs=1)
     assert len(calls) == 2 and report.validated and report.band is None and report.band_interrupted

@@ -82,7 +82,7 @@ def test_search_writes_a_result_folder_that_explains_itself(searched):
     out, result = searched
     config = tomllib.loads((out / "config.toml").read_text())
     assert config["seed"] == 4 and config["validation_seed"] != 4
-    assert config["search"]["global_evals"] == 25 and config["objective"]["name"] == "short"
+    assert config["search"]["surrogate"]["global_evals"] == 25 and config["objective"]["name"] == "short"
     history = pd.read_csv(out / "history.csv")
     assert len(history) > 50 and set(history["k"]) == {1, 2}
     comparison = pd.read_csv(out / "comparison.csv")
@@ -103,11 +103,10 @@ def test_search_progress_off_a_terminal_counts_each_stage_within_its_budget(sear
     import re
 
     from optipose.cli.search import stage_budget
-    from optipose.search.config import SearchConfig
+    from optipose.search.config import SearchConfig, search_preset
 
     out, result = searched
-    config = tomllib.loads((out / "config.toml").read_text())["search"]
-    config = SearchConfig(**{**config, "sensors": tuple(config["sensors"])})
+    config = search_preset(tomllib.loads((out / "config.toml").read_text())["search"]).apply(SearchConfig())
     history = pd.read_csv(out / "history.csv")
     for stage, n in history.groupby("stage").size().items():  # what each stage did, at most its budget
         assert stage_budget(config, stage) is not None and n <= stage_budget(config, stage), stage
@@ -132,10 +131,13 @@ def test_resume_replays_from_the_cache_to_the_same_layout(searched):
 def test_every_budget_validates_on_the_full_protocol_and_reduced_is_still_there():
     from optipose.evaluate.objective import load_objective
     from optipose.evaluate.objective import reduced_objective
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
+    from optipose.search.config import search_preset
 
-    assert {config_from_budget(b, (1, 2, 3)).validation for b in ("quick", "default", "thorough")} == {"full"}
-    assert config_from_budget("quick", (1, 2, 3), {"validation": "reduced"}).validation == "reduced"
+    budgets = ("quick", "default", "thorough")
+    assert {config_from_budget(b, (1, 2, 3)).validation.protocol for b in budgets} == {"full"}
+    reduced = search_preset({"validation": "reduced"})
+    assert config_from_budget("quick", (1, 2, 3), reduced).validation.protocol == "reduced"
     # the paper's 7 sequences at their two end angles: 14 of the 77 scans
     from optipose.evaluate.protocol import perturbations
 

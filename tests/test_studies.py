@@ -6,7 +6,7 @@ import pytest
 
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
-from optipose.search.config import config_from_budget
+from optipose.search.budgets import config_from_budget
 from optipose.io.search import SearchFolder
 from optipose.search.pipeline import run
 

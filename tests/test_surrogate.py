@@ -261,7 +261,7 @@ def test_prefetching_poses_on_threads_fills_the_cache_as_scoring_them_one_by_one
     information (or its violation) is the one a plain call computes, bit for bit, whatever the threads."""
     from scipy.stats import qmc
 
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
     from optipose.search.problem import SurrogateProblem
 
     part, objective, config = part_b[0], load_objective("paper").in_cell("ideal"), config_from_budget("default", (1,))
@@ -288,7 +288,7 @@ def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
     share of the clock: the screen computes its poses ahead in chunks and records each chunk, so when the
     clock ends it, what was computed is in the history (a first version computed them all ahead and
     recorded none: "no feasible layout in 0 evaluations")."""
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
     from optipose.search.driver import SubProblem
     from optipose.search.problem import SurrogateProblem
     from optipose.search.screen import screen
@@ -299,7 +299,7 @@ def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
     study.start_clock(4.0)
     with pytest.raises(Stop):
         screen(SubProblem(study, np.zeros(0)), config, 1, seed=0)
-    assert 16 <= len(study.history) < config.screen_samples
+    assert 16 <= len(study.history) < config.surrogate.screen_samples
     assert any(e.state.name == "FEASIBLE" for e in study.history)
 
 

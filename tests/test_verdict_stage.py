@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from optipose.verdict.confidence import Decision, PairedDraw, Rules, Verdicts, compare_draws
+from optipose.verdict.confidence import Decision, PairedDraw, Verdicts, compare_draws
+from optipose.verdict.rules import Rules, VerdictConfig
 from optipose.verdict.racing import race_many
 from optipose.verdict.words import axis_lines, confident_line, fewer_line
 from optipose.evaluate.objective import load_objective
@@ -18,7 +19,7 @@ from optipose.io.load import read_verdicts
 from optipose.io.tables import verdict_frame
 from optipose.model.layout import Layout, SensorPose
 from optipose.model.part import load_part
-from optipose.search.config import SearchConfig
+from optipose.search.config import SearchConfig, ValidationConfig
 from optipose.search.validate import validate
 from optipose.search.draws import confident_verdicts
 from optipose.seeds import validation_seed, verdict_seed
@@ -37,7 +38,10 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
     common to both sides (the same cell instance, orientations, robot paths and noise)."""
     part = load_part("part_b")
     objective = load_objective("paper").in_cell(cell)
-    config = SearchConfig(validation="reduced", verdict_draws=4, verdict_scans=0 if cell == "ideal" else 7)
+    config = SearchConfig(
+        validation=ValidationConfig(protocol="reduced"),
+        verdict=VerdictConfig(draws=4, scans=0 if cell == "ideal" else 7),
+    )
     hand = part.layouts["hand"]
     layouts = {k: _as_found(hand, k) for k in (1, 2, 3)}
     first, draws = {}, []
@@ -246,18 +250,17 @@ def test_answer_time_ends_the_verdict_whatever_the_stages_before_it_took():
     import time
 
     from optipose.errors import ConfigError
-    from optipose.search.config import SearchConfig
     from optipose.search.pipeline import _verdict_seconds
 
     now = time.monotonic()
-    assert _verdict_seconds(SearchConfig(verdict_time=12.0), now - 100.0) == 12.0  # no answer_time: the verdict's own
-    timed = SearchConfig(verdict_time=12.0, answer_time=23.5)
+    assert _verdict_seconds(VerdictConfig(time=12.0), now - 100.0) == 12.0  # no answer_time: the verdict's own
+    timed = VerdictConfig(time=12.0, answer_time=23.5)
     assert _verdict_seconds(timed, now - 20.0) == pytest.approx(3.5, abs=0.1)  # what is left of 23.5 s
     assert _verdict_seconds(timed, now - 5.0) == 12.0  # never more than verdict_time
     assert 0 < _verdict_seconds(timed, now - 60.0) < 0.01  # past it: a moment, not "no limit" (0)
-    assert _verdict_seconds(SearchConfig(verdict_time=0.0, answer_time=10.0), now - 4.0) == pytest.approx(6.0, abs=0.1)
+    assert _verdict_seconds(VerdictConfig(time=0.0, answer_time=10.0), now - 4.0) == pytest.approx(6.0, abs=0.1)
     with pytest.raises(ConfigError, match="answer_time"):
-        SearchConfig(answer_time=-1.0)
+        VerdictConfig(answer_time=-1.0)
 
 
 def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_search_answers_with_it(tmp_path):
@@ -329,7 +332,7 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     # through the real evaluator in the paper's cell: the found layouts are the hand's first k, and k = 1 is answered
     # with the hand's own single choice
     objective = load_objective("paper").in_cell("ur10e")
-    config = SearchConfig(validation="reduced", verdict_draws=4, verdict_scans=7)
+    config = SearchConfig(validation=ValidationConfig(protocol="reduced"), verdict=VerdictConfig(draws=4, scans=7))
     layouts = {k: _as_found(hand, k) for k in (1, 2, 3)}
     first, names = {}, []
     validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)

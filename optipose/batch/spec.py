@@ -151,7 +151,7 @@ def _explicit(entry: dict, where: str, base: Path) -> list[TrialSpec]:
 
 def _combine(axes: dict, where: str, base: Path) -> list[TrialSpec]:
     """Every combination of the axes; parts and objectives resolved, the budget only for searches."""
-    from optipose.search.config import BUDGETS
+    from optipose.search.budgets import BUDGETS
 
     for task in axes["tasks"]:
         if task not in TASKS:

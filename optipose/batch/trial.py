@@ -140,7 +140,7 @@ def _search(trial: TrialSpec, folder: Path, jobs: int) -> None:
     from optipose.evaluate.objective import load_objective
     from optipose.io.search import SearchFolder
     from optipose.model.part import load_part
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
     from optipose.search.pipeline import run
 
     part = load_part(trial.part)

@@ -95,7 +95,7 @@ def search_command(
     from optipose.evaluate.objective import load_objective
     from optipose.io.folders import RESULTS_DIR, make_result_dir
     from optipose.model.part import load_part
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     console = make_console(stderr=True)
     jobs = jobs or os.cpu_count() or 1
@@ -194,17 +194,17 @@ def _settings(saved):
     """The settings of a config.toml (``saved``, a RunConfig); KeyError, TypeError, ValueError or
     ConfigError where this version cannot take them."""
     from optipose.evaluate.objective import objective_from_table
-    from optipose.search.config import SearchConfig
+    from optipose.search.config import SearchConfig, search_preset, unknown_keys
 
     part = _needed(saved.part_source, "part" if saved.part_name is None else "source") or _needed(
         saved.part_name, "name"
     )
-    cfg = dict(_needed(saved.search, "search"))
-    unknown = set(cfg) - set(SearchConfig.__dataclass_fields__)
+    cfg = _needed(saved.search, "search")  # sectioned, or flat as folders written before the sections have it
+    unknown = unknown_keys(cfg)
     if unknown:  # a setting this version no longer has
-        raise ConfigError(f"unknown search setting(s) {', '.join(sorted(unknown))}")
-    cfg["sensors"] = tuple(cfg["sensors"])
-    search_config = SearchConfig(**cfg)
+        raise ConfigError(f"unknown search setting(s) {', '.join(unknown)}")
+    _needed(cfg.get("sensors"), "sensors")
+    search_config = search_preset(cfg).apply(SearchConfig())
     budget, seed = str(_needed(saved.budget, "budget")), int(_needed(saved.seed, "seed"))
     text = _needed(saved.objective_file, "objective_file")
     try:
@@ -233,24 +233,27 @@ def _parse_sensors(text: str) -> tuple[int, ...]:
     return values
 
 
-def _overrides(path: Path | None) -> dict:
-    """The ``[search]`` table of a ``--search-config`` TOML, its keys checked against SearchConfig's."""
-    from optipose.search.config import SearchConfig
+def _overrides(path: Path | None):
+    """The ``[search]`` table of a ``--search-config`` TOML as a preset (``search.config.Preset``): by section
+    (``[search.surrogate]`` …) or by the flat keys (``global_evals`` …), its keys checked against SearchConfig's."""
+    from optipose.search.config import FLAT_KEYS, SECTIONS, search_preset, unknown_keys
 
     if path is None:
-        return {}
+        return None
     if not path.is_file():
         raise ConfigError(f"search config not found: {path}")
     table = read_toml(path, "search config")[0].get("search", {})
-    known = set(SearchConfig.__dataclass_fields__)
-    unknown = set(table) - known
+    unknown = unknown_keys(table)
     if unknown:
+        known = sorted({*FLAT_KEYS, "sensors"})
         raise ConfigError(
-            f"search config {path}: unknown key(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(known))})"
+            f"search config {path}: unknown key(s) {', '.join(unknown)} (known: {', '.join(known)}; "
+            f"or by section: {', '.join(SECTIONS)})"
         )
-    if "sensors" in table:
-        table["sensors"] = tuple(table["sensors"])
-    return table
+    try:
+        return search_preset(table)
+    except ConfigError as exc:
+        raise ConfigError(f"search config {path}: {exc}") from None
 
 
 def _resumed(resume: Path):
@@ -303,12 +306,13 @@ def _run_with_progress(console, part, objective, config, seed, folder, budget, j
 def stage_budget(config, stage: str) -> int | None:
     """At most how many surrogate evaluations a stage of the search (``screen:k=2``, ``greedy:k=1`` …)
     makes, as its settings in ``config`` allow (its clock may end it sooner); None for another stage."""
+    surrogate = config.surrogate
     budgets = {
-        "screen": config.screen_samples,
-        "screen-polish": config.screen_starts * config.screen_evals,  # a local polish per start picked
-        "greedy": config.global_evals,
-        "greedy-polish": config.local_evals + config.local_evals // 2,  # and the hand start's, when it led
-        "joint": config.joint_evals,  # shared between its starts
+        "screen": surrogate.screen_samples,
+        "screen-polish": surrogate.screen_starts * surrogate.screen_evals,  # a local polish per start picked
+        "greedy": surrogate.global_evals,
+        "greedy-polish": surrogate.local_evals + surrogate.local_evals // 2,  # and the hand start's, when it led
+        "joint": surrogate.joint_evals,  # shared between its starts
     }
     return budgets.get(stage.split(":")[0]) or None
 

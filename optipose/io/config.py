@@ -41,7 +41,9 @@ class RunConfig:
     command : evaluate | search | robustness | batch; format : the folder layout's version
     (``RESULT_FORMAT``), None before it was recorded; part_name, part_source : the part and the file it was
     loaded from, part_units the ``--units`` it was loaded with (None: auto); seed : the run's seed; validation_seed : a search's held-out seed; budget : a search's
-    budget; search : the search's settings as written (``SearchConfig``'s fields, in file order);
+    budget; search : the search's settings as written, in file order: ``sensors`` and one sub-table per section of
+    ``SearchConfig`` (``surrogate``, ``constraints`` …), or in a folder written before the sections, its flat
+    keys (``global_evals``, ``verdict_draws`` …; :func:`optipose.search.config.search_preset` reads both);
     objective : the resolved objective's table (:func:`~optipose.evaluate.objective.objective_from_dict`
     reads it), objective_name its name, objective_file the objective file as written; layout : an
     evaluation's layout table (:func:`~optipose.model.layout.layout_from_table` reads it), layout_name and
@@ -77,6 +79,16 @@ class RunConfig:
     def sensors(self) -> tuple:
         """A search's sensor counts (``[search] sensors``), () when not written."""
         return tuple((self.search or {}).get("sensors") or ())
+
+    @property
+    def search_settings(self) -> tuple[tuple[str, object], ...]:
+        """The search's settings one value a row, in file order: a section's as ``section.key`` (a folder
+        written before the sections: its flat keys as they are); () when not written."""
+        return tuple(
+            (f"{key}.{name}", v) if isinstance(value, dict) else (key, value)
+            for key, value in (self.search or {}).items()
+            for name, v in (value.items() if isinstance(value, dict) else ((None, value),))
+        )
 
     @property
     def part(self) -> str | None:

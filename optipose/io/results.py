@@ -35,7 +35,7 @@ class SearchResult:
 
     layouts : k → the found layout (sensors F1 … Fk); hand : the hand-placed layout, when the part has one;
     validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
-    band : the same under the band of the check after a nominal search (``SearchConfig.band``), or None;
+    band : the same under the band of the check after a nominal search (``SearchConfig.validation.band_objective``), or None;
     confident : the verdicts with confidence (``verdict.csv``; none for a search without one).
     """
 

@@ -5,7 +5,7 @@ is never lost, and ``--resume`` replays it), ``layouts/found_k*.toml`` (the surr
 finalists after the selection), ``selection.csv``, ``surrogate_scores.csv``, ``validation/`` (one
 evaluation folder per evaluated layout) and ``comparison.csv`` (found vs. hand per k and axis), ``verdict/``
 (the verdict's further draws, one folder each) and ``verdict.csv`` (the verdict with confidence); after a
-check under a band (``SearchConfig.band``), ``band/`` holds the same for it: one folder per layout with one
+check under a band (``SearchConfig.validation.band_objective``), ``band/`` holds the same for it: one folder per layout with one
 evaluation per condition, and ``band/comparison.csv``.
 """
 
@@ -117,7 +117,10 @@ def _write_search_config(
 ) -> Path:
     from dataclasses import asdict
 
-    extra = {} if band is None else {"band": {"file": config.band, "conditions": asdict(band.conditions)}}
+    from optipose.search.config import search_table
+
+    file = config.validation.band_objective
+    extra = {} if band is None else {"band": {"file": file, "conditions": asdict(band.conditions)}}
     return write_config(
         folder,
         {
@@ -126,7 +129,7 @@ def _write_search_config(
             "seed": seed,
             "validation_seed": validation_seed,
             "budget": budget,
-            "search": asdict(config),
+            "search": search_table(config),
             "objective": objective.to_dict(),
             "objective_file": objective.source_text,
             "versions": versions(),

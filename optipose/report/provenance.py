@@ -61,7 +61,7 @@ def provenance_blocks(config: RunConfig) -> list[Block]:
         Table(("what", "value"), tuple(rows), numeric=(False, False)),
     ]
     if config.search:
-        settings = tuple((k, str(v)) for k, v in config.search.items())
+        settings = tuple((k, str(v)) for k, v in config.search_settings)
         blocks.append(
             Table(("search setting", "value"), settings, "search settings (SI units)", numeric=(False, False))
         )

@@ -242,7 +242,7 @@ def maxmin_anchored(
                 return -r[0] if r is not None else 1.0
 
             with contextlib.suppress(Stop):
-                optimize(value, problem.config.local_algorithm, start, evals, seed=None, step=0.03)
+                optimize(value, problem.config.surrogate.local_algorithm, start, evals, seed=None, step=0.03)
             scored += seen
         if scored:
             r, u6 = min(scored, key=rank)
@@ -299,7 +299,9 @@ def _gap_floors(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: int)
     model, n = problem.collision.sensor, min(k, len(hand_poses))
     floors = {}
     for a, b in itertools.permutations(range(n), 2):
-        floors[a, b] = min(problem.config.head_gap, heads_clearance(model, hand_poses[a], model, hand_poses[b]))
+        floors[a, b] = min(
+            problem.config.constraints.head_gap, heads_clearance(model, hand_poses[a], model, hand_poses[b])
+        )
     return floors
 
 
@@ -308,7 +310,7 @@ def _gap_violation(problem: SurrogateProblem, u: np.ndarray, free: list[int], k:
     poses = problem.space.to_poses(u)
     model = problem.collision.sensor
     short = [
-        floors.get((a, b), problem.config.head_gap) - heads_clearance(model, poses[a], model, poses[b])
+        floors.get((a, b), problem.config.constraints.head_gap) - heads_clearance(model, poses[a], model, poses[b])
         for a in free
         for b in range(k)
         if b != a
@@ -357,7 +359,7 @@ def _refined(
         return v
 
     with contextlib.suppress(Stop):
-        optimize(value, problem.config.local_algorithm, start.u[slots], evals, seed=None, step=0.03)
+        optimize(value, problem.config.surrogate.local_algorithm, start.u[slots], evals, seed=None, step=0.03)
     u = best["u"]
     infos = [kept[i] if i in kept else problem.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
     infos = [problem.info(u[6 * i : 6 * i + 6]) if isinstance(x, Violation) else x for i, x in enumerate(infos)]

@@ -1,22 +1,43 @@
-"""How to search: :class:`SearchConfig` and the budgets that fill in its numbers.
+"""How to search: :class:`SearchConfig`, one typed section per part of the search.
 
-Every stage of :mod:`optipose.search` reads its settings from one frozen config; a result folder saves
-it (``config.toml``, table ``search``) so ``--resume`` continues with the same one.
+Every stage of :mod:`optipose.search` reads its settings from one frozen config, in sections: ``surrogate``
+(the NLopt search on the surrogate), ``constraints`` (what a layout must keep to), ``selection`` (the ICP
+selection, polish and confirmation), ``validation`` (the held-out seed's protocol and the check under a band)
+and ``verdict`` (the verdict's own record, :class:`optipose.verdict.rules.VerdictConfig`). The budgets
+(:mod:`optipose.search.budgets`) are presets of these sections. A result folder saves the config
+(``config.toml``, table ``search``, one sub-table a section: :func:`search_table`) so ``--resume`` continues
+with the same one; :func:`search_preset` reads such a table back, and the flat ``[search]`` keys of the folders
+written before the sections (:data:`FLAT_KEYS`), and a user's ``--search-config`` in either form.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field, fields, replace
 
 from optipose.errors import ConfigError
 from optipose.model.collision import DEFAULT_MARGIN
+from optipose.verdict.rules import VerdictConfig
 
-__all__ = ["SearchConfig", "BUDGETS", "BAND_BUDGETS", "CELL_BUDGETS", "config_from_budget", "algorithm_code"]
+__all__ = [
+    "SearchConfig",
+    "SurrogateConfig",
+    "Constraints",
+    "SelectionConfig",
+    "ValidationConfig",
+    "Preset",
+    "SECTIONS",
+    "FLAT_KEYS",
+    "search_preset",
+    "unknown_keys",
+    "search_table",
+    "algorithm_code",
+]
 
 
 @dataclass(frozen=True)
-class SearchConfig:
-    """How to search. Budgets (``quick``, ``default``, ``thorough``) fill in the numbers."""
+class SurrogateConfig:
+    """The NLopt search on the surrogate (:mod:`optipose.search.surrogate_search`) and how it scores a layout
+    against the hand one."""
 
     global_algorithm: str = "GN_DIRECT_L"  # best of five on all four problems: benchmarks/README.md
     local_algorithm: str = "LN_BOBYQA"
@@ -24,8 +45,35 @@ class SearchConfig:
     local_evals: int = 120  # per local polish
     joint_evals: int = 200  # per joint polish (k >= 2)
     max_time: float = 600.0  # s, the whole surrogate search
-    sensors: tuple[int, ...] = (1, 2, 3)
     strategy: str = "both"  # greedy | joint | both
+    random_starts: int = 8  # extra random start points scored before each greedy stage
+    # before each greedy stage: score this many space-filling (scrambled Sobol) poses of the new sensor on the
+    # surrogate, and polish the best screen_starts distinct ones locally (screen_evals each). DIRECT-L
+    # refines around one basin; the screen finds the others, which the ICP selection then compares (quick,
+    # which has none, takes the surrogate's best of them)
+    screen_samples: int = 0
+    screen_starts: int = 6
+    screen_evals: int = 30
+    # the hand-anchored candidates' found sensors moved by this many local surrogate evaluations with the
+    # kept hand sensors fixed, before the selection evaluates them (0: taken as found; search/candidates.py)
+    anchor_evals: int = 0
+    # a layout is asked to beat the hand-placed one on every axis, not just on the sum: each axis whose
+    # predicted score exceeds hand_margin x the hand-placed k-subset's adds hand_weight x the excess
+    # (0 turns it off; < 1 leaves room for the surrogate's error)
+    hand_margin: float = 0.5
+    hand_weight: float = 5.0
+
+    def __post_init__(self) -> None:
+        if self.strategy not in ("greedy", "joint", "both"):
+            raise ConfigError(f"search strategy must be greedy, joint or both, not '{self.strategy}'")
+        for name in (self.global_algorithm, self.local_algorithm):
+            algorithm_code(name)  # raises ConfigError for an unknown name
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """What every layout the search scores keeps to (:class:`optipose.search.problem.SurrogateProblem`)."""
+
     min_points: int = 2000
     clearance: float = DEFAULT_MARGIN  # m, head to swept part / keep-outs
     head_gap: float = 0.0  # m, head to head
@@ -36,24 +84,15 @@ class SearchConfig:
     # of the part across the motion, and fools the surrogate (docs/method.md, "Constraints"); 90 turns the
     # constraint off
     line_skew_max_deg: float = 60.0
-    random_starts: int = 8  # extra random start points scored before each greedy stage
-    # before each greedy stage: score this many space-filling (scrambled Sobol) poses of the new sensor on the
-    # surrogate, and polish the best screen_starts distinct ones locally (screen_evals each). DIRECT-L
-    # refines around one basin; the screen finds the others, which the ICP selection then compares (quick,
-    # which has none, takes the surrogate's best of them)
-    screen_samples: int = 0
-    screen_starts: int = 6
-    screen_evals: int = 30
-    select_candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
-    select_time: float = 300.0  # s, the selection stage
-    # the hand-anchored candidates' found sensors moved by this many local surrogate evaluations with the
-    # kept hand sensors fixed, before the selection evaluates them (0: taken as found; search/candidates.py)
-    anchor_evals: int = 0
-    # a layout is asked to beat the hand-placed one on every axis, not just on the sum: each axis whose
-    # predicted score exceeds hand_margin x the hand-placed k-subset's adds hand_weight x the excess
-    # (0 turns it off; < 1 leaves room for the surrogate's error)
-    hand_margin: float = 0.5
-    hand_weight: float = 5.0
+
+
+@dataclass(frozen=True)
+class SelectionConfig:
+    """The ICP stages after the surrogate (:mod:`optipose.search.select`): the selection, the polish of a
+    finalist and its confirmation on the full protocol."""
+
+    candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
+    time: float = 300.0  # s, the selection stage
     # the ICP polish of a finalist that is not yet no worse than the hand layout on every axis (search/polish.py)
     polish_algorithm: str = "LN_COBYLA"
     polish_evals: int = 0  # evaluations for k = 1 (half for larger k); 0: no polish
@@ -67,177 +106,138 @@ class SearchConfig:
     # kept (0: no confirmation)
     confirm_candidates: int = 0
     clear_ratio: float = 0.4
-    validation: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
+
+    def __post_init__(self) -> None:
+        algorithm_code(self.polish_algorithm)  # raises ConfigError for an unknown name
+
+
+@dataclass(frozen=True)
+class ValidationConfig:
+    """The validation on the held-out seed (:mod:`optipose.search.validate`) and the check under a band after it."""
+
+    protocol: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
     # after the validation, the found layouts and the hand one again on the held-out seed under the
     # [conditions] of this objective (a shipped name or a TOML path; "": no check): a layout that wins only
     # at the preset's noise with perfect brackets is not bought. Skipped when the search's own objective
     # has a band (its validation is under it already)
-    band: str = ""
-    # the verdict with confidence (search/draws.py): draws of the cell after the validation's, raced until
-    # every k is BUY, KEEP or TIE, at most verdict_draws in all and while another draw ends within verdict_time
-    # s (0: no limit); an axis may be worse by verdict_tolerance (0.1: 10 %) with verdict_confidence
-    verdict_draws: int = 12
-    verdict_time: float = 120.0
-    # and, when above 0, ends by answer_time s after the search started (its surrogate's set-up), whatever the
-    # stages before it took: a budget that promises an answer in so many seconds keeps it on a slower machine
-    answer_time: float = 0.0
-    verdict_scans: int = 0  # the protocol's scans a draw after the validation's evaluates, drawn by its seed (0: all)
-    verdict_tolerance: float = 0.10
-    # and found may fail an axis's registration on at most this share of scans more than hand (a failed
-    # registration is a part scanned again: verdict/confidence.py)
-    verdict_failures: float = 0.01
-    verdict_confidence: float = 0.95
+    band_objective: str = ""
+
+    def __post_init__(self) -> None:
+        if self.protocol not in ("full", "reduced"):
+            raise ConfigError(f"search validation must be full or reduced, not '{self.protocol}'")
+
+
+SECTIONS = {
+    "surrogate": SurrogateConfig,
+    "constraints": Constraints,
+    "selection": SelectionConfig,
+    "validation": ValidationConfig,
+    "verdict": VerdictConfig,
+}  # SearchConfig's sections, in the order a result folder's config.toml writes them
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """How to search: the sensor counts to place and one section per part of the search (see the module doc).
+    Budgets (``quick``, ``default``, ``thorough``: :mod:`optipose.search.budgets`) fill in the numbers."""
+
+    sensors: tuple[int, ...] = (1, 2, 3)
+    surrogate: SurrogateConfig = field(default_factory=SurrogateConfig)
+    constraints: Constraints = field(default_factory=Constraints)
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
+    validation: ValidationConfig = field(default_factory=ValidationConfig)
+    verdict: VerdictConfig = field(default_factory=VerdictConfig)
 
     def __post_init__(self) -> None:
         if not self.sensors or min(self.sensors) < 1 or max(self.sensors) > 6:
             raise ConfigError("--sensors: give sensor counts between 1 and 6, e.g. 1,2,3")
-        if self.validation not in ("full", "reduced"):
-            raise ConfigError(f"search validation must be full or reduced, not '{self.validation}'")
-        if self.strategy not in ("greedy", "joint", "both"):
-            raise ConfigError(f"search strategy must be greedy, joint or both, not '{self.strategy}'")
-        if (
-            self.verdict_scans < 0
-            or self.verdict_draws < 1
-            or not 0.5 < self.verdict_confidence < 1
-            or self.verdict_tolerance < 0
-            or not 0 <= self.verdict_failures < 1
-            or self.verdict_time < 0
-            or self.answer_time < 0
-        ):
-            raise ConfigError(
-                "search verdict: verdict_draws >= 1, verdict_scans >= 0, 0.5 < verdict_confidence < 1, verdict_tolerance >= 0, "
-                "0 <= verdict_failures < 1, verdict_time >= 0, answer_time >= 0"
-            )
-        for name in (self.global_algorithm, self.local_algorithm, self.polish_algorithm):
-            algorithm_code(name)  # raises ConfigError for an unknown name
 
 
-BUDGETS: dict[str, dict] = {
-    # quick: greedy only, so the layouts are nested and one evaluation validates k = 1, 2, 3 (the hand
-    # layout's runs beside the search); a small screen finds basins DIRECT-L's 70 evaluations miss (docs/method.md,
-    # "Budgets"); no check under the band, so its verdicts say they hold in the ideal cell only
-    "quick": dict(
-        global_evals=70,
-        local_evals=20,
-        max_time=25.0,
-        random_starts=4,
-        select_candidates=0,
-        strategy="greedy",
-        screen_samples=1024,
-        screen_starts=4,
-        screen_evals=20,
-        verdict_draws=1,
-    ),
-    "default": dict(
-        global_evals=400,
-        local_evals=120,
-        joint_evals=200,
-        max_time=240.0,
-        select_candidates=3,
-        select_time=240.0,
-        polish_evals=90,
-        confirm_candidates=3,
-        screen_samples=4096,
-        band="robust",
-        verdict_time=60.0,
-    ),
-    "thorough": dict(
-        global_evals=2000,
-        local_evals=400,
-        joint_evals=1000,
-        max_time=3000.0,
-        random_starts=16,
-        screen_samples=16384,
-        screen_starts=12,
-        screen_evals=60,
-        select_candidates=6,
-        select_time=1800.0,
-        polish_time=900.0,
-        polish_evals=200,
-        confirm_candidates=6,
-        band="robust",
-        verdict_draws=30,
-        verdict_time=900.0,
-    ),
+# the flat [search] keys of the result folders written before the sections, and of a --search-config: each
+# names one field of one section (most by the field's own name; the others here)
+_RENAMED = {
+    "select_candidates": ("selection", "candidates"),
+    "select_time": ("selection", "time"),
+    "validation": ("validation", "protocol"),
+    "band": ("validation", "band_objective"),
+    "verdict_draws": ("verdict", "draws"),
+    "verdict_time": ("verdict", "time"),
+    "answer_time": ("verdict", "answer_time"),
+    "verdict_scans": ("verdict", "scans"),
+    "verdict_tolerance": ("verdict", "tolerance"),
+    "verdict_failures": ("verdict", "failures"),
+    "verdict_confidence": ("verdict", "confidence"),
 }
+FLAT_KEYS: dict[str, tuple[str, str]] = {
+    **{f.name: (name, f.name) for name in ("surrogate", "constraints") for f in fields(SECTIONS[name])},
+    **{f.name: ("selection", f.name) for f in fields(SelectionConfig) if f.name not in ("candidates", "time")},
+    **_RENAMED,
+}  # flat key → (section, field), for every field of every section
 
 
-# Under a band of conditions every ICP evaluation runs each condition of the band's ends (4 for
-# objectives/robust.toml, each more work than a nominal condition: bracket errors slow ICP): the default budget then
-# spends its ICP work on the selection and the validation over the band, not on a polish and a
-# confirmation; the selection's statistic already pools every condition's scans (docs/conditions.md, "The search
-# under the band").
-BAND_BUDGETS: dict[str, dict] = {
-    # a sensor pose costs the band's surrogate several nominal ones (the noise and bracket terms): 4,096 screen
-    # poses would take the whole clock, and k = 1 and 2 got no greedy stage at all
-    "default": dict(
-        max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024, anchor_evals=80
-    ),
-}
+@dataclass(frozen=True)
+class Preset:
+    """Values set on top of a config: a budget, its adjustment under a band or in a real cell, a user's
+    ``[search]`` table. Per section, the fields it sets (the others are left as they are); ``sensors``
+    when it sets the sensor counts."""
+
+    sensors: tuple[int, ...] | None = None
+    surrogate: dict = field(default_factory=dict)
+    constraints: dict = field(default_factory=dict)
+    selection: dict = field(default_factory=dict)
+    validation: dict = field(default_factory=dict)
+    verdict: dict = field(default_factory=dict)
+
+    def apply(self, config: SearchConfig) -> SearchConfig:
+        """``config`` with this preset's values in place of its own."""
+        sections = {
+            name: replace(getattr(config, name), **values) for name in SECTIONS if (values := getattr(self, name))
+        }
+        sensors = {} if self.sensors is None else {"sensors": self.sensors}
+        return replace(config, **sections, **sensors)
 
 
-# In a real cell (an objective's cell other than the ideal one) an ICP evaluation costs several nominal ones
-# (the cell's sources move every point; the paper's pipeline removes outliers) and the verdict's draws, not a
-# confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, less surrogate search; no
-# check under the band, whose noise and brackets the cell's sources stand for. The verdict's draws after the
-# validation's evaluate a share of the protocol's scans each: in a real cell the spread between cell instances rules
-# the intervals, so more draws of fewer scans decide sooner. The stages end by their evaluations, candidates and
-# draws, whose counts are set so that `default` answers within three minutes on two cores and `quick`, validated on
-# the reduced protocol's 14 scans, within 30 s (benchmarks/README.md, "Whole commands"); their clocks are safety
-# nets for a slower machine, so that on this one a seed gives the same layouts.
-CELL_BUDGETS: dict[str, dict] = {
-    # quick: a screen of 64 poses (a cell pose costs the surrogate several nominal ones), its three best polished,
-    # then per sensor a local BOBYQA from the best start and its polish, few enough evaluations that BOBYQA mostly
-    # probes each of the six numbers around its start: DIRECT-L's evaluations went to the surrogate's optimistic
-    # corners, and ICP rated the local stage's layouts better (docs/results.md, "`--budget quick` in the real
-    # cell"). The verdict's draws of 6 scans each (3 a worker on two cores), so that its seconds see several times
-    # as many cell instances as draws of the reduced protocol's 14 scans would (benchmarks/README.md,
-    # "bench_verdict_draw.py"); the race plans its looks for as many draws as its seconds hold, each look a share of
-    # the error rate. Its seconds are what is left of 23 s after the search started, so that with the start-up, the
-    # pictures and the report the answer comes in 30 s on two cores with a second to spare for a shared machine's
-    # swings: the draws, unlike the layouts, are the clock's where the seconds hold fewer than the cap
-    "quick": dict(
-        max_time=15.0,
-        screen_samples=64,
-        screen_starts=3,
-        screen_evals=15,
-        global_algorithm="LN_BOBYQA",
-        global_evals=20,
-        local_evals=10,
-        validation="reduced",
-        verdict_draws=12,
-        verdict_time=12.0,
-        verdict_scans=6,
-        answer_time=23.0,
-    ),
-    # default: the joint stage's 100 evaluations, where its clock used to stop it; the race at most 10 draws of 20
-    # scans each, which its seconds hold with room, so that the looks are planned for the same draws on every run
-    "default": dict(
-        max_time=150.0,
-        joint_evals=100,
-        screen_samples=1024,
-        select_time=45.0,
-        polish_evals=0,
-        confirm_candidates=0,
-        band="",
-        verdict_scans=20,
-        verdict_draws=10,
-        verdict_time=60.0,
-    ),
-    "thorough": dict(band="", verdict_scans=20),
-}
+def unknown_keys(table: dict) -> list[str]:
+    """The keys of a ``[search]`` table that name no setting (a section's as ``section.key``), sorted."""
+    unknown = []
+    for key, value in table.items():
+        if key in SECTIONS and isinstance(value, dict):  # a section (``validation`` is a flat key too)
+            known = {f.name for f in fields(SECTIONS[key])}
+            unknown += [f"{key}.{name}" for name in value if name not in known]
+        elif key not in FLAT_KEYS and key != "sensors":
+            unknown.append(key)
+    return sorted(unknown)
 
 
-def config_from_budget(
-    budget: str, sensors: tuple[int, ...], overrides: dict | None = None, band: bool = False, cell: bool = False
-) -> SearchConfig:
-    """The config of a named budget for these sensor counts, with ``overrides`` (``[search]`` keys) on top;
-    ``band``: the objective has a band of conditions (:data:`BAND_BUDGETS` adjusts the budget first);
-    ``cell``: it runs in a real cell (:data:`CELL_BUDGETS`, after the band's)."""
-    if budget not in BUDGETS:
-        raise ConfigError(f"unknown budget '{budget}' (use {', '.join(BUDGETS)})")
-    adjusted = {**(BAND_BUDGETS.get(budget, {}) if band else {}), **(CELL_BUDGETS.get(budget, {}) if cell else {})}
-    return SearchConfig(sensors=sensors, **{**BUDGETS[budget], **adjusted, **(overrides or {})})
+def search_preset(table: dict) -> Preset:
+    """The :class:`Preset` of a ``[search]`` table: sections as sub-tables (``[search.surrogate]`` …), the
+    flat keys of :data:`FLAT_KEYS`, or both; ``sensors`` at its top. A key it does not know
+    (:func:`unknown_keys`, which callers check first to say whose table it is), or a field given twice, is a
+    ConfigError."""
+    if unknown := unknown_keys(table):
+        raise ConfigError(f"unknown search setting(s) {', '.join(unknown)}")
+    values: dict[str, dict] = {name: {} for name in SECTIONS}
+    twice = []
+    for key, value in table.items():
+        if key in SECTIONS and isinstance(value, dict):
+            given = [(key, name, v) for name, v in value.items()]
+        elif key in FLAT_KEYS:
+            given = [(*FLAT_KEYS[key], value)]
+        else:  # sensors
+            continue
+        for section, name, v in given:
+            twice += [f"{section}.{name}"] if name in values[section] else []
+            values[section][name] = v
+    if twice:
+        raise ConfigError(
+            f"search setting(s) {', '.join(sorted(set(twice)))} given twice (as a flat key and in a section)"
+        )
+    return Preset(tuple(table["sensors"]) if "sensors" in table else None, **values)
+
+
+def search_table(config: SearchConfig) -> dict:
+    """The ``[search]`` table of a result folder's ``config.toml``: ``sensors`` and one sub-table a section."""
+    return asdict(config)
 
 
 def algorithm_code(name: str) -> int:

@@ -13,11 +13,11 @@ hand layout's evaluation with that choice, an exact TIE that rides along without
 one, they are the race, decided at one look at its last draw: the draws go to the hand layout's predicted error).
 
 Draws are added (:func:`optipose.verdict.racing.race_many`) until every k is BUY, KEEP or TIE, or
-``SearchConfig.verdict_draws`` are in, or another draw would end past ``SearchConfig.verdict_time``. In the
+``SearchConfig.verdict.draws`` are in, or another draw would end past ``SearchConfig.verdict.time``. In the
 ideal cell a draw differs from the next only in its noise and orientations, which the scans' own spread
 already measures: the first look is at one draw. In a real cell each draw is another instance of the cell,
 whose spread only draws show: the first look is at three, and a draw may evaluate a seeded
-share of the protocol's scans (``SearchConfig.verdict_scans``): more instances of fewer scans (docs/method.md,
+share of the protocol's scans (``SearchConfig.verdict.scans``): more instances of fewer scans (docs/method.md,
 "The verdict with confidence").
 """
 
@@ -82,18 +82,12 @@ def confident_verdicts(
     kept = {k for k, s in side.items() if s.kept}
     evaluated = {s.evaluation: layouts[int(s.evaluation.removeprefix("found_k"))] for s in side.values() if not s.kept}
     names = ["hand", *evaluated]
-    objective = stage_objective(objective, "validation", config.validation)
+    objective = stage_objective(objective, "validation", config.validation.protocol)
     counted = choice_draw_counts(objective)
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
     if hand is None or not ks or not objective.conditions.trivial or missing:
         return Verdicts()
-    rules = Rules(
-        tolerance=config.verdict_tolerance,
-        failures=config.verdict_failures,
-        confidence=config.verdict_confidence,
-        seed=int(seed),
-        statistic=objective.statistic,
-    )
+    rules = config.verdict.rules(int(seed), objective.statistic)
     label = baseline_label(hand)
     labels = {
         (k, k): dict(
@@ -126,7 +120,7 @@ def confident_verdicts(
         }
 
     draws = {k: [p] for k, p in pairs(first).items()} if counted else None
-    if counted and config.verdict_draws <= 1:
+    if counted and config.verdict.draws <= 1:
         return _verdicts(
             race_many(
                 lambda i, keys: {},
@@ -151,7 +145,7 @@ def confident_verdicts(
             name for name in evaluated if keys is None or any(side[f].evaluation == name for f, h in keys if f == h)
         ]
         with Evaluator(
-            part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict_scans
+            part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict.scans
         ) as evaluator:
             results = {"hand": evaluator(hand, subsets=used["hand"])}
             results |= {name: evaluator(evaluated[name], subsets=used[name]) for name in wanted}
@@ -164,12 +158,12 @@ def confident_verdicts(
     # holding the race, and when every k is one, the draws go to its predicted error (one look, at the end)
     riders = fewer | (frozenset((k, k) for k in kept) if kept != set(ks) else frozenset())
     try:
-        seconds = config.verdict_time if config.verdict_time > 0 else math.inf
+        seconds = config.verdict.time if config.verdict.time > 0 else math.inf
         raced = race_many(
             next_draws,
             rules,
-            min_draws=config.verdict_draws if kept == set(ks) else first_look(objective),
-            max_draws=config.verdict_draws,
+            min_draws=config.verdict.draws if kept == set(ks) else first_look(objective),
+            max_draws=config.verdict.draws,
             seconds=seconds,
             draws=draws,
             names=labels,

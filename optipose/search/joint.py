@@ -27,7 +27,11 @@ def joint_stage(
     with study.stage_named(f"joint:k={k}"):
         for start in starts:
             row = local_best(
-                study, config.local_algorithm, start.u, config.joint_evals // (2 if hand and greedy else 1), seed
+                study,
+                config.surrogate.local_algorithm,
+                start.u,
+                config.surrogate.joint_evals // (2 if hand and greedy else 1),
+                seed,
             )
             if row is not None:
                 u = np.asarray(row.u)

@@ -38,8 +38,8 @@ STAGES = ("surrogate", "selection", "polish", "confirmation", "validation", "ban
 def stage_objective(objective: Objective, stage: str, protocol: str = "full", band: str = "") -> Objective | None:
     """The objective ``stage`` (one of :data:`STAGES`) scores with, from the search's ``objective``.
 
-    protocol : the validation's, ``full`` or ``reduced`` (``SearchConfig.validation``); band : the name or
-    TOML path of the objective whose band the found layouts are checked under (``SearchConfig.band``). Only
+    protocol : the validation's, ``full`` or ``reduced`` (``SearchConfig.validation.protocol``); band : the name or
+    TOML path of the objective whose band the found layouts are checked under (``SearchConfig.validation.band_objective``). Only
     ``band`` can be None: no check (see :func:`band_objective`).
     """
     if stage == "surrogate":
@@ -67,7 +67,7 @@ def validation_objective(objective: Objective, protocol: str = "full") -> Object
 
 
 def band_objective(objective: Objective, band: str) -> Objective | None:
-    """The objective the found layouts are checked under after the validation (``SearchConfig.band``): the
+    """The objective the found layouts are checked under after the validation (``SearchConfig.validation.band_objective``): the
     search's own, with the ``[conditions]`` of the objective ``band`` (a shipped name or a TOML path); None
     when there is no check (``band`` empty, or the search's objective has a band of its own, under which it
     validates already). A bad name is a ConfigError."""

@@ -9,16 +9,18 @@
    band's ends (:func:`optipose.search.objectives.search_objective`) and compare with the hand layout condition by condition;
 4. validation on a noise seed the search never saw (:mod:`optipose.search.validate`), under every
    condition of the band: the numbers reported. A search whose objective has no band then checks the
-   found layouts and the hand one under the band of ``SearchConfig.band`` (the ``default`` and ``thorough`` budgets in the ideal cell:
+   found layouts and the hand one under the band of ``SearchConfig.validation.band_objective`` (the ``default`` and ``thorough`` budgets in the ideal cell:
    ``objectives/robust.toml``'s noise levels and bracket tolerance), on the same held-out seed: a layout
    that wins only in the simulation's ideal cell is not a layout to buy. Every budget validates on the objective's protocol
-   (``[search] validation = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
+   (``[search.validation] protocol = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
    hand layout's part of it starts with step 2, in ``jobs`` processes of its own (``jobs`` ≥ 2), and is waited
    for before step 3;
 5. the verdict with confidence (:mod:`optipose.search.draws`): the validation's evaluations are its first
    draw in the ideal cell (in a real cell the choices were made on them), and further draws of the cell on
    seeds of their own are raced until every k is BUY, KEEP or TIE, before the check under the band.
 
+:func:`run` calls one function per step (``_surrogate_search``, ``_selection``, ``_validation``, ``_verdict``,
+``_band_check``), all sharing one :class:`SearchContext`: what the search was given and what each step produced.
 Every result goes to a :class:`ResultSink` the caller gives (``optipose.io.search.SearchFolder`` writes a
 result folder), so the search itself never touches the file system.
 """
@@ -27,9 +29,10 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from optipose.errors import OptiposeError, is_interrupt
 from optipose.model.layout import Layout, SensorPose
@@ -43,6 +46,12 @@ from optipose.search.surrogate_search import run_search
 from optipose.seeds import validation_seed
 from optipose.verdict.confidence import Verdicts
 from optipose.model.baseline import baseline
+from optipose.verdict.rules import VerdictConfig
+
+if TYPE_CHECKING:
+    from optipose.evaluate.objective import Objective
+    from optipose.model.part import Part
+    from optipose.search.validate import BaselineRun
 
 __all__ = ["SearchReport", "ResultSink", "run", "found_layout", "NoFeasibleLayout"]
 
@@ -92,13 +101,46 @@ class SearchReport:
     outcome: SearchOutcome
     layouts: dict[int, Layout] = field(default_factory=dict)
     validation: Validation | None = None
-    band: Validation | None = None  # the check under the band (SearchConfig.band), when there was one
+    band: Validation | None = None  # the check under the band (validation.band_objective), when there was one
     band_interrupted: bool = False  # Ctrl-C stopped the check under the band (the validation is complete)
     confident: Verdicts = field(default_factory=Verdicts)  # the verdicts with confidence (search/draws.py)
 
     @property
     def validated(self) -> bool:
         return self.validation is not None
+
+
+@dataclass
+class SearchContext:
+    """One search as its stages share it: what it was given, and what each stage produced.
+
+    check_objective : the objective of the check under a band after the validation (``SearchConfig.validation``'s
+    ``band_objective``), None when there is none; started : ``time.monotonic()`` when the search started (the
+    verdict's ``answer_time`` counts from here); on_stage : told when a stage starts (or None); hand_run,
+    check_run : the hand layout's validation and its check under the band, running beside the search (None in
+    one process); study : the live surrogate search; first : the validation's evaluations by name (the
+    verdict's first draw); report : what the stages found so far."""
+
+    part: Part
+    objective: Objective
+    config: SearchConfig
+    seed: int
+    sink: ResultSink
+    jobs: int
+    started: float
+    check_objective: Objective | None = None
+    on_stage: Callable[[str], None] | None = None
+    hand_run: BaselineRun | None = None
+    check_run: BaselineRun | None = None
+    study: SurrogateStudy | None = None
+    hand: Layout | None = None
+    first: dict = field(default_factory=dict)
+    report: SearchReport | None = None
+
+    def stage(self, text: str) -> None:
+        """Tell ``on_stage`` that a stage starts."""
+        if self.on_stage:
+            self.on_stage(text)
 
 
 def run(
@@ -121,24 +163,42 @@ def run(
     # layout's processes run beside it on every core, where a second BLAS thread only waits for a busy core and
     # slows every product many times over (benchmarks/README.md, "bench_surrogate_threads.py")
     with threadpool_limits(limits=1, user_api="blas"):
-        return _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, on_stage)
+        ctx = _start(part, objective, config, seed, sink, budget, jobs, on_stage)
+        with _beside(ctx):
+            ctx.study = _study(ctx, resume, on_eval)  # after the hand layout's processes start: they set up beside it
+            _surrogate_search(ctx)
+            _selection(ctx)
+            sink.surrogate_scores(ctx.report.outcome)
+            if not ctx.report.outcome.interrupted:
+                _validation(ctx)
+                _verdict(ctx)
+                _band_check(ctx)
+            return ctx.report
 
 
-def _search(part, objective, config, seed, sink, budget, jobs, resume, on_eval, on_stage) -> SearchReport:
+def _start(part, objective, config, seed, sink, budget, jobs, on_stage) -> SearchContext:
+    """The search's context, its config written first; the clock starts here."""
     started = time.monotonic()  # answer_time counts from here
-    band = stage_objective(objective, "band", band=config.band)  # a bad name fails here, before any work
-    sink.start(part, objective, config, budget, seed, validation_seed(seed), band)
-    if on_stage:  # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
-        on_stage("searching on the surrogate")
+    # a bad name fails here, before any work
+    check = stage_objective(objective, "band", band=config.validation.band_objective)
+    sink.start(part, objective, config, budget, seed, validation_seed(seed), check)
+    ctx = SearchContext(part, objective, config, seed, sink, jobs, started, check, on_stage)
+    # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
+    ctx.stage("searching on the surrogate")
+    return ctx
+
+
+@contextmanager
+def _beside(ctx: SearchContext):
+    """The part's shared reference and the hand layout's processes (its validation, and its check under the
+    band at the lowest priority), for as long as the search runs."""
     with (
-        _shared_reference(part, jobs) as folder,
-        _baseline_run(part, objective, config, seed, jobs, folder) as hand_run,
-        _baseline_run(part, band, config, seed, jobs, folder, last=True) as band_run,
+        _shared_reference(ctx.part, ctx.jobs) as folder,
+        _baseline_run(ctx, ctx.objective, folder) as hand_run,
+        _baseline_run(ctx, ctx.check_objective, folder, last=True) as check_run,
     ):
-        study = _study(
-            part, objective, config, sink, resume, on_eval
-        )  # after the hand layout's processes start: they set up beside it
-        return _run(part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run, started)
+        ctx.hand_run, ctx.check_run = hand_run, check_run
+        yield
 
 
 @contextmanager
@@ -158,7 +218,7 @@ def _shared_reference(part, jobs: int):
         shared.release(key)
 
 
-def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, folder: str | None, last: bool = False):
+def _baseline_run(ctx: SearchContext, objective, folder: str | None, last: bool = False):
     """The hand layout's validation (``objective``: the search's, or the band's for the check after it),
     started beside the surrogate search when there are cores for both (``jobs`` ≥ 2), in ``jobs`` processes
     mapping the reference in ``folder``; a do-nothing context otherwise, or without an objective. ``last``: at
@@ -168,98 +228,139 @@ def _baseline_run(part, objective, config: SearchConfig, seed: int, jobs: int, f
 
     from optipose.search.validate import BaselineRun
 
-    if objective is None or jobs < 2:
+    if objective is None or ctx.jobs < 2:
         return nullcontext()
-    return BaselineRun(part, objective, seed, config.validation, last=last, processes=jobs, reference_dir=folder)
+    protocol = ctx.config.validation.protocol
+    return BaselineRun(ctx.part, objective, ctx.seed, protocol, last=last, processes=ctx.jobs, reference_dir=folder)
 
 
-def _run(
-    part, objective, config, seed, sink, jobs, study, on_stage, hand_run, band, band_run, started: float
-) -> SearchReport:
-    stage = on_stage or (lambda text: None)
-    outcome = run_search(part, objective, config, seed, study)
-    _flush(sink, study)
+def _surrogate_search(ctx: SearchContext) -> None:
+    """The NLopt search on the surrogate; its best layouts on disk before anything slower."""
+    outcome = run_search(ctx.part, ctx.objective, ctx.config, ctx.seed, ctx.study)
+    _flush(ctx.sink, ctx.study)
     if not outcome.found:
+        constraints = ctx.config.constraints
         raise NoFeasibleLayout(
-            f"no feasible layout for '{part.name}': in {len(outcome.history)} evaluations no sensor pose returned "
-            f"{config.min_points} points without its head hitting the part or a keep-out (can the sensors see "
-            f"this part at all? check --units, the material and the part's size against the {config.clearance * 1e3:.0f} mm clearance)"
+            f"no feasible layout for '{ctx.part.name}': in {len(outcome.history)} evaluations no sensor pose returned "
+            f"{constraints.min_points} points without its head hitting the part or a keep-out (can the sensors see "
+            f"this part at all? check --units, the material and the part's size against the {constraints.clearance * 1e3:.0f} mm clearance)"
         )
-    hand = baseline(part)
-    report = SearchReport(outcome, _layouts(outcome.found))
-    sink.layouts(report.layouts, hand)  # the surrogate's best, on disk before anything slower
-    if config.select_candidates > 0 and not outcome.interrupted:
-        from optipose.search.select import select_finalists
+    ctx.hand = baseline(ctx.part)
+    ctx.report = SearchReport(outcome, _layouts(outcome.found))
+    ctx.sink.layouts(ctx.report.layouts, ctx.hand)
 
-        if hand_run is not None:  # the selection's clock is wall time: it runs alone on the cores
-            stage("evaluating the hand layout (held-out noise seed)")
-            hand_run.wait()
-        stage("selecting finalists by ICP on a reduced protocol")
-        finalists, records = select_finalists(
-            part, objective, outcome, study, seed, config.select_candidates, config.select_time, on_stage, jobs
-        )
-        sink.selection(records)
-        report.layouts = _layouts({**outcome.found, **finalists})
-        sink.layouts(report.layouts, hand)
-    sink.surrogate_scores(outcome)
-    if outcome.interrupted:
-        return report
-    from optipose.search.validate import hand_where_better, validate
+
+def _selection(ctx: SearchContext) -> None:
+    """The ICP selection (with its polish and confirmation), after the hand layout's validation: the finalists
+    replace the surrogate's best."""
+    outcome, selection = ctx.report.outcome, ctx.config.selection
+    if selection.candidates <= 0 or outcome.interrupted:
+        return
+    from optipose.search.select import select_finalists
+
+    if ctx.hand_run is not None:  # the selection's clock is wall time: it runs alone on the cores
+        ctx.stage("evaluating the hand layout (held-out noise seed)")
+        ctx.hand_run.wait()
+    ctx.stage("selecting finalists by ICP on a reduced protocol")
+    finalists, records = select_finalists(
+        ctx.part,
+        ctx.objective,
+        outcome,
+        ctx.study,
+        ctx.seed,
+        selection.candidates,
+        selection.time,
+        ctx.on_stage,
+        ctx.jobs,
+    )
+    ctx.sink.selection(records)
+    ctx.report.layouts = _layouts({**outcome.found, **finalists})
+    ctx.sink.layouts(ctx.report.layouts, ctx.hand)
+
+
+def _validation(ctx: SearchContext) -> None:
+    """The found layouts and the hand one on the held-out seed; in a real cell, the baseline's choice where it did
+    better (under a band the verdict is the band's, not raced)."""
     from optipose.search.draws import choice_draw_counts
+    from optipose.search.validate import hand_where_better, validate
 
-    stage(f"validating on the {config.validation} protocol (held-out noise seed)")
-    first: dict = {}
+    report, protocol = ctx.report, ctx.config.validation.protocol
+    ctx.stage(f"validating on the {protocol} protocol (held-out noise seed)")
 
     def evaluation(name, result) -> None:
-        first[name] = result
-        sink.evaluation(name, result)
+        ctx.first[name] = result
+        ctx.sink.evaluation(name, result)
 
-    report.validation = validate(part, objective, report.layouts, seed, jobs, config.validation, evaluation, hand_run)
-    # a real cell: the baseline's choice where it did better (under a band the verdict is the band's, not raced)
-    if report.validation.hand and not choice_draw_counts(objective) and objective.conditions.trivial:
-        answered, report.validation = hand_where_better(report.layouts, report.validation, hand)
+    report.validation = validate(
+        ctx.part, ctx.objective, report.layouts, ctx.seed, ctx.jobs, protocol, evaluation, ctx.hand_run
+    )
+    if report.validation.hand and not choice_draw_counts(ctx.objective) and ctx.objective.conditions.trivial:
+        answered, report.validation = hand_where_better(report.layouts, report.validation, ctx.hand)
         if answered is not report.layouts:  # some k answered with the hand layout's own sensors: their files
             report.layouts = answered
-            sink.layouts(report.layouts, hand)
-    sink.validation(report.validation)
-    if report.validation.hand:
-        from optipose.search.draws import confident_verdicts
+            ctx.sink.layouts(report.layouts, ctx.hand)
+    ctx.sink.validation(report.validation)
 
-        stage(f"the verdict with confidence (up to {config.verdict_draws} draws of the cell)")
-        raced = replace(config, verdict_time=_verdict_seconds(config, started))
-        report.confident = confident_verdicts(
-            part, objective, report.layouts, report.validation, first, seed, raced, jobs, sink.verdict_draw
-        )
-        sink.verdict(report.confident)
-    if band is None or not report.validation.hand:  # no band, or nothing to compare with: no check
-        return report
+
+def _verdict(ctx: SearchContext) -> None:
+    """The verdict with confidence, raced on draws of the cell (nothing to compare without a hand choice)."""
+    report = ctx.report
+    if not report.validation.hand:
+        return
+    from optipose.search.draws import confident_verdicts
+
+    verdict = ctx.config.verdict
+    ctx.stage(f"the verdict with confidence (up to {verdict.draws} draws of the cell)")
+    raced = replace(ctx.config, verdict=replace(verdict, time=_verdict_seconds(verdict, ctx.started)))
+    report.confident = confident_verdicts(
+        ctx.part,
+        ctx.objective,
+        report.layouts,
+        report.validation,
+        ctx.first,
+        ctx.seed,
+        raced,
+        ctx.jobs,
+        ctx.sink.verdict_draw,
+    )
+    ctx.sink.verdict(report.confident)
+
+
+def _band_check(ctx: SearchContext) -> None:
+    """The found layouts and the hand one under the band of ``validation.band_objective`` (no band, or nothing
+    to compare with: no check); a Ctrl-C here hands the validated search back, unchecked."""
+    report, check = ctx.report, ctx.check_objective
+    if check is None or not report.validation.hand:
+        return
     from optipose.evaluate.conditions import conditions
+    from optipose.search.validate import validate
 
-    stage(f"checking under the band ({len(conditions(band.conditions))} conditions, held-out seed)")
+    ctx.stage(f"checking under the band ({len(conditions(check.conditions))} conditions, held-out seed)")
+    protocol = ctx.config.validation.protocol
     try:
         report.band = validate(
-            part, band, report.layouts, seed, jobs, config.validation, sink.band_evaluation, band_run
+            ctx.part, check, report.layouts, ctx.seed, ctx.jobs, protocol, ctx.sink.band_evaluation, ctx.check_run
         )
     except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
         if not is_interrupt(exc):
             raise
         report.band_interrupted = True
-        return report
-    sink.band(report.band)
-    return report
+        return
+    ctx.sink.band(report.band)
 
 
-def _verdict_seconds(config, started: float) -> float:
-    """The verdict's ``verdict_time`` (0: no limit), ended by ``answer_time`` s after ``started`` when that is set:
+def _verdict_seconds(verdict: VerdictConfig, started: float) -> float:
+    """The verdict's ``time`` (0: no limit), ended by ``answer_time`` s after ``started`` when that is set:
     what is left then, at least a moment (the race adds one draw and looks at what it has)."""
-    if config.answer_time <= 0:
-        return config.verdict_time
-    left = max(1e-3, config.answer_time - (time.monotonic() - started))
-    return min(config.verdict_time, left) if config.verdict_time > 0 else left
+    if verdict.answer_time <= 0:
+        return verdict.time
+    left = max(1e-3, verdict.answer_time - (time.monotonic() - started))
+    return min(verdict.time, left) if verdict.time > 0 else left
 
 
-def _study(part, objective, config, sink: ResultSink, resume: bool, on_eval) -> SurrogateStudy:
+def _study(ctx: SearchContext, resume: bool, on_eval) -> SurrogateStudy:
     """The live search, with the sink's cache when resuming, flushing to the sink as it goes."""
+    part, objective, config, sink = ctx.part, ctx.objective, ctx.config, ctx.sink
     cache = sink.load_cache(SPACE_VERSION) if resume else {}
     if resume:
         log.info("resuming with %d cached sensor poses", len(cache))

@@ -49,8 +49,8 @@ def polish(
         if not score.feasible:
             return float(score.objective)  # PENALTY + violation: infeasible, never a result
         choice = evaluator(problem.space.to_poses(u)).table[k - 1]
-        over = excess(choice, reference, config.polish_margin) if reference is not None else 0.0
-        value = float(np.rad2deg(choice.score + config.polish_weight * over))
+        over = excess(choice, reference, config.selection.polish_margin) if reference is not None else 0.0
+        value = float(np.rad2deg(choice.score + config.selection.polish_weight * over))
         wins = reference is None or dominates(choice, reference)
         records.append(IcpEvaluation(k, "ICP polish", score.objective, "reduced", choice, wins))
         key = (not wins, float(np.rad2deg(choice.score)) if wins else value)
@@ -65,7 +65,14 @@ def polish(
 
     # its own step and an absolute tolerance; NLopt's seed is left alone (the local algorithms draw none)
     optimize(
-        f, config.polish_algorithm, start.u, max_evals, None, step=config.polish_step, xtol_rel=None, xtol_abs=1e-4
+        f,
+        config.selection.polish_algorithm,
+        start.u,
+        max_evals,
+        None,
+        step=config.selection.polish_step,
+        xtol_rel=None,
+        xtol_abs=1e-4,
     )
     if best[1] is None:
         return None, None, records

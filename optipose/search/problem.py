@@ -85,7 +85,9 @@ class SurrogateProblem:
             mounting=objective.conditions.mounted,
             cell=cell,
         )
-        self.space = PoseSpace.around(np.asarray(part.mesh.bounds), config.margin, config.alpha_max_deg)
+        self.space = PoseSpace.around(
+            np.asarray(part.mesh.bounds), config.constraints.margin, config.constraints.alpha_max_deg
+        )
         self.collision = collision_model(part)
         corners = self.collision.sensor.head_box_corners()
         middle = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
@@ -172,7 +174,7 @@ class SurrogateProblem:
         return self._sensor(self.space.to_pose(np.asarray(key)))
 
     def _sensor(self, T: np.ndarray) -> SensorInfo | Violation:
-        cfg = self.config
+        cfg = self.config.constraints
         skew, limit = abs(T[0, 0]), np.sin(np.deg2rad(cfg.line_skew_max_deg))  # |x_S · x_O|
         if skew > limit + 1e-12:  # checked first: it needs no collision test and no scan
             return Violation("line_skew", 1.0 + (skew - limit) / max(1.0 - limit, 1e-9))
@@ -215,7 +217,7 @@ class SurrogateProblem:
         positive); otherwise centres d apart, d/√3 − 2·radius beyond the gap (along one of the first box's
         axes the centres are at least d/√3 apart, and SAT tests that axis)."""
         poses = self.space.to_poses(u)
-        sensor, gap_min = self.collision.sensor, self.config.head_gap
+        sensor, gap_min = self.collision.sensor, self.config.constraints.head_gap
         centre, radius = self._head_sphere
         centres = [T[:3, :3] @ centre + T[:3, 3] for T in poses]
         for a, b in itertools.combinations(range(len(poses)), 2):
@@ -232,14 +234,15 @@ class SurrogateProblem:
         level by noise level under a band (the worst over the band is the top level's on nearly every axis,
         so it cannot see an axis lost at the preset's noise: the comparison with the hand layout can)."""
         target = self._targets.get(k, self._targets.get(max(self._targets, default=0)))
-        if target is None or self.config.hand_margin <= 0:
+        if target is None or self.config.surrogate.hand_margin <= 0:
             return 0.0
-        margin, weights = self.config.hand_margin, self.weights[0]
+        margin, weights = self.config.surrogate.hand_margin, self.weights[0]
         values, target = np.atleast_2d(stats.level_axis_score), np.atleast_2d(target)
         if len(target) != len(values):
             raise ValueError(
                 f"hand targets for {len(target)} noise level(s), the layout's for {len(values)}: give each level's (level_axis_score)"
             )
         return float(
-            self.config.hand_weight * sum(weighted_excess(v, t, margin, weights) for v, t in zip(values, target))
+            self.config.surrogate.hand_weight
+            * sum(weighted_excess(v, t, margin, weights) for v, t in zip(values, target))
         )

@@ -24,13 +24,13 @@ def screen(sub: SubProblem, config: SearchConfig, k: int, seed: int) -> list[np.
 
     sub : the new sensor's sub-problem of the study (:class:`~optipose.search.driver.SubProblem`).
     """
-    if config.screen_samples <= 0:
+    if config.surrogate.screen_samples <= 0:
         return []
     from scipy.stats import qmc
 
     study = sub.study
     with study.stage_named(f"screen:k={k}"):
-        points = qmc.Sobol(6, scramble=True, seed=seed).random(int(config.screen_samples))
+        points = qmc.Sobol(6, scramble=True, seed=seed).random(int(config.surrogate.screen_samples))
         values = []
         for start in range(0, len(points), _CHUNK):  # each chunk's poses on every core, then recorded in order
             block = points[start : start + _CHUNK]
@@ -39,14 +39,16 @@ def screen(sub: SubProblem, config: SearchConfig, k: int, seed: int) -> list[np.
         values = np.array(values)
     picked: list[np.ndarray] = []
     for i in np.argsort(values, kind="stable"):
-        if values[i] >= PENALTY or len(picked) >= config.screen_starts:
+        if values[i] >= PENALTY or len(picked) >= config.surrogate.screen_starts:
             break
         if apart(points[i], picked, 0.1):
             picked.append(points[i])
     bests = []
     with study.stage_named(f"screen-polish:k={k}"):
         for j, start in enumerate(picked):
-            best = local_best(sub, config.local_algorithm, start, config.screen_evals, seed + 10 + j)
+            best = local_best(
+                sub, config.surrogate.local_algorithm, start, config.surrogate.screen_evals, seed + 10 + j
+            )
             if best is not None:
                 bests.append((best.value, np.asarray(best.u, dtype=float)[-6:]))
     return [u for _, u in sorted(bests, key=lambda t: t[0])]

@@ -73,7 +73,7 @@ def select_finalists(
     finalists, records = {}, []
     confirmer = (
         Confirmer(part, stage_objective(objective, "confirmation"), selection_seed(seed), jobs)
-        if config.confirm_candidates > 0
+        if config.selection.confirm_candidates > 0
         else None
     )
     with make_evaluator(
@@ -92,7 +92,9 @@ def select_finalists(
             if not pool:
                 continue
             key, best, choice = min(pool, key=lambda t: _order(t, reference, band))
-            polished = reference is not None and (key[0] or key[1] > reference.score / 2) and config.polish_evals > 0
+            polished = (
+                reference is not None and (key[0] or key[1] > reference.score / 2) and config.selection.polish_evals > 0
+            )
             if polished:  # not yet no worse on every axis and 2x better in sum
                 best, choice = _polish(study, part, evaluator, pool, best, reference, records, on_stage)
             # a polish minimised these very 14-scan statistics, so its winner's are biased low: after a
@@ -104,7 +106,7 @@ def select_finalists(
             ):
                 pool_layouts = [(kk, f) for kk, f, _ in pool]
                 best = confirmer.pick(
-                    k, pool_layouts, config.confirm_candidates, records, on_stage, closest(pool, reference)
+                    k, pool_layouts, config.selection.confirm_candidates, records, on_stage, closest(pool, reference)
                 )
             finalists[k] = best
     if confirmer is not None:
@@ -156,7 +158,7 @@ def _screen_candidates(
             used,
             outcome,
             k,
-            evals=cfg.anchor_evals,
+            evals=cfg.surrogate.anchor_evals,
             until=time.monotonic() + (deadline - time.monotonic()) / 2,
         )
     rest = candidates(study.problem, study.history, outcome, k, per_k, finalists)
@@ -186,7 +188,7 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
     if k == 1:  # a reference means the part has a hand layout
         starts += hand_start(study.problem, baseline(part), reference)
     # under a band each evaluation runs every condition: the polish gets as many conditions' worth of work
-    evals = (config.polish_evals if k == 1 else config.polish_evals // 2) // len(
+    evals = (config.selection.polish_evals if k == 1 else config.selection.polish_evals // 2) // len(
         conditions(evaluator.objective.conditions)
     )
     starts = starts[: evals // (6 * k + 2)]  # COBYLA needs 6k + 1 evaluations before its first step
@@ -198,7 +200,7 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
             reference,
             config,
             evals // len(starts),
-            config.polish_time / len(starts),
+            config.selection.polish_time / len(starts),
             on_stage,
         )
         records += polish_records
@@ -213,7 +215,8 @@ def clear_win(choice, reference, config) -> bool:
     reference's and the sum at most ``clear_ratio`` × its sum. A win that wide on a 14-scan sample needs
     no confirmation (unless a polish produced it); anything less does."""
     return (
-        excess(choice, reference, config.polish_margin) == 0.0 and choice.score <= config.clear_ratio * reference.score
+        excess(choice, reference, config.selection.polish_margin) == 0.0
+        and choice.score <= config.selection.clear_ratio * reference.score
     )
 
 

@@ -43,7 +43,9 @@ def run_search(
     ks = sorted(set(config.sensors))
     hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])
     study.measure_against({k: f.stats.level_axis_score for k, f in hand.items()})
-    study.start_clock(config.max_time)  # after the hand layout is scored: that first scan also compiles the kernels
+    study.start_clock(
+        config.surrogate.max_time
+    )  # after the hand layout is scored: that first scan also compiles the kernels
     greedy, joint, unplaced = {}, {}, []
     try:
         _place(study, config, max(ks), hand_u, hand, rng, seed, greedy, joint)
@@ -85,15 +87,15 @@ def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict)
     for k in range(1, n + 1):
         with study.share(study.seconds_left() * work[k] / sum(work[j] for j in range(k, n + 1))):
             try:
-                if config.strategy in ("greedy", "both") or k == 1:
+                if config.surrogate.strategy in ("greedy", "both") or k == 1:
                     placed = greedy_stage(study, config, placed, hand_u, rng, seed * 1000 + k)
                     if study.best(k) is None:  # no feasible layout of k sensors: more sensors will not help
                         log.warning("no feasible layout of %d sensor(s) found; stopping", k)
                         break
                     greedy[k] = _found(study, k, "greedy", placed)
-                if k > 1 and config.strategy in ("joint", "both"):
+                if k > 1 and config.surrogate.strategy in ("joint", "both"):
                     joint[k] = joint_stage(study, config, k, greedy.get(k), hand.get(k), rng, seed * 1000 + 100 + k)
-                    if config.strategy == "joint":
+                    if config.surrogate.strategy == "joint":
                         placed = joint[k].u
             except Share as why:
                 best = study.best(k)
@@ -111,12 +113,11 @@ def _scans(config: SearchConfig, k: int) -> int:
     ones are cached), a joint one all k; the screen's poses are the same at every k, so only k = 1 scans
     them. (Counting evaluations times k instead gave k = 1 a sixth of the default budget's clock, less than
     its 4,096 screen poses take: on a busy machine the clock, not the seed, decided B's k = 1.)"""
-    greedy = (
-        config.global_evals + config.local_evals + config.random_starts + config.screen_starts * config.screen_evals
-    )
-    greedy += config.screen_samples if k == 1 else 0
-    return (greedy if config.strategy in ("greedy", "both") or k == 1 else 0) + (
-        k * config.joint_evals if k > 1 and config.strategy != "greedy" else 0
+    s = config.surrogate
+    greedy = s.global_evals + s.local_evals + s.random_starts + s.screen_starts * s.screen_evals
+    greedy += s.screen_samples if k == 1 else 0
+    return (greedy if s.strategy in ("greedy", "both") or k == 1 else 0) + (
+        k * s.joint_evals if k > 1 and s.strategy != "greedy" else 0
     )
 
 

@@ -62,9 +62,10 @@ from optipose.verdict.bootstrap import (
     widening,
 )
 
+from optipose.verdict.rules import Rules
+
 __all__ = [
     "Decision",
-    "Rules",
     "PairedDraw",
     "Interval",
     "AxisError",
@@ -86,20 +87,6 @@ class Decision(StrEnum):
     KEEP = "KEEP"
     TIE = "TIE"
     UNDECIDED = "UNDECIDED"
-
-
-@dataclass(frozen=True)
-class Rules:
-    """How a verdict is reached: the tolerance an axis may be worse by (0.1: 10 %), the share of an axis's scans
-    the found layout may fail on beyond the hand one's (0.01: one in a hundred), the intervals' two-sided
-    confidence, the bootstrap's replicates and seed, and the objective's statistic (its weights)."""
-
-    tolerance: float = 0.10
-    failures: float = 0.01
-    confidence: float = 0.95
-    replicates: int = 2000
-    seed: int = 0
-    statistic: StatisticConfig = field(default_factory=StatisticConfig)
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,7 +13,8 @@ import time
 from dataclasses import replace
 from typing import Callable, Sequence
 
-from optipose.verdict.confidence import ConfidentVerdict, Decision, PairedDraw, Rules, compare_draws
+from optipose.verdict.confidence import ConfidentVerdict, Decision, PairedDraw, compare_draws
+from optipose.verdict.rules import Rules
 
 __all__ = ["SPENDING", "looks", "race", "race_many", "spent"]
 

@@ -191,7 +191,7 @@ def search_config(tmp_path_factory) -> dict:
     from optipose.evaluate.objective import load_objective
     from optipose.io.search import SearchFolder
     from optipose.model.part import load_part
-    from optipose.search.config import config_from_budget
+    from optipose.search.budgets import config_from_budget
 
     folder = tmp_path_factory.mktemp("search_config")
     SearchFolder(folder).start(

@@ -1,0 +1,262 @@
+"""The search config in sections: every budget gives the settings the flat config gave, and both forms of a
+``[search]`` table (the sections, and the flat keys of older result folders and ``--search-config`` files) read
+back to the same config."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from dataclasses import fields
+from pathlib import Path
+
+import pytest
+
+from optipose.errors import ConfigError
+from optipose.search.budgets import BUDGETS, config_from_budget
+from optipose.search.config import FLAT_KEYS, SECTIONS, SearchConfig, search_preset, search_table
+
+ROOT = Path(__file__).resolve().parent.parent
+BASE = Path("/work/base/optipose/search/config.py")  # the flat config before the sections, where it is checked out
+
+# the flat config as it was before the sections (its defaults and its three tables), the regression's reference
+OLD_DEFAULTS = dict(
+    global_algorithm="GN_DIRECT_L",
+    local_algorithm="LN_BOBYQA",
+    global_evals=300,
+    local_evals=120,
+    joint_evals=200,
+    max_time=600.0,
+    sensors=(1, 2, 3),
+    strategy="both",
+    min_points=2000,
+    clearance=0.002,
+    head_gap=0.0,
+    margin=0.005,
+    alpha_max_deg=60.0,
+    line_skew_max_deg=60.0,
+    random_starts=8,
+    screen_samples=0,
+    screen_starts=6,
+    screen_evals=30,
+    select_candidates=3,
+    select_time=300.0,
+    anchor_evals=0,
+    hand_margin=0.5,
+    hand_weight=5.0,
+    polish_algorithm="LN_COBYLA",
+    polish_evals=0,
+    polish_time=150.0,
+    polish_margin=0.9,
+    polish_weight=5.0,
+    polish_step=0.03,
+    confirm_candidates=0,
+    clear_ratio=0.4,
+    validation="full",
+    band="",
+    verdict_draws=12,
+    verdict_time=120.0,
+    answer_time=0.0,
+    verdict_scans=0,
+    verdict_tolerance=0.10,
+    verdict_failures=0.01,
+    verdict_confidence=0.95,
+)
+OLD_BUDGETS = {
+    "quick": dict(
+        global_evals=70,
+        local_evals=20,
+        max_time=25.0,
+        random_starts=4,
+        select_candidates=0,
+        strategy="greedy",
+        screen_samples=1024,
+        screen_starts=4,
+        screen_evals=20,
+        verdict_draws=1,
+    ),
+    "default": dict(
+        global_evals=400,
+        local_evals=120,
+        joint_evals=200,
+        max_time=240.0,
+        select_candidates=3,
+        select_time=240.0,
+        polish_evals=90,
+        confirm_candidates=3,
+        screen_samples=4096,
+        band="robust",
+        verdict_time=60.0,
+    ),
+    "thorough": dict(
+        global_evals=2000,
+        local_evals=400,
+        joint_evals=1000,
+        max_time=3000.0,
+        random_starts=16,
+        screen_samples=16384,
+        screen_starts=12,
+        screen_evals=60,
+        select_candidates=6,
+        select_time=1800.0,
+        polish_time=900.0,
+        polish_evals=200,
+        confirm_candidates=6,
+        band="robust",
+        verdict_draws=30,
+        verdict_time=900.0,
+    ),
+}
+OLD_BAND = {
+    "default": dict(
+        max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024, anchor_evals=80
+    )
+}
+OLD_CELL = {
+    "quick": dict(
+        max_time=15.0,
+        screen_samples=64,
+        screen_starts=3,
+        screen_evals=15,
+        global_algorithm="LN_BOBYQA",
+        global_evals=20,
+        local_evals=10,
+        validation="reduced",
+        verdict_draws=12,
+        verdict_time=12.0,
+        verdict_scans=6,
+        answer_time=23.0,
+    ),
+    "default": dict(
+        max_time=150.0,
+        joint_evals=100,
+        screen_samples=1024,
+        select_time=45.0,
+        polish_evals=0,
+        confirm_candidates=0,
+        band="",
+        verdict_scans=20,
+        verdict_draws=10,
+        verdict_time=60.0,
+    ),
+    "thorough": dict(band="", verdict_scans=20),
+}
+CASES = [(b, band, cell) for b in ("quick", "default", "thorough") for band in (False, True) for cell in (False, True)]
+
+
+def flat(config: SearchConfig) -> dict:
+    """Every leaf of a sectioned config under its flat key, with the sensor counts."""
+    return {key: getattr(getattr(config, s), f) for key, (s, f) in FLAT_KEYS.items()} | {"sensors": config.sensors}
+
+
+def old_flat(budget: str, band: bool, cell: bool, sensors=(1, 2, 3)) -> dict:
+    adjusted = {**(OLD_BAND.get(budget, {}) if band else {}), **(OLD_CELL.get(budget, {}) if cell else {})}
+    return {**OLD_DEFAULTS, "sensors": sensors, **OLD_BUDGETS[budget], **adjusted}
+
+
+def test_every_flat_key_names_one_field_of_one_section():
+    leaves = [(s, f.name) for s, cls in SECTIONS.items() for f in fields(cls)]
+    assert sorted(FLAT_KEYS.values()) == sorted(leaves)  # each field once
+    assert set(FLAT_KEYS) | {"sensors"} == set(OLD_DEFAULTS)  # and every old key
+    assert flat(SearchConfig()) == OLD_DEFAULTS
+
+
+@pytest.mark.parametrize("budget, band, cell", CASES)
+def test_every_budget_gives_the_settings_of_the_flat_config(budget, band, cell):
+    new = flat(config_from_budget(budget, (1, 2, 3), band=band, cell=cell))
+    old = old_flat(budget, band, cell)
+    assert new == old
+    assert {k: type(v) for k, v in new.items()} == {k: type(v) for k, v in old.items()}  # 25.0 stays a float
+
+
+@pytest.mark.skipif(not BASE.is_file(), reason="no checkout of the flat config at /work/base")
+def test_every_budget_equals_the_base_commits_flat_config():
+    spec = importlib.util.spec_from_file_location("base_search_config", BASE)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    try:
+        spec.loader.exec_module(module)
+        for budget, band, cell in CASES:
+            old = vars(module.config_from_budget(budget, (1, 2), band=band, cell=cell))
+            assert flat(config_from_budget(budget, (1, 2), band=band, cell=cell)) == old, (budget, band, cell)
+    finally:
+        del sys.modules[spec.name]
+
+
+@pytest.mark.parametrize("budget, band, cell", CASES)
+def test_a_config_reads_back_from_its_sections_and_from_its_flat_keys(budget, band, cell):
+    config = config_from_budget(budget, (1, 3), band=band, cell=cell)
+    assert search_preset(search_table(config)).apply(SearchConfig()) == config
+    assert search_preset(flat(config)).apply(SearchConfig()) == config  # an older result folder's table
+
+
+def test_a_search_table_takes_sections_flat_keys_or_both_and_the_user_word_last():
+    both = search_preset({"global_evals": 25, "selection": {"candidates": 0}, "band": "", "verdict": {"draws": 2}})
+    config = config_from_budget("default", (1,), both)
+    assert (config.surrogate.global_evals, config.selection.candidates) == (25, 0)
+    assert (config.validation.band_objective, config.verdict.draws) == ("", 2)
+    assert config.validation.protocol == "full" and config.surrogate.local_evals == 120  # the rest the budget's
+    assert search_preset({"validation": "reduced"}).validation == {"protocol": "reduced"}  # the flat key
+    assert search_preset({"validation": {"protocol": "reduced"}}).validation == {"protocol": "reduced"}  # the section
+    assert config_from_budget("quick", (1,), search_preset({"sensors": [2, 3]})).sensors == (2, 3)
+
+
+@pytest.mark.parametrize(
+    "table, message",
+    [
+        ({"global_eval": 3}, "unknown search setting(s) global_eval"),
+        ({"surrogate": {"draws": 3}, "colour": 1}, "unknown search setting(s) colour, surrogate.draws"),
+        ({"verdict_draws": 3, "verdict": {"draws": 4}}, "verdict.draws given twice"),
+    ],
+)
+def test_a_search_table_with_an_unknown_or_repeated_key_is_one_config_error(table, message):
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        search_preset(table)
+
+
+def test_a_search_config_file_in_either_form_overrides_the_budget(tmp_path):
+    from optipose.cli.search import _overrides
+
+    (tmp_path / "flat.toml").write_text('[search]\nglobal_evals = 25\nselect_candidates = 0\nvalidation = "reduced"\n')
+    (tmp_path / "sections.toml").write_text(
+        '[search.surrogate]\nglobal_evals = 25\n[search.selection]\ncandidates = 0\n[search.validation]\nprotocol = "reduced"\n'
+    )
+    flat_file, sections = (
+        config_from_budget("quick", (1,), _overrides(tmp_path / n)) for n in ("flat.toml", "sections.toml")
+    )
+    assert flat_file == sections and sections.surrogate.global_evals == 25 and sections.validation.protocol == "reduced"
+    (tmp_path / "bad.toml").write_text("[search]\nglobal_eval = 25\n[search.verdict]\nrounds = 2\n")
+    with pytest.raises(ConfigError) as bad:
+        _overrides(tmp_path / "bad.toml")
+    said = str(bad.value)
+    assert said.startswith(
+        f"search config {tmp_path / 'bad.toml'}: unknown key(s) global_eval, verdict.rounds (known: "
+    )
+    assert "\n" not in said and "verdict_draws" in said
+
+
+def test_the_committed_search_folders_written_flat_still_resume_with_their_settings():
+    from optipose.cli.search import _settings
+    from optipose.io.folders import read_config
+
+    folders = [
+        p.parent for p in sorted((ROOT / "results").rglob("config.toml")) if 'command = "search"' in p.read_text()
+    ]
+    assert folders  # results/verdict-quick and the others
+    for folder in folders:
+        saved = read_config(folder)
+        assert "global_evals" in saved.search  # the flat form
+        config = _settings(saved)[1]
+        assert flat(config) == {**OLD_DEFAULTS, **saved.search, "sensors": tuple(saved.search["sensors"])}, folder
+
+
+def test_the_report_shows_a_sectioned_config_one_value_a_row():
+    from optipose.io.config import run_config
+
+    sectioned = run_config({"search": search_table(SearchConfig())})
+    rows = dict(sectioned.search_settings)
+    assert rows["surrogate.global_evals"] == 300 and rows["verdict.draws"] == 12 and rows["sensors"] == (1, 2, 3)
+    assert sectioned.sensors == (1, 2, 3)
+    assert dict(run_config({"search": {"global_evals": 5, "sensors": [1]}}).search_settings) == {
+        "global_evals": 5,
+        "sensors": [1],
+    }
