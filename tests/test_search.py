@@ -460,7 +460,7 @@ def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_final
     single = as_sensor(_choice([(1.0, 2.0), (0.05, 0.1), (0.05, 0.1)]), 1)  # the pair's second sensor beats the hand
     pair_result = SimpleNamespace(table=[single], layout=SimpleNamespace(names=["S1", "S2"]))
     confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
-    confirmer._hand, confirmer._results, confirmer.chosen = hand, {}, {1: (True, np.deg2rad(5e-3))}
+    confirmer._baseline, confirmer._results, confirmer.chosen = hand, {}, {1: (True, np.deg2rad(5e-3))}
     confirmer.evaluate = lambda layout: pair_result
     problem = SimpleNamespace(
         score=lambda u: LayoutScore(0.25, {"score": 0.25}), space=SimpleNamespace(to_poses=lambda u: ["pose"])
@@ -500,7 +500,7 @@ def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_lay
         return SimpleNamespace(table=[full[float(layout.u[0])]])
 
     confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
-    confirmer._hand, confirmer._results, confirmer.chosen, confirmer.evaluate = hand, {}, {}, evaluate
+    confirmer._baseline, confirmer._results, confirmer.chosen, confirmer.evaluate = hand, {}, {}, evaluate
     assert confirmer.pick(1, pool, 2, []).strategy == "c0"  # the leaders alone: the lower sum, pitch worse
     assert evaluated == ["c0", "c1"]
     evaluated.clear()
