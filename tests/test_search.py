@@ -553,7 +553,7 @@ def test_the_hand_layout_evaluated_beside_the_search_is_the_one_validate_would_c
     with BaselineRun(part, objective, seed=3) as run:
         validation = validate(part, objective, found, 3, 1, "full", lambda name, r: seen.setdefault(name, r), run)
     np.testing.assert_array_equal(seen["hand"].per_scan[cols].to_numpy(), here.per_scan[cols].to_numpy())
-    assert validation.hand[1].score == here.table[0].score
+    assert validation.baseline[1].score == here.table[0].score
 
 
 def test_the_hand_layout_shared_out_over_processes_by_its_scans_is_the_evaluators():
@@ -604,7 +604,7 @@ def test_a_found_pair_inside_the_triple_in_another_order_shares_its_evaluation()
     assert nested_groups(layouts) == [[3, 2]]
     validation = validate(part, objective, layouts, 2, 1)
     assert validation.found[2].sensors == (1, 2) and validation.found[2].name == "S2S3"
-    assert validation.found[3].score == validation.hand[3].score  # the hand triple itself
+    assert validation.found[3].score == validation.baseline[3].score  # the hand triple itself
 
 
 def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
@@ -617,7 +617,7 @@ def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
     hand = part.layouts["hand"]
     found = {1: replace(hand, name="one", sensors=hand.sensors[1:2])}
     validation = validate(part, objective, found, 5, 1, "full", None, run)
-    assert validation.hand[1].score > 0 and np.isfinite(validation.hand[1].score)
+    assert validation.baseline[1].score > 0 and np.isfinite(validation.baseline[1].score)
 
 
 def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_path):
@@ -641,7 +641,7 @@ def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_p
     assert any("selecting" in s for s in stages) and any("hand layout" in s for s in stages)
     with Evaluator(part, objective, seed=validation_seed(2), jobs=1) as evaluator:
         here = evaluator(part.layouts["hand"])
-    assert report.validation.hand[2].score == here.table[1].score
+    assert report.validation.baseline[2].score == here.table[1].score
     assert (tmp_path / "validation" / "hand" / "per_scan.csv").is_file() and (tmp_path / "selection.csv").is_file()
 
 
@@ -694,8 +694,10 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
     assert report.band is not None and any("under the band" in s for s in stages)
     for k in (1, 2):
         levels = [label for label, _ in report.band.found[k].under]
-        assert levels == ["noise x1", "noise x5"] and [label for label, _ in report.band.hand[k].under] == levels
-        assert report.band.hand[k].under[1][1].score > report.band.hand[k].under[0][1].score  # 5x the noise costs
+        assert levels == ["noise x1", "noise x5"] and [label for label, _ in report.band.baseline[k].under] == levels
+        assert (
+            report.band.baseline[k].under[1][1].score > report.band.baseline[k].under[0][1].score
+        )  # 5x the noise costs
     import pandas as pd
 
     at_x1, nominal = (pd.read_csv(out / sub / "stats.csv") for sub in ("band/hand/noise-x1", "validation/hand"))
