@@ -154,7 +154,7 @@ def main() -> None:
                         return PairedDraw(hand[i], f, h)
 
                     rules = Rules(seed=trial, replicates=args.replicates)
-                    names = dict(k=k, found_name=choice.name, hand_name=choice.name)
+                    names = dict(k=k, found_name=choice.name, baseline_name=choice.name)
                     if n_draws > 0:
                         verdict = compare_draws([draw(i) for i in range(n_draws)], rules, **names)
                     else:

@@ -26,7 +26,7 @@ from optipose.search.draws import sides
 def stored_draws(folder: Path, result) -> list[dict]:
     """The folder's verdict draws in order, each k → its paired draw (the search's choices; ``result`` the
     folder's, read back)."""
-    v, side = result.validation, sides(result.layouts, result.validation, result.hand)
+    v, side = result.validation, sides(result.layouts, result.validation, result.baseline)
     draws = []
     for d in sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:])):
         stored = {
@@ -34,7 +34,7 @@ def stored_draws(folder: Path, result) -> list[dict]:
         }  # each once
         draws.append(
             {
-                k: paired_draw(stored[s.evaluation], s.choice, stored["hand"], v.hand[k])
+                k: paired_draw(stored[s.evaluation], s.choice, stored["hand"], v.baseline[k])
                 for k, s in side.items()
                 if s.evaluation in stored
             }

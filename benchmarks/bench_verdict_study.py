@@ -127,7 +127,7 @@ def holdout(args) -> None:
                 part, objective, result.layouts, seed, args.jobs, config.validation.protocol, first.__setitem__
             )
             if args.choices == "kept":  # what the search bought, on the held-out draws (the ideal cell's first)
-                validation = replace(validation, found=result.validation.found, hand=result.validation.hand)
+                validation = replace(validation, found=result.validation.found, baseline=result.validation.baseline)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
         pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / args.file, index=False)
         print(
@@ -152,12 +152,14 @@ def table(args) -> None:
         by_k = load_result(folder).confident.by_k
         held = [read_verdicts(folder / file).by_k for file in ([args.file] + ([args.remade_file] if remade else []))]
         for k, v in by_k.items():
-            axes = [f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.hand)]
+            axes = [
+                f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.baseline)
+            ]
             others = [
                 f"{h.decision} {ratio_cell(h.score)} ({h.n_draws})" if h else "-" for h in (by.get(k) for by in held)
             ]
             print(
-                f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.hand_name} | {ratio_cell(v.score)} | "
+                f"| {name} | {k} | {v.decision} | {v.found_name} / {v.reference} {v.baseline_name} | {ratio_cell(v.score)} | "
                 + " | ".join(axes)
                 + f" | {v.n_draws} | "
                 + " | ".join(others)
@@ -186,11 +188,11 @@ def draws(args) -> None:
         stored = [folder / "validation"] + sorted((folder / "verdict").glob("draw-*"), key=lambda d: int(d.name[5:]))
         v = result.validation
         loaded = functools.cache(load_result)  # a nested group's evaluation serves each of its k
-        for k, side in sides(result.layouts, v, result.hand).items():
+        for k, side in sides(result.layouts, v, result.baseline).items():
             ratios = []
             for d in stored:
                 if (d / side.evaluation).is_dir():
-                    pair = paired_draw(loaded(d / side.evaluation), side.choice, loaded(d / "hand"), v.hand[k])
+                    pair = paired_draw(loaded(d / side.evaluation), side.choice, loaded(d / "hand"), v.baseline[k])
                     ratios.append(compare_draws([pair], rules).score.estimate)
             rest = np.array(ratios[1:])
             spread = f"{rest.mean():.2f}x ({rest.min():.2f}-{rest.max():.2f})" if len(rest) else "-"

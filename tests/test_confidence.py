@@ -45,18 +45,18 @@ def _draws(rng, n_draws, ratio=1.0, extra=0.1, cell=0.2, start=0):
 
 def test_a_layout_against_itself_on_the_same_draws_is_an_exact_tie():
     rng = np.random.default_rng(1)
-    same = [PairedDraw(d.seed, d.hand.copy(), d.hand) for d in _draws(rng, 4)]
-    verdict = compare_draws(same, FAST, k=2, found_name="S1S2", hand_name="S1S2")
+    same = [PairedDraw(d.seed, d.baseline.copy(), d.baseline) for d in _draws(rng, 4)]
+    verdict = compare_draws(same, FAST, k=2, found_name="S1S2", baseline_name="S1S2")
     assert verdict.decision == Decision.TIE
     assert (verdict.score.estimate, verdict.score.low, verdict.score.high) == (1.0, 1.0, 1.0)
     assert all((a.ratio.low, a.ratio.high, a.median.low, a.p75.high) == (1.0, 1.0, 1.0, 1.0) for a in verdict.axes)
-    assert verdict.found == verdict.hand  # the predicted errors too
+    assert verdict.found == verdict.baseline  # the predicted errors too
     for n in (1, 2, 3):  # with any number of draws, even one
         assert compare_draws(same[:n], FAST).decision == Decision.TIE
 
 
 def test_a_buy_needs_the_interval_not_the_point_estimate():
-    hand = _draws(np.random.default_rng(2), 1)[0].hand
+    hand = _draws(np.random.default_rng(2), 1)[0].baseline
     # found 5 % better in sum on these three draws, but by 1.6x on one and worse on two: a wide interval
     wide = [PairedDraw(i, hand / f, hand) for i, f in enumerate((1.6, 0.85, 0.95))]
     verdict = compare_draws(wide, FAST)
@@ -71,12 +71,12 @@ def test_a_buy_needs_the_interval_not_the_point_estimate():
 
 
 def test_keep_when_hand_is_better_in_sum_or_an_axis_is_worse_beyond_the_tolerance():
-    hand = _draws(np.random.default_rng(3), 1)[0].hand
+    hand = _draws(np.random.default_rng(3), 1)[0].baseline
     assert compare_draws([PairedDraw(0, hand * 1.3, hand)], FAST).decision == Decision.KEEP
     # 2x better on roll and pitch, 1.5x worse on yaw: better in sum, and yaw's error alone adds about a sixth
     # to the hand layout's total (each axis about a third of it): worse on yaw beyond 10 %
     found = hand / np.array([2.0, 2.0, 1 / 1.5])
-    verdict = compare_draws([PairedDraw(0, found, hand)], FAST, k=1, found_name="F1", hand_name="S2")
+    verdict = compare_draws([PairedDraw(0, found, hand)], FAST, k=1, found_name="F1", baseline_name="S2")
     assert verdict.score.low > 1.0 and verdict.decision == Decision.KEEP
     assert "worse on yaw" in confident_line(verdict)
     # 5 % worse on yaw, within the tolerance, and better in sum: bought
@@ -86,7 +86,7 @@ def test_keep_when_hand_is_better_in_sum_or_an_axis_is_worse_beyond_the_toleranc
 
 def test_a_layout_that_fails_more_registrations_is_not_bought_for_a_better_score():
     rng = np.random.default_rng(7)
-    hand = [d.hand for d in _draws(rng, 10)]
+    hand = [d.baseline for d in _draws(rng, 10)]
     # found 1.6x better on every scan, but its pitch registration fails on 2, 1, 0, 0, 0, 0, 1, 2, 0, 1 of 77 scans
     # (hand's never): the medians and p75s do not see it, the failed share does
     counts = (2, 1, 0, 0, 0, 0, 1, 2, 0, 1)
@@ -95,7 +95,7 @@ def test_a_layout_that_fails_more_registrations_is_not_bought_for_a_better_score
         f = h / 1.6
         f[:c, 1] = FAILED_ERROR
         draws.append(PairedDraw(i, f, h))
-    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
+    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", baseline_name="S1S2S3")
     assert verdict.score.low > 1.0  # better in sum with confidence
     pitch = verdict.axes[1].failed
     # the interval by hand: the scans' spread (each draw's 0/1 per scan, c(n - c) / (n(n - 1)) over n) exceeds the
@@ -113,7 +113,7 @@ def test_a_layout_that_fails_more_registrations_is_not_bought_for_a_better_score
     # found failing 5 of 77 pitch scans on every draw: more than 1 % with confidence, so the hand layout is kept
     for d in draws:
         d.found[:5, 1] = FAILED_ERROR
-    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
+    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", baseline_name="S1S2S3")
     assert verdict.decision == Decision.KEEP and "fails 6.5 % more pitch" in confident_line(verdict)
     # failures beyond a tolerance of 10 %: bought, as on its score alone
     assert compare_draws(draws, Rules(replicates=400, failures=0.1)).decision == Decision.BUY
@@ -127,15 +127,15 @@ def test_a_keep_for_failures_says_why_in_80_columns_and_a_zero_tolerance_still_c
     rng = np.random.default_rng(8)
     draws = []
     for i, d in enumerate(_draws(rng, 6)):
-        f = d.hand / np.array([1.6, 1 / 1.5, 1.6])  # worse on pitch beyond the tolerance
+        f = d.baseline / np.array([1.6, 1 / 1.5, 1.6])  # worse on pitch beyond the tolerance
         f[:5, 1] = FAILED_ERROR  # and failing it on 5 of 77 scans where hand never does
-        draws.append(PairedDraw(i, f, d.hand))
-    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3", reference="conventional")
+        draws.append(PairedDraw(i, f, d.baseline))
+    verdict = compare_draws(draws, FAST, k=3, found_name="F1F2F3", baseline_name="S1S2S3", reference="conventional")
     line = confident_line(verdict)
     assert verdict.decision == Decision.KEEP and len(line) <= 80, line
     assert "worse on pitch" in line and "fails 6.5 % more pitch" in line  # the reasons kept, the ratio left out
     # a tolerance of 0 with no failure on either side: met (its test is <=), and the draws to add come from the rest
-    close = [PairedDraw(d.seed, d.hand / 1.02, d.hand) for d in _draws(np.random.default_rng(9), 3)]
+    close = [PairedDraw(d.seed, d.baseline / 1.02, d.baseline) for d in _draws(np.random.default_rng(9), 3)]
     strict = compare_draws(close, Rules(replicates=400, tolerance=0.0, failures=0.0))
     assert all((a.failed.low, a.failed.high) == (0.0, 0.0) for a in strict.axes)
     assert strict.decision in (Decision.BUY, Decision.UNDECIDED) and (
@@ -146,7 +146,7 @@ def test_a_keep_for_failures_says_why_in_80_columns_and_a_zero_tolerance_still_c
 def test_an_axis_is_worse_by_what_it_adds_to_the_hand_layouts_total():
     """The tolerance is a share of the hand layout's score: an axis of a fiftieth of it may double, one of a
     third may not grow by a third. Checked against the hand computation of the axis's test."""
-    hand = _draws(np.random.default_rng(3), 1)[0].hand * np.array([0.03, 1.0, 1.0])  # roll a small share
+    hand = _draws(np.random.default_rng(3), 1)[0].baseline * np.array([0.03, 1.0, 1.0])  # roll a small share
     found = hand / np.array([0.5, 1.5, 1.5])  # roll twice the hand's, pitch and yaw 1.5x better
     verdict = compare_draws([PairedDraw(0, found, hand)], FAST)
     share = lambda x: np.median(x, axis=0) + np.percentile(x, 75, axis=0)  # noqa: E731
@@ -155,7 +155,7 @@ def test_an_axis_is_worse_by_what_it_adds_to_the_hand_layouts_total():
     assert verdict.axes[0].ratio.estimate > 1 / 1.1 and verdict.axes[0].median.estimate == pytest.approx(0.5)
     assert verdict.decision == Decision.BUY
     # roll doubled where it is a third of the total adds a third: found is kept, though better in sum
-    hand = _draws(np.random.default_rng(3), 1)[0].hand
+    hand = _draws(np.random.default_rng(3), 1)[0].baseline
     verdict = compare_draws([PairedDraw(0, hand / np.array([0.5, 3.0, 3.0]), hand)], FAST)
     assert verdict.score.low > 1.0 and verdict.decision == Decision.KEEP and "worse on roll" in confident_line(verdict)
 
@@ -166,7 +166,7 @@ def test_racing_stops_when_the_interval_is_clear():
     assert verdict.decision == Decision.BUY and verdict.n_draws <= 5  # the first or second look
     assert verdict.confidence > 0.95  # each look spends a share of the 5 %
     # an exact copy on the same draws: a tie at the first look
-    verdict = race(lambda i: PairedDraw(i, *(2 * [_draws(rng, 1)[0].hand])), FAST, max_draws=40)
+    verdict = race(lambda i: PairedDraw(i, *(2 * [_draws(rng, 1)[0].baseline])), FAST, max_draws=40)
     assert verdict.decision == Decision.TIE and verdict.n_draws == 3
 
 
@@ -324,10 +324,12 @@ def test_reproducible_from_the_seed():
 
 def test_one_line_of_at_most_80_columns_naming_the_sensors():
     rng = np.random.default_rng(9)
-    hand = _draws(rng, 1)[0].hand
+    hand = _draws(rng, 1)[0].baseline
     cases = {Decision.BUY: hand / 1.5, Decision.KEEP: hand * 1.5, Decision.TIE: hand}
     for decision, found in cases.items():
-        verdict = compare_draws([PairedDraw(0, found, hand)] * 2, FAST, k=3, found_name="F1F2F3", hand_name="S1S2S3")
+        verdict = compare_draws(
+            [PairedDraw(0, found, hand)] * 2, FAST, k=3, found_name="F1F2F3", baseline_name="S1S2S3"
+        )
         assert verdict.decision == decision
         line = confident_line(verdict)
         assert len(line) <= 80 and line.startswith(f"k=3: {decision}") and "F1F2F3" in line and "S1S2S3" in line
@@ -337,7 +339,7 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
         max_draws=4,
         k=3,
         found_name="F1F2F3",
-        hand_name="S1S2S3",
+        baseline_name="S1S2S3",
         reference="conventional",
     )
     assert (
@@ -349,7 +351,9 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
     # one found sensor against the conventional placement's three: the long names fit, the ratio whole
     for decision, found in {**cases, Decision.UNDECIDED: None}.items():
         draws = [PairedDraw(0, found, hand)] * 2 if found is not None else _draws(rng, 2, extra=0.5)
-        fewer = compare_draws(draws, FAST, k=1, found_name="F1", hand_name="S1S2S3", reference="conventional", hand_k=3)
+        fewer = compare_draws(
+            draws, FAST, k=1, found_name="F1", baseline_name="S1S2S3", reference="conventional", baseline_k=3
+        )
         line, s = fewer_line(fewer), fewer.score
         assert fewer.decision == decision and len(line) <= 80, line
         assert (
@@ -389,7 +393,7 @@ def test_scan_errors_take_each_axis_from_its_subset():
     np.testing.assert_array_equal(out[:, 1], [2e-4, FAILED_ERROR, 6e-4])
     np.testing.assert_array_equal(out[:, 2], [UNOBSERVABLE_PENALTY] * 3)
     draw = paired_draw(_result(1, errors, ok), choice, _result(1, errors, ok), choice)
-    assert draw.seed == 1 and np.array_equal(draw.found, draw.hand)
+    assert draw.seed == 1 and np.array_equal(draw.found, draw.baseline)
     with pytest.raises(ValueError, match="not a paired draw"):
         paired_draw(_result(1, errors, ok), choice, _result(2, errors, ok), choice)
     found = [_result(s, errors, ok) for s in (3, 1)]
@@ -402,7 +406,7 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
     # a sphere: every axis unobservable for found and hand alike, the penalty on every scan of every draw
     blind = np.full((20, 3), UNOBSERVABLE_PENALTY)
     verdict = compare_draws(
-        [PairedDraw(i, blind, blind) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
+        [PairedDraw(i, blind, blind) for i in range(2)], FAST, k=2, found_name="F1F2", baseline_name="S1S2"
     )
     assert verdict.unmeasured == ["roll", "pitch", "yaw"]
     assert confident_line(verdict) == "k=2: nothing measured: F1F2 and hand S1S2 see no roll/pitch/yaw"
@@ -411,7 +415,7 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
         FAST,
         k=3,
         found_name="F1F2F3",
-        hand_name="S1S2S3",
+        baseline_name="S1S2S3",
         reference="conventional",
     )
     assert confident_line(wide) == "k=3: nothing measured: F1F2F3 and conventional S1S2S3 see no roll/pitch/yaw"
@@ -423,7 +427,7 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
     seen = blind.copy()
     seen[:, 0] = np.deg2rad(0.01)
     verdict = compare_draws(
-        [PairedDraw(i, seen, seen) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
+        [PairedDraw(i, seen, seen) for i in range(2)], FAST, k=2, found_name="F1F2", baseline_name="S1S2"
     )
     assert verdict.unmeasured == ["pitch", "yaw"] and confident_line(verdict).startswith("k=2: TIE")
     assert interval_cell(verdict.found[0].median_deg) != "not measured"

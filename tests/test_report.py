@@ -133,8 +133,8 @@ def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
 # --- the baseline of a bare STL ------------------------------------------------------------------------
 def test_a_bare_stl_search_is_compared_with_the_conventional_placement(results):
     result = load_result(results["search"])
-    assert result.hand is not None and result.hand.description.startswith("conventional placement")
-    assert sorted(result.validation.hand) == [1, 2] and len(result.verdicts()) == 2
+    assert result.baseline is not None and result.baseline.description.startswith("conventional placement")
+    assert sorted(result.validation.baseline) == [1, 2] and len(result.verdicts()) == 2
     assert all("than conventional" in line for line in result.verdict_lines()[:2])
 
 
@@ -209,7 +209,7 @@ def test_the_xyz_rpy_shown_rebuilds_each_sensors_T_O_S(results):
     result = load_result(results["search"])
     md = (results["search"] / "report.md").read_text()
     shown = re.findall(r"# (\w+): X Y Z \(mm\), roll pitch yaw \(deg, extrinsic xyz\)\n([-0-9., ]+)", md)
-    layouts = [*(lay for _, lay in sorted(result.layouts.items())), result.hand]
+    layouts = [*(lay for _, lay in sorted(result.layouts.items())), result.baseline]
     expected = [(s.name, s.T_O_S) for lay in layouts for s in lay.sensors]
     assert [name for name, _ in shown] == [name for name, _ in expected]
     for (_, numbers), (_, T) in zip(shown, expected):

@@ -34,7 +34,7 @@ VALIDATION = Validation(
     "full",
     1234,
     found={3: _choice((0, 1, 2), F, [(0.05, 0.1)] * 3), 1: _choice((0,), F, [(0.1, 0.2), (0.1, 0.25), (0.05, 0.1)])},
-    hand={1: _choice((0,), S, [(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)]), 3: _choice((0, 1, 2), S, [(0.1, 0.2)] * 3)},
+    baseline={1: _choice((0,), S, [(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)]), 3: _choice((0, 1, 2), S, [(0.1, 0.2)] * 3)},
 )
 
 
@@ -61,7 +61,7 @@ def test_a_found_layout_worse_in_sum_says_keep_and_a_bare_part_gets_no_verdict()
         "full",
         1,
         found={2: _choice((0, 1), F, [(0.5, 0.6), (0.1, 0.2), (0.1, 0.2)])},
-        hand={2: _choice((0, 1), S, [(0.4, 0.5), (0.1, 0.2), (0.1, 0.2)])},
+        baseline={2: _choice((0, 1), S, [(0.4, 0.5), (0.1, 0.2), (0.1, 0.2)])},
     )
     (line,) = pair.verdict_lines()
     assert line.startswith("k=2: found F1F2 1.13x worse in sum than hand S1S2 and worse on roll median 0.500 vs 0.400")
@@ -87,16 +87,16 @@ def test_a_found_layout_that_ties_the_hand_one_is_not_bought():
 
 
 def test_dominance_excess_and_rank_agree():
-    hand, found = VALIDATION.hand[1], VALIDATION.found[1]
+    hand, found = VALIDATION.baseline[1], VALIDATION.found[1]
     assert not dominates(found, hand) and dominates(hand, hand)
     assert excess(found, hand) == pytest.approx(np.deg2rad(0.05e-3)) and excess(hand, hand) == 0.0
     assert excess(hand, hand, 0.5) > 0  # a margin below 1 asks for a clear win
-    assert rank(VALIDATION.found[3], VALIDATION.hand[3]) < rank(found, hand)  # no worse anywhere ranks first
+    assert rank(VALIDATION.found[3], VALIDATION.baseline[3]) < rank(found, hand)  # no worse anywhere ranks first
     assert rank(found, None) == (False, found.score)
     worse = Verdict(1, hand, found)  # the other way round: worse in sum and on axes
     assert verdict_line(worse).startswith("k=1: found S1 10.75x worse in sum than hand F1 and worse on roll median")
     assert verdict_line(worse).endswith(": keep F1")
-    assert one_versus_many(hand, VALIDATION.hand[3]).startswith("one found sensor does not beat")
+    assert one_versus_many(hand, VALIDATION.baseline[3]).startswith("one found sensor does not beat")
 
 
 def _layout(name, n, prefix):
@@ -128,7 +128,7 @@ def test_a_search_folder_reads_back_with_the_same_verdicts(tmp_path):
     sink.validation(VALIDATION)
     result = load_result(tmp_path)
     assert isinstance(result, SearchResult) and (result.part, result.seed, result.budget) == ("part_x", 7, "quick")
-    assert sorted(result.layouts) == [1, 3] and result.hand.names == S
+    assert sorted(result.layouts) == [1, 3] and result.baseline.names == S
     assert result.verdict_lines() == VALIDATION.verdict_lines()
     loaded = result.validation.found[1]
     assert loaded.sensors == (0,) and [a.subset for a in loaded.axes] == [(0,)] * 3  # indices recovered from names
@@ -246,7 +246,7 @@ def test_a_band_validation_reads_back_with_every_condition(tmp_path):
     found_hi = _choice((0,), F, [(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])
     hand_hi = _choice((0,), S, [(0.1, 0.2), (0.1, 0.25), (0.05, 0.1)])
     found = {1: _banded(found_hi, [(lo, VALIDATION.found[1]), (hi, found_hi)])}
-    hand = {1: _banded(VALIDATION.hand[1], [(lo, VALIDATION.hand[1]), (hi, hand_hi)])}
+    hand = {1: _banded(VALIDATION.baseline[1], [(lo, VALIDATION.baseline[1]), (hi, hand_hi)])}
     validation = Validation("full", 99, found, hand)
     write_config(
         tmp_path,

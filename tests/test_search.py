@@ -460,7 +460,7 @@ def test_a_confirmed_finalist_gives_way_to_the_better_k_subset_of_a_larger_final
     single = as_sensor(_choice([(1.0, 2.0), (0.05, 0.1), (0.05, 0.1)]), 1)  # the pair's second sensor beats the hand
     pair_result = SimpleNamespace(table=[single], layout=SimpleNamespace(names=["S1", "S2"]))
     confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
-    confirmer._hand, confirmer._results, confirmer.chosen = hand, {}, {1: (True, np.deg2rad(5e-3))}
+    confirmer._baseline, confirmer._results, confirmer.chosen = hand, {}, {1: (True, np.deg2rad(5e-3))}
     confirmer.evaluate = lambda layout: pair_result
     problem = SimpleNamespace(
         score=lambda u: LayoutScore(0.25, {"score": 0.25}), space=SimpleNamespace(to_poses=lambda u: ["pose"])
@@ -500,7 +500,7 @@ def test_confirmation_also_re_runs_the_candidate_closest_to_beating_the_hand_lay
         return SimpleNamespace(table=[full[float(layout.u[0])]])
 
     confirmer = _Confirmer.__new__(_Confirmer)  # no evaluator: the full-protocol results are given
-    confirmer._hand, confirmer._results, confirmer.chosen, confirmer.evaluate = hand, {}, {}, evaluate
+    confirmer._baseline, confirmer._results, confirmer.chosen, confirmer.evaluate = hand, {}, {}, evaluate
     assert confirmer.pick(1, pool, 2, []).strategy == "c0"  # the leaders alone: the lower sum, pitch worse
     assert evaluated == ["c0", "c1"]
     evaluated.clear()
@@ -553,7 +553,7 @@ def test_the_hand_layout_evaluated_beside_the_search_is_the_one_validate_would_c
     with BaselineRun(part, objective, seed=3) as run:
         validation = validate(part, objective, found, 3, 1, "full", lambda name, r: seen.setdefault(name, r), run)
     np.testing.assert_array_equal(seen["hand"].per_scan[cols].to_numpy(), here.per_scan[cols].to_numpy())
-    assert validation.hand[1].score == here.table[0].score
+    assert validation.baseline[1].score == here.table[0].score
 
 
 def test_the_hand_layout_shared_out_over_processes_by_its_scans_is_the_evaluators():
@@ -604,7 +604,7 @@ def test_a_found_pair_inside_the_triple_in_another_order_shares_its_evaluation()
     assert nested_groups(layouts) == [[3, 2]]
     validation = validate(part, objective, layouts, 2, 1)
     assert validation.found[2].sensors == (1, 2) and validation.found[2].name == "S2S3"
-    assert validation.found[3].score == validation.hand[3].score  # the hand triple itself
+    assert validation.found[3].score == validation.baseline[3].score  # the hand triple itself
 
 
 def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
@@ -617,7 +617,7 @@ def test_a_stopped_hand_evaluation_is_evaluated_again_by_validate():
     hand = part.layouts["hand"]
     found = {1: replace(hand, name="one", sensors=hand.sensors[1:2])}
     validation = validate(part, objective, found, 5, 1, "full", None, run)
-    assert validation.hand[1].score > 0 and np.isfinite(validation.hand[1].score)
+    assert validation.baseline[1].score > 0 and np.isfinite(validation.baseline[1].score)
 
 
 def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_path):
@@ -641,7 +641,7 @@ def test_the_whole_pipeline_with_a_selection_and_the_hand_layout_beside_it(tmp_p
     assert any("selecting" in s for s in stages) and any("hand layout" in s for s in stages)
     with Evaluator(part, objective, seed=validation_seed(2), jobs=1) as evaluator:
         here = evaluator(part.layouts["hand"])
-    assert report.validation.hand[2].score == here.table[1].score
+    assert report.validation.baseline[2].score == here.table[1].score
     assert (tmp_path / "validation" / "hand" / "per_scan.csv").is_file() and (tmp_path / "selection.csv").is_file()
 
 
@@ -694,8 +694,10 @@ def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp
     assert report.band is not None and any("under the band" in s for s in stages)
     for k in (1, 2):
         levels = [label for label, _ in report.band.found[k].under]
-        assert levels == ["noise x1", "noise x5"] and [label for label, _ in report.band.hand[k].under] == levels
-        assert report.band.hand[k].under[1][1].score > report.band.hand[k].under[0][1].score  # 5x the noise costs
+        assert levels == ["noise x1", "noise x5"] and [label for label, _ in report.band.baseline[k].under] == levels
+        assert (
+            report.band.baseline[k].under[1][1].score > report.band.baseline[k].under[0][1].score
+        )  # 5x the noise costs
     import pandas as pd
 
     at_x1, nominal = (pd.read_csv(out / sub / "stats.csv") for sub in ("band/hand/noise-x1", "validation/hand"))

@@ -60,10 +60,10 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
     assert sorted(by_k) == [1, 2, 3]
     # one found sensor against the hand's three rides along on the same draws, without holding the race
     last = max(v.n_draws for v in by_k.values())
-    assert (fewer.k, fewer.hand_k, fewer.hand_name, fewer.n_draws) == (1, 3, validation.hand[3].name, last)
+    assert (fewer.k, fewer.baseline_k, fewer.baseline_name, fewer.n_draws) == (1, 3, validation.baseline[3].name, last)
     assert fewer.found_name == "F1"
     same = [
-        k for k in by_k if validation.hand[k].sensors == tuple(range(k))
+        k for k in by_k if validation.baseline[k].sensors == tuple(range(k))
     ]  # the hand's own choice is its first k sensors
     assert 3 in same
     for k in same:
@@ -71,8 +71,12 @@ def test_the_hand_layout_found_again_is_an_exact_tie_on_every_draw(cell):
         assert v.decision == Decision.TIE, confident_line(v)
         assert (v.score.estimate, v.score.low, v.score.high) == (1.0, 1.0, 1.0)
         # the found sensors its axes use (a copy of the hand's: the hand's used ones), the hand's k sensors
-        used = validation.hand[k].used
-        assert v.found == v.hand and v.found_name == "".join(f"F{i + 1}" for i in used) and v.hand_name.startswith("S")
+        used = validation.baseline[k].used
+        assert (
+            v.found == v.baseline
+            and v.found_name == "".join(f"F{i + 1}" for i in used)
+            and v.baseline_name.startswith("S")
+        )
     # the ideal cell looks first at the validation's draw alone; a real cell waits for three instances, none of
     # them the validation's (the choices were made on it)
     expected = 1 if cell == "ideal" else 3
@@ -102,7 +106,7 @@ def test_racing_several_k_stops_each_at_its_own_look_and_ends_when_all_are_decid
 
     def next_draws(i, keys):
         calls.append((i, keys))
-        return {1: _pairs(rng, i, 3.0), 2: PairedDraw(i, *(2 * [_pairs(rng, i, 1.0).hand]))}
+        return {1: _pairs(rng, i, 3.0), 2: PairedDraw(i, *(2 * [_pairs(rng, i, 1.0).baseline]))}
 
     verdicts = race_many(next_draws, FAST, min_draws=2, max_draws=6, names={1: dict(k=1), 2: dict(k=2)})
     assert verdicts[1].decision == Decision.BUY and verdicts[1].n_draws == 2  # clear at the first look
@@ -132,18 +136,18 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
             FAST,
             k=k,
             found_name=f"F{k}",
-            hand_name="S1",
+            baseline_name="S1",
             seconds_per_draw=2.5,
         )
         for k in (1, 2)
     }
     verdicts[3] = replace(compare_draws([_pairs(rng, 0, 1.01)], FAST, k=3), decision=Decision.UNDECIDED, more_draws=7)
     fewer = compare_draws(
-        [_pairs(rng, i, 0.5) for i in range(3)], FAST, k=1, found_name="F1", hand_name="S1S2S3", hand_k=3
+        [_pairs(rng, i, 0.5) for i in range(3)], FAST, k=1, found_name="F1", baseline_name="S1S2S3", baseline_k=3
     )
     write_csv(verdict_frame(Verdicts(verdicts, fewer)), tmp_path / "verdict.csv")
     back = read_verdicts(tmp_path / "verdict.csv")
-    assert set(back.by_k) == {1, 2, 3} and back.fewer.hand_k == 3
+    assert set(back.by_k) == {1, 2, 3} and back.fewer.baseline_k == 3
     for read, v in [*((back.by_k[k], v) for k, v in verdicts.items()), (back.fewer, fewer)]:
         assert (
             confident_line(read) == confident_line(v)
@@ -193,13 +197,17 @@ def test_a_buy_says_which_bracket_to_move_and_which_hand_sensors_stay():
     assert kept_sensors(found, hand) == {"F2": "S2"}
     buy = replace(
         compare_draws(
-            [_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)], FAST, k=2, found_name="F1F2", hand_name="S1S2"
+            [_pairs(np.random.default_rng(5), i, 3.0) for i in range(2)],
+            FAST,
+            k=2,
+            found_name="F1F2",
+            baseline_name="S1S2",
         ),
         decision=Decision.BUY,
     )
     assert mount_line(buy, found, hand) == "k=2: mount F1 (new), keep S2; S1 freed"
     assert mount_line(replace(buy, decision=Decision.TIE), found, hand) == ""
-    assert mount_line(replace(buy, found_name="F2", hand_name="S2S3"), found, hand) == "k=2: keep S2; S3 freed"
+    assert mount_line(replace(buy, found_name="F2", baseline_name="S2S3"), found, hand) == "k=2: keep S2; S3 freed"
 
 
 def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
@@ -239,7 +247,7 @@ def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
             FAST,
             k=3,
             found_name=_found_name(triple, choice, big),
-            hand_name="S1S2S3",
+            baseline_name="S1S2S3",
         ),
         decision=Decision.BUY,
     )
@@ -273,7 +281,7 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     from optipose.io.search import SearchFolder
     from optipose.model.layout import is_part_of
     from optipose.search.records import Validation
-    from optipose.search.validate import hand_where_better
+    from optipose.search.validate import baseline_where_better
 
     part = load_part("part_b")
     hand = part.layouts["hand"]
@@ -292,12 +300,12 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     triple = Choice(3, (0, 1, 2), "S1S2S3", tuple(replace(a, subset=(0, 1, 2), name="S1S2S3") for a in axes), 2e-3)
     layouts = {2: _as_found(hand, 2), 3: _as_found(hand, 3)}
     validation = Validation("reduced", 1, {3: found_triple, 2: found_pair}, {2: pair, 3: triple})
-    answered, v = hand_where_better(layouts, validation, hand)
+    answered, v = baseline_where_better(layouts, validation, hand)
     assert answered[3] is layouts[3] and v.found[3] is found_triple
     assert answered[2].names == ["S2", "S3"] and is_part_of(answered[2], hand) and not is_part_of(layouts[2], hand)
     assert [np.array_equal(T, hand.poses[i]) for i, T in zip((1, 2), answered[2].poses)] == [True, True]
     assert v.found[2].sensors == (0, 1) and [a.subset for a in v.found[2].axes] == [(1,), (0, 1), (0, 1)]
-    assert (v.found[2].name, v.found[2].score) == ("S2S3", 2e-3) and v.hand == validation.hand
+    assert (v.found[2].name, v.found[2].score) == ("S2S3", 2e-3) and v.baseline == validation.baseline
 
     # the largest found layout replaced: the smaller ones it held keep their choices, restated in the largest left
     # (here found_k3 = (C, A, B) held found_k1 = A as its F2 and found_k2 = (B, A) as F3F2; in found_k2 A is F2, B F1)
@@ -319,7 +327,7 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
         1e-3,
     )
     worse = replace(found_triple, score=5e-3)
-    answered, v = hand_where_better(nested, Validation("reduced", 1, {3: worse, 2: two, 1: one}, {3: triple}), hand)
+    answered, v = baseline_where_better(nested, Validation("reduced", 1, {3: worse, 2: two, 1: one}, {3: triple}), hand)
     assert is_part_of(answered[3], hand) and answered[2] is nested[2] and answered[1] is nested[1]
     assert (v.found[1].sensors, v.found[1].name, [a.subset for a in v.found[1].axes]) == (
         (1,),
@@ -337,9 +345,9 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     first, names = {}, []
     validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)
     worse = replace(
-        validation, found={**validation.found, 1: replace(validation.found[1], score=validation.hand[1].score * 2)}
+        validation, found={**validation.found, 1: replace(validation.found[1], score=validation.baseline[1].score * 2)}
     )
-    answered, v = hand_where_better(layouts, worse, hand)
+    answered, v = baseline_where_better(layouts, worse, hand)
     assert sorted(k for k in answered if is_part_of(answered[k], hand)) == [1]
     verdicts = confident_verdicts(
         part, objective, answered, v, first, 5, config, on_draw=lambda i, name, result: names.append(name)
@@ -347,11 +355,11 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     by_k, fewer = verdicts.by_k, verdicts.fewer
     one = by_k[1]
     assert one.decision == Decision.TIE and (one.score.estimate, one.score.low, one.score.high) == (1.0, 1.0, 1.0)
-    assert one.found == one.hand and one.found_name == one.hand_name == validation.hand[1].name
-    assert confident_line(one).startswith(f"k=1: TIE keep hand {one.hand_name}: no found layout beat it")
+    assert one.found == one.baseline and one.found_name == one.baseline_name == validation.baseline[1].name
+    assert confident_line(one).startswith(f"k=1: TIE keep hand {one.baseline_name}: no found layout beat it")
     assert set(names) == {"hand", "found_k3"}  # the single is not evaluated: its side is the hand's evaluation
     assert one.n_draws == max(v.n_draws for v in by_k.values())  # it rode along to the race's last look
-    assert fewer_line(fewer).startswith(f"fewer sensors: {one.hand_name} alone")
+    assert fewer_line(fewer).startswith(f"fewer sensors: {one.baseline_name} alone")
 
     # the folder: layouts/found_k1.toml holds the hand's sensor, comparison.csv its choice, both read back
     sink = SearchFolder(tmp_path)
@@ -359,7 +367,8 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     sink.validation(v)
     back = load_search(tmp_path, RunConfig(command="search", part_name="part_b", seed=5))
     assert (
-        back.layouts[1].names == [validation.hand[1].name] and back.validation.found[1].name == validation.hand[1].name
+        back.layouts[1].names == [validation.baseline[1].name]
+        and back.validation.found[1].name == validation.baseline[1].name
     )
     assert [(a.subset, a.name) for a in back.validation.found[1].axes] == [(a.subset, a.name) for a in v.found[1].axes]
     assert [a.median for a in back.validation.found[1].axes] == pytest.approx(

@@ -47,15 +47,15 @@ def trial_results(folder: str | Path, trial: TrialSpec) -> dict:
     verdict = {v.k: v for v in result.verdicts()}.get(trial.sensors)
     if verdict is None:  # no hand layout to compare with (a bare mesh): the found layout alone
         return _choice_columns(result.validation.found[trial.sensors])
-    hand = {
+    baseline = {
         f"hand_{key}": value for key, value in _choice_columns(verdict.reference).items() if not key.endswith("subset")
     }
-    hand.pop("hand_sensors_used")
+    baseline.pop("hand_sensors_used")
     band = result.band_verdicts().get(trial.sensors)
     checked = {} if band is None else {"band_ratio": band.ratio, "band_no_worse": bool(band.no_worse)}
     return {
         **_choice_columns(verdict.found),
-        **hand,
+        **baseline,
         "ratio": verdict.ratio,
         "no_worse": bool(verdict.no_worse),
         **checked,

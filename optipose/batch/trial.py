@@ -166,7 +166,7 @@ def _robustness(trial: TrialSpec, folder: Path, jobs: int) -> None:
     _check_k(trial, layout)
     objective = load_objective(trial.objective)
     result = evaluate_robust(part, layout, objective, seed=trial.seed, jobs=jobs, quiet=True)
-    write_robustness(folder, part, objective, trial.seed, {"hand": result}, hand="hand")
+    write_robustness(folder, part, objective, trial.seed, {"hand": result}, baseline="hand")
 
 
 TASK_RUNNERS = {"search": _search, "evaluate": _evaluate, "robustness": _robustness}

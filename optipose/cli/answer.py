@@ -45,9 +45,14 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
         for line in report.validation.unmeasured_lines(label):
             console.print(line, style="bold red", highlight=False)
         lines = report.validation.verdict_lines(label)
-        found, hand = report.validation.found, report.validation.hand
-        if 1 in found and max(hand, default=0) > 1 and report.confident.fewer is None:  # fewer sensors to buy
-            console.print(words.one_versus_many(found[1], hand[max(hand)], label, the=False), highlight=False)
+        found, baseline_choices = report.validation.found, report.validation.baseline
+        if (
+            1 in found and max(baseline_choices, default=0) > 1 and report.confident.fewer is None
+        ):  # fewer sensors to buy
+            console.print(
+                words.one_versus_many(found[1], baseline_choices[max(baseline_choices)], label, the=False),
+                highlight=False,
+            )
         console.print(_validation_table(report.validation, part, label))
         console.print(_subsets_table(report.validation, label))
         if any(v.ratios() for v in verdicts):
@@ -104,7 +109,7 @@ def _confident_table(confident: dict, part):
         [("k", "right"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"), ("yaw", "right")],
     )
     for k, v in sorted(confident.items()):
-        for name, axes in ((v.found_name, v.found), (v.hand_name, v.hand)):
+        for name, axes in ((v.found_name, v.found), (v.baseline_name, v.baseline)):
             table.add_row(str(k), name, *(interval_cell(a.median_deg, digits=2) for a in axes))
     return table
 
@@ -127,8 +132,8 @@ def _validation_table(validation, part, label: str = "hand"):
             ("score", "right"),
         ],
     )
-    for k in sorted({*validation.found, *validation.hand}):
-        for name, choices in (("found", validation.found), (label, validation.hand)):
+    for k in sorted({*validation.found, *validation.baseline}):
+        for name, choices in (("found", validation.found), (label, validation.baseline)):
             if k in choices:
                 choice = choices[k]
                 cells = [
@@ -145,8 +150,8 @@ def _subsets_table(validation, label: str = "hand"):
         "the subset each axis uses",
         [("k", "right"), ("layout", "left"), ("roll", "left"), ("pitch", "left"), ("yaw", "left")],
     )
-    for k in sorted({*validation.found, *validation.hand}):
-        for name, choices in (("found", validation.found), (label, validation.hand)):
+    for k in sorted({*validation.found, *validation.baseline}):
+        for name, choices in (("found", validation.found), (label, validation.baseline)):
             if k in choices:
                 table.add_row(str(k), _short(name), *(a.label for a in choices[k].axes))
     return table
@@ -171,7 +176,7 @@ def _strategies_table(outcome, label: str = "hand"):
         [("k", "right"), ("greedy", "right"), ("joint", "right"), (_short(label), "right"), ("winner", "right")],
     )
     for k in sorted(outcome.found):
-        g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.hand.get(k)
+        g, j, h = outcome.greedy.get(k), outcome.joint.get(k), outcome.baseline.get(k)
         fmt = lambda f: f"{1e3 * f.stats.score:.3f}" if f is not None and f.stats else "-"  # noqa: E731
         strategies.add_row(str(k), fmt(g), fmt(j), fmt(h), outcome.found[k].strategy)
     return strategies

@@ -125,7 +125,7 @@ def robustness_command(
             results[name] = evaluate_robust(the_part, lay, the_objective, seed=seed, jobs=jobs, quiet=True)
     folder = make_result_dir(the_part.name, "robustness", out)
     rows = write_robustness(
-        folder, the_part, the_objective, seed, results, hand="hand", sources=[str(p) for p in layouts]
+        folder, the_part, the_objective, seed, results, baseline="hand", sources=[str(p) for p in layouts]
     )
     Console().print(_table(rows, the_part.name))
     for line in _verdicts(results):
@@ -173,13 +173,13 @@ def _verdicts(results: dict) -> list[str]:
     from optipose.verdict.compare import Verdict
     from optipose.verdict.words import verdict_line
 
-    hand, lines = results["hand"], []
-    label = baseline_label(hand.layout)  # "conventional" for a part without a hand-placed layout
+    baseline, lines = results["hand"], []
+    label = baseline_label(baseline.layout)  # "conventional" for a part without a hand-placed layout
     for name, result in results.items():
         if name == "hand":
             continue
-        k = min(len(result.layout), len(hand.table))
-        line = verdict_line(Verdict(k, result.table[k - 1], hand.table[k - 1]), label)
+        k = min(len(result.layout), len(baseline.table))
+        line = verdict_line(Verdict(k, result.table[k - 1], baseline.table[k - 1]), label)
         lines.append(f"{name} (worst over the band): {line}")
     return lines
 

@@ -327,9 +327,9 @@ def _draw_layouts(folder: Path, part, layouts, jobs: int):
     from optipose.model.baseline import baseline, baseline_label
     from optipose.report.views import render_layouts
 
-    hand = baseline(part)
+    baseline_layout = baseline(part)
     named = {f"found_k{k}": lay for k, lay in layouts.items()} | (
-        {baseline_label(hand): hand} if hand is not None else {}
+        {baseline_label(baseline_layout): baseline_layout} if baseline_layout is not None else {}
     )
     shown = replace(part, layouts={**part.layouts, **named})
     thread = threading.Thread(target=render_layouts, args=(shown, list(named), folder / "layouts", jobs), daemon=True)

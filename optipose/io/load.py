@@ -59,13 +59,13 @@ def load_search(folder: Path, config: RunConfig | None = None):
         int(p.stem.removeprefix("found_k")): load_layout(p) for p in sorted((folder / "layouts").glob("found_k*.toml"))
     }
     baselines = [p for p in (folder / "layouts" / "hand.toml", folder / "layouts" / "conventional.toml") if p.is_file()]
-    hand = load_layout(baselines[0]) if baselines else None
+    baseline = load_layout(baselines[0]) if baselines else None
     found_names = [f"F{i + 1}" for i in range(max(layouts, default=0))]
 
     def names(
         k: int,
     ) -> list[str]:  # a found choice names the largest layout's sensors; the baseline's own, its sensors
-        return layouts[k].names if k in layouts and is_part_of(layouts[k], hand) else found_names
+        return layouts[k].names if k in layouts and is_part_of(layouts[k], baseline) else found_names
 
     def validation(path: Path):
         if not path.is_file():
@@ -75,9 +75,9 @@ def load_search(folder: Path, config: RunConfig | None = None):
             found = {}
             for k, group in rows[rows.layout == "found"].groupby("k", sort=False):
                 found |= choices_from_comparison(group, names(int(k)))
-            hand_choices = choices_from_comparison(rows[rows.layout == "hand"], hand.names if hand else [])
+            baseline_choices = choices_from_comparison(rows[rows.layout == "hand"], baseline.names if baseline else [])
             protocol = str(rows["protocol"].iloc[0]) if len(rows) else "full"
-        return Validation(protocol, int(given(config.validation_seed, -1)), found, hand_choices)
+        return Validation(protocol, int(given(config.validation_seed, -1)), found, baseline_choices)
 
     return SearchResult(
         folder,
@@ -86,7 +86,7 @@ def load_search(folder: Path, config: RunConfig | None = None):
         str(given(config.budget, "")),
         config,
         layouts,
-        hand,
+        baseline,
         validation(folder / "comparison.csv"),
         validation(folder / "band" / "comparison.csv") if config.band is not None else None,
         read_verdicts(folder / "verdict.csv"),
@@ -114,19 +114,19 @@ def read_verdicts(path: Path) -> Verdicts:
                 name not in rows
             ):  # a folder from before the failures' rule (NaN: not applied) and the hand choice's answer
                 rows[name] = value
-        for (k, hand_k), group in rows.groupby(["k", "hand_k"], sort=True):
+        for (k, baseline_k), group in rows.groupby(["k", "hand_k"], sort=True):
             score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
 
             def iv(row, name):
                 return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
 
             more = int(score["more_draws"])
-            against_more = int(hand_k) != int(k)
+            against_more = int(baseline_k) != int(k)
             verdict = ConfidentVerdict(
                 k=int(k),
                 decision=Decision(str(score["decision"])),
                 found_name=str(score["found"]),
-                hand_name=str(score["hand"]),
+                baseline_name=str(score["hand"]),
                 score=iv(score, "ratio"),
                 axes=tuple(
                     AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio"), iv(r, "failed"))
@@ -135,11 +135,11 @@ def read_verdicts(path: Path) -> Verdicts:
                 found=tuple(
                     AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()
                 ),
-                hand=tuple(
+                baseline=tuple(
                     AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()
                 ),
                 found_score_deg=iv(score, "found_median_deg"),
-                hand_score_deg=iv(score, "hand_median_deg"),
+                baseline_score_deg=iv(score, "hand_median_deg"),
                 n_draws=int(score["draws"]),
                 n_scans=int(score["scans"]),
                 tolerance=float(score["tolerance"]),
@@ -147,7 +147,7 @@ def read_verdicts(path: Path) -> Verdicts:
                 more_draws=None if more < 0 else more,
                 seconds_per_draw=float(score["seconds_per_draw"]),
                 reference=str(score["reference"]),
-                hand_k=int(hand_k) if against_more else 0,
+                baseline_k=int(baseline_k) if against_more else 0,
                 failures=float(score["failures"]),
                 kept=str(score["kept"]) == "True",
             )

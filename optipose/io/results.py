@@ -33,7 +33,8 @@ __all__ = ["EvaluationResult", "SearchResult", "RobustnessResult"]
 class SearchResult:
     """A search as saved in its result folder (:func:`optipose.io.load_result`).
 
-    layouts : k → the found layout (sensors F1 … Fk); hand : the hand-placed layout, when the part has one;
+    layouts : k → the found layout (sensors F1 … Fk); baseline : the hand-placed layout, when the part has one,
+    else the conventional placement;
     validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
     band : the same under the band of the check after a nominal search (``SearchConfig.validation.band_objective``), or None;
     confident : the verdicts with confidence (``verdict.csv``; none for a search without one).
@@ -45,7 +46,7 @@ class SearchResult:
     budget: str
     config: RunConfig = field(repr=False)
     layouts: dict[int, Layout] = field(default_factory=dict, repr=False)
-    hand: Layout | None = field(default=None, repr=False)
+    baseline: Layout | None = field(default=None, repr=False)
     validation: Validation | None = None
     band: Validation | None = None
     confident: Verdicts = field(default_factory=Verdicts)
@@ -67,7 +68,7 @@ class SearchResult:
             self.config.band is not None
             and self.band is None
             and self.validation is not None
-            and bool(self.validation.hand)
+            and bool(self.validation.baseline)
         )
 
     @property
@@ -81,7 +82,7 @@ class SearchResult:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` (or ``conventional.toml``) says."""
         from optipose.model.baseline import baseline_label
 
-        return self.validation.verdict_lines(baseline_label(self.hand)) if self.validation is not None else []
+        return self.validation.verdict_lines(baseline_label(self.baseline)) if self.validation is not None else []
 
 
 @dataclass(frozen=True)

@@ -36,11 +36,11 @@ __all__ = ["write_robustness", "write_brackets", "brackets_frame", "bracket_sens
 
 
 def write_robustness(
-    folder: Path, part, objective, seed: int, results: dict, hand: str = "hand", sources=()
+    folder: Path, part, objective, seed: int, results: dict, baseline: str = "hand", sources=()
 ) -> pd.DataFrame:
     """Save the folder of ``optipose robustness``; returns the table written to ``robustness.csv``.
 
-    results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the hand layout's under ``hand``.
+    results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the baseline's under the name ``baseline``.
     """
     folder = Path(folder)
     (folder / "layouts").mkdir(parents=True, exist_ok=True)
@@ -59,7 +59,7 @@ def write_robustness(
             "versions": versions(),
         },
     )
-    frame = robustness_frame(results, hand, objective.conditions.aggregate)
+    frame = robustness_frame(results, baseline, objective.conditions.aggregate)
     write_csv(frame, folder / "robustness.csv")
     per_condition = [
         result.stats.assign(layout=name, condition=condition.label)

@@ -53,15 +53,15 @@ class SearchFolder:
         write_csv(history_frame(history), self.folder / "history.csv")
         save_cache(self.folder, cache, space_version)
 
-    def layouts(self, layouts: dict[int, Layout], hand: Layout | None) -> None:
+    def layouts(self, layouts: dict[int, Layout], baseline: Layout | None) -> None:
         """``layouts/found_k*.toml`` and the baseline's: ``layouts/hand.toml`` when the part has a hand layout,
         else ``layouts/conventional.toml`` (:func:`optipose.model.baseline.baseline_label`)."""
         layout_dir = self.folder / "layouts"
         layout_dir.mkdir(exist_ok=True)
         for k, layout in layouts.items():
             write_layout(layout, layout_dir / f"found_k{k}.toml")
-        if hand is not None:
-            write_layout(hand, layout_dir / f"{baseline_label(hand)}.toml")
+        if baseline is not None:
+            write_layout(baseline, layout_dir / f"{baseline_label(baseline)}.toml")
 
     def selection(self, records) -> None:
         write_csv(selection_frame(records), self.folder / "selection.csv")

@@ -46,7 +46,7 @@ def comparison_frame(validation) -> pd.DataFrame:
     evaluated, then the hand rows. Under a band the ``condition`` column names the statistic's condition:
     ``band`` for the robust one (the aggregate over the band), then one row group per condition."""
     rows = [r for k, c in validation.found.items() for r in _band_rows("found", k, c)]
-    rows += [r for k, c in validation.hand.items() for r in _band_rows("hand", k, c)]
+    rows += [r for k, c in validation.baseline.items() for r in _band_rows("hand", k, c)]
     for row in rows:
         row["protocol"] = validation.protocol
     return pd.DataFrame(rows)
@@ -127,7 +127,7 @@ def surrogate_frame(outcome) -> pd.DataFrame:
             ("found", f),
             ("greedy", outcome.greedy.get(k)),
             ("joint", outcome.joint.get(k)),
-            ("hand", outcome.hand.get(k)),
+            ("hand", outcome.baseline.get(k)),
         ):
             if g is not None and g.stats:
                 rows.append(
@@ -142,29 +142,29 @@ def surrogate_frame(outcome) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def robustness_frame(results: dict, hand: str = "hand", aggregate="worst") -> pd.DataFrame:
+def robustness_frame(results: dict, baseline: str = "hand", aggregate="worst") -> pd.DataFrame:
     """Layouts under every condition (``robustness.csv``): per layout, k, condition and axis the layout's
     robust choice of k sensors (k: its own size, at most the hand layout's), each axis's subset fixed as a
     deployed cell fixes it, and the hand layout's robust choice of as many under the same condition; the
     condition ``worst`` (or ``quantile <q>``) is the robust statistic. The hand layout's rows come first, for
     every k a given layout is compared at (every k when none is given).
 
-    results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the hand layout's under ``hand``.
+    results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the baseline's under the name ``baseline``.
     """
     robust_label = "worst" if aggregate == "worst" else f"quantile {aggregate:g}"
-    hand_result = results[hand]
-    n_hand = len(hand_result.table)
-    given = {name: min(len(r.layout), n_hand) for name, r in results.items() if name != hand}
-    jobs = [(hand, k) for k in sorted(set(given.values()) or range(1, n_hand + 1))] + list(given.items())
+    baseline_result = results[baseline]
+    n_baseline = len(baseline_result.table)
+    given = {name: min(len(r.layout), n_baseline) for name, r in results.items() if name != baseline}
+    jobs = [(baseline, k) for k in sorted(set(given.values()) or range(1, n_baseline + 1))] + list(given.items())
     rows = []
     for name, k in jobs:
-        choice, reference = results[name].table[k - 1], hand_result.table[k - 1]
+        choice, reference = results[name].table[k - 1], baseline_result.table[k - 1]
         pairs = [
             (c.label, mine, theirs.score)
-            for (c, mine), (_, theirs) in zip(results[name].under(choice), hand_result.under(reference))
+            for (c, mine), (_, theirs) in zip(results[name].under(choice), baseline_result.under(reference))
         ]
-        for label, mine, hand_score in pairs + [(robust_label, choice, reference.score)]:
-            extra = {"condition": label, "hand_score_deg": float(np.rad2deg(hand_score))}
+        for label, mine, baseline_score in pairs + [(robust_label, choice, reference.score)]:
+            extra = {"condition": label, "hand_score_deg": float(np.rad2deg(baseline_score))}
             rows += [row | extra for row in _choice_rows(name, k, mine)]
     return pd.DataFrame(rows)
 
@@ -255,11 +255,11 @@ def verdict_frame(verdicts) -> pd.DataFrame:
     for v in verdicts.in_order():
         head = {
             "k": v.k,
-            "hand_k": v.hand_k or v.k,
+            "hand_k": v.baseline_k or v.k,
             "decision": v.decision.value,
             "found": v.found_name,
             "reference": v.reference,
-            "hand": v.hand_name,
+            "hand": v.baseline_name,
             "draws": v.n_draws,
             "scans": v.n_scans,
             "tolerance": v.tolerance,
@@ -270,9 +270,14 @@ def verdict_frame(verdicts) -> pd.DataFrame:
             "seconds_per_draw": v.seconds_per_draw,
         }
         empty = {"median_ratio": None, "p75_ratio": None, "failed": None, "found_p75_deg": None, "hand_p75_deg": None}
-        score = {"ratio": v.score, "found_median_deg": v.found_score_deg, "hand_median_deg": v.hand_score_deg, **empty}
+        score = {
+            "ratio": v.score,
+            "found_median_deg": v.found_score_deg,
+            "hand_median_deg": v.baseline_score_deg,
+            **empty,
+        }
         rows.append({**head, "axis": "score", **_intervals(score)})
-        for ratio, found, hand in zip(v.axes, v.found, v.hand):
+        for ratio, found, baseline in zip(v.axes, v.found, v.baseline):
             cells = {
                 "ratio": ratio.ratio,
                 "median_ratio": ratio.median,
@@ -280,8 +285,8 @@ def verdict_frame(verdicts) -> pd.DataFrame:
                 "failed": ratio.failed,
                 "found_median_deg": found.median_deg,
                 "found_p75_deg": found.p75_deg,
-                "hand_median_deg": hand.median_deg,
-                "hand_p75_deg": hand.p75_deg,
+                "hand_median_deg": baseline.median_deg,
+                "hand_p75_deg": baseline.p75_deg,
             }
             rows.append({**head, "axis": ratio.axis, **_intervals(cells)})
     return pd.DataFrame(rows)

@@ -118,5 +118,5 @@ def kept_sensors(layout: Layout, other: Layout, tolerance: float = 1e-6) -> dict
 
 def is_part_of(layout: Layout, other: Layout | None) -> bool:
     """Whether every sensor of ``layout`` is one of ``other``'s own, its name and its pose (:func:`kept_sensors`):
-    a search's answer that is some of the baseline's sensors (:func:`optipose.search.validate.hand_where_better`)."""
+    a search's answer that is some of the baseline's sensors (:func:`optipose.search.validate.baseline_where_better`)."""
     return other is not None and len(layout) > 0 and kept_sensors(layout, other) == {n: n for n in layout.names}

@@ -178,7 +178,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
     from optipose.report.confidence import confident_blocks
     from optipose.report.verdict import table1_side_by_side, verdict_blocks
 
-    label = baseline_label(result.hand)
+    label = baseline_label(result.baseline)
     validation = result.validation
     title = f"{result.part}: where to mount the sensors (search, budget {result.budget}, seed {result.seed})"
     blocks: list[Block] = []
@@ -196,13 +196,15 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
             else "the REDUCED protocol (14 scans; --budget default for the full one)"
         )
         band = result.band_verdicts()
-        verdict = verdict_blocks(result.verdicts(), validation.found, validation.hand, label, band, result.unchecked)
+        verdict = verdict_blocks(
+            result.verdicts(), validation.found, validation.baseline, label, band, result.unchecked
+        )
         if (
             result.confident.by_k
         ):  # the verdict on draws decides; the validation draw's own lines only where the band's check follows them
             verdict = (
                 verdict[:1]
-                + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.hand)
+                + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.baseline)
                 + ([Heading("The validation draw alone, statistic by statistic")] + verdict[1:] if band else [])
             )
         blocks += verdict
@@ -223,7 +225,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
         blocks.append(
             table1_side_by_side(
                 validation.found,
-                validation.hand,
+                validation.baseline,
                 label,
                 "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses",
             )
@@ -232,8 +234,8 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
             blocks += band_blocks(f"found k={v.k}", v, label)
         blocks += _band_check(result, label)
     layouts = {f"found_k{k}": lay for k, lay in sorted(result.layouts.items())}
-    if result.hand is not None:
-        layouts[label] = replace(result.hand, name=label)
+    if result.baseline is not None:
+        layouts[label] = replace(result.baseline, name=label)
     at = len(blocks)  # the views go here, taken last (their pictures may still be drawn beside this)
     blocks.append(Heading("Poses for the robot program"))
     for name, layout in layouts.items():
@@ -320,9 +322,9 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
             )
         )
     if not verdicts:
-        hand = {k: c for (n, k), c in result.choices.items() if n == "hand"}
+        baseline = {k: c for (n, k), c in result.choices.items() if n == "hand"}
         blocks.append(
-            table1_side_by_side({}, hand, label, "Table 1: median / 75th percentile (mdeg), robust over the band")
+            table1_side_by_side({}, baseline, label, "Table 1: median / 75th percentile (mdeg), robust over the band")
         )
     blocks.append(Heading("At every condition of the band"))
     for v in verdicts:

@@ -23,17 +23,19 @@ def confident_css(decision: Decision) -> str:
     return _CSS.get(decision, "verdict mixed")
 
 
-def confident_blocks(verdicts: Verdicts, cell: str = "ideal", layouts: dict | None = None, hand=None) -> list[Block]:
+def confident_blocks(
+    verdicts: Verdicts, cell: str = "ideal", layouts: dict | None = None, baseline=None
+) -> list[Block]:
     """The verdict's lines, what a BUY mounts and keeps (:func:`mount_line`), its table and its picture (empty
     without verdicts). ``cell``: the cell's name, which the caption says the errors are predicted in;
-    ``layouts``: k → the found layout, ``hand``: the baseline's."""
+    ``layouts``: k → the found layout, ``baseline``: the baseline's."""
     if not verdicts.by_k:
         return []
     ordered = list(verdicts.by_k.values())
     label = ordered[0].reference
     blocks: list[Block] = [Paragraph(confident_line(v), confident_css(v.decision)) for v in ordered]
     blocks += [
-        Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), hand))
+        Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), baseline))
     ]
     if cell == "ideal":
         blocks.append(Paragraph("These verdicts hold " + IDEAL_CELL + ".", "verdict mixed"))
@@ -51,7 +53,7 @@ def confident_blocks(verdicts: Verdicts, cell: str = "ideal", layouts: dict | No
                 str(v.n_draws),
             )
         )
-        rows.append(("", "", f"{label} {v.hand_name}", "", *(interval_cell(a.median_deg) for a in v.hand), ""))
+        rows.append(("", "", f"{label} {v.baseline_name}", "", *(interval_cell(a.median_deg) for a in v.baseline), ""))
     v = ordered[0]  # its failures NaN: a verdict from before the failures' rule, whose caption leaves it out
     caption = (
         f"Predicted median |error| per axis in the {cell} cell (mdeg), each with its {100 * v.confidence:.1f} % interval "

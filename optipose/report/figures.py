@@ -181,7 +181,7 @@ def verdict_intervals(verdicts: list) -> bytes:
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharey=True)
     ks = [v.k for v in verdicts]
     for j, ax in enumerate(axes):
-        for shift, side, colour in ((-0.12, "found", "C0"), (0.12, "hand", "C1")):
+        for shift, side, colour in ((-0.12, "found", "C0"), (0.12, "baseline", "C1")):
             est = [1e3 * getattr(v, side)[j].median_deg.estimate for v in verdicts]
             low = [1e3 * getattr(v, side)[j].median_deg.low for v in verdicts]
             high = [1e3 * getattr(v, side)[j].median_deg.high for v in verdicts]

@@ -23,9 +23,9 @@ def surrogate_pairs(selection: list, surrogate: dict, result, label: str) -> lis
     ]
     validation = result.validation
     if validation is not None:
-        for name, choices in (("found", validation.found), ("hand", validation.hand)):
+        for name, choices in (("found", validation.found), ("hand", validation.baseline)):
             for k, choice in choices.items():
-                replaced = name == "found" and k in result.layouts and is_part_of(result.layouts[k], result.hand)
+                replaced = name == "found" and k in result.layouts and is_part_of(result.layouts[k], result.baseline)
                 if (name, k) in surrogate and not replaced:
                     pairs.append(
                         (name if name == "found" else label, k, surrogate[(name, k)], float(np.rad2deg(choice.score)))

@@ -91,7 +91,7 @@ def _extended(problem: SurrogateProblem, base: Found, others: list[Found]) -> Fo
 
 def anchored(
     problem: SurrogateProblem,
-    hand_poses: list[np.ndarray],
+    baseline_poses: list[np.ndarray],
     used: tuple[int, ...],
     outcome: SearchOutcome,
     k: int,
@@ -121,14 +121,14 @@ def anchored(
     from the best of the found sensors and the hand one in place 0; only the refined layout comes back.
     """
     keepable = [i for i in used if i < k]
-    if not hand_poses or (not keepable and k > 1) or (k < 2 and evals <= 0):
+    if not baseline_poses or (not keepable and k > 1) or (k < 2 and evals <= 0):
         return []
     size = min(len(keepable), k - 1)  # one sensor, refined: nothing is kept, and the hand one in its place is a start
     pool = [f for f in (*outcome.found.values(), *outcome.greedy.values(), *outcome.joint.values()) if f and f.stats]
     sensors = distinct_sensors([f.sensor(i) for f in pool for i in range(f.k)])
     sensors = [u6 for u6 in sensors if not isinstance(problem.sensor(u6), Violation)]  # feasible alone
-    hand_u = [problem.space.from_pose(T) for T in hand_poses]
-    floors = _gap_floors(problem, hand_poses, k) if evals > 0 else {}
+    baseline_u = [problem.space.from_pose(T) for T in baseline_poses]
+    floors = _gap_floors(problem, baseline_poses, k) if evals > 0 else {}
     out, values = [], {}
     for keep in itertools.combinations(keepable, size):
         free = [i for i in range(k) if i not in keep]
@@ -136,8 +136,8 @@ def anchored(
         # each free place: a found sensor, or (refined only) the hand-placed sensor of that place when it is
         # feasible alone, a start the local search can move from; a sensor fills one place at most
         starts = [
-            [hand_u[i]]
-            if evals > 0 and i < len(hand_u) and not isinstance(problem.sensor(hand_u[i]), Violation)
+            [baseline_u[i]]
+            if evals > 0 and i < len(baseline_u) and not isinstance(problem.sensor(baseline_u[i]), Violation)
             else []
             for i in free
         ]
@@ -146,17 +146,17 @@ def anchored(
                 break
             if len(fill) > 1 and not all(apart(a, [b], 1e-9) for a, b in itertools.combinations(fill, 2)):
                 continue
-            u6s = {i: hand_u[i] for i in keep} | dict(zip(free, fill))
-            found = _anchored_layout(problem, [u6s[i] for i in range(k)], free, floors, hand_poses)
+            u6s = {i: baseline_u[i] for i in keep} | dict(zip(free, fill))
+            found = _anchored_layout(problem, [u6s[i] for i in range(k)], free, floors, baseline_poses)
             if found is not None:
                 these.append(found)
         if evals > 0 and these:
-            kept = {i: problem.info(hand_u[i]) for i in keep}  # whatever their clearances
+            kept = {i: problem.info(baseline_u[i]) for i in keep}  # whatever their clearances
             for found in these:
                 values[id(found)] = _anchored_value(problem, found.u, kept, k, floors)
             if time.monotonic() < until:
                 refined = _refined(
-                    problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors, hand_poses
+                    problem, min(these, key=lambda f: values[id(f)]), kept, k, evals, until, floors, baseline_poses
                 )
                 values[id(refined)] = _anchored_value(problem, refined.u, kept, k, floors)
                 these = (
@@ -172,7 +172,7 @@ def anchored(
 
 def maxmin_anchored(
     problem: SurrogateProblem,
-    hand_poses: list[np.ndarray],
+    baseline_poses: list[np.ndarray],
     k: int,
     n: int = 2,
     evals: int = 30,
@@ -191,23 +191,23 @@ def maxmin_anchored(
     local evaluations of the smallest ratio. Where :func:`anchored` trades the axes in a weighted sum, this
     asks each statistic to hold: on A the surrogate's no-worse triples that keep S2 and S3 came out no worse
     on all 12 statistics under ICP too (``benchmarks/bench_frontier.py --icp``)."""
-    if not hand_poses or k > len(hand_poses):
+    if not baseline_poses or k > len(baseline_poses):
         return []
-    hand_u = [problem.space.from_pose(T) for T in hand_poses]
-    hand = [problem.info(u) for u in hand_u]
+    baseline_u = [problem.space.from_pose(T) for T in baseline_poses]
+    baseline = [problem.info(u) for u in baseline_u]
     scales, mounting = problem.band["noise_scales"], problem.band["mounting"]
 
     def per_level(infos) -> np.ndarray:  # (levels, 3 axes, median and p75) of each level's best subsets, deg
         return predicted_stats(infos, noise_scales=scales, mounting=mounting).level_axis_stats
 
     target = min(
-        (per_level([hand[i] for i in c]) for c in itertools.combinations(range(len(hand)), k)),
+        (per_level([baseline[i] for i in c]) for c in itertools.combinations(range(len(baseline)), k)),
         key=lambda t: t.max(axis=0).sum(),
     )
     feasible = [(key, info) for key, info in problem.cache.items() if isinstance(info, SensorInfo)]
     feasible.sort(key=lambda t: per_level([t[1]]).max(axis=0).sum())  # each pose alone, its worst over the band
     pool = distinct_sensors([np.array(key) for key, _ in feasible])[:pool_size]
-    floors = _gap_floors(problem, hand_poses, k)
+    floors = _gap_floors(problem, baseline_poses, k)
 
     def rank(t) -> tuple:  # predicted no worse first, by the sum at the lowest level; then by the smallest ratio
         (smallest, low_sum), _ = t
@@ -218,13 +218,13 @@ def maxmin_anchored(
         free = next(i for i in range(k) if i not in keep)
 
         def place(u6, free=free) -> np.ndarray:
-            return np.concatenate([u6 if i == free else hand_u[i] for i in range(k)])
+            return np.concatenate([u6 if i == free else baseline_u[i] for i in range(k)])
 
         def ratios(u6, free=free) -> tuple[float, float] | None:
             info = problem.sensor(u6)
             if not isinstance(info, SensorInfo) or _gap_violation(problem, place(u6), [free], k, floors) > 0:
                 return None
-            stats = per_level([info if i == free else hand[i] for i in range(k)])
+            stats = per_level([info if i == free else baseline[i] for i in range(k)])
             return float(np.min(target / stats)), float(target[0].sum() / stats[0].sum())
 
         scored = [(r, u6) for u6 in pool if time.monotonic() < until and (r := ratios(u6)) is not None]
@@ -252,25 +252,30 @@ def maxmin_anchored(
         score = problem.score(u, constrained=False)
         out.append(
             Found(
-                k, "hand-anchored, max-min", u, kept_exactly(problem, u, [free], hand_poses), score.value, score.stats
+                k,
+                "hand-anchored, max-min",
+                u,
+                kept_exactly(problem, u, [free], baseline_poses),
+                score.value,
+                score.stats,
             )
         )
     return out
 
 
 def kept_exactly(
-    problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]
+    problem: SurrogateProblem, u: np.ndarray, free: list[int], baseline_poses: list[np.ndarray]
 ) -> list[np.ndarray]:
     """The poses of a hand-anchored layout (6k,): the found sensors' from their numbers, and every other place
     the hand sensor's pose itself. Through the [0, 1] numbers a pose comes back a few ulps off, and under
     bracket errors ICP is chaotic at that level (docs/conditions.md, 'The search under the band'): a kept sensor would then measure
     a little off the hand layout's own, and a tie would not be one."""
     poses = problem.space.to_poses(u)
-    return [poses[i] if i in free else np.array(hand_poses[i], dtype=float) for i in range(len(poses))]
+    return [poses[i] if i in free else np.array(baseline_poses[i], dtype=float) for i in range(len(poses))]
 
 
 def _anchored_poses(
-    problem: SurrogateProblem, u: np.ndarray, free: list[int], hand_poses: list[np.ndarray]
+    problem: SurrogateProblem, u: np.ndarray, free: list[int], baseline_poses: list[np.ndarray]
 ) -> list[np.ndarray]:
     """The poses :func:`anchored` gives its layouts: under a band the kept places hold the hand poses
     themselves (:func:`kept_exactly`); a nominal search keeps the poses its numbers give, as its answers were
@@ -278,11 +283,11 @@ def _anchored_poses(
     with it C's answer: docs/conditions.md, "The search under the band")."""
     if problem.objective.conditions.trivial:
         return problem.space.to_poses(u)
-    return kept_exactly(problem, u, free, hand_poses)
+    return kept_exactly(problem, u, free, baseline_poses)
 
 
 def _anchored_layout(
-    problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict, hand_poses: list[np.ndarray]
+    problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict, baseline_poses: list[np.ndarray]
 ) -> Found | None:
     """The layout of these sensors (one (6,) per place) scored on the surrogate as given (the kept heads are
     the baseline's); None when a found head is too close to another."""
@@ -290,17 +295,17 @@ def _anchored_layout(
     if _gap_violation(problem, u, free, k, floors) > 0:
         return None
     score = problem.score(u, constrained=False)
-    return Found(k, "hand-anchored", u, _anchored_poses(problem, u, free, hand_poses), score.value, score.stats)
+    return Found(k, "hand-anchored", u, _anchored_poses(problem, u, free, baseline_poses), score.value, score.stats)
 
 
-def _gap_floors(problem: SurrogateProblem, hand_poses: list[np.ndarray], k: int) -> dict:
+def _gap_floors(problem: SurrogateProblem, baseline_poses: list[np.ndarray], k: int) -> dict:
     """The gap (m) two heads of places a, b must keep: ``head_gap``, or the hand-placed heads' own gap at
     those places when that is smaller (the hand cell exists; our head box is a conservative model of it)."""
-    model, n = problem.collision.sensor, min(k, len(hand_poses))
+    model, n = problem.collision.sensor, min(k, len(baseline_poses))
     floors = {}
     for a, b in itertools.permutations(range(n), 2):
         floors[a, b] = min(
-            problem.config.constraints.head_gap, heads_clearance(model, hand_poses[a], model, hand_poses[b])
+            problem.config.constraints.head_gap, heads_clearance(model, baseline_poses[a], model, baseline_poses[b])
         )
     return floors
 
@@ -341,7 +346,7 @@ def _refined(
     evals: int,
     until: float,
     floors: dict,
-    hand_poses: list[np.ndarray],
+    baseline_poses: list[np.ndarray],
 ) -> Found:
     """``start`` with its found sensors moved by the local algorithm on :func:`_anchored_value`, the kept
     ones fixed; the best layout it met (``start`` itself when it met none better)."""
@@ -368,7 +373,7 @@ def _refined(
         k,
         "hand-anchored, refined",
         u,
-        _anchored_poses(problem, u, [i for i in range(k) if i not in kept], hand_poses),
+        _anchored_poses(problem, u, [i for i in range(k) if i not in kept], baseline_poses),
         stats.score,
         stats,
     )

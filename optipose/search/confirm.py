@@ -27,17 +27,17 @@ class Confirmer:
 
     def __init__(self, part, objective, seed: int, jobs: int):
         self.part, self.evaluator = part, make_evaluator(part, objective, seed=seed, jobs=jobs, quiet=True)
-        self._hand = None
+        self._baseline = None
         self._results: dict[bytes, object] = {}  # layout parameters -> its full-protocol evaluation
         self.chosen: dict[int, tuple] = {}  # k -> rank of the confirmed finalist
 
     def reference(self, on_stage=None):
         """The hand layout's full-protocol evaluation."""
-        if self._hand is None:
+        if self._baseline is None:
             if on_stage:
                 on_stage("confirming on the full protocol: the hand-placed layout")
-            self._hand = self.evaluator(baseline(self.part))
-        return self._hand
+            self._baseline = self.evaluator(baseline(self.part))
+        return self._baseline
 
     def evaluate(self, layout: Found):
         key = np.asarray(layout.u, dtype=float).tobytes()

@@ -8,7 +8,7 @@ same cell instance (the part as made, the calibration), the same protocol orient
 scan noise (common random numbers). Each layout keeps the choice the validation made for it (its subset per
 axis); a draw gives that choice's per-scan errors (:func:`optipose.verdict.confidence.scan_errors`), and
 registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``). A k the search answered with
-the hand layout's own choice (:func:`optipose.search.validate.hand_where_better`) is not evaluated: its side is the
+the hand layout's own choice (:func:`optipose.search.validate.baseline_where_better`) is not evaluated: its side is the
 hand layout's evaluation with that choice, an exact TIE that rides along without holding the race (when every k is
 one, they are the race, decided at one look at its last draw: the draws go to the hand layout's predicted error).
 
@@ -76,8 +76,8 @@ def confident_verdicts(
     on_draw(i, name, result) : told of each further draw's evaluations as they end. Empty when the part has no
     baseline, the validation has no hand choice, or the validation's objective is a band's (its evaluations are
     not per-scan ones), or ``first`` lacks one the race needs."""
-    hand = baseline(part)
-    side = sides(layouts, validation, hand)
+    baseline_layout = baseline(part)
+    side = sides(layouts, validation, baseline_layout)
     ks = sorted(side)
     kept = {k for k, s in side.items() if s.kept}
     evaluated = {s.evaluation: layouts[int(s.evaluation.removeprefix("found_k"))] for s in side.values() if not s.kept}
@@ -85,19 +85,23 @@ def confident_verdicts(
     objective = stage_objective(objective, "validation", config.validation.protocol)
     counted = choice_draw_counts(objective)
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
-    if hand is None or not ks or not objective.conditions.trivial or missing:
+    if baseline_layout is None or not ks or not objective.conditions.trivial or missing:
         return Verdicts()
     rules = config.verdict.rules(int(seed), objective.statistic)
-    label = baseline_label(hand)
+    label = baseline_label(baseline_layout)
     labels = {
         (k, k): dict(
-            k=k, found_name=validation.hand[k].name, hand_name=validation.hand[k].name, reference=label, kept=True
+            k=k,
+            found_name=validation.baseline[k].name,
+            baseline_name=validation.baseline[k].name,
+            reference=label,
+            kept=True,
         )
         if k in kept
         else dict(
             k=k,
             found_name=_found_name(layouts[k], s.choice, evaluated[s.evaluation]),
-            hand_name=validation.hand[k].name,
+            baseline_name=validation.baseline[k].name,
             reference=label,
         )
         for k, s in side.items()
@@ -106,15 +110,15 @@ def confident_verdicts(
 
     # the race's keys, (found k, hand k): each k against the hand's choice of as many, and one found sensor against
     # the hand's largest choice (``fewer``), which rides along
-    top = max(validation.hand)
+    top = max(validation.baseline)
     fewer = frozenset({(1, top)} if 1 in ks and top > 1 else ())
     compared = [(k, k) for k in ks] + sorted(fewer)
     for key in fewer:
-        labels[key] = dict(labels[(1, 1)], hand_name=validation.hand[top].name, hand_k=top)
+        labels[key] = dict(labels[(1, 1)], baseline_name=validation.baseline[top].name, baseline_k=top)
 
     def pairs(results: dict[str, EvaluationResult]) -> dict:
         return {
-            (f, h): paired_draw(results[side[f].evaluation], side[f].choice, results["hand"], validation.hand[h])
+            (f, h): paired_draw(results[side[f].evaluation], side[f].choice, results["hand"], validation.baseline[h])
             for f, h in compared
             if side[f].evaluation in results
         }
@@ -135,7 +139,7 @@ def confident_verdicts(
     executor = make_executor(jobs)
 
     # a draw registers only the subsets the choices use (of the 2^n - 1 a layout has)
-    used = {"hand": _used(validation.hand[h] for _, h in compared)}
+    used = {"hand": _used(validation.baseline[h] for _, h in compared)}
     used |= {name: _used(s.choice for s in side.values() if s.evaluation == name) for name in evaluated}
 
     def next_draws(n: int, keys) -> dict:
@@ -147,7 +151,7 @@ def confident_verdicts(
         with Evaluator(
             part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict.scans
         ) as evaluator:
-            results = {"hand": evaluator(hand, subsets=used["hand"])}
+            results = {"hand": evaluator(baseline_layout, subsets=used["hand"])}
             results |= {name: evaluator(evaluated[name], subsets=used[name]) for name in wanted}
         for name, result in results.items():
             done(i, name, result)
@@ -180,17 +184,18 @@ def _verdicts(raced: dict) -> Verdicts:
     return Verdicts({f: v for (f, h), v in raced.items() if f == h}, fewer[0] if fewer else None)
 
 
-def sides(layouts: dict[int, Layout], validation: Validation, hand: Layout | None) -> dict[int, Side]:
+def sides(layouts: dict[int, Layout], validation: Validation, baseline_layout: Layout | None) -> dict[int, Side]:
     """k (each with a found and a hand choice) → the :class:`~optipose.search.records.Side` a draw pairs with the
     hand layout's evaluation for it: the evaluation ``hand`` and the hand's choice for a k the search answered with
-    the hand layout's own sensors (:func:`optipose.search.validate.hand_where_better`), else ``found_k<m>`` (the
+    the hand layout's own sensors (:func:`optipose.search.validate.baseline_where_better`), else ``found_k<m>`` (the
     largest found layout that holds it, evaluated once for its nested group) and its found choice. The one rule the
     verdict and the benchmarks that read its stored draws pair by."""
-    ks = [k for k in sorted(validation.found) if k in validation.hand]
-    kept = {k for k in ks if is_part_of(layouts[k], hand)}
+    ks = [k for k in sorted(validation.found) if k in validation.baseline]
+    kept = {k for k in ks if is_part_of(layouts[k], baseline_layout)}
     big = {k: max(g) for g in nested_groups({k: lay for k, lay in layouts.items() if k not in kept}) for k in g}
     return {
-        k: Side("hand", validation.hand[k]) if k in kept else Side(f"found_k{big[k]}", validation.found[k]) for k in ks
+        k: Side("hand", validation.baseline[k]) if k in kept else Side(f"found_k{big[k]}", validation.found[k])
+        for k in ks
     }
 
 

@@ -21,7 +21,7 @@ def greedy_stage(
     study: SurrogateStudy,
     config: SearchConfig,
     placed: np.ndarray,
-    hand_u: list[np.ndarray],
+    baseline_u: list[np.ndarray],
     rng: np.random.Generator,
     seed: int,
 ) -> np.ndarray:
@@ -29,7 +29,7 @@ def greedy_stage(
     k = len(placed) // 6 + 1
     sub = SubProblem(study, placed)
     screened = screen(sub, config, k, seed - k)  # the same points at every k: cached
-    starts = [u for u in hand_u] + [rng.random(6) for _ in range(config.surrogate.random_starts)] + screened[:1]
+    starts = [u for u in baseline_u] + [rng.random(6) for _ in range(config.surrogate.random_starts)] + screened[:1]
     scored = sorted(
         ((study.problem.score(np.concatenate([placed, u])).objective, i) for i, u in enumerate(starts)),
         key=lambda t: t[0],
@@ -48,7 +48,7 @@ def greedy_stage(
     best_u6 = (best[1] if best else np.concatenate([placed, x0]))[-6:]
     with study.stage_named(f"greedy-polish:k={k}"):
         optimize(sub, config.surrogate.local_algorithm, best_u6, config.surrogate.local_evals, seed + 1)
-        if len(starts) and scored[0][1] < len(hand_u):  # also polish the best hand start, when it led
+        if len(starts) and scored[0][1] < len(baseline_u):  # also polish the best hand start, when it led
             optimize(sub, config.surrogate.local_algorithm, x0, config.surrogate.local_evals // 2, seed + 2)
     best = study.best(k)
     return best[1].copy() if best else np.concatenate([placed, x0])

@@ -17,20 +17,20 @@ def joint_stage(
     config: SearchConfig,
     k: int,
     greedy: Found | None,
-    hand: Found | None,
+    baseline: Found | None,
     rng: np.random.Generator,
     seed: int,
 ) -> Found:
     """The best layout of a local polish of all k sensors from each start (a random one when there is none)."""
     best = None
-    starts = [s for s in (greedy, hand) if s is not None] or [Found(k, "random", rng.random(6 * k), [], np.inf)]
+    starts = [s for s in (greedy, baseline) if s is not None] or [Found(k, "random", rng.random(6 * k), [], np.inf)]
     with study.stage_named(f"joint:k={k}"):
         for start in starts:
             row = local_best(
                 study,
                 config.surrogate.local_algorithm,
                 start.u,
-                config.surrogate.joint_evals // (2 if hand and greedy else 1),
+                config.surrogate.joint_evals // (2 if baseline and greedy else 1),
                 seed,
             )
             if row is not None:

@@ -75,7 +75,7 @@ class ResultSink(Protocol):
 
     def flush(self, history: list, cache, space_version: int) -> None: ...
 
-    def layouts(self, layouts: dict[int, Layout], hand: Layout | None) -> None: ...
+    def layouts(self, layouts: dict[int, Layout], baseline: Layout | None) -> None: ...
 
     def selection(self, records: list) -> None: ...
 
@@ -116,7 +116,7 @@ class SearchContext:
 
     check_objective : the objective of the check under a band after the validation (``SearchConfig.validation``'s
     ``band_objective``), None when there is none; started : ``time.monotonic()`` when the search started (the
-    verdict's ``answer_time`` counts from here); on_stage : told when a stage starts (or None); hand_run,
+    verdict's ``answer_time`` counts from here); on_stage : told when a stage starts (or None); baseline_run,
     check_run : the hand layout's validation and its check under the band, running beside the search (None in
     one process); study : the live surrogate search; first : the validation's evaluations by name (the
     verdict's first draw); report : what the stages found so far."""
@@ -130,10 +130,10 @@ class SearchContext:
     started: float
     check_objective: Objective | None = None
     on_stage: Callable[[str], None] | None = None
-    hand_run: BaselineRun | None = None
+    baseline_run: BaselineRun | None = None
     check_run: BaselineRun | None = None
     study: SurrogateStudy | None = None
-    hand: Layout | None = None
+    baseline: Layout | None = None
     first: dict = field(default_factory=dict)
     report: SearchReport | None = None
 
@@ -194,10 +194,10 @@ def _beside(ctx: SearchContext):
     band at the lowest priority), for as long as the search runs."""
     with (
         _shared_reference(ctx.part, ctx.jobs) as folder,
-        _baseline_run(ctx, ctx.objective, folder) as hand_run,
+        _baseline_run(ctx, ctx.objective, folder) as baseline_run,
         _baseline_run(ctx, ctx.check_objective, folder, last=True) as check_run,
     ):
-        ctx.hand_run, ctx.check_run = hand_run, check_run
+        ctx.baseline_run, ctx.check_run = baseline_run, check_run
         yield
 
 
@@ -245,9 +245,9 @@ def _surrogate_search(ctx: SearchContext) -> None:
             f"{constraints.min_points} points without its head hitting the part or a keep-out (can the sensors see "
             f"this part at all? check --units, the material and the part's size against the {constraints.clearance * 1e3:.0f} mm clearance)"
         )
-    ctx.hand = baseline(ctx.part)
+    ctx.baseline = baseline(ctx.part)
     ctx.report = SearchReport(outcome, _layouts(outcome.found))
-    ctx.sink.layouts(ctx.report.layouts, ctx.hand)
+    ctx.sink.layouts(ctx.report.layouts, ctx.baseline)
 
 
 def _selection(ctx: SearchContext) -> None:
@@ -258,9 +258,9 @@ def _selection(ctx: SearchContext) -> None:
         return
     from optipose.search.select import select_finalists
 
-    if ctx.hand_run is not None:  # the selection's clock is wall time: it runs alone on the cores
+    if ctx.baseline_run is not None:  # the selection's clock is wall time: it runs alone on the cores
         ctx.stage("evaluating the hand layout (held-out noise seed)")
-        ctx.hand_run.wait()
+        ctx.baseline_run.wait()
     ctx.stage("selecting finalists by ICP on a reduced protocol")
     finalists, records = select_finalists(
         ctx.part,
@@ -275,14 +275,14 @@ def _selection(ctx: SearchContext) -> None:
     )
     ctx.sink.selection(records)
     ctx.report.layouts = _layouts({**outcome.found, **finalists})
-    ctx.sink.layouts(ctx.report.layouts, ctx.hand)
+    ctx.sink.layouts(ctx.report.layouts, ctx.baseline)
 
 
 def _validation(ctx: SearchContext) -> None:
     """The found layouts and the hand one on the held-out seed; in a real cell, the baseline's choice where it did
     better (under a band the verdict is the band's, not raced)."""
     from optipose.search.draws import choice_draw_counts
-    from optipose.search.validate import hand_where_better, validate
+    from optipose.search.validate import baseline_where_better, validate
 
     report, protocol = ctx.report, ctx.config.validation.protocol
     ctx.stage(f"validating on the {protocol} protocol (held-out noise seed)")
@@ -292,20 +292,20 @@ def _validation(ctx: SearchContext) -> None:
         ctx.sink.evaluation(name, result)
 
     report.validation = validate(
-        ctx.part, ctx.objective, report.layouts, ctx.seed, ctx.jobs, protocol, evaluation, ctx.hand_run
+        ctx.part, ctx.objective, report.layouts, ctx.seed, ctx.jobs, protocol, evaluation, ctx.baseline_run
     )
-    if report.validation.hand and not choice_draw_counts(ctx.objective) and ctx.objective.conditions.trivial:
-        answered, report.validation = hand_where_better(report.layouts, report.validation, ctx.hand)
+    if report.validation.baseline and not choice_draw_counts(ctx.objective) and ctx.objective.conditions.trivial:
+        answered, report.validation = baseline_where_better(report.layouts, report.validation, ctx.baseline)
         if answered is not report.layouts:  # some k answered with the hand layout's own sensors: their files
             report.layouts = answered
-            ctx.sink.layouts(report.layouts, ctx.hand)
+            ctx.sink.layouts(report.layouts, ctx.baseline)
     ctx.sink.validation(report.validation)
 
 
 def _verdict(ctx: SearchContext) -> None:
     """The verdict with confidence, raced on draws of the cell (nothing to compare without a hand choice)."""
     report = ctx.report
-    if not report.validation.hand:
+    if not report.validation.baseline:
         return
     from optipose.search.draws import confident_verdicts
 
@@ -330,7 +330,7 @@ def _band_check(ctx: SearchContext) -> None:
     """The found layouts and the hand one under the band of ``validation.band_objective`` (no band, or nothing
     to compare with: no check); a Ctrl-C here hands the validated search back, unchecked."""
     report, check = ctx.report, ctx.check_objective
-    if check is None or not report.validation.hand:
+    if check is None or not report.validation.baseline:
         return
     from optipose.evaluate.conditions import conditions
     from optipose.search.validate import validate

@@ -18,7 +18,7 @@ from optipose.search.driver import optimize
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import PENALTY, Found, IcpEvaluation
 
-__all__ = ["polish", "hand_start"]
+__all__ = ["polish", "baseline_start"]
 
 
 def polish(
@@ -81,9 +81,9 @@ def polish(
     return Found(k, "ICP polish", u, problem.space.to_poses(u), score.objective, score.stats), best[2], records
 
 
-def hand_start(problem: SurrogateProblem, hand_layout, reference) -> list[Found]:
+def baseline_start(problem: SurrogateProblem, baseline_layout, reference) -> list[Found]:
     """The hand-placed sensors of the reference choice (e.g. ``S3``) as a polish start: it is no worse than
     itself on every axis, so a local search from it that keeps that while lowering the sum is what a user
     who already owns these mounts wants."""
-    u = np.concatenate([problem.space.from_pose(hand_layout.poses[i]) for i in reference.sensors])
+    u = np.concatenate([problem.space.from_pose(baseline_layout.poses[i]) for i in reference.sensors])
     return [Found(reference.k, "hand start", u, problem.space.to_poses(u), problem.score(u).objective)]

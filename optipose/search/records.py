@@ -142,7 +142,7 @@ class SearchOutcome:
     found: dict[int, Found]
     greedy: dict[int, Found]
     joint: dict[int, Found]
-    hand: dict[int, Found]  # k -> the best hand-placed k-subset on the surrogate
+    baseline: dict[int, Found]  # k -> the best hand-placed k-subset on the surrogate
     history: list[Evaluation]
     interrupted: bool = False
     seconds: float = 0.0
@@ -156,17 +156,17 @@ class Validation:
     """Found vs. hand-placed on the held-out noise seed: per k the found layout's best choice of k sensors
     and the hand layout's (a nested found layout is evaluated inside the larger one that holds it).
 
-    found : k → choice, in the order the layouts were evaluated; hand : k → choice, k ascending.
+    found : k → choice, in the order the layouts were evaluated; baseline : k → choice, k ascending.
     """
 
     protocol: str  # full | reduced
     seed: int
     found: dict = field(default_factory=dict)
-    hand: dict = field(default_factory=dict)
+    baseline: dict = field(default_factory=dict)
 
     def verdicts(self) -> list[Verdict]:
         """Found vs. hand for every k that has both."""
-        return [Verdict(k, self.found[k], self.hand[k]) for k in sorted(self.found) if k in self.hand]
+        return [Verdict(k, self.found[k], self.baseline[k]) for k in sorted(self.found) if k in self.baseline]
 
     def by_k(self) -> dict[int, Verdict]:
         """:meth:`verdicts` by k."""
@@ -175,7 +175,7 @@ class Validation:
     def unmeasured_lines(self, reference: str = "hand") -> list[str]:
         """Per k whose found choice leaves an axis unmeasured, one line saying so
         (:func:`~optipose.verdict.words.unmeasured_line`): no found layout of k sensors observes it."""
-        lines = (unmeasured_line(k, self.found[k], self.hand.get(k), reference) for k in sorted(self.found))
+        lines = (unmeasured_line(k, self.found[k], self.baseline.get(k), reference) for k in sorted(self.found))
         return [line for line in lines if line]
 
     def verdict_lines(self, reference: str = "hand") -> list[str]:
@@ -185,9 +185,9 @@ class Validation:
         lines = [verdict_line(v, reference) for v in self.verdicts()] + self.unmeasured_lines(reference)
         ks = sorted(self.found)
         top = max(ks, default=0)
-        if 1 in self.found and top in self.hand and top > 1:
+        if 1 in self.found and top in self.baseline and top > 1:
             lines.append(
-                one_versus_many(self.found[1], self.hand[top], "hand-placed" if reference == "hand" else reference)
+                one_versus_many(self.found[1], self.baseline[top], "hand-placed" if reference == "hand" else reference)
             )
         return lines
 

@@ -39,7 +39,7 @@ from optipose.evaluate.robust import make_evaluator
 from optipose.search.candidates import anchored, candidates, maxmin_anchored
 from optipose.search.confirm import Confirmer
 from optipose.search.objectives import stage_objective
-from optipose.search.polish import hand_start, polish
+from optipose.search.polish import baseline_start, polish
 from optipose.search.records import Found, IcpEvaluation, SearchOutcome
 from optipose.search.study import SurrogateStudy
 from optipose.seeds import selection_seed
@@ -79,10 +79,10 @@ def select_finalists(
     with make_evaluator(
         part, stage_objective(objective, "selection"), seed=selection_seed(seed), jobs=jobs, quiet=True
     ) as evaluator:
-        hand = evaluator(baseline(part)) if baseline(part) is not None else None
+        baseline_result = evaluator(baseline(part)) if baseline(part) is not None else None
         ks = sorted(outcome.found)
         for n, k in enumerate(ks):
-            reference = _reference(k, hand, confirmer, records, on_stage)
+            reference = _reference(k, baseline_result, confirmer, records, on_stage)
             deadline = time.monotonic() + max(0.0, end - time.monotonic()) / (
                 len(ks) - n
             )  # a fair share of what is left
@@ -123,10 +123,12 @@ def _order(entry, reference, band: bool) -> tuple:
     return (worse, excess(choice, reference) if band and worse and reference is not None else 0.0, score)
 
 
-def _reference(k: int, hand, confirmer: Confirmer | None, records: list[IcpEvaluation], on_stage):
+def _reference(k: int, baseline_result, confirmer: Confirmer | None, records: list[IcpEvaluation], on_stage):
     """The bar of a k: the hand layout's choice, on the full protocol when confirmation is on (on 14 scans it
     is itself a noisy draw, and a polish aimed at a lucky low chases noise instead of the axis)."""
-    reference = hand.table[k - 1] if hand is not None and k <= len(hand.table) else None
+    reference = (
+        baseline_result.table[k - 1] if baseline_result is not None and k <= len(baseline_result.table) else None
+    )
     if reference is None:
         return None
     records.append(IcpEvaluation(k, "hand", np.nan, "reduced", reference, True))
@@ -186,7 +188,7 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
     config, k = study.problem.config, best.k
     starts = [best] + nearest(pool, reference, best)
     if k == 1:  # a reference means the part has a hand layout
-        starts += hand_start(study.problem, baseline(part), reference)
+        starts += baseline_start(study.problem, baseline(part), reference)
     # under a band each evaluation runs every condition: the polish gets as many conditions' worth of work
     evals = (config.selection.polish_evals if k == 1 else config.selection.polish_evals // 2) // len(
         conditions(evaluator.objective.conditions)

@@ -22,7 +22,7 @@ from optipose.search.records import Found, SearchOutcome
 from optipose.search.study import Share, Stop, SurrogateStudy
 from optipose.model.baseline import baseline
 
-__all__ = ["run_search", "best_hand_subsets"]
+__all__ = ["run_search", "best_baseline_subsets"]
 
 log = logging.getLogger(__name__)
 
@@ -38,17 +38,17 @@ def run_search(
     t0 = time.monotonic()
     study = study or SurrogateStudy(SurrogateProblem(part, objective, config))
     rng = np.random.default_rng(seed)
-    hand_poses = baseline(part).poses if baseline(part) is not None else []
-    hand_u = [study.problem.space.from_pose(T) for T in hand_poses]
+    baseline_poses = baseline(part).poses if baseline(part) is not None else []
+    baseline_u = [study.problem.space.from_pose(T) for T in baseline_poses]
     ks = sorted(set(config.sensors))
-    hand = best_hand_subsets(study.problem, hand_u, [k for k in ks if k <= len(hand_u)])
-    study.measure_against({k: f.stats.level_axis_score for k, f in hand.items()})
+    baseline_subsets = best_baseline_subsets(study.problem, baseline_u, [k for k in ks if k <= len(baseline_u)])
+    study.measure_against({k: f.stats.level_axis_score for k, f in baseline_subsets.items()})
     study.start_clock(
         config.surrogate.max_time
     )  # after the hand layout is scored: that first scan also compiles the kernels
     greedy, joint, unplaced = {}, {}, []
     try:
-        _place(study, config, max(ks), hand_u, hand, rng, seed, greedy, joint)
+        _place(study, config, max(ks), baseline_u, baseline_subsets, rng, seed, greedy, joint)
     except Stop as why:
         unplaced = [k for k in ks if study.best(k) is None]
         cut = f", the clock having ended the surrogate's {', '.join(study.cut)}" if study.cut and unplaced else ""
@@ -71,11 +71,18 @@ def run_search(
         if options:
             found[k] = min(options, key=lambda f: f.score)
     return SearchOutcome(
-        found, greedy, joint, hand, study.history, study.interrupted, time.monotonic() - t0, tuple(study.cut)
+        found,
+        greedy,
+        joint,
+        baseline_subsets,
+        study.history,
+        study.interrupted,
+        time.monotonic() - t0,
+        tuple(study.cut),
     )
 
 
-def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict) -> None:
+def _place(study, config, n, baseline_u, baseline_subsets, rng, seed, greedy: dict, joint: dict) -> None:
     """Fill ``greedy`` and ``joint`` for k = 1 … n (as far as the clock allows).
 
     Each k gets its share of what is left of the clock, by the work its stages ask for (the sensor poses
@@ -88,13 +95,15 @@ def _place(study, config, n, hand_u, hand, rng, seed, greedy: dict, joint: dict)
         with study.share(study.seconds_left() * work[k] / sum(work[j] for j in range(k, n + 1))):
             try:
                 if config.surrogate.strategy in ("greedy", "both") or k == 1:
-                    placed = greedy_stage(study, config, placed, hand_u, rng, seed * 1000 + k)
+                    placed = greedy_stage(study, config, placed, baseline_u, rng, seed * 1000 + k)
                     if study.best(k) is None:  # no feasible layout of k sensors: more sensors will not help
                         log.warning("no feasible layout of %d sensor(s) found; stopping", k)
                         break
                     greedy[k] = _found(study, k, "greedy", placed)
                 if k > 1 and config.surrogate.strategy in ("joint", "both"):
-                    joint[k] = joint_stage(study, config, k, greedy.get(k), hand.get(k), rng, seed * 1000 + 100 + k)
+                    joint[k] = joint_stage(
+                        study, config, k, greedy.get(k), baseline_subsets.get(k), rng, seed * 1000 + 100 + k
+                    )
                     if config.surrogate.strategy == "joint":
                         placed = joint[k].u
             except Share as why:
@@ -126,14 +135,14 @@ def _found(study, k: int, stage: str, u: np.ndarray) -> Found:
     return Found(k, stage, u.copy(), study.problem.space.to_poses(u), score.objective, score.stats)
 
 
-def best_hand_subsets(problem: SurrogateProblem, hand_u: list[np.ndarray], ks) -> dict[int, Found]:
+def best_baseline_subsets(problem: SurrogateProblem, baseline_u: list[np.ndarray], ks) -> dict[int, Found]:
     """The best k of the hand-placed sensors on the surrogate, scored as given (no constraint checks:
     they are the baseline, e.g. the paper's three heads overlap in our default head-box model)."""
     out = {}
     for k in ks:
         best = None
-        for combo in itertools.combinations(range(len(hand_u)), k):
-            u = np.concatenate([hand_u[i] for i in combo])
+        for combo in itertools.combinations(range(len(baseline_u)), k):
+            u = np.concatenate([baseline_u[i] for i in combo])
             score = problem.score(u, constrained=False)
             if score.stats is not None and (best is None or score.value < best.score):
                 best = Found(k, "hand", u, problem.space.to_poses(u), score.value, score.stats)

@@ -26,7 +26,7 @@ from optipose.search.records import Validation
 from optipose.seeds import validation_seed
 from optipose.model.baseline import baseline
 
-__all__ = ["validate", "BaselineRun", "nested_groups", "indices_in", "hand_where_better"]
+__all__ = ["validate", "BaselineRun", "nested_groups", "indices_in", "baseline_where_better"]
 
 log = logging.getLogger(__name__)
 _NICE = 10  # the hand layout's evaluation takes the cores the search leaves idle, and yields where it wants them
@@ -157,13 +157,13 @@ def validate(
     jobs: int = 1,
     protocol: str = "full",
     on_evaluation=None,
-    hand_run=None,
+    baseline_run=None,
 ) -> Validation:
     """Evaluate ``layouts`` (k → found layout) and the part's hand layout on the held-out seed of ``seed``.
 
     on_evaluation(name, result) : told of each evaluation as it ends (``found_k3``, ``hand``), so it can
     be saved before the next one starts.
-    hand_run : a :class:`BaselineRun` of the same part, objective, seed and protocol, whose result stands for
+    baseline_run : a :class:`BaselineRun` of the same part, objective, seed and protocol, whose result stands for
     the hand layout's evaluation (the hand layout is evaluated here when it has none).
 
     The same function checks the found layouts under a band after a nominal search's validation
@@ -172,7 +172,7 @@ def validate(
     vseed = validation_seed(seed)
     objective = stage_objective(objective, "validation", protocol)
     done = on_evaluation or (lambda name, result: None)
-    found, hand = {}, {}
+    found, baseline_choices = {}, {}
     with make_evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:
         for members in nested_groups(layouts):
             big = layouts[max(members)]
@@ -181,10 +181,10 @@ def validate(
             for k in members:
                 found[k] = choice_of(result, tuple(indices_in(layouts[k], big)))
         if baseline(part) is not None:
-            result = (hand_run.result() if hand_run is not None else None) or evaluator(baseline(part))
+            result = (baseline_run.result() if baseline_run is not None else None) or evaluator(baseline(part))
             done("hand", result)
-            hand = {choice.k: choice for choice in result.table if choice.k in layouts}
-    return Validation(protocol, vseed, found, hand)
+            baseline_choices = {choice.k: choice for choice in result.table if choice.k in layouts}
+    return Validation(protocol, vseed, found, baseline_choices)
 
 
 def nested_groups(layouts: dict[int, Layout]) -> list[list[int]]:
@@ -207,8 +207,8 @@ def indices_in(layout: Layout, big: Layout) -> list[int]:
     return [next(i for i, P in enumerate(big.poses) if np.allclose(T, P)) for T in layout.poses]
 
 
-def hand_where_better(
-    layouts: dict[int, Layout], validation: Validation, hand: Layout
+def baseline_where_better(
+    layouts: dict[int, Layout], validation: Validation, baseline: Layout
 ) -> tuple[dict[int, Layout], Validation]:
     """In a real cell, the search's answer for each k whose found layout the baseline's choice of k sensors beat on
     the validation's draw (a lower score): that choice's own sensors (the baseline's names and poses, in a layout
@@ -219,14 +219,16 @@ def hand_where_better(
     inside was replaced. In the ideal cell the validation's draw is the race's first and is not also used to choose
     (:func:`optipose.search.draws.choice_draw_counts`)."""
     out, found, replaced = dict(layouts), dict(validation.found), set()
-    for k, h in validation.hand.items():
+    for k, h in validation.baseline.items():
         f = found.get(k)
         if f is None or k not in out or not h.score < f.score:
             continue
         replaced.add(k)
-        why = f"{hand.name}'s {h.name}: no found layout of {k} sensor{'s' * (k > 1)} beat it on the validation's draw"
-        out[k] = Layout(tuple(hand.sensors[i] for i in h.sensors), name=f"found_k{k}", description=why)
-        found[k] = _restated(h, hand, out[k])
+        why = (
+            f"{baseline.name}'s {h.name}: no found layout of {k} sensor{'s' * (k > 1)} beat it on the validation's draw"
+        )
+        out[k] = Layout(tuple(baseline.sensors[i] for i in h.sensors), name=f"found_k{k}", description=why)
+        found[k] = _restated(h, baseline, out[k])
         log.info(
             "k=%d: %s (%.3f deg) beat the found layout (%.3f deg) on the validation's draw: the search answers with it",
             k,

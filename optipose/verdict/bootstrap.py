@@ -52,7 +52,7 @@ def _quantiles(x: np.ndarray) -> np.ndarray:
 def draw_statistics(draw, replicates: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """One draw's statistics (2 quantiles, 2 layouts, 3 axes) and (replicates, 2, 2, 3) of its scans
     resampled, the same scan indices for both layouts."""
-    x = np.concatenate([draw.found, draw.hand], axis=1).T  # (6, n)
+    x = np.concatenate([draw.found, draw.baseline], axis=1).T  # (6, n)
     observed = _quantiles(np.sort(x, axis=1)).reshape(2, 2, 3)
     index = rng.integers(0, x.shape[1], (replicates, x.shape[1]))
     boot = np.sort(x[:, index], axis=2)  # (6, replicates, n)
@@ -142,7 +142,7 @@ def failed_shares(draws: Sequence, confidence: float) -> list[tuple[float, float
     Exactly [0, 0] where neither layout fails, or both fail on the same scans. Returns (estimate, low, high)
     per axis; ``draws``: :class:`~optipose.verdict.confidence.PairedDraw` records."""
     diff = [
-        (d.found >= FAILED_ERROR).astype(float) - (d.hand >= FAILED_ERROR) for d in draws
+        (d.found >= FAILED_ERROR).astype(float) - (d.baseline >= FAILED_ERROR) for d in draws
     ]  # (n, 3) each, in {-1, 0, 1}
     per = np.stack([x.mean(axis=0) for x in diff])  # (D, 3)
     within = np.mean([x.var(axis=0, ddof=1) / len(x) if len(x) > 1 else np.zeros(len(AXES)) for x in diff], axis=0)

@@ -96,12 +96,12 @@ class PairedDraw:
 
     seed: int
     found: np.ndarray
-    hand: np.ndarray
+    baseline: np.ndarray
 
     def __post_init__(self):
-        if self.found.shape != self.hand.shape or self.found.ndim != 2 or self.found.shape[1] != len(AXES):
+        if self.found.shape != self.baseline.shape or self.found.ndim != 2 or self.found.shape[1] != len(AXES):
             raise ValueError(
-                f"a paired draw needs two (n_scans, 3) arrays, got {self.found.shape} and {self.hand.shape}"
+                f"a paired draw needs two (n_scans, 3) arrays, got {self.found.shape} and {self.baseline.shape}"
             )
 
 
@@ -123,23 +123,25 @@ def scan_errors(result, choice: Choice) -> np.ndarray:
     return out
 
 
-def paired_draw(found, found_choice: Choice, hand, hand_choice: Choice) -> PairedDraw:
+def paired_draw(found, found_choice: Choice, baseline, baseline_choice: Choice) -> PairedDraw:
     """The paired draw of two evaluations on the same seed (common random numbers); a ValueError if they
     were not (another seed, other scans)."""
-    if found.seed != hand.seed or found.n_scans != hand.n_scans:
+    if found.seed != baseline.seed or found.n_scans != baseline.n_scans:
         raise ValueError(
-            f"not a paired draw: seed {found.seed} ({found.n_scans} scans) vs {hand.seed} ({hand.n_scans} scans)"
+            f"not a paired draw: seed {found.seed} ({found.n_scans} scans) vs {baseline.seed} ({baseline.n_scans} scans)"
         )
-    return PairedDraw(int(found.seed), scan_errors(found, found_choice), scan_errors(hand, hand_choice))
+    return PairedDraw(int(found.seed), scan_errors(found, found_choice), scan_errors(baseline, baseline_choice))
 
 
-def paired_draws(found: Sequence, found_choice: Choice, hand: Sequence, hand_choice: Choice) -> list[PairedDraw]:
+def paired_draws(
+    found: Sequence, found_choice: Choice, baseline: Sequence, baseline_choice: Choice
+) -> list[PairedDraw]:
     """The paired draws of two lists of evaluations, matched by seed (in the found list's order)."""
-    by_seed = {r.seed: r for r in hand}
+    by_seed = {r.seed: r for r in baseline}
     missing = [r.seed for r in found if r.seed not in by_seed]
     if missing:
         raise ValueError(f"no hand evaluation on seed(s) {missing}")
-    return [paired_draw(r, found_choice, by_seed[r.seed], hand_choice) for r in found]
+    return [paired_draw(r, found_choice, by_seed[r.seed], baseline_choice) for r in found]
 
 
 @dataclass(frozen=True)
@@ -179,7 +181,7 @@ class AxisRatio:
 
 @dataclass(frozen=True)
 class ConfidentVerdict:
-    """Found vs. hand for one k, with confidence. ``found_name`` and ``hand_name`` name the choices as
+    """Found vs. hand for one k, with confidence. ``found_name`` and ``baseline_name`` name the choices as
     their layouts name sensors (e.g. "F1F3", "S1S2"); ``reference`` says what the hand side is ("hand",
     "conventional"). ``more_draws``: under UNDECIDED, the draws to add that would settle it at the present
     estimates (None when no number would); ``seconds_per_draw`` (NaN unknown) turns it into minutes. Its lines
@@ -188,13 +190,13 @@ class ConfidentVerdict:
     k: int
     decision: Decision
     found_name: str
-    hand_name: str
+    baseline_name: str
     score: Interval  # hand / found
     axes: tuple[AxisRatio, ...]
     found: tuple[AxisError, ...]
-    hand: tuple[AxisError, ...]
+    baseline: tuple[AxisError, ...]
     found_score_deg: Interval
-    hand_score_deg: Interval
+    baseline_score_deg: Interval
     n_draws: int
     n_scans: int  # the scans of every draw together
     tolerance: float
@@ -202,7 +204,7 @@ class ConfidentVerdict:
     more_draws: int | None = None
     seconds_per_draw: float = float("nan")
     reference: str = "hand"
-    hand_k: int = 0  # the hand choice's size when it differs from k (fewer found sensors against more hand ones)
+    baseline_k: int = 0  # the hand choice's size when it differs from k (fewer found sensors against more hand ones)
     failures: float = (
         0.01  # the share of an axis's scans found may fail on beyond hand's (Rules.failures); NaN: not applied
     )
@@ -219,7 +221,9 @@ class ConfidentVerdict:
     def unmeasured(self) -> list[str]:
         """The axes neither layout measures in any draw (unobservable, or failed: the penalty throughout)."""
         return [
-            f.axis for f, h in zip(self.found, self.hand) if not_measured(f.median_deg) and not_measured(h.median_deg)
+            f.axis
+            for f, h in zip(self.found, self.baseline)
+            if not_measured(f.median_deg) and not_measured(h.median_deg)
         ]
 
 
@@ -246,10 +250,10 @@ def compare_draws(
     *,
     k: int = 0,
     found_name: str = "found",
-    hand_name: str = "hand",
+    baseline_name: str = "hand",
     reference: str = "hand",
     seconds_per_draw: float = float("nan"),
-    hand_k: int = 0,
+    baseline_k: int = 0,
     kept: bool = False,
 ) -> ConfidentVerdict:
     """The verdict on paired draws (one per seed, each the same scans for both layouts)."""
@@ -269,19 +273,19 @@ def compare_draws(
     failed = [Interval(*f) for f in failed_shares(draws, c)]
     axes = tuple(AxisRatio(axis, iv[1 + j], iv[4 + j], iv[7 + j], failed[j]) for j, axis in enumerate(AXES))
     found = tuple(AxisError(axis, iv[10 + j], iv[13 + j]) for j, axis in enumerate(AXES))
-    hand = tuple(AxisError(axis, iv[16 + j], iv[19 + j]) for j, axis in enumerate(AXES))
+    baseline = tuple(AxisError(axis, iv[16 + j], iv[19 + j]) for j, axis in enumerate(AXES))
     decision, more = _decide(iv[0], axes, rules.tolerance, rules.failures, len(draws))
     return ConfidentVerdict(
         k=k,
         decision=decision,
         found_name=found_name,
-        hand_name=hand_name,
+        baseline_name=baseline_name,
         score=iv[0],
         axes=axes,
         found=found,
-        hand=hand,
+        baseline=baseline,
         found_score_deg=iv[22],
-        hand_score_deg=iv[23],
+        baseline_score_deg=iv[23],
         n_draws=len(draws),
         n_scans=sum(n_scans),
         tolerance=rules.tolerance,
@@ -289,7 +293,7 @@ def compare_draws(
         more_draws=more,
         seconds_per_draw=seconds_per_draw,
         reference=reference,
-        hand_k=hand_k,
+        baseline_k=baseline_k,
         failures=rules.failures,
         kept=kept,
     )

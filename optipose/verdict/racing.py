@@ -67,7 +67,7 @@ def race(
     planned at the first: up to ``max_draws``, or to the draws the ``seconds`` left hold at the time a draw took
     (:func:`_planned`). Each look's intervals are at confidence 1 − (1 − ``rules.confidence``) · its share
     (:func:`spent`), and a last look the time forces early spends what the looks it leaves unmade would; the verdict carries its
-    confidence, with the seconds a draw took. ``names``: ``k``, ``found_name``, ``hand_name``, ``reference`` for :func:`compare_draws`."""
+    confidence, with the seconds a draw took. ``names``: ``k``, ``found_name``, ``baseline_name``, ``reference`` for :func:`compare_draws`."""
     verdicts = race_many(
         lambda i, keys: {0: next_draw(i)},
         rules,

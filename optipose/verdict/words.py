@@ -113,7 +113,7 @@ def confident_line(v: ConfidentVerdict) -> str:
     """One line of at most 80 columns: the decision, hand / found in sum with its interval, the draws (and
     under UNDECIDED how many more would settle it), e.g.
     ``k=2: BUY F1F3 1.42x [1.21, 1.66] better than hand S1S2 (12 draws)``."""
-    ratio, ref = ratio_cell(v.score), f"{v.reference} {v.hand_name}"
+    ratio, ref = ratio_cell(v.score), f"{v.reference} {v.baseline_name}"
     head = f"k={v.k}: {v.decision}"
     if len(v.unmeasured) == len(v.found):  # equal because neither measures anything: say that
         text = f"k={v.k}: nothing measured: {v.found_name} and {ref} see no {'/'.join(v.unmeasured)}"
@@ -143,7 +143,7 @@ def confident_line(v: ConfidentVerdict) -> str:
     elif v.decision == Decision.TIE and v.kept:
         text = f"{head} keep {ref}: no found layout beat it"  # the search answered with the baseline's own choice
     elif v.decision == Decision.TIE:
-        text = f"{head} {v.found_name} {ratio} vs {ref}: keep {v.hand_name}"
+        text = f"{head} {v.found_name} {ratio} vs {ref}: keep {v.baseline_name}"
     else:
         text = f"{head} {v.found_name} {ratio} vs {ref}"
     # undecided: the axis whose interval straddles the tolerance, where it fits
@@ -159,10 +159,10 @@ def confident_line(v: ConfidentVerdict) -> str:
 
 
 def fewer_line(v: ConfidentVerdict) -> str:
-    """The comparison of fewer found sensors with more hand ones (``hand_k`` > k) in one line of at most 80
+    """The comparison of fewer found sensors with more hand ones (``baseline_k`` > k) in one line of at most 80
     columns, e.g. ``fewer sensors: found F1 alone matches hand S1S2S3 within 10 % (1.02x [0.95, 1.08])``
     (shorter where the names are long: ``fewer: F1 alone matches conventional S1S2S3 within 10 % …``)."""
-    ratio, ref = ratio_cell(v.score), f"{v.reference} {v.hand_name}"
+    ratio, ref = ratio_cell(v.score), f"{v.reference} {v.baseline_name}"
     template = (
         "nothing measured by {who} or {ref}"
         if len(v.unmeasured) == len(v.found)
@@ -187,7 +187,7 @@ def fewer_line(v: ConfidentVerdict) -> str:
 def axis_lines(v: ConfidentVerdict) -> list[str]:
     """Per axis, found's and hand's predicted median / p75 (mdeg) with intervals, each ≤ 80 columns."""
     out = []
-    for f, h in zip(v.found, v.hand):
+    for f, h in zip(v.found, v.baseline):
         cells = [
             f"{_sig_mdeg(i.estimate)} [{_sig_mdeg(i.low)}, {_sig_mdeg(i.high)}]"
             for i in (f.median_deg, h.median_deg, f.p75_deg, h.p75_deg)
@@ -197,18 +197,18 @@ def axis_lines(v: ConfidentVerdict) -> list[str]:
     return out
 
 
-def mount_line(v: ConfidentVerdict, found, hand) -> str:
+def mount_line(v: ConfidentVerdict, found, baseline) -> str:
     """What a BUY asks of the cell, in one line: the found sensors its choice uses that are new (their poses
     follow in the layouts), the baseline's it keeps in their brackets and those it frees, e.g.
-    ``k=2: mount F1 (new), keep S2; S1 freed``; "" for another decision. ``found``, ``hand``: the
+    ``k=2: mount F1 (new), keep S2; S1 freed``; "" for another decision. ``found``, ``baseline``: the
     :class:`~optipose.model.layout.Layout` of the found k sensors and the baseline's."""
-    if v.decision != Decision.BUY or found is None or hand is None:
+    if v.decision != Decision.BUY or found is None or baseline is None:
         return ""
     used = [n for n in found.names if n in v.found_name]
-    kept = kept_sensors(found, hand)
+    kept = kept_sensors(found, baseline)
     new = [n for n in used if n not in kept]
     keep = [kept[n] for n in used if n in kept]
-    freed = [n for n in hand.names if n in v.hand_name and n not in keep]
+    freed = [n for n in baseline.names if n in v.baseline_name and n not in keep]
     parts = ([f"mount {', '.join(new)} (new)"] if new else []) + ([f"keep {', '.join(keep)}"] if keep else [])
     return f"k={v.k}: " + ", ".join(parts) + (f"; {', '.join(freed)} freed" if freed else "")
 
