@@ -4,6 +4,8 @@ interval is clear, the intervals cover the true ratio at their nominal rate, and
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import warnings
 from types import SimpleNamespace
 
@@ -22,7 +24,7 @@ from optipose.verdict.confidence import (
     scan_errors,
 )
 from optipose.verdict.racing import looks, race
-from optipose.verdict.words import axis_lines, confident_line, fewer_line
+from optipose.verdict.words import axis_lines, confident_line, fewer_line, open_line
 from optipose.verdict.rules import Rules
 from optipose.evaluate.statistics import FAILED_ERROR
 
@@ -203,7 +205,9 @@ def test_racing_stops_before_a_draw_would_end_past_the_time_budget():
     assert verdict.n_draws == 4 and verdict.seconds_per_draw == 10.0  # a fifth would end at 50 s
     if verdict.decision == Decision.UNDECIDED:
         assert verdict.more_minutes == pytest.approx(verdict.more_draws * 10.0 / 60.0)
-        assert f"+{verdict.more_draws}, " in confident_line(verdict) and " min)" in confident_line(verdict)
+        assert confident_line(verdict).endswith(f"(4 draws; +{verdict.more_draws})")  # no minutes: the machine's
+        assert verdict.ended == "clock" and "the clock ended the race at 4 draws" in open_line(verdict)
+        assert f"about {verdict.more_minutes:.0f} min here" in open_line(verdict)
 
 
 def test_the_race_plans_its_looks_for_the_draws_its_time_holds():
@@ -234,9 +238,14 @@ def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
     """Whatever the draws' times and the budgets, the looks a race makes spend at most its 5 % in all."""
     rng, now, spent = np.random.default_rng(seed), [0.0], []
 
+    @dataclass(frozen=True)
+    class Open:  # what the race reads of a verdict: its decision, and what ended it
+        decision: Decision = Decision.UNDECIDED
+        ended: str = ""
+
     def undecided(draws, rules, **names):
         spent.append(1.0 - rules.confidence)
-        return SimpleNamespace(decision=Decision.UNDECIDED)
+        return Open()
 
     monkeypatch.setattr(racing, "compare_draws", undecided)
 
