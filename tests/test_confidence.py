@@ -4,6 +4,8 @@ interval is clear, the intervals cover the true ratio at their nominal rate, and
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import warnings
 from types import SimpleNamespace
 
@@ -15,6 +17,7 @@ from optipose.verdict import racing
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, AxisChoice, Choice
 from optipose.verdict.confidence import (
     Decision,
+    Interval,
     PairedDraw,
     compare_draws,
     paired_draw,
@@ -22,7 +25,7 @@ from optipose.verdict.confidence import (
     scan_errors,
 )
 from optipose.verdict.racing import looks, race
-from optipose.verdict.words import axis_lines, confident_line, fewer_line
+from optipose.verdict.words import axis_lines, confident_line, fewer_line, open_line, ratio_cell
 from optipose.verdict.rules import Rules
 from optipose.evaluate.statistics import FAILED_ERROR
 
@@ -203,7 +206,9 @@ def test_racing_stops_before_a_draw_would_end_past_the_time_budget():
     assert verdict.n_draws == 4 and verdict.seconds_per_draw == 10.0  # a fifth would end at 50 s
     if verdict.decision == Decision.UNDECIDED:
         assert verdict.more_minutes == pytest.approx(verdict.more_draws * 10.0 / 60.0)
-        assert f"+{verdict.more_draws}, " in confident_line(verdict) and " min)" in confident_line(verdict)
+        assert confident_line(verdict).endswith(f"(4 draws; +{verdict.more_draws})")  # no minutes: the machine's
+        assert verdict.ended == "clock" and "the clock ended the race at 4 draws" in open_line(verdict)
+        assert f"about {verdict.more_minutes:.0f} min here" in open_line(verdict)
 
 
 def test_the_race_plans_its_looks_for_the_draws_its_time_holds():
@@ -234,9 +239,14 @@ def test_the_looks_made_spend_at_most_the_error_rate(seed, monkeypatch):
     """Whatever the draws' times and the budgets, the looks a race makes spend at most its 5 % in all."""
     rng, now, spent = np.random.default_rng(seed), [0.0], []
 
+    @dataclass(frozen=True)
+    class Open:  # what the race reads of a verdict: its decision, and what ended it
+        decision: Decision = Decision.UNDECIDED
+        ended: str = ""
+
     def undecided(draws, rules, **names):
         spent.append(1.0 - rules.confidence)
-        return SimpleNamespace(decision=Decision.UNDECIDED)
+        return Open()
 
     monkeypatch.setattr(racing, "compare_draws", undecided)
 
@@ -431,3 +441,37 @@ def test_when_neither_layout_measures_anything_the_line_says_so_not_tie():
     )
     assert verdict.unmeasured == ["pitch", "yaw"] and confident_line(verdict).startswith("k=2: TIE")
     assert interval_cell(verdict.found[0].median_deg) != "not measured"
+
+
+def test_each_way_a_race_ends_open_says_what_keeps_it_open_and_what_would_settle_it():
+    """An UNDECIDED line's reason: what keeps it open (the sum spanning 1, an axis spanning the tolerance, extra
+    failures spanning theirs) and what would settle it (draws, or that none within the budgets can, or that no
+    number of draws would); how it ended (the budget's draws, or a clock). A decided verdict has no such line."""
+    rng = np.random.default_rng(5)
+    equal = race(lambda i: _draws(rng, 1, ratio=1.0, start=i)[0], FAST, min_draws=3, max_draws=8)
+    assert equal.decision == Decision.UNDECIDED and equal.ended == "draws" and equal.more_draws is not None
+    sum_open = replace(equal, axes=tuple(replace(a, ratio=Interval(1.0, 0.95, 1.05)) for a in equal.axes))
+    line = open_line(sum_open, 30)
+    assert line.startswith(f"  k=0 open: the sum {ratio_cell(equal.score)} spans 1 after the budget's 8 draws; ")
+    within = equal.n_draws + equal.more_draws <= 30
+    assert (f"+{equal.more_draws} draws would settle it" in line) and (("none within them can" in line) != within)
+    # an axis whose interval spans the tolerance, the sum clear of 1
+    axis = replace(
+        equal,
+        score=Interval(1.5, 1.2, 1.9),
+        axes=(replace(equal.axes[0], ratio=Interval(1.0, 0.8, 1.2)),) + equal.axes[1:],
+    )
+    assert f"open: {equal.axes[0].axis} 1.00x [0.80, 1.20] spans 0.91" in open_line(axis, 30)
+    # extra failed registrations spanning the rule's 1 %
+    fails = replace(
+        axis,
+        axes=(replace(equal.axes[0], ratio=Interval(1.3, 1.2, 1.4), failed=Interval(0.01, -0.005, 0.03)),)
+        + equal.axes[1:],
+    )
+    assert f"open: {equal.axes[0].axis} fails -0.5 to +3.0 % more, across 1 %" in open_line(fails, 30)
+    # beyond every budget's draws, and beyond any number of them
+    assert "more than any budget races (30): none within them can" in open_line(replace(equal, more_draws=500), 30)
+    assert "no number of draws settles it at these estimates" in open_line(replace(equal, more_draws=None), 30)
+    # a clock that ended the race, and a decided verdict
+    assert "the clock ended the race at 8 draws (without --max-time" in open_line(replace(equal, ended="clock"), 30)
+    assert open_line(replace(equal, decision=Decision.BUY), 30) == ""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -224,17 +225,18 @@ def test_same_seed_same_layout(part_b_problem):
     assert [r.value for r in a.history] == [r.value for r in b.history]
 
 
-def test_quick_in_a_real_cell_runs_every_stage_to_its_evaluations_and_a_seed_gives_its_layouts():
-    # quick's surrogate stages in a real cell are bounded by evaluations, its clock only a safety net (here taken
-    # away, so that a loaded machine cannot cut a stage; how long they take is benchmarks/README.md's): every stage
-    # of every k is reached, none runs past its count, and the same seed gives the same layouts and history
+def test_quick_in_a_real_cell_runs_every_stage_to_its_evaluations_and_a_slowed_clock_gives_its_layouts(monkeypatch):
+    # a budget is work, not seconds: quick's surrogate stages in a real cell end by their evaluations and no budget
+    # sets a clock, so every stage of every k is reached, none runs past its count, and the same seed on a machine
+    # sixty times as slow (every clock the search reads running sixty times as fast) gives the same layouts and history
     from collections import Counter
 
     from optipose.search.budgets import config_from_budget
 
     part, objective = load_part("part_c"), load_objective("paper")
     assert not objective.cell.ideal
-    cfg = Preset(surrogate={"max_time": np.inf}).apply(config_from_budget("quick", (1, 2, 3), cell=True))
+    cfg = config_from_budget("quick", (1, 2, 3), cell=True)
+    assert cfg.surrogate.max_time == 0 and cfg.time_limit == 0  # no clock
     a = run_search(part, objective, cfg, seed=4)
     stages = Counter(r.stage for r in a.history)
     for k in (1, 2, 3):
@@ -242,7 +244,11 @@ def test_quick_in_a_real_cell_runs_every_stage_to_its_evaluations_and_a_seed_giv
         assert 0 < stages[f"screen-polish:k={k}"] <= cfg.surrogate.screen_starts * cfg.surrogate.screen_evals
         assert 0 < stages[f"greedy:k={k}"] <= cfg.surrogate.global_evals
         assert 0 < stages[f"greedy-polish:k={k}"] <= cfg.surrogate.local_evals + cfg.surrogate.local_evals // 2
+    real, start = time.monotonic, time.monotonic()
+    monkeypatch.setattr(time, "monotonic", lambda: start + 60.0 * (real() - start))
+    began = real()
     b = run_search(part, objective, cfg, seed=4)
+    assert b.seconds > 30.0 * (real() - began)  # the slowed clock was the one the search read
     assert all(np.array_equal(a.found[k].u, b.found[k].u) for k in (1, 2, 3))
     assert [r.value for r in a.history] == [r.value for r in b.history]
     assert a.clock_cut == b.clock_cut == ()  # no clock ended a stage
@@ -291,7 +297,7 @@ def test_a_clock_that_stops_the_search_before_any_layout_says_so_once(caplog):
     assert (
         "no layout of [1, 2, 3] sensor(s) yet" in said[0]
         and out.clock_cut[0] in said[0]
-        and "raise max_time" in said[0]
+        and "a larger --max-time, or none" in said[0]
     )
 
 

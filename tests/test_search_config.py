@@ -1,5 +1,5 @@
-"""The search config in sections: every budget gives the settings the flat config gave, and both forms of a
-``[search]`` table (the sections, and the flat keys of older result folders and ``--search-config`` files) read
+"""The search config in sections: every budget gives the settings the flat config gave but its clocks (a budget is
+work, not seconds: no budget sets a clock), and both forms of a ``[search]`` table (the sections, and the flat keys of older result folders and ``--search-config`` files) read
 back to the same config."""
 
 from __future__ import annotations
@@ -140,6 +140,7 @@ OLD_CELL = {
     ),
     "thorough": dict(band="", verdict_scans=20),
 }
+CLOCKS = ("max_time", "select_time", "polish_time", "verdict_time", "answer_time")  # 0 in every budget: none
 CASES = [(b, band, cell) for b in ("quick", "default", "thorough") for band in (False, True) for cell in (False, True)]
 
 
@@ -149,15 +150,16 @@ def flat(config: SearchConfig) -> dict:
 
 
 def old_flat(budget: str, band: bool, cell: bool, sensors=(1, 2, 3)) -> dict:
+    """The flat config's settings, its clocks none (0)."""
     adjusted = {**(OLD_BAND.get(budget, {}) if band else {}), **(OLD_CELL.get(budget, {}) if cell else {})}
-    return {**OLD_DEFAULTS, "sensors": sensors, **OLD_BUDGETS[budget], **adjusted}
+    return {**OLD_DEFAULTS, "sensors": sensors, **OLD_BUDGETS[budget], **adjusted} | dict.fromkeys(CLOCKS, 0.0)
 
 
 def test_every_flat_key_names_one_field_of_one_section():
     leaves = [(s, f.name) for s, cls in SECTIONS.items() for f in fields(cls)]
     assert sorted(FLAT_KEYS.values()) == sorted(leaves)  # each field once
     assert set(FLAT_KEYS) | {"sensors"} == set(OLD_DEFAULTS)  # and every old key
-    assert flat(SearchConfig()) == OLD_DEFAULTS
+    assert flat(SearchConfig()) == OLD_DEFAULTS | dict.fromkeys(CLOCKS, 0.0)
 
 
 @pytest.mark.parametrize("budget, band, cell", CASES)
@@ -176,7 +178,7 @@ def test_every_budget_equals_the_base_commits_flat_config():
     try:
         spec.loader.exec_module(module)
         for budget, band, cell in CASES:
-            old = vars(module.config_from_budget(budget, (1, 2), band=band, cell=cell))
+            old = vars(module.config_from_budget(budget, (1, 2), band=band, cell=cell)) | dict.fromkeys(CLOCKS, 0.0)
             assert flat(config_from_budget(budget, (1, 2), band=band, cell=cell)) == old, (budget, band, cell)
     finally:
         del sys.modules[spec.name]

@@ -254,21 +254,30 @@ def test_a_found_sensor_no_axis_measures_on_is_not_named_or_mounted():
     assert mount_line(buy, triple, hand) == "k=3: mount F1, F2 (new); S1, S2, S3 freed"
 
 
-def test_answer_time_ends_the_verdict_whatever_the_stages_before_it_took():
+def test_a_stages_clock_is_its_own_and_what_is_left_of_the_users_whatever_the_stages_before_it_took():
+    import math
     import time
 
     from optipose.errors import ConfigError
-    from optipose.search.pipeline import _verdict_seconds
+    from optipose.search.config import SearchConfig
+    from optipose.search.pipeline import SearchContext
 
-    now = time.monotonic()
-    assert _verdict_seconds(VerdictConfig(time=12.0), now - 100.0) == 12.0  # no answer_time: the verdict's own
-    timed = VerdictConfig(time=12.0, answer_time=23.5)
-    assert _verdict_seconds(timed, now - 20.0) == pytest.approx(3.5, abs=0.1)  # what is left of 23.5 s
-    assert _verdict_seconds(timed, now - 5.0) == 12.0  # never more than verdict_time
-    assert 0 < _verdict_seconds(timed, now - 60.0) < 0.01  # past it: a moment, not "no limit" (0)
-    assert _verdict_seconds(VerdictConfig(time=0.0, answer_time=10.0), now - 4.0) == pytest.approx(6.0, abs=0.1)
+    def context(ago: float, time_limit: float = 0.0) -> SearchContext:
+        config = SearchConfig(time_limit=time_limit)
+        return SearchContext(None, None, config, 0, None, 1, time.monotonic() - ago)
+
+    assert context(100.0).seconds() == math.inf  # no clock anywhere: the counts end the stage
+    assert context(100.0).seconds(12.0) == 12.0  # the stage's own
+    assert context(20.0).seconds(12.0, 23.5) == pytest.approx(3.5, abs=0.1)  # what is left of 23.5 s (answer_time)
+    assert context(5.0).seconds(12.0, 23.5) == 12.0  # never more than the stage's own
+    assert 0 < context(60.0).seconds(12.0, 23.5) < 0.01  # past it: a moment, not "no limit"
+    assert context(4.0).seconds(0.0, 10.0) == pytest.approx(6.0, abs=0.1)
+    assert context(30.0, time_limit=90.0).seconds() == pytest.approx(60.0, abs=0.1)  # --max-time's rest
+    assert context(30.0, time_limit=90.0).seconds(20.0) == 20.0
     with pytest.raises(ConfigError, match="answer_time"):
         VerdictConfig(answer_time=-1.0)
+    with pytest.raises(ConfigError, match="--max-time"):
+        SearchConfig(time_limit=-1.0)
 
 
 def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_search_answers_with_it(tmp_path):

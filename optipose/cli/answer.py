@@ -8,15 +8,17 @@ from __future__ import annotations
 __all__ = ["print_answer"]
 
 
-def print_answer(console, report, part, unchecked: bool = False, ideal: bool = True) -> None:
+def print_answer(console, report, part, unchecked: bool = False, ideal: bool = True, time_limit: float = 0.0) -> None:
     """The verdict first, one line per k (:func:`optipose.verdict.words.verdict_headline`, or with confidence
     :func:`~optipose.verdict.words.confident_line`), then the details: found vs. the
     baseline per axis on the validation protocol (the records ``comparison.csv`` was written from, which
     :func:`optipose.io.load_result` reads back), the subsets each axis uses, the band, the full verdict
     lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
     ``unchecked``: the answer was never checked under a band (a nominal search without the check); ``ideal``:
-    the search ran in the ideal cell (its verdicts say so)."""
+    the search ran in the ideal cell (its verdicts say so); ``time_limit``: the user's clock on the search (0: none),
+    whose cuts the answer names."""
     from optipose.model.baseline import baseline, baseline_label
+    from optipose.search.budgets import BUDGETS
     from optipose.verdict import words
 
     label = baseline_label(baseline(part))
@@ -24,6 +26,7 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
         verdicts = report.validation.verdicts()
         band = report.band.by_k() if report.band is not None else {}
         confident = report.confident.by_k
+        most = BUDGETS["thorough"].verdict["draws"]
         for v in confident.values() or verdicts:
             console.print(
                 words.confident_line(v)
@@ -31,6 +34,8 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
                 else words.verdict_headline(v, label, band.get(v.k), checked=not unchecked),
                 highlight=False,
             )
+            if confident and (why := words.open_line(v, most)):
+                console.print(why, highlight=False)
         for v in confident.values():
             if line := words.mount_line(v, report.layouts.get(v.k), baseline(part)):
                 console.print(line, highlight=False)
@@ -69,6 +74,8 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
             for v in band.values():
                 if advice := words.band_advice(v, label, nominal.get(v.k, False)):
                     console.print(advice, highlight=False)
+    if line := words.clock_line(report.clock_cut, time_limit):
+        console.print(line, style="yellow", highlight=False)
     console.print(_strategies_table(report.outcome, label))
     for k, layout in sorted(report.layouts.items()):
         console.print(f"[bold]found k={k}[/] (T_O_S, metres; X Y Z mm, roll pitch yaw deg):")

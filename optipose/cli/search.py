@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -60,6 +61,14 @@ def search(
         ),
     ] = None,
     no_report: NoReport = False,
+    max_time: Annotated[
+        float,
+        typer.Option(
+            "--max-time",
+            help="Seconds the whole search may take (0: no clock). Without it every stage ends by its counts and a "
+            "seed gives the same answer on any machine; with it, the answer says what the clock cut.",
+        ),
+    ] = 0.0,
 ) -> None:
     """Place 1, 2, 3 … sensors automatically and compare with the hand layout.
 
@@ -67,7 +76,19 @@ def search(
     the full ICP protocol with a held-out noise seed, and print found vs. hand-placed per axis (the paper's
     Table 1 shape)."""
     search_command(
-        part, units, sensors, budget, objective, seed, jobs, out, resume, config, report=not no_report, cell=cell
+        part,
+        units,
+        sensors,
+        budget,
+        objective,
+        seed,
+        jobs,
+        out,
+        resume,
+        config,
+        report=not no_report,
+        cell=cell,
+        max_time=max_time,
     )
 
 
@@ -84,6 +105,7 @@ def search_command(
     config: Path | None = None,
     report: bool = True,
     cell: str | None = None,
+    max_time: float = 0.0,
 ) -> Path:
     """Run the search, print found vs. hand-placed, keep everything in the result folder; returns the folder.
 
@@ -115,7 +137,8 @@ def search_command(
             band=not the_objective.conditions.trivial,
             cell=not the_objective.cell.ideal,
         )
-    if not resume:
+    if max_time:  # the user's clock on the whole search (a resumed search takes it anew)
+        search_config = replace(search_config, time_limit=max_time)
         check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
@@ -141,7 +164,9 @@ def search_command(
         and searched.band is None
         and not searched.band_interrupted
     )
-    print_answer(Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal)
+    print_answer(
+        Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal, time_limit=search_config.time_limit
+    )
     ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:
         console.print(
@@ -322,7 +347,6 @@ def _draw_layouts(folder: Path, part, layouts, jobs: int):
     thread on ``jobs`` worker processes while this one prints the answer and writes the report; returns the
     started thread (``join`` waits for the pictures)."""
     import threading
-    from dataclasses import replace
 
     from optipose.model.baseline import baseline, baseline_label
     from optipose.report.views import render_layouts

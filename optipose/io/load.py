@@ -109,6 +109,7 @@ def read_verdicts(path: Path) -> Verdicts:
             ("failed_high", np.nan),
             ("failures", np.nan),
             ("kept", False),
+            ("ended", ""),
         ):
             if (
                 name not in rows
@@ -150,6 +151,7 @@ def read_verdicts(path: Path) -> Verdicts:
                 baseline_k=int(baseline_k) if against_more else 0,
                 failures=float(score["failures"]),
                 kept=str(score["kept"]) == "True",
+                ended=score["ended"] if isinstance(score["ended"], str) else "",  # "" reads back as NaN
             )
             if against_more:
                 fewer = verdict

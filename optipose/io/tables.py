@@ -268,6 +268,7 @@ def verdict_frame(verdicts) -> pd.DataFrame:
             "confidence": v.confidence,
             "more_draws": v.more_draws if v.more_draws is not None else -1,
             "seconds_per_draw": v.seconds_per_draw,
+            "ended": v.ended,
         }
         empty = {"median_ratio": None, "p75_ratio": None, "failed": None, "found_p75_deg": None, "hand_p75_deg": None}
         score = {

@@ -11,7 +11,15 @@ from __future__ import annotations
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
 from optipose.verdict.confidence import Decision, Verdicts
-from optipose.verdict.words import IDEAL_CELL, confident_line, fewer_line, interval_cell, mount_line, ratio_cell
+from optipose.verdict.words import (
+    IDEAL_CELL,
+    confident_line,
+    fewer_line,
+    interval_cell,
+    mount_line,
+    open_line,
+    ratio_cell,
+)
 
 __all__ = ["confident_blocks", "confident_css"]
 
@@ -34,6 +42,7 @@ def confident_blocks(
     ordered = list(verdicts.by_k.values())
     label = ordered[0].reference
     blocks: list[Block] = [Paragraph(confident_line(v), confident_css(v.decision)) for v in ordered]
+    blocks += [Paragraph(line.strip(), "verdict info") for v in ordered if (line := open_line(v))]
     blocks += [
         Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), baseline))
     ]

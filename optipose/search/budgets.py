@@ -3,6 +3,10 @@
 A budget (``quick``, ``default``, ``thorough``: :data:`BUDGETS`) sets some fields of some sections; under a band
 of conditions (:data:`UNDER_A_BAND`) and in a real cell (:data:`IN_A_CELL`) a budget is adjusted by presets of
 its own, in that order; a user's ``[search]`` table goes last (:func:`config_from_budget`).
+
+A budget is work, not seconds: every stage ends by its counts (evaluations, candidates, draws), so a seed gives the
+same layouts, draws and verdict lines on any machine at any load. No budget sets a clock; a user may
+(``--max-time``, or a section's ``max_time`` / ``time``), and the answer then says what the clock cut.
 """
 
 from __future__ import annotations
@@ -21,7 +25,6 @@ BUDGETS: dict[str, Preset] = {
         surrogate=dict(
             global_evals=70,
             local_evals=20,
-            max_time=25.0,
             random_starts=4,
             strategy="greedy",
             screen_samples=1024,
@@ -32,25 +35,23 @@ BUDGETS: dict[str, Preset] = {
         verdict=dict(draws=1),
     ),
     "default": Preset(
-        surrogate=dict(global_evals=400, local_evals=120, joint_evals=200, max_time=240.0, screen_samples=4096),
-        selection=dict(candidates=3, time=240.0, polish_evals=90, confirm_candidates=3),
+        surrogate=dict(global_evals=400, local_evals=120, joint_evals=200, screen_samples=4096),
+        selection=dict(candidates=3, polish_evals=90, confirm_candidates=3),
         validation=dict(band_objective="robust"),
-        verdict=dict(time=60.0),
     ),
     "thorough": Preset(
         surrogate=dict(
             global_evals=2000,
             local_evals=400,
             joint_evals=1000,
-            max_time=3000.0,
             random_starts=16,
             screen_samples=16384,
             screen_starts=12,
             screen_evals=60,
         ),
-        selection=dict(candidates=6, time=1800.0, polish_time=900.0, polish_evals=200, confirm_candidates=6),
+        selection=dict(candidates=6, polish_evals=200, confirm_candidates=6),
         validation=dict(band_objective="robust"),
-        verdict=dict(draws=30, time=900.0),
+        verdict=dict(draws=30),
     ),
 }
 
@@ -61,11 +62,11 @@ BUDGETS: dict[str, Preset] = {
 # confirmation; the selection's statistic already pools every condition's scans (docs/conditions.md, "The search
 # under the band").
 UNDER_A_BAND: dict[str, Preset] = {
-    # a sensor pose costs the band's surrogate several nominal ones (the noise and bracket terms): 4,096 screen
-    # poses would take the whole clock, and k = 1 and 2 got no greedy stage at all
+    # a sensor pose costs the band's surrogate several nominal ones (the noise and bracket terms): a quarter of
+    # the nominal screen
     "default": Preset(
-        surrogate=dict(max_time=180.0, screen_samples=1024, anchor_evals=80),
-        selection=dict(time=100.0, polish_evals=0, confirm_candidates=0),
+        surrogate=dict(screen_samples=1024, anchor_evals=80),
+        selection=dict(polish_evals=0, confirm_candidates=0),
     ),
 }
 
@@ -75,24 +76,18 @@ UNDER_A_BAND: dict[str, Preset] = {
 # confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, less surrogate search; no
 # check under the band, whose noise and brackets the cell's sources stand for. The verdict's draws after the
 # validation's evaluate a share of the protocol's scans each: in a real cell the spread between cell instances rules
-# the intervals, so more draws of fewer scans decide sooner. The stages end by their evaluations, candidates and
-# draws, whose counts are set so that `default` answers within three minutes on two cores and `quick`, validated on
-# the reduced protocol's 14 scans, within 30 s (benchmarks/README.md, "Whole commands"); their clocks are safety
-# nets for a slower machine, so that on this one a seed gives the same layouts.
+# the intervals, so more draws of fewer scans decide sooner (benchmarks/README.md, "Whole commands", for what the
+# counts cost).
 IN_A_CELL: dict[str, Preset] = {
     # quick: a screen of 64 poses (a cell pose costs the surrogate several nominal ones), its three best polished,
     # then per sensor a local BOBYQA from the best start and its polish, few enough evaluations that BOBYQA mostly
     # probes each of the six numbers around its start: DIRECT-L's evaluations went to the surrogate's optimistic
     # corners, and ICP rated the local stage's layouts better (docs/results.md, "`--budget quick` in the real
-    # cell"). The verdict's draws of 6 scans each (3 a worker on two cores), so that its seconds see several times
+    # cell"). The verdict's draws of 6 scans each (3 a worker on two cores), so that its work sees several times
     # as many cell instances as draws of the reduced protocol's 14 scans would (benchmarks/README.md,
-    # "bench_verdict_draw.py"); the race plans its looks for as many draws as its seconds hold, each look a share of
-    # the error rate. Its seconds are what is left of 23 s after the search started, so that with the start-up, the
-    # pictures and the report the answer comes in 30 s on two cores with a second to spare for a shared machine's
-    # swings: the draws, unlike the layouts, are the clock's where the seconds hold fewer than the cap
+    # "bench_verdict_draw.py"), at most 12
     "quick": Preset(
         surrogate=dict(
-            max_time=15.0,
             screen_samples=64,
             screen_starts=3,
             screen_evals=15,
@@ -101,15 +96,14 @@ IN_A_CELL: dict[str, Preset] = {
             local_evals=10,
         ),
         validation=dict(protocol="reduced"),
-        verdict=dict(draws=12, time=12.0, scans=6, answer_time=23.0),
+        verdict=dict(draws=12, scans=6),
     ),
-    # default: the joint stage's 100 evaluations, where its clock used to stop it; the race at most 10 draws of 20
-    # scans each, which its seconds hold with room, so that the looks are planned for the same draws on every run
+    # default: the joint stage's 100 evaluations; the race at most 10 draws of 20 scans each
     "default": Preset(
-        surrogate=dict(max_time=150.0, joint_evals=100, screen_samples=1024),
-        selection=dict(time=45.0, polish_evals=0, confirm_candidates=0),
+        surrogate=dict(joint_evals=100, screen_samples=1024),
+        selection=dict(polish_evals=0, confirm_candidates=0),
         validation=dict(band_objective=""),
-        verdict=dict(scans=20, draws=10, time=60.0),
+        verdict=dict(scans=20, draws=10),
     ),
     "thorough": Preset(validation=dict(band_objective=""), verdict=dict(scans=20)),
 }

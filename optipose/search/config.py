@@ -44,7 +44,7 @@ class SurrogateConfig:
     global_evals: int = 300  # per greedy stage
     local_evals: int = 120  # per local polish
     joint_evals: int = 200  # per joint polish (k >= 2)
-    max_time: float = 600.0  # s, the whole surrogate search
+    max_time: float = 0.0  # s, a clock on the surrogate search (0: none; its evaluations end it)
     strategy: str = "both"  # greedy | joint | both
     random_starts: int = 8  # extra random start points scored before each greedy stage
     # before each greedy stage: score this many space-filling (scrambled Sobol) poses of the new sensor on the
@@ -92,11 +92,11 @@ class SelectionConfig:
     finalist and its confirmation on the full protocol."""
 
     candidates: int = 3  # per k, candidates re-ranked by ICP on a reduced protocol (0: skip)
-    time: float = 300.0  # s, the selection stage
+    time: float = 0.0  # s, a clock on the selection stage (0: none; its candidates end it)
     # the ICP polish of a finalist that is not yet no worse than the hand layout on every axis (search/polish.py)
     polish_algorithm: str = "LN_COBYLA"
     polish_evals: int = 0  # evaluations for k = 1 (half for larger k); 0: no polish
-    polish_time: float = 150.0  # s per k, a safety net: the evaluations should end the polish
+    polish_time: float = 0.0  # s per k, a clock on the polish (0: none; its evaluations end it)
     polish_margin: float = 0.9  # aim below 0.9 x the hand layout's per-axis statistics
     polish_weight: float = 5.0  # cost per unit of per-axis excess over polish_margin x the hand's, on top of the sum
     polish_step: float = 0.03  # initial step in [0, 1] units (about 2 mm of aim point, 4 deg of view)
@@ -142,6 +142,9 @@ class SearchConfig:
     Budgets (``quick``, ``default``, ``thorough``: :mod:`optipose.search.budgets`) fill in the numbers."""
 
     sensors: tuple[int, ...] = (1, 2, 3)
+    # s from the search's start, the user's clock on the whole search (``--max-time``; 0: none): every stage ends by
+    # it as well as by its own counts, and the answer says what it cut (a seed's own answer has no clock)
+    time_limit: float = 0.0
     surrogate: SurrogateConfig = field(default_factory=SurrogateConfig)
     constraints: Constraints = field(default_factory=Constraints)
     selection: SelectionConfig = field(default_factory=SelectionConfig)
@@ -151,6 +154,8 @@ class SearchConfig:
     def __post_init__(self) -> None:
         if not self.sensors or min(self.sensors) < 1 or max(self.sensors) > 6:
             raise ConfigError("--sensors: give sensor counts between 1 and 6, e.g. 1,2,3")
+        if not self.time_limit >= 0:
+            raise ConfigError(f"--max-time: give seconds >= 0 (0: no clock), not {self.time_limit}")
 
 
 # the flat [search] keys of the result folders written before the sections, and of a --search-config: each
@@ -182,6 +187,7 @@ class Preset:
     when it sets the sensor counts."""
 
     sensors: tuple[int, ...] | None = None
+    time_limit: float | None = None
     surrogate: dict = field(default_factory=dict)
     constraints: dict = field(default_factory=dict)
     selection: dict = field(default_factory=dict)
@@ -193,8 +199,8 @@ class Preset:
         sections = {
             name: replace(getattr(config, name), **values) for name in SECTIONS if (values := getattr(self, name))
         }
-        sensors = {} if self.sensors is None else {"sensors": self.sensors}
-        return replace(config, **sections, **sensors)
+        top = {name: v for name in ("sensors", "time_limit") if (v := getattr(self, name)) is not None}
+        return replace(config, **sections, **top)
 
 
 def unknown_keys(table: dict) -> list[str]:
@@ -204,14 +210,14 @@ def unknown_keys(table: dict) -> list[str]:
         if key in SECTIONS and isinstance(value, dict):  # a section (``validation`` is a flat key too)
             known = {f.name for f in fields(SECTIONS[key])}
             unknown += [f"{key}.{name}" for name in value if name not in known]
-        elif key not in FLAT_KEYS and key != "sensors":
+        elif key not in FLAT_KEYS and key not in ("sensors", "time_limit"):
             unknown.append(key)
     return sorted(unknown)
 
 
 def search_preset(table: dict) -> Preset:
     """The :class:`Preset` of a ``[search]`` table: sections as sub-tables (``[search.surrogate]`` …), the
-    flat keys of :data:`FLAT_KEYS`, or both; ``sensors`` at its top. A key it does not know
+    flat keys of :data:`FLAT_KEYS`, or both; ``sensors`` and ``time_limit`` at its top. A key it does not know
     (:func:`unknown_keys`, which callers check first to say whose table it is), or a field given twice, is a
     ConfigError."""
     if unknown := unknown_keys(table):
@@ -223,7 +229,7 @@ def search_preset(table: dict) -> Preset:
             given = [(key, name, v) for name, v in value.items()]
         elif key in FLAT_KEYS:
             given = [(*FLAT_KEYS[key], value)]
-        else:  # sensors
+        else:  # sensors, time_limit
             continue
         for section, name, v in given:
             twice += [f"{section}.{name}"] if name in values[section] else []
@@ -232,7 +238,11 @@ def search_preset(table: dict) -> Preset:
         raise ConfigError(
             f"search setting(s) {', '.join(sorted(set(twice)))} given twice (as a flat key and in a section)"
         )
-    return Preset(tuple(table["sensors"]) if "sensors" in table else None, **values)
+    return Preset(
+        tuple(table["sensors"]) if "sensors" in table else None,
+        float(table["time_limit"]) if "time_limit" in table else None,
+        **values,
+    )
 
 
 def search_table(config: SearchConfig) -> dict:

@@ -28,6 +28,7 @@ result folder), so the search itself never touches the file system.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
@@ -46,7 +47,6 @@ from optipose.search.surrogate_search import run_search
 from optipose.seeds import validation_seed
 from optipose.verdict.confidence import Verdicts
 from optipose.model.baseline import baseline
-from optipose.verdict.rules import VerdictConfig
 
 if TYPE_CHECKING:
     from optipose.evaluate.objective import Objective
@@ -109,14 +109,21 @@ class SearchReport:
     def validated(self) -> bool:
         return self.validation is not None
 
+    @property
+    def clock_cut(self) -> tuple[str, ...]:
+        """What a user's clock ended before its counts, in order: the surrogate's and the selection's stages
+        (``greedy:k=1``, ``selection:k=2``) and the verdict's race (``verdict:k=3``); empty without a clock."""
+        raced = [f"verdict:k={v.k}" for v in self.confident.by_k.values() if v.ended == "clock"]
+        return tuple(self.outcome.clock_cut) + tuple(raced)
+
 
 @dataclass
 class SearchContext:
     """One search as its stages share it: what it was given, and what each stage produced.
 
     check_objective : the objective of the check under a band after the validation (``SearchConfig.validation``'s
-    ``band_objective``), None when there is none; started : ``time.monotonic()`` when the search started (the
-    verdict's ``answer_time`` counts from here); on_stage : told when a stage starts (or None); baseline_run,
+    ``band_objective``), None when there is none; started : ``time.monotonic()`` when the search started (a
+    user's clock, ``SearchConfig.time_limit`` and the verdict's ``answer_time``, counts from here); on_stage : told when a stage starts (or None); baseline_run,
     check_run : the hand layout's validation and its check under the band, running beside the search (None in
     one process); study : the live surrogate search; first : the validation's evaluations by name (the
     verdict's first draw); report : what the stages found so far."""
@@ -141,6 +148,16 @@ class SearchContext:
         """Tell ``on_stage`` that a stage starts."""
         if self.on_stage:
             self.on_stage(text)
+
+    def seconds(self, own: float = 0.0, since_start: float = 0.0) -> float:
+        """A stage's clock, s: its own ``own`` (0: none), what is left of ``since_start`` s after the search
+        started (0: none) and of the user's ``time_limit`` (0: none); inf where no clock is set, at least a
+        moment where one is (a stage then does what it must and stops)."""
+        now = time.monotonic() - self.started
+        clocks = ([own] if own > 0 else []) + [
+            limit - now for limit in (since_start, self.config.time_limit) if limit > 0
+        ]
+        return max(1e-3, min(clocks)) if clocks else math.inf
 
 
 def run(
@@ -178,7 +195,7 @@ def run(
 
 def _start(part, objective, config, seed, sink, budget, jobs, on_stage) -> SearchContext:
     """The search's context, its config written first; the clock starts here."""
-    started = time.monotonic()  # answer_time counts from here
+    started = time.monotonic()  # a user's clock counts from here
     # a bad name fails here, before any work
     check = stage_objective(objective, "band", band=config.validation.band_objective)
     sink.start(part, objective, config, budget, seed, validation_seed(seed), check)
@@ -236,7 +253,8 @@ def _baseline_run(ctx: SearchContext, objective, folder: str | None, last: bool 
 
 def _surrogate_search(ctx: SearchContext) -> None:
     """The NLopt search on the surrogate; its best layouts on disk before anything slower."""
-    outcome = run_search(ctx.part, ctx.objective, ctx.config, ctx.seed, ctx.study)
+    seconds = ctx.seconds(ctx.config.surrogate.max_time)
+    outcome = run_search(ctx.part, ctx.objective, ctx.config, ctx.seed, ctx.study, seconds=seconds)
     _flush(ctx.sink, ctx.study)
     if not outcome.found:
         constraints = ctx.config.constraints
@@ -258,7 +276,7 @@ def _selection(ctx: SearchContext) -> None:
         return
     from optipose.search.select import select_finalists
 
-    if ctx.baseline_run is not None:  # the selection's clock is wall time: it runs alone on the cores
+    if ctx.baseline_run is not None:  # a clock on the selection is wall time: it runs alone on the cores
         ctx.stage("evaluating the hand layout (held-out noise seed)")
         ctx.baseline_run.wait()
     ctx.stage("selecting finalists by ICP on a reduced protocol")
@@ -269,11 +287,12 @@ def _selection(ctx: SearchContext) -> None:
         ctx.study,
         ctx.seed,
         selection.candidates,
-        selection.time,
+        ctx.seconds(selection.time),
         ctx.on_stage,
         ctx.jobs,
     )
     ctx.sink.selection(records)
+    ctx.report.outcome = replace(outcome, clock_cut=tuple(ctx.study.cut))  # with the selection's, where a clock cut it
     ctx.report.layouts = _layouts({**outcome.found, **finalists})
     ctx.sink.layouts(ctx.report.layouts, ctx.baseline)
 
@@ -311,7 +330,7 @@ def _verdict(ctx: SearchContext) -> None:
 
     verdict = ctx.config.verdict
     ctx.stage(f"the verdict with confidence (up to {verdict.draws} draws of the cell)")
-    raced = replace(ctx.config, verdict=replace(verdict, time=_verdict_seconds(verdict, ctx.started)))
+    raced = replace(ctx.config, verdict=replace(verdict, time=ctx.seconds(verdict.time, verdict.answer_time)))
     report.confident = confident_verdicts(
         ctx.part,
         ctx.objective,
@@ -347,15 +366,6 @@ def _band_check(ctx: SearchContext) -> None:
         report.band_interrupted = True
         return
     ctx.sink.band(report.band)
-
-
-def _verdict_seconds(verdict: VerdictConfig, started: float) -> float:
-    """The verdict's ``time`` (0: no limit), ended by ``answer_time`` s after ``started`` when that is set:
-    what is left then, at least a moment (the race adds one draw and looks at what it has)."""
-    if verdict.answer_time <= 0:
-        return verdict.time
-    left = max(1e-3, verdict.answer_time - (time.monotonic() - started))
-    return min(verdict.time, left) if verdict.time > 0 else left
 
 
 def _study(ctx: SearchContext, resume: bool, on_eval) -> SurrogateStudy:

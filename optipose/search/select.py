@@ -29,6 +29,7 @@ so it costs about what it does without a band.
 from __future__ import annotations
 
 import logging
+import math
 import time
 
 import numpy as np
@@ -169,8 +170,10 @@ def _screen_candidates(
     required = {0, len(maxmin), len(first)}
     for n, cand in enumerate(first + rest):
         if time.monotonic() > deadline and pool and n not in required:
+            if f"selection:k={k}" not in study.cut:  # what the user's clock cut, which the answer says
+                study.cut.append(f"selection:k={k}")
             if n > len(first):
-                log.info("selection for k=%d stopped by the time budget", k)
+                log.info("selection for k=%d stopped by the clock", k)
                 break
             continue
         if on_stage:
@@ -202,7 +205,7 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
             reference,
             config,
             evals // len(starts),
-            config.selection.polish_time / len(starts),
+            (config.selection.polish_time or math.inf) / len(starts),
             on_stage,
         )
         records += polish_records

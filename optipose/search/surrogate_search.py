@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import time
 
 import numpy as np
@@ -28,11 +29,18 @@ log = logging.getLogger(__name__)
 
 
 def run_search(
-    part, objective, config: SearchConfig, seed: int = 0, study: SurrogateStudy | None = None
+    part,
+    objective,
+    config: SearchConfig,
+    seed: int = 0,
+    study: SurrogateStudy | None = None,
+    seconds: float | None = None,
 ) -> SearchOutcome:
     """Greedy then joint NLopt search for every k in ``config.sensors`` (see the module doc).
 
     study : the live search to record into (e.g. with a resumed cache and callbacks); default a new one.
+    seconds : a clock on the search (default ``config.surrogate.max_time``, 0: none; inf: none); without one its
+    evaluations end it, and a seed gives its layouts on any machine.
     Its problem is measured against the hand layout's targets from here on.
     """
     t0 = time.monotonic()
@@ -43,9 +51,9 @@ def run_search(
     ks = sorted(set(config.sensors))
     baseline_subsets = best_baseline_subsets(study.problem, baseline_u, [k for k in ks if k <= len(baseline_u)])
     study.measure_against({k: f.stats.level_axis_score for k, f in baseline_subsets.items()})
-    study.start_clock(
-        config.surrogate.max_time
-    )  # after the hand layout is scored: that first scan also compiles the kernels
+    if seconds is None:
+        seconds = config.surrogate.max_time if config.surrogate.max_time > 0 else math.inf
+    study.start_clock(seconds)  # after the hand layout is scored: that first scan also compiles the kernels
     greedy, joint, unplaced = {}, {}, []
     try:
         _place(study, config, max(ks), baseline_u, baseline_subsets, rng, seed, greedy, joint)
@@ -55,14 +63,14 @@ def run_search(
         (log.warning if unplaced else log.info)(
             "search stopped: %s%s",
             why,
-            f"; no layout of {unplaced} sensor(s) yet{cut} (raise max_time)" if unplaced else "",
+            f"; no layout of {unplaced} sensor(s) yet{cut} (a larger --max-time, or none)" if unplaced else "",
         )
     if (
         study.cut and not unplaced
     ):  # the layouts are then the machine's speed's as well as the seed's: say so where the user reads
         log.warning(
             "the clock ended the surrogate's %s before its evaluations: another run of this seed may place other "
-            "sensors (a larger [search] max_time, with --search-config, gives the seed's own answer)",
+            "sensors (without --max-time the seed gives its own answer)",
             ", ".join(study.cut),
         )
     found = {}

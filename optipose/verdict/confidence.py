@@ -184,7 +184,8 @@ class ConfidentVerdict:
     """Found vs. hand for one k, with confidence. ``found_name`` and ``baseline_name`` name the choices as
     their layouts name sensors (e.g. "F1F3", "S1S2"); ``reference`` says what the hand side is ("hand",
     "conventional"). ``more_draws``: under UNDECIDED, the draws to add that would settle it at the present
-    estimates (None when no number would); ``seconds_per_draw`` (NaN unknown) turns it into minutes. Its lines
+    estimates (None when no number would); ``seconds_per_draw`` (NaN unknown) turns it into minutes; ``ended``:
+    what ended the race of an UNDECIDED one. Its lines
     are :mod:`optipose.verdict.words`' (:func:`~optipose.verdict.words.confident_line`)."""
 
     k: int
@@ -211,6 +212,9 @@ class ConfidentVerdict:
     kept: bool = (
         False  # the found side is the baseline's own choice, the search's answer where it beat the found layout
     )
+    # how a race left it UNDECIDED: "draws" (its budget's draws ran out), "clock" (a user's clock ended it), ""
+    # (decided, or not raced)
+    ended: str = ""
 
     @property
     def more_minutes(self) -> float:

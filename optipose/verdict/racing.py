@@ -119,6 +119,8 @@ def race_many(
             used += share
             for key in taken.keys() - done.keys() - passengers:
                 verdict = compare_draws(taken[key], each, seconds_per_draw=per_draw, **names.get(key, {}))
+                if verdict.decision == Decision.UNDECIDED and last:  # open: say whether draws or a clock ended it
+                    verdict = replace(verdict, ended="draws" if n >= max_draws else "clock")
                 if verdict.decision != Decision.UNDECIDED or last:
                     done[key] = verdict
             if not taken.keys() - done.keys() - passengers:

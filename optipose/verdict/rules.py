@@ -34,15 +34,14 @@ class Rules:
 @dataclass(frozen=True)
 class VerdictConfig:
     """A search's verdict with confidence (:mod:`optipose.search.draws`): draws of the cell after the
-    validation's, raced until every k is BUY, KEEP or TIE, at most ``draws`` in all and while another draw ends
-    within ``time`` s (0: no limit); an axis may be worse by ``tolerance`` (0.1: 10 %) with ``confidence``, and
+    validation's, raced until every k is BUY, KEEP or TIE or ``draws`` are in (and, where a user sets a clock, while
+    another draw ends within ``time`` s; 0: none); an axis may be worse by ``tolerance`` (0.1: 10 %) with ``confidence``, and
     found may fail an axis's registration on at most ``failures`` of the scans more than hand (a failed
     registration is a part scanned again: :mod:`optipose.verdict.confidence`)."""
 
     draws: int = 12
-    time: float = 120.0
-    # when above 0, the verdict ends by answer_time s after the search started (its surrogate's set-up), whatever
-    # the stages before it took: a budget that promises an answer in so many seconds keeps it on a slower machine
+    time: float = 0.0  # s, a clock on the race (0: none; its draws end it)
+    # a clock: when above 0, the verdict ends by answer_time s after the search started (0: none)
     answer_time: float = 0.0
     scans: int = 0  # the protocol's scans a draw after the validation's evaluates, drawn by its seed (0: all)
     tolerance: float = Rules.tolerance

@@ -35,6 +35,8 @@ __all__ = [
     "ratio_cell",
     "xyz_rpy_text",
     "confident_line",
+    "open_line",
+    "clock_line",
     "fewer_line",
     "axis_lines",
     "mount_line",
@@ -111,7 +113,8 @@ def xyz_rpy_text(T_O_S) -> str:
 
 def confident_line(v: ConfidentVerdict) -> str:
     """One line of at most 80 columns: the decision, hand / found in sum with its interval, the draws (and
-    under UNDECIDED how many more would settle it), e.g.
+    under UNDECIDED how many more would settle it; why it is open and in what time: :func:`open_line`), the same
+    on any machine for the same draws, e.g.
     ``k=2: BUY F1F3 1.42x [1.21, 1.66] better than hand S1S2 (12 draws)``."""
     ratio, ref = ratio_cell(v.score), f"{v.reference} {v.baseline_name}"
     head = f"k={v.k}: {v.decision}"
@@ -120,9 +123,7 @@ def confident_line(v: ConfidentVerdict) -> str:
         return text if len(text) <= 80 else f"k={v.k}: nothing measured: {v.found_name} and {ref} see no axis"
     tail = f"{v.n_draws} draw{'s' if v.n_draws != 1 else ''}"
     if v.decision == Decision.UNDECIDED and v.more_draws is not None:
-        minutes = v.more_minutes
-        took = (f", {minutes:.0f} min" if minutes >= 1 else f", {60 * minutes:.0f} s") if math.isfinite(minutes) else ""
-        tail += f"; +{v.more_draws}{took}"
+        tail += f"; +{v.more_draws}"  # the minutes are the machine's: on the line below (open_line), not here
     if v.decision == Decision.KEEP:
         worse = [a.axis for a in v.axes if a.ratio.high < 1.0 / (1.0 + v.tolerance)]
         fails = [a for a in v.axes if a.failed.low > v.failures]
@@ -156,6 +157,62 @@ def confident_line(v: ConfidentVerdict) -> str:
     order = (f"{text}{axis}", f"{text} ({tail})") if axis == fails else (f"{text} ({tail})", f"{text}{axis}")
     fits = [line for line in (f"{text}{axis} ({tail})", *order) if len(line) <= 80]
     return fits[0] if fits else text[:80]
+
+
+def open_line(v: ConfidentVerdict, most: int = 0) -> str:
+    """Why an UNDECIDED verdict is open and what would settle it, one line below its verdict line, e.g.
+    ``  k=1 open: the sum 1.11x [0.92, 1.31] spans 1 after the budget's 10 draws; +22 draws would settle it
+    (about 4 min here; --budget thorough races 30)``. What keeps it open: the sum's interval spanning 1, an axis's
+    spanning the tolerance, or an axis's extra failed registrations spanning theirs. What would settle it: the
+    draws (and the minutes at this run's pace), or that no number of draws would at these estimates, or that
+    more are needed than ``most`` (the most draws any budget races: nothing within the budgets can). "" for a
+    decided verdict."""
+    if v.decision != Decision.UNDECIDED:
+        return ""
+    floor = 1.0 / (1.0 + v.tolerance)
+    spans = [f"the sum {ratio_cell(v.score)} spans 1"] if v.score.low <= 1.0 <= v.score.high else []
+    spans += [
+        f"{a.axis} {ratio_cell(a.ratio)} spans {floor:.2f}" for a in v.axes if a.ratio.low < floor <= a.ratio.high
+    ]
+    spans += [
+        f"{a.axis} fails {100 * a.failed.low:+.1f} to {100 * a.failed.high:+.1f} % more, across {100 * v.failures:.0f} %"
+        for a in v.axes
+        if a.failed.low <= v.failures < a.failed.high
+    ]
+    what = spans[0] if spans else f"the sum {ratio_cell(v.score)} is neither within {100 * v.tolerance:.0f} % nor clear"
+    draws = f"{v.n_draws} draw{'s' if v.n_draws != 1 else ''}"
+    ended = {
+        "draws": f" after the budget's {draws}",
+        "clock": f": the clock ended the race at {draws} (without --max-time the draws end it)",
+    }.get(v.ended, f" after {draws}")
+    if v.more_draws is None:
+        settle = "no number of draws settles it at these estimates"
+    elif most and v.n_draws + v.more_draws > most:
+        settle = f"+{v.more_draws} draws would settle it, more than any budget races ({most}): none within them can"
+    else:
+        minutes = v.more_minutes
+        pace = (
+            (f"about {minutes:.0f} min here" if minutes >= 1 else f"about {60 * minutes:.0f} s here")
+            if math.isfinite(minutes)
+            else ""
+        )
+        more = f"--budget thorough races {most}" if most and v.n_draws < most else ""
+        settle = f"+{v.more_draws} draws would settle it" + (
+            f" ({'; '.join(p for p in (pace, more) if p)})" if pace or more else ""
+        )
+    return f"  k={v.k} open: {what}{ended}; {settle}"
+
+
+def clock_line(cut: tuple[str, ...], seconds: float) -> str:
+    """What a user's clock (``--max-time``) ended before its counts, and how to get the seed's own answer; "" when
+    it ended nothing."""
+    if not cut:
+        return ""
+    clock = f"the {seconds:g} s clock (--max-time)" if seconds > 0 else "a clock of the search config"
+    return (
+        f"{clock} ended {', '.join(cut)} before their counts: this answer is the machine's speed's as well as the "
+        "seed's; without the clock the seed gives its own, on any machine"
+    )
 
 
 def fewer_line(v: ConfidentVerdict) -> str:
