@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 from meshes import centroid_split, distance_to_every_face
 from optipose.cell.asmade import AsMade
 from optipose.cell.config import load_cell, load_process
+from optipose.cell.kernels import lattice_normals
 from optipose.cell.scans import CellSetup, ConcaveEdges, LiveCell
 from optipose.model.material import MaterialEffects, load_material
 from optipose.model.part import load_part
@@ -191,3 +192,18 @@ def test_a_cell_without_a_material_or_a_process_draws_nothing_of_them(part_b):
     scan = _scan(x, face, np.arange(len(x)))
     moved = live.perturb([[scan]], [np.asarray(mesh.face_normals, float)], [np.inf], np.zeros(40), np.eye(4), 5e-4, 1)
     np.testing.assert_array_equal(moved[0][0].points, scan.points)
+
+
+def test_a_planes_draws_are_standard_normal_continuous_and_independent_two_cells_apart():
+    """cell.kernels.lattice_normals: standard normal wherever the point lies in its cell, moved by about δ
+    when the point moves by δ of a cell, and uncorrelated with the draws two cells away."""
+    rng = np.random.default_rng(0)
+    place = rng.uniform(-50, 50, (20000, 4))
+    draws = lattice_normals(place, np.uint64(12345), 4)
+    assert np.abs(draws.mean(axis=0)).max() < 0.05 and np.abs(draws.std(axis=0) - 1).max() < 0.03
+    assert np.abs(np.corrcoef(draws.T) - np.eye(4)).max() < 0.05  # the four fields are independent
+    moved = lattice_normals(place + 1e-9, np.uint64(12345), 4)
+    assert np.abs(moved - draws).max() < 1e-6
+    far = np.stack([lattice_normals(place[:1] + [2.0, 0, 0, 0], np.uint64(k), 1)[0] for k in range(1, 3001)])
+    here = np.stack([lattice_normals(place[:1], np.uint64(k), 1)[0] for k in range(1, 3001)])
+    assert abs(np.corrcoef(far[:, 0], here[:, 0])[0, 1]) < 0.08 and here.std() == pytest.approx(1.0, abs=0.05)

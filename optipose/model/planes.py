@@ -148,10 +148,10 @@ def surface_planes(vertices: np.ndarray, faces: np.ndarray) -> SurfacePlanes:
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     normal, _ = face_planes(vertices, faces)
-    tri = vertices[faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    centre = tri.mean(axis=1)
-    del tri
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    centre = (a + b + c) / 3.0
+    del a, b, c
     live = np.flatnonzero((np.linalg.norm(normal, axis=1) > 0.5) & (area > 0))
     plane = np.full(len(faces), -1, dtype=np.int64)
     if not len(live):
@@ -178,8 +178,9 @@ def surface_planes(vertices: np.ndarray, faces: np.ndarray) -> SurfacePlanes:
             found = other >= 0
             a.append(node[sel[found]])
             b.append(other[found])
-    a, b = np.concatenate(a), np.concatenate(b)
-    links = coo_matrix((np.ones(len(a), np.int8), (a, b)), shape=(len(codes), len(codes)))
+    pair = np.unique(np.concatenate(a) * len(codes) + np.concatenate(b))  # each link once (no sum of duplicates)
+    a, b = np.divmod(pair, len(codes))
+    links = coo_matrix((np.ones(len(pair), np.int8), (a, b)), shape=(len(codes), len(codes)))
     group = connected_components(links, directed=False)[1][node]
     mean = np.zeros((group.max() + 1, 3))
     np.add.at(mean, group, w[:, None] * n)
