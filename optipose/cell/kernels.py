@@ -134,6 +134,10 @@ def along_rays(
         out[i, 0], out[i, 1], out[i, 2] = px + rx * s, py + ry * s, pz + rz * s
 
 
+_TWO_TO_MINUS_53, _TWO_TO_MINUS_32 = 2.0**-53, 2.0**-32
+_NODE_OFFSET = 1 << 40  # added to a lattice node's coordinates: a positive integer for any plane
+
+
 # Counter-based draws: a draw is a hash of what it belongs to (a plane's place, a ray), never a position in a
 # sequence, so that it does not move when the mesh has other triangles or the scan other points before it.
 @njit(cache=True, nogil=True, inline="always")
@@ -148,14 +152,14 @@ def _mix(z):
 @njit(cache=True, nogil=True, inline="always")
 def _uniform(z):
     """A uniform in (0, 1) from the top 53 bits of ``z``."""
-    return (np.float64(z >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
+    return (np.float64(z >> np.uint64(11)) + 0.5) * _TWO_TO_MINUS_53
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _gauss(z):
     """A standard normal from 64 bits (Box-Muller on its two 32-bit halves)."""
-    u = (np.float64(z >> np.uint64(32)) + 0.5) * (1.0 / 4294967296.0)
-    v = (np.float64(z & np.uint64(0xFFFFFFFF)) + 0.5) * (1.0 / 4294967296.0)
+    u = (np.float64(z >> np.uint64(32)) + 0.5) * _TWO_TO_MINUS_32
+    v = (np.float64(z & np.uint64(0xFFFFFFFF)) + 0.5) * _TWO_TO_MINUS_32
     return np.sqrt(-2.0 * np.log(u)) * np.cos(2.0 * np.pi * v)
 
 
@@ -177,7 +181,7 @@ def lattice_normals(coords, key, fields):
                 frac = coords[i, j] - base
                 bit = (corner >> j) & 1
                 w *= frac if bit else 1.0 - frac
-                h = _mix(h ^ np.uint64(np.int64(base) + bit + 1099511627776))  # 2^40: a node's place, positive
+                h = _mix(h ^ np.uint64(np.int64(base) + bit + _NODE_OFFSET))  # a node's place, positive
             if w == 0.0:
                 continue
             total += w * w
