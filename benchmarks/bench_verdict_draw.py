@@ -32,7 +32,6 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.baseline import baseline
 from optipose.model.layout import load_layout
 from optipose.model.part import load_part
-from optipose.model.planes import face_planes, plane_numbers
 from optipose.search.objectives import stage_objective
 from optipose.seeds import verdict_seed
 
@@ -46,7 +45,7 @@ def form(part) -> None:
     process = CellSetup.of(load_objective("paper").cell, part).process
     times = {}
     for name in ("product", "cosines"):
-        made = AsMade(process, v, f, plane_numbers(*face_planes(v, f)), 7)
+        made = AsMade(process, v, f, 7)
         t0 = time.perf_counter()
         if name == "product":
             grid, first, step = made.form_grid()

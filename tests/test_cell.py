@@ -31,7 +31,7 @@ from optipose.model.layout import Layout
 from optipose.model.material import MaterialEffects, load_material
 from optipose.model.part import load_part
 from optipose.model.sensor import load_sensor
-from optipose.model.planes import face_planes, plane_numbers
+from optipose.model.planes import surface_planes
 from optipose.scan.cloud import Scan
 from optipose.transforms import invert_T, matrix_to_rpy
 
@@ -70,7 +70,7 @@ def _errors(result) -> np.ndarray:
 
 def _mesh_arrays(mesh):
     v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces)
-    return v, f, plane_numbers(*face_planes(v, f))
+    return v, f, surface_planes(v, f).plane
 
 
 def _form(made: AsMade, x: np.ndarray) -> np.ndarray:
@@ -152,17 +152,15 @@ def part_b_arrays():
 
 
 def test_a_form_deviation_has_the_rms_asked_for(part_b_arrays):
-    mesh, v, f, plane = part_b_arrays
+    mesh, v, f, _ = part_b_arrays
     rms, band = 50e-6, (0.010, 0.040)
     points, _ = trimesh.sample.sample_surface(mesh, 20000, seed=3)
-    draws = [
-        _form(AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, plane, seed), points) for seed in range(8)
-    ]
+    draws = [_form(AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, seed), points) for seed in range(8)]
     # over the part's surface, several parts as made: within 10 %
     assert np.sqrt(np.mean(np.square(draws))) == pytest.approx(rms, rel=0.10)
     # one draw over a region many wavelengths across: the RMS over space the model promises
     box = np.random.default_rng(0).uniform(-0.15, 0.15, (40000, 3))
-    one = _form(AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, plane, 0), box)
+    one = _form(AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, 0), box)
     assert np.sqrt(np.mean(one**2)) == pytest.approx(rms, rel=0.03)
     assert abs(one.mean()) < 0.05 * rms
 
@@ -171,14 +169,14 @@ def test_a_form_deviation_has_the_rms_asked_for(part_b_arrays):
 def test_a_form_deviation_lies_in_its_wavelength_band(part_b_arrays, band):
     """The mean-square gradient of a field of plane waves is form_rms² × the mean |k|²: between the band's
     ends' (2π/λ)², and near the mean of (2π/λ)² over wavelengths log-uniform in the band."""
-    _, v, f, plane = part_b_arrays
+    _, v, f, _ = part_b_arrays
     rms, (lo, hi) = 20e-6, band
     expected = (2 * np.pi) ** 2 / (2 * np.log(hi / lo)) * (1 / lo**2 - 1 / hi**2)
     x = np.random.default_rng(1).uniform(-0.15, 0.15, (4000, 3))
     h = 1e-3 * lo
     ratios = []
     for seed in range(6):
-        made = AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, plane, seed)
+        made = AsMade(Process(form_rms=rms, form_wavelengths=band), v, f, seed)
         grad = np.stack([(_form(made, x + h * e) - _form(made, x - h * e)) / (2 * h) for e in np.eye(3)], axis=1)
         ms = np.mean(np.sum(grad**2, axis=1)) / rms**2
         assert (2 * np.pi / hi) ** 2 < ms < (2 * np.pi / lo) ** 2
@@ -189,8 +187,8 @@ def test_a_form_deviation_lies_in_its_wavelength_band(part_b_arrays, band):
 def test_the_form_grid_is_the_field_at_its_nodes(part_b_arrays):
     """The grid the scans' kernel interpolates (each wave a product over the axes) holds at its nodes the
     sum of cosines :meth:`AsMade.form_exact` gives, whatever the block the product is taken in."""
-    _, v, f, plane = part_b_arrays
-    made = AsMade(Process(form_rms=30e-6, form_wavelengths=(0.004, 0.03)), v, f, plane, 5)
+    _, v, f, _ = part_b_arrays
+    made = AsMade(Process(form_rms=30e-6, form_wavelengths=(0.004, 0.03)), v, f, 5)
     grid, first, step = made.form_grid()
     axes = [first[j] + step[j] * np.arange(grid.shape[j]) for j in range(3)]
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -217,7 +215,7 @@ def test_the_face_term_moves_each_plane_as_one_by_the_sigma_asked(box_arrays):
     n = mesh.face_normals[face]
     per_plane = []
     for seed in range(400):
-        d = AsMade(Process(face_offset=sigma), v, f, plane, seed).offset(x, n, face)
+        d = AsMade(Process(face_offset=sigma), v, f, seed).offset(x, n, face)
         for p in np.unique(plane):
             on = d[plane[face] == p]
             assert np.all(on == on[0])  # the whole face moves together
@@ -342,7 +340,8 @@ def flat():
     top = np.flatnonzero(mesh.face_normals[:, 2] > 0.99)
     rng = np.random.default_rng(8)
     m, n_profiles, step = 60000, 80, 0.5e-3
-    profile = rng.integers(0, n_profiles, m).astype(np.int32)
+    ray = rng.choice(n_profiles * 3200, m, replace=False)  # one point per ray, as a scan has
+    profile, column = (ray // 3200).astype(np.int32), (ray % 3200).astype(np.int32)
     face = rng.choice(top, m).astype(np.int32)
     bary = rng.dirichlet([1.0, 1.0, 1.0], m)
     points = np.einsum("ij,ijk->ik", bary, mesh.vertices[mesh.faces[face]])
@@ -351,7 +350,7 @@ def flat():
     scan = Scan(
         points,
         profile,
-        np.zeros(m, np.int32),
+        column,
         np.ones(m, np.float32),
         np.zeros((0, 3200)),
         T_O_S,

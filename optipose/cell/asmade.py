@@ -18,7 +18,20 @@ A manufacturing process leaves each face off its drawing in a few ways, each a t
 Only the normal component of a displacement moves what a sensor measures (to first order in the
 displacement over the surface's curvature radius), so the field is a normal offset ``d(x)`` (m, outward
 positive) at part-frame points ``x`` on faces with outward normals ``n``. A part instance is a
-deterministic function of its seed: every sensor and every orientation of a run sees the same part.
+deterministic function of its seed and the CAD surface, never of the triangles the surface is cut into:
+every sensor and every orientation of a run sees the same part, and so does the same surface in other
+triangles, in another order, or written in float32.
+
+- The form waves, the scale, the warp and the layers' phase are drawn from the seed alone, a fixed number.
+- A plane face of the part is found from the surface (:func:`optipose.model.planes.surface_planes`: faces
+  whose planes agree, whatever their number and order, to the rounding of a float32 STL), and its centroid
+  is its faces' area centroid. Its offset and tilt are a function of the plane itself: standard normals at
+  its place in the space of planes — its unit normal in steps of ``_DRAW_NORMAL`` and its offset from the
+  part's bounding-box centre in steps of ``_DRAW_OFFSET`` — from a lattice of normals hashed from the seed
+  (:func:`optipose.cell.kernels.lattice_normals`). Planes more than two steps apart on some coordinate draw
+  independently; the same plane computed from other triangles (its normal and centroid equal to rounding)
+  draws the same to rounding, where a per-plane key rounded to a grid would jump at the grid's cells.
+- A face of no area is on a plane that does not move.
 """
 
 from __future__ import annotations
@@ -27,11 +40,16 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from optipose.cell.kernels import lattice_normals
+from optipose.model.planes import surface_planes
+
 __all__ = ["Process", "AsMade", "FORM_MODES"]
 
 FORM_MODES = 256  # plane waves in the form field; the RMS of one draw over a surface is within a few % of form_rms
 _GRID_NODES = 2_000_000  # the form grid's nodes at most (a metre-long part gets a coarser grid)
 _LAYER_WALL = 0.5  # |n_z| below this: a side wall, where a print's layer lines show
+_DRAW_NORMAL = 2e-3  # rad: a plane's normal in these steps places its draws (facets of a 96-gon are 0.065 apart)
+_DRAW_OFFSET = 5e-5  # m: and its offset in these
 
 
 @dataclass(frozen=True)
@@ -71,12 +89,13 @@ class Process:
 class AsMade:
     """One instance of a part as made by ``process``, drawn from ``seed``.
 
-    vertices (v, 3) m, faces (f, 3): the CAD mesh in its own frame. ``plane`` (f,): each face's plane number
-    (:func:`optipose.model.planes.plane_numbers`); faces of one plane are one face of the part and move
-    together.
+    vertices (v, 3) m, faces (f, 3): the CAD mesh in its own frame. ``plane`` (f,): each face's plane
+    (:func:`optipose.model.planes.surface_planes`; a face of no area: the last, which does not move); faces
+    of one plane are one face of the part and move together. ``plane_centroid`` (p, 3), ``plane_offset``
+    (p,), ``plane_tilt`` (p, 3): per plane.
     """
 
-    def __init__(self, process: Process, vertices: np.ndarray, faces: np.ndarray, plane: np.ndarray, seed: int):
+    def __init__(self, process: Process, vertices: np.ndarray, faces: np.ndarray, seed: int):
         self.process = process
         rng = np.random.default_rng([int(seed), 0xA5AADE])
         p = process
@@ -93,21 +112,28 @@ class AsMade:
             hi - lo
         )  # the grid covers the part and a margin: an as-made point lies near its face
         self._lo, self._hi, self._grid = lo - pad, hi + pad, None
-        # faces: offset and tilt of each plane about its centroid
-        tri = vertices[faces]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        n_planes = int(plane.max(initial=-1)) + 1
-        weight = np.bincount(plane, area, n_planes)
-        centroid = np.stack([np.bincount(plane, area * tri[:, :, a].mean(axis=1), n_planes) for a in range(3)], axis=1)
-        self.plane = plane
-        self.plane_centroid = centroid / np.maximum(weight, 1e-300)[:, None]
-        self.plane_offset = rng.normal(0.0, 1.0, n_planes) * p.face_offset
-        self.plane_tilt = (
-            rng.normal(0.0, 1.0, (n_planes, 3)) * p.face_tilt
-        )  # a rotation vector; its part along n does nothing
         self.scale = rng.normal(0.0, 1.0, 3) * p.scale
         self.warp = rng.normal() * p.warp
         self.layer_phase = rng.uniform(0.0, 1.0)
+        key = np.uint64(rng.integers(1, 2**63))  # the planes' lattice
+        # faces: offset and tilt of each plane about its centroid, drawn at the plane's place
+        self.plane = np.zeros(len(faces), np.int64)
+        self.plane_centroid, self.plane_offset, self.plane_tilt = np.zeros((1, 3)), np.zeros(1), np.zeros((1, 3))
+        if p.face_offset or p.face_tilt:
+            planes = surface_planes(vertices, faces)
+            count = len(planes.area)
+            self.plane = np.where(planes.plane < 0, count, planes.plane)
+            draw = self.plane_draws(planes.normal, planes.centroid, key)
+            self.plane_centroid = np.vstack([planes.centroid, np.zeros((1, 3))])
+            self.plane_offset = np.r_[draw[:, 0] * p.face_offset, 0.0]
+            self.plane_tilt = np.vstack([draw[:, 1:] * p.face_tilt, np.zeros((1, 3))])  # its part along n does nothing
+
+    def plane_draws(self, normal: np.ndarray, centroid: np.ndarray, key: np.uint64) -> np.ndarray:
+        """(p, 4) standard normals per plane (unit ``normal`` (p, 3), ``centroid`` (p, 3) m): its offset's and
+        its tilt's, a function of where the plane lies (its normal, its offset from the part's centre)."""
+        offset = np.einsum("ij,ij->i", normal, centroid - self.centre)
+        place = np.ascontiguousarray(np.c_[normal / _DRAW_NORMAL, offset / _DRAW_OFFSET])
+        return lattice_normals(place, key, 4)
 
     def offset(self, x: np.ndarray, n: np.ndarray, face: np.ndarray) -> np.ndarray:
         """The surface's normal offset (m, outward positive) at part-frame points ``x`` (m, 3) on faces

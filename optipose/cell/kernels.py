@@ -1,13 +1,16 @@
-"""The cell's per-point kernel (numba): each measured point moved along its laser ray by what the cell adds
-(:mod:`optipose.cell.scans` says what and why). One pass over the points, no temporaries: a scan has
-10⁵–10⁶ points per sensor, far more than the voxels the registration keeps."""
+"""The cell's kernels (numba): each measured point moved along its laser ray by what the cell adds
+(:mod:`optipose.cell.scans` says what and why), in one pass over the points, no temporaries (a scan has
+10⁵–10⁶ points per sensor, far more than the voxels the registration keeps); and the cell's counter-based
+draws: the part as made's per plane (:func:`lattice_normals`, a function of the plane itself) and the
+material's per ray (:func:`ray_draws`, a function of the ray), never a place in a sequence of draws whose
+length or order follows the mesh's triangles or the scan's points."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-__all__ = ["along_rays", "trilinear"]
+__all__ = ["along_rays", "trilinear", "lattice_normals", "ray_draws"]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -129,3 +132,82 @@ def along_rays(
             c = max(c, grazing)
         s = d / c + extra[i]
         out[i, 0], out[i, 1], out[i, 2] = px + rx * s, py + ry * s, pz + rz * s
+
+
+_TWO_TO_MINUS_53, _TWO_TO_MINUS_32 = 2.0**-53, 2.0**-32
+_NODE_OFFSET = 1 << 40  # added to a lattice node's coordinates: a positive integer for any plane
+
+
+# Counter-based draws: a draw is a hash of what it belongs to (a plane's place, a ray), never a position in a
+# sequence, so that it does not move when the mesh has other triangles or the scan other points before it.
+@njit(cache=True, nogil=True, inline="always")
+def _mix(z):
+    """splitmix64's finaliser: 64 bits → 64 well-mixed bits."""
+    z = z + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _uniform(z):
+    """A uniform in (0, 1) from the top 53 bits of ``z``."""
+    return (np.float64(z >> np.uint64(11)) + 0.5) * _TWO_TO_MINUS_53
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gauss(z):
+    """A standard normal from 64 bits (Box-Muller on its two 32-bit halves)."""
+    u = (np.float64(z >> np.uint64(32)) + 0.5) * _TWO_TO_MINUS_32
+    v = (np.float64(z & np.uint64(0xFFFFFFFF)) + 0.5) * _TWO_TO_MINUS_32
+    return np.sqrt(-2.0 * np.log(u)) * np.cos(2.0 * np.pi * v)
+
+
+@njit(cache=True, nogil=True)
+def lattice_normals(coords, key, fields):
+    """(p, fields): at each point of ``coords`` (p, d) (in lattice units), ``fields`` standard normal draws,
+    continuous in the point. Each node of the integer lattice holds independent normals hashed from ``key``
+    and its place; a point takes its cell's 2^d nodes' weighted by their multilinear weights w, divided by
+    √Σw² (so that it is standard normal wherever it lies). Points two cells apart along some axis share no
+    node and draw independently; a point moved by δ of a cell moves its draws by about δ."""
+    p, d = coords.shape
+    out = np.zeros((p, fields))
+    for i in range(p):
+        total = 0.0
+        for corner in range(1 << d):
+            w, h = 1.0, key
+            for j in range(d):
+                base = np.floor(coords[i, j])
+                frac = coords[i, j] - base
+                bit = (corner >> j) & 1
+                w *= frac if bit else 1.0 - frac
+                h = _mix(h ^ np.uint64(np.int64(base) + bit + _NODE_OFFSET))  # a node's place, positive
+            if w == 0.0:
+                continue
+            total += w * w
+            for f in range(fields):
+                out[i, f] += w * _gauss(_mix(h ^ np.uint64(f + 1)))
+        scale = 1.0 / np.sqrt(total)
+        for f in range(fields):
+            out[i, f] *= scale
+    return out
+
+
+@njit(cache=True, nogil=True)
+def ray_draws(profile, column, key, bias, sigma, spurious_fraction, spurious_range, concave_fraction, shift, ghost):
+    """The material's draws per point, each hashed from ``key`` (a scan's sensor) and the point's ray
+    (``profile``, ``column``): ``shift`` (n,) m along the ray — ``bias``, a normal of ``sigma``, and with
+    probability ``spurious_fraction`` a uniform in ± ``spurious_range`` —; ``ghost`` (n,): with probability
+    ``concave_fraction`` a uniform in (0, 1) (the point is a multipath ghost if it lies near a concave edge),
+    else -1."""
+    for i in range(profile.shape[0]):
+        h = _mix(_mix(key ^ np.uint64(profile[i])) ^ np.uint64(column[i]))
+        s = bias
+        if sigma != 0.0:
+            s += sigma * _gauss(_mix(h ^ np.uint64(1)))
+        if spurious_fraction != 0.0 and _uniform(_mix(h ^ np.uint64(2))) < spurious_fraction:
+            s += (2.0 * _uniform(_mix(h ^ np.uint64(3))) - 1.0) * spurious_range
+        shift[i] = s
+        ghost[i] = -1.0
+        if concave_fraction != 0.0 and _uniform(_mix(h ^ np.uint64(4))) < concave_fraction:
+            ghost[i] = _uniform(_mix(h ^ np.uint64(5)))

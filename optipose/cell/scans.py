@@ -15,6 +15,14 @@ really stand, and builds each cloud with the poses the cell believes (:meth:`Liv
 Per run seed one cell instance (the part as made, the calibration); per scan (the orientation's noise
 seed) one robot path and the material's draws — the same at every noise level of the scan, so the
 levels differ by the sensor's noise alone.
+
+What a point draws depends on the seeds and the surface, not on the mesh's triangles: the part as made's
+draws are the surface's (:mod:`optipose.cell.asmade`); the material's are hashed from the scan's seed, the
+sensor and the point's ray (its profile and column: :func:`optipose.cell.kernels.ray_draws`), never from
+its place among the scan's points, which another triangulation may change; and multipath ghosts are the
+points within the material's distance of the concave edges as segments (:class:`ConcaveEdges`), the same
+line whatever the edges it is split into. The calibration and the robot's draws take no mesh at all (the
+rotation centre is the part file's, else its bounding box's).
 """
 
 from __future__ import annotations
@@ -29,7 +37,7 @@ from optipose.cell.robot import calibrated_poses, orientation_error, path_draw
 from optipose.model.material import MaterialEffects
 from optipose.seeds import derived_seed
 
-__all__ = ["CellSetup", "LiveCell", "GRAZING"]
+__all__ = ["CellSetup", "LiveCell", "ConcaveEdges", "GRAZING"]
 
 GRAZING = 0.2  # |cos| of the angle between ray and normal below which a displacement's factor is capped
 _CELL, _INSTANCE, _SCAN, _CALIBRATION = 0xCE11, 1, 2, 3
@@ -86,16 +94,8 @@ class LiveCell:
         self.setup, self.centre, self.seed = setup, np.asarray(centre, float), int(seed)
         self.as_made = None
         if not setup.process.exact:
-            from optipose.model.planes import face_planes, plane_numbers
-
-            plane = plane_numbers(*face_planes(vertices, faces))
-            self.as_made = AsMade(setup.process, vertices, faces, plane, derived_seed(seed, _CELL + _INSTANCE))
-        self.edges = None
-        if setup.effects.concave_fraction:
-            from scipy.spatial import cKDTree
-
-            samples = _concave_edge_samples(vertices, faces)
-            self.edges = None if samples is None else cKDTree(samples)
+            self.as_made = AsMade(setup.process, vertices, faces, derived_seed(seed, _CELL + _INSTANCE))
+        self.edges = ConcaveEdges.of(vertices, faces) if setup.effects.concave_fraction else None
 
     def rpy(self, rpy: np.ndarray, scan_seed: int) -> np.ndarray:
         """The orientation the robot sets when the protocol commands ``rpy`` (rad) in the scan of ``scan_seed``."""
@@ -141,7 +141,8 @@ class LiveCell:
             apex = (
                 T[:3, :3] @ np.array([0.0, 0.0, apex_z[j]]) + T[:3, 3] if np.isfinite(apex_z[j]) else np.full(3, np.nan)
             )
-            extra = self._material(effects, scan, R, t, np.random.default_rng([int(scan_seed), _CELL, _SCAN, 2, j]))
+            key = np.uint64(np.random.default_rng([int(scan_seed), _CELL, _SCAN, 2, j]).integers(1, 2**63))
+            extra = self._material(effects, scan, R, t, key)
             moved = np.empty_like(scan.points)
             along_rays(
                 scan.points,
@@ -167,36 +168,62 @@ class LiveCell:
                     level[j] = replace(level[j], points=level[j].points + delta)
         return out
 
-    def _material(self, e: MaterialEffects, scan, R: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """The material's shift of each point of ``scan`` along its ray (m, positive: deeper)."""
+    def _material(self, e: MaterialEffects, scan, R: np.ndarray, t: np.ndarray, key: np.uint64) -> np.ndarray:
+        """The material's shift of each point of ``scan`` along its ray (m, positive: deeper), each point's
+        draws hashed from ``key`` and its ray (:func:`optipose.cell.kernels.ray_draws`)."""
+        from optipose.cell.kernels import ray_draws
+
         m = len(scan.points)
-        s = np.full(m, e.subsurface_bias)
-        sigma = np.hypot(e.speckle, e.subsurface_sigma)
-        if sigma:
-            s += rng.normal(size=m) * sigma
-        if e.spurious_fraction:  # anywhere: in front of the surface or behind it
-            spurious = rng.random(m) < e.spurious_fraction
-            s[spurious] += rng.uniform(-1.0, 1.0, int(spurious.sum())) * e.spurious_range
-        if self.edges is not None:  # multipath: the reflected light's path is longer, the ghost lies behind
-            drawn = np.flatnonzero(rng.random(m) < e.concave_fraction)  # drawn first: only these are looked up
-            x_P = (scan.points[drawn] - t) @ R
-            ghost = drawn[self.edges.query(x_P, distance_upper_bound=e.concave_distance)[0] < e.concave_distance]
-            s[ghost] += rng.uniform(0.0, 1.0, len(ghost)) * e.spurious_range
+        s, ghost = np.empty(m), np.empty(m)
+        sigma = float(np.hypot(e.speckle, e.subsurface_sigma))
+        concave = e.concave_fraction if self.edges is not None else 0.0
+        profile, column = np.ascontiguousarray(scan.profile), np.ascontiguousarray(scan.column)
+        ray_draws(
+            profile, column, key, e.subsurface_bias, sigma, e.spurious_fraction, e.spurious_range, concave, s, ghost
+        )
+        if concave:  # multipath: the reflected light's path is longer, the ghost lies behind
+            drawn = np.flatnonzero(ghost >= 0.0)  # drawn first: only these are looked up
+            near = drawn[self.edges.near((scan.points[drawn] - t) @ R, e.concave_distance)]
+            s[near] += ghost[near] * e.spurious_range
         return s
 
 
-def _concave_edge_samples(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
-    """Points every :data:`_EDGE_SAMPLE` along the mesh's concave edges (faces meeting at an inside angle
-    under 180° − :data:`_CONCAVE_DEG`), (m, 3) m; ``None`` when it has none."""
-    import trimesh
+class ConcaveEdges:
+    """A mesh's concave edges (faces meeting at an inside angle under 180° − :data:`_CONCAVE_DEG`) as the
+    segments they are, whatever their split into edges: which points lie within a distance of them."""
 
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    concave = (~mesh.face_adjacency_convex) & (mesh.face_adjacency_angles > np.deg2rad(_CONCAVE_DEG))
-    edges = vertices[mesh.face_adjacency_edges[concave]]
-    if not len(edges):
-        return None
-    out = []
-    for a, b in edges:
-        k = max(2, int(np.ceil(np.linalg.norm(b - a) / _EDGE_SAMPLE)) + 1)
-        out.append(a + np.linspace(0.0, 1.0, k)[:, None] * (b - a))
-    return np.vstack(out)
+    def __init__(self, start: np.ndarray, end: np.ndarray):
+        from scipy.spatial import cKDTree
+
+        self.start, self.end = start, end
+        count = np.maximum(2, np.ceil(np.linalg.norm(end - start, axis=1) / _EDGE_SAMPLE).astype(np.int64) + 1)
+        self.segment = np.repeat(np.arange(len(start)), count)
+        u = (np.arange(len(self.segment)) - np.repeat(np.cumsum(count) - count, count)) / np.repeat(count - 1, count)
+        self.tree = cKDTree(start[self.segment] + u[:, None] * (end - start)[self.segment])
+
+    @classmethod
+    def of(cls, vertices: np.ndarray, faces: np.ndarray) -> "ConcaveEdges | None":
+        """The concave edges of a mesh; ``None`` when it has none."""
+        import trimesh
+
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        concave = (~mesh.face_adjacency_convex) & (mesh.face_adjacency_angles > np.deg2rad(_CONCAVE_DEG))
+        edges = np.asarray(vertices, float)[mesh.face_adjacency_edges[concave]]
+        return cls(edges[:, 0], edges[:, 1]) if len(edges) else None
+
+    def near(self, x: np.ndarray, distance: float) -> np.ndarray:
+        """(m,) bool: whether each point of ``x`` (m, 3) lies within ``distance`` of a concave edge, exactly
+        (to rounding): the samples, at most :data:`_EDGE_SAMPLE` apart on each segment, decide all but the
+        points whose nearest sample is between ``distance`` and ``distance`` + half that, which the segments
+        of the samples within that reach decide."""
+        reach = distance + 0.5 * _EDGE_SAMPLE
+        d = self.tree.query(x, distance_upper_bound=reach)[0]
+        out = d < distance
+        band = np.flatnonzero(~out & (d < reach))
+        for i, around in zip(band, self.tree.query_ball_point(x[band], reach)):
+            seg = np.unique(self.segment[around])
+            a, ab = self.start[seg], self.end[seg] - self.start[seg]
+            u = np.einsum("ij,ij->i", x[i] - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+            u = np.clip(u, 0.0, 1.0)
+            out[i] = np.min(np.linalg.norm(x[i] - (a + u[:, None] * ab), axis=1)) < distance
+        return out

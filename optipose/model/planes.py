@@ -1,14 +1,17 @@
 """A mesh's planes: each face's plane and inward edge planes, and the number of the plane a face lies in
-(coplanar faces share one), computed in float64 whatever the mesh's own precision."""
+(coplanar faces share one), computed in float64 whatever the mesh's own precision; and the plane faces of a
+surface whatever its triangles (:func:`surface_planes`: the part as made moves each as one)."""
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from optipose.model.grouping import unique_rows
 
-__all__ = ["face_planes", "edge_planes", "plane_numbers", "shared_planes"]
+__all__ = ["face_planes", "edge_planes", "plane_numbers", "shared_planes", "surface_planes", "SurfacePlanes"]
 
 
 def face_planes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,3 +109,92 @@ def shared_planes(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9):
         np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64), normals
     )
     return plane, normals, offsets, edge_n, edge_c
+
+
+# The part's plane faces (surface_planes): normals in cells of _NORMAL_CELL about each axis, a face within
+# _NORMAL_MARGIN of a cell's side also counted in the cell across it; offsets apart by more than _OFFSET_GAP.
+_NORMAL_CELL = 1e-3  # rad
+_NORMAL_MARGIN = 0.1  # of a cell: the rounding a face's normal may carry (1e-4 rad: a float32 STL's 0.3 mm faces)
+_OFFSET_GAP = 1e-6  # m
+
+
+class SurfacePlanes(NamedTuple):
+    """The plane faces of a mesh's surface (:func:`surface_planes`): ``plane`` (f,) int64 each face's number
+    (-1: a face of no area), and per plane its unit ``normal`` (p, 3), ``centroid`` (p, 3) m and ``area`` (p,) m²."""
+
+    plane: np.ndarray
+    normal: np.ndarray
+    centroid: np.ndarray
+    area: np.ndarray
+
+
+def surface_planes(vertices: np.ndarray, faces: np.ndarray) -> SurfacePlanes:
+    """The plane faces of the surface, whatever its triangles: faces whose normals agree to about 1e-3 rad and
+    whose offsets along their common normal to 1 µm make one plane; its normal is the area-weighted mean of
+    theirs, its centroid the area centroid of its faces.
+
+    Unlike :func:`plane_numbers` (faces equal to the rounding of float64 arithmetic), it holds for a surface
+    re-tessellated and written in float32 (an STL): a 2 mm face's normal then carries 1e-5 rad of rounding.
+    Normals are grouped in cells of ``_NORMAL_CELL`` linked across a cell's side wherever a face lies within
+    ``_NORMAL_MARGIN`` of it, so that no rounding splits a plane (normals further apart than two cells are
+    never one group unless faces between them link them); a group's faces are then split where their offsets
+    along its mean normal, sorted, jump by more than ``_OFFSET_GAP``. Linear in the faces but for one sort.
+    The numbers themselves follow the mesh (what is drawn per plane must not: :mod:`optipose.cell.asmade`).
+    """
+    import pandas as pd
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    normal, _ = face_planes(vertices, faces)
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    centre = (a + b + c) / 3.0
+    del a, b, c
+    live = np.flatnonzero((np.linalg.norm(normal, axis=1) > 0.5) & (area > 0))
+    plane = np.full(len(faces), -1, dtype=np.int64)
+    if not len(live):
+        return SurfacePlanes(plane, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    n, w, x = normal[live], area[live], centre[live]
+    # normals: a cell per face, and the cells across the sides it lies near, linked where some face has them
+    u = n / _NORMAL_CELL
+    cell = np.rint(u).astype(np.int64)
+    side = np.where(u >= cell, 1, -1)
+    near = np.abs(u - cell) > 0.5 - _NORMAL_MARGIN
+    half = int(np.ceil(1.0 / _NORMAL_CELL)) + 2
+
+    def code(c: np.ndarray) -> np.ndarray:  # a cell's three integers as one
+        return ((c[:, 0] + half) * (2 * half + 1) + (c[:, 1] + half)) * (2 * half + 1) + (c[:, 2] + half)
+
+    codes, node = np.unique(code(cell), return_inverse=True)
+    index = pd.Index(codes)
+    a, b = [node], [node]
+    for mask in range(1, 8):
+        bits = np.array([(mask >> j) & 1 for j in range(3)], dtype=bool)
+        sel = np.flatnonzero(np.all(near[:, bits], axis=1))
+        if len(sel):
+            other = index.get_indexer(code(cell[sel] + side[sel] * bits))
+            found = other >= 0
+            a.append(node[sel[found]])
+            b.append(other[found])
+    pair = np.unique(np.concatenate(a) * len(codes) + np.concatenate(b))  # each link once (no sum of duplicates)
+    a, b = np.divmod(pair, len(codes))
+    links = coo_matrix((np.ones(len(pair), np.int8), (a, b)), shape=(len(codes), len(codes)))
+    group = connected_components(links, directed=False)[1][node]
+    mean = np.zeros((group.max() + 1, 3))
+    np.add.at(mean, group, w[:, None] * n)
+    mean /= np.linalg.norm(mean, axis=1, keepdims=True)
+    # offsets along the group's normal: a new plane where they jump
+    offset = np.einsum("ij,ij->i", mean[group], x)
+    order = np.lexsort((offset, group))
+    new = np.ones(len(order), dtype=bool)
+    new[1:] = (group[order[1:]] != group[order[:-1]]) | (np.diff(offset[order]) > _OFFSET_GAP)
+    number = np.empty(len(order), dtype=np.int64)
+    number[order] = np.cumsum(new) - 1
+    plane[live] = number
+    count = int(number.max()) + 1
+    weight = np.bincount(number, w, count)
+    normal_sum = np.stack([np.bincount(number, w * n[:, j], count) for j in range(3)], axis=1)
+    centroid = np.stack([np.bincount(number, w * x[:, j], count) for j in range(3)], axis=1) / weight[:, None]
+    return SurfacePlanes(plane, normal_sum / np.linalg.norm(normal_sum, axis=1, keepdims=True), centroid, weight)

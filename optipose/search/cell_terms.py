@@ -94,7 +94,6 @@ class CellModel:
         self, setup, vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray, offsets: np.ndarray, apex_z: float
     ):
         from optipose.cell.asmade import AsMade
-        from optipose.model.planes import face_planes, plane_numbers
 
         cell, p, e = setup.cell, setup.process, setup.effects
         self.cell, self.process, self.centre, self.apex_z = cell, p, np.asarray(centre, float), float(apex_z)
@@ -114,10 +113,10 @@ class CellModel:
         self.sub_bias = e.subsurface_bias
         self.made = None
         if not p.exact:
-            self.plane = plane_numbers(*face_planes(vertices, faces))
             self.made = AsMade(
-                p, vertices, faces, self.plane, 0
-            )  # its planes' centroids, centre and extent (no draw is used)
+                p, vertices, faces, 0
+            )  # its planes, their centroids, centre and extent (no draw is used)
+            self.plane = self.made.plane
             rng = np.random.default_rng(2022_1536)  # fixed: a pose always scores the same
             d = rng.normal(size=(_FORM_FEATURES, 3))
             lam = np.exp(rng.uniform(*np.log(p.form_wavelengths), _FORM_FEATURES))
