@@ -5,6 +5,8 @@ lines are :mod:`optipose.verdict.words`'; every table fits an 80-column terminal
 
 from __future__ import annotations
 
+import textwrap
+
 __all__ = ["print_answer"]
 
 
@@ -34,8 +36,8 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
                 else words.verdict_headline(v, label, band.get(v.k), checked=not unchecked),
                 highlight=False,
             )
-            if confident and (why := words.open_line(v, most)):
-                console.print(why, highlight=False)
+            if confident and (why := words.open_line(v, most)):  # wrapped by words, not where the terminal ends
+                console.print(textwrap.fill(why, 80, subsequent_indent="    "), highlight=False, soft_wrap=True)
         for v in confident.values():
             if line := words.mount_line(v, report.layouts.get(v.k), baseline(part)):
                 console.print(line, highlight=False)
