@@ -139,6 +139,7 @@ def search_command(
         )
     if max_time:  # the user's clock on the whole search (a resumed search takes it anew)
         search_config = replace(search_config, time_limit=max_time)
+    if not resume:
         check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
     the_part = load_part(part, units=units)
     folder = resume or make_result_dir(the_part.name, "search", out)
