@@ -121,7 +121,13 @@ def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
     verdicts, band = result.verdicts(), result.band_verdicts()
     assert set(band) == {v.k for v in verdicts}  # checked under the band
     # the verdict with confidence first, one line per k, then the predicted errors with their intervals
-    assert lines[: len(verdicts)] == [confident_line(result.confident.by_k[v.k]) for v in verdicts]
+    # (an UNDECIDED one followed by what keeps it open, indented)
+    heads = [i for i, line in enumerate(lines) if line.startswith("k=")][: len(verdicts)]
+    assert heads[0] == 0 and [lines[i] for i in heads] == [confident_line(result.confident.by_k[v.k]) for v in verdicts]
+    for i, v in zip(heads, verdicts):
+        opened = result.confident.by_k[v.k].decision == "UNDECIDED"
+        assert lines[i + 1].startswith(f"  k={v.k} open: ") == opened
+    lines = [lines[i] for i in heads] + lines[heads[-1] + 1 :]  # the verdict lines, then the rest
     assert all(any(f"{w} conventional" in line for w in ("vs", "than", "KEEP")) for line in lines[:2])
     assert "predicted median |error| in the cell" in results["stdout"]
     assert "these verdicts hold in the ideal cell" in results["stdout"]  # the search ran in the ideal cell: it says so
