@@ -77,7 +77,7 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
                 if advice := words.band_advice(v, label, nominal.get(v.k, False)):
                     console.print(advice, highlight=False)
     if line := words.clock_line(report.clock_cut, time_limit):
-        console.print(line, style="yellow", highlight=False)
+        console.print(textwrap.fill(line, 80), style="yellow", highlight=False, soft_wrap=True)
     console.print(_strategies_table(report.outcome, label))
     for k, layout in sorted(report.layouts.items()):
         console.print(f"[bold]found k={k}[/] (T_O_S, metres; X Y Z mm, roll pitch yaw deg):")
