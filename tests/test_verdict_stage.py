@@ -389,3 +389,23 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
         [a.median for a in v.found[1].axes], rel=1e-12
     )
     assert back.validation.found[3].name == v.found[3].name
+
+
+def test_what_a_users_clock_cut_is_named_with_the_way_to_the_seeds_own_answer():
+    from optipose.search.pipeline import SearchReport
+    from optipose.search.records import SearchOutcome
+    from optipose.verdict.words import clock_line
+
+    rng = np.random.default_rng(3)
+    raced = compare_draws(
+        [_pairs(rng, i, 1.0) for i in range(3)], FAST, k=3, found_name="F1F2F3", baseline_name="S1S2S3"
+    )
+    outcome = SearchOutcome({}, {}, {}, {}, [], clock_cut=("greedy:k=2", "selection:k=2"))
+    report = SearchReport(outcome, confident=Verdicts({3: replace(raced, ended="clock")}))
+    assert report.clock_cut == ("greedy:k=2", "selection:k=2", "verdict:k=3")
+    line = clock_line(report.clock_cut, 60.0)
+    assert line.startswith(
+        "the 60 s clock (--max-time) ended greedy:k=2, selection:k=2, verdict:k=3 before their counts"
+    )
+    assert "without the clock the seed gives its own, on any machine" in line
+    assert clock_line((), 60.0) == "" and clock_line(SearchReport(outcome).clock_cut[:0], 0.0) == ""
