@@ -20,7 +20,7 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
     the search ran in the ideal cell (its verdicts say so); ``time_limit``: the user's clock on the search (0: none),
     whose cuts the answer names."""
     from optipose.model.baseline import baseline, baseline_label
-    from optipose.search.budgets import BUDGETS
+    from optipose.search.budgets import config_from_budget
     from optipose.verdict import words
 
     label = baseline_label(baseline(part))
@@ -28,7 +28,7 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
         verdicts = report.validation.verdicts()
         band = report.band.by_k() if report.band is not None else {}
         confident = report.confident.by_k
-        most = BUDGETS["thorough"].verdict["draws"]
+        most = config_from_budget("thorough", tuple(report.layouts), cell=not ideal).verdict.draws
         for v in confident.values() or verdicts:
             console.print(
                 words.confident_line(v)

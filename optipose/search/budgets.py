@@ -98,14 +98,28 @@ IN_A_CELL: dict[str, Preset] = {
         validation=dict(protocol="reduced"),
         verdict=dict(draws=12, scans=6),
     ),
-    # default: the joint stage's 100 evaluations; the race at most 10 draws of 20 scans each
+    # default: half the nominal surrogate search (a 512-pose screen, four starts polished, DIRECT-L's 200
+    # evaluations, a joint stage of 60) and the selection's fewest candidates (four for one sensor, two for two, one
+    # for three, with the anchored, nested and subset ones); the validation on the reduced protocol's 14 scans
+    # (it makes each layout's choice; its draw is not the race's); the race at most 40 draws of 3 scans each: the
+    # spread between cell instances rules the intervals, so draws of fewer scans decide on fewer scans
+    # (benchmarks/README.md, "bench_search_stages.py": where the work goes, and the draws' sizes tried)
     "default": Preset(
-        surrogate=dict(joint_evals=100, screen_samples=1024),
-        selection=dict(polish_evals=0, confirm_candidates=0),
-        validation=dict(band_objective=""),
-        verdict=dict(scans=20, draws=10),
+        surrogate=dict(
+            screen_samples=512,
+            screen_starts=4,
+            screen_evals=20,
+            global_evals=200,
+            local_evals=60,
+            joint_evals=60,
+            random_starts=4,
+        ),
+        selection=dict(candidates=1, polish_evals=0, confirm_candidates=0),
+        validation=dict(protocol="reduced", band_objective=""),
+        verdict=dict(scans=3, draws=40),
     ),
-    "thorough": Preset(validation=dict(band_objective=""), verdict=dict(scans=20)),
+    # thorough: the race at most 120 draws of 3 scans (360 scans a layout, thrice the default's)
+    "thorough": Preset(validation=dict(band_objective=""), verdict=dict(scans=3, draws=120)),
 }
 
 
