@@ -69,8 +69,11 @@ def _assert_same_maps(new: CellMaps, model: CellModel, turns: list, T_O_S: np.nd
     for i, name in enumerate(("A", "own", "shared", "path", "white", "bias")):
         got, want = getattr(new, name), np.array([r[i] for r in ref])
         assert got.dtype == np.float32 and got.shape == want.shape, name
+        # the frame's columns and the part's apart: the form's are some 10× smaller than the frame's
+        blocks = (slice(0, 6), slice(6, None)) if name == "shared" else (slice(None),)
         for t in range(len(turns)):
-            assert _off(got[t], want[t]) <= 2e-5 * _off(want[t], 0.0) + 1e-30, (name, t)
+            for b in blocks:
+                assert _off(got[t][..., b], want[t][..., b]) <= 2e-5 * _off(want[t][..., b], 0.0) + 1e-30, (name, t)
     for t, r in enumerate(ref):
         got = new.faces[t, np.searchsorted(planes, r[6])]
         assert got.shape == r[7].shape and _off(got, r[7]) <= 2e-5 * _off(r[7], 0.0) + 1e-30
