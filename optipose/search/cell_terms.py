@@ -43,7 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from optipose.search.mounting import displacement, scaled_solve
+from optipose.search.cell_sums import turn_sums
+from optipose.search.mounting import scaled_solve
 
 __all__ = ["CellMaps", "CellModel", "sensor_maps", "subset_terms"]
 
@@ -102,7 +103,7 @@ class CellModel:
         self.frame_sigma = np.repeat([c.frame_rotation, c.frame_translation], 3)
         r = cell.robot
         self.path_sigma = np.repeat([r.path_rotation, r.path], 3)
-        self.offsets = np.asarray(offsets, float)
+        self.offsets = np.ascontiguousarray(offsets, float)
         self.modes = (
             _gauss_markov_modes(self.offsets, r.path_correlation)
             if r.path or r.path_rotation
@@ -121,10 +122,41 @@ class CellModel:
             d = rng.normal(size=(_FORM_FEATURES, 3))
             lam = np.exp(rng.uniform(*np.log(p.form_wavelengths), _FORM_FEATURES))
             self.k = d / np.linalg.norm(d, axis=1, keepdims=True) * (2 * np.pi / lam)[:, None]
+        # what the compiled pass needs besides a turn's points, fixed per model (the CAD: no part columns)
+        form = p.form_rms / np.sqrt(_FORM_FEATURES)
+        self.part_scale = np.r_[np.full(2 * _FORM_FEATURES, form), np.ones(4)] if self.made is not None else np.zeros(0)
+        made = self.made
+        long = 0 if made is None else int(np.argmax(made.extent[:2]))
+        self._part_args = (
+            (np.zeros((0, 3)), np.zeros(3), 0.0, 0, 1.0, 0.0)
+            if made is None
+            else (self.k, np.asarray(made.centre, float), float(p.scale), long, float(made.extent[long]), float(p.warp))
+        )
+        self._face_args = (
+            (np.ascontiguousarray(made.plane_centroid, float), float(p.face_tilt))
+            if self.face_width
+            else (np.zeros((0, 3)), 0.0)
+        )
+
+    def kernel_args(self, T_O_S: np.ndarray, v: np.ndarray, n: np.ndarray, face: np.ndarray, R: np.ndarray) -> tuple:
+        """:func:`optipose.search.cell_sums.turn_sums`'s arguments for one turn (v, n (m, 3), face (m,), R (3, 3)),
+        of one type each, so that it compiles once."""
+        T = np.ascontiguousarray(T_O_S, float)
+        fan = bool(np.isfinite(self.apex_z))
+        apex = T[:3, 2] * self.apex_z + T[:3, 3] if fan else np.zeros(3)
+        plane = self.plane[face] if self.face_width else np.zeros(0, np.int64)
+        # the travel and the profile in numpy, as before: a point seen by one profile lies on its travel, where
+        # the profile it is given turns on the last bit of s
+        s = _travel((v - self.centre) @ R.T + self.centre, T)
+        at = np.clip(np.searchsorted(self.offsets, s), 0, len(self.offsets) - 1)
+        v, n, R = (np.ascontiguousarray(a, np.float64) for a in (v, n, R))
+        plane, at = np.ascontiguousarray(plane, np.int64), at.astype(np.int64)
+        return (v, n, plane, s, at, len(self.offsets), R, self.centre, T, fan, apex, *self._part_args, *self._face_args)
 
     def part_columns(self, x: np.ndarray, n: np.ndarray) -> np.ndarray:
         """(m, F) the normal offset at part-frame points x (m, 3), outward normals n, per unit random number of
-        the form field's features, the scale per axis and the warp (F = 0 for the CAD)."""
+        the form field's features, the scale per axis and the warp (F = 0 for the CAD): the columns
+        :func:`optipose.search.cell_sums.turn_sums` sums without building them (tests check it does)."""
         if self.made is None:
             return np.zeros((len(x), 0))
         p, made = self.process, self.made
@@ -185,39 +217,27 @@ def sensor_maps(model: CellModel, turns: list[tuple], T_O_S: np.ndarray, raw_per
 
 def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, face, R) -> tuple:
     """One turn's maps: A, own, shared, path, white, bias, the planes seen and their (p, 6, 4) maps."""
-    c = model.centre
-    p, n_O = (v - c) @ R.T + c, n @ R.T
-    J = np.hstack([np.cross(p - c, n_O), n_O])
-    L = np.einsum("ij,ijk->ik", n_O, displacement(p, T_O_S))  # (m, 6): residual per unit head error (r, t), its frame
-    own = J.T @ (L * model.own_sigma)
+    JJ, JL, JG, Js, white, Jc, per_plane, seen = turn_sums(*model.kernel_args(T_O_S, v, n, face, R))
     Rs, o = T_O_S[:3, :3], T_O_S[:3, 3]
     frame = np.zeros(
         (6, 6)
     )  # the frame's error (ω, t about the centre) as this head's own: r = Rsᵀω, t = Rsᵀ(ω × (o − c) + t_F)
     frame[:3, :3], frame[3:, 3:] = Rs.T, Rs.T
-    frame[3:, :3] = -Rs.T @ _cross(o - c)
-    shared = np.hstack([J.T @ (L @ frame * model.frame_sigma), J.T @ model.part_columns(v, n)])
-    s = _travel(p, T_O_S)
+    frame[3:, :3] = -Rs.T @ _cross(o - model.centre)
+    shared = np.hstack([JL @ frame * model.frame_sigma, JG * model.part_scale])
     path = np.zeros((6, 0))
-    if model.modes.shape[1]:
-        at = np.clip(np.searchsorted(model.offsets, s), 0, len(model.offsets) - 1)  # the profile that saw each point
-        JJ = J[:, :, None] * (J * model.path_sigma)[:, None, :]  # (m, 6, 6): r = J·ξ(s) for a pose error ξ at travel s
-        path = (
-            (model.modes[at].T @ JJ.reshape(len(J), 36)).reshape(-1, 6, 6).transpose(1, 0, 2).reshape(6, -1)
-        )  # Σ_m modes ⊗ JJ
+    if model.modes.shape[1]:  # Σ_m modes ⊗ JJ: a point's pose error ξ(s) at the travel s of the profile that saw it
+        path = np.einsum("pq,pab->aqb", model.modes, JJ * model.path_sigma).reshape(6, -1)
     if model.step:
-        path = np.hstack([path, (J.T @ (n_O[:, 0] * s * model.step))[:, None]])
-    cos = np.einsum("ij,ij->i", _rays(model, p, s, T_O_S), n_O)  # a move along the ray moves the point cos along n
-    white = (J * (cos**2 * model.white / max(raw_per_voxel, 1.0))[:, None]).T @ J
-    bias = J.T @ (cos * model.sub_bias)
-    plane, cols = model.face_columns(v, n, face)
-    planes = np.unique(plane) if cols.shape[1] else np.zeros(0, np.int64)
-    per_plane = np.zeros((len(planes), 6, cols.shape[1]))
-    if len(planes):  # the points' J ⊗ cols summed per plane: sorted by plane, each plane's run added
-        order = np.argsort(plane, kind="stable")
-        runs = np.searchsorted(plane[order], planes)
-        per_plane = np.add.reduceat((J[order, :, None] * cols[order, None, :]), runs, axis=0)
-    return J.T @ J, own, shared, path, white, bias, planes, per_plane
+        path = np.hstack([path, (Js * model.step)[:, None]])
+    planes = np.flatnonzero(seen) if model.face_width else np.zeros(0, np.int64)
+    per_plane = (
+        per_plane[planes] * [model.process.face_offset, 1.0, 1.0, 1.0]
+        if len(planes)
+        else np.zeros((0, 6, model.face_width))
+    )
+    white = white * (model.white / max(raw_per_voxel, 1.0))
+    return JJ.sum(axis=0), JL * model.own_sigma, shared, path, white, Jc * model.sub_bias, planes, per_plane
 
 
 def _cross(a: np.ndarray) -> np.ndarray:
@@ -229,15 +249,6 @@ def _travel(p: np.ndarray, T_O_S: np.ndarray) -> np.ndarray:
     y_S = T_O_S[:3, 1]
     across = float(y_S[0])
     return (T_O_S[:3, 3] - p) @ y_S / np.copysign(max(abs(across), 1e-3), across)
-
-
-def _rays(model: CellModel, p: np.ndarray, s: np.ndarray, T_O_S: np.ndarray) -> np.ndarray:
-    """(m, 3) unit laser rays to the points p seen at travel s (from the fan's apex, or along z_S)."""
-    if not np.isfinite(model.apex_z):
-        return np.broadcast_to(T_O_S[:3, 2], p.shape)
-    apex = T_O_S[:3, :3] @ np.array([0.0, 0.0, model.apex_z]) + T_O_S[:3, 3]
-    u = p + s[:, None] * np.array([1.0, 0.0, 0.0]) - apex
-    return u / np.linalg.norm(u, axis=1, keepdims=True)
 
 
 def subset_terms(maps: list[CellMaps]) -> tuple[np.ndarray, np.ndarray]:
