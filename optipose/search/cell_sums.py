@@ -34,7 +34,7 @@ def _cos_sin(phase):
     return 1.0 - 2.0 * s * s, 2.0 * s * c
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True)
 def turn_sums(
     v, n, plane, s, at, profiles, R, centre, T_O_S, fan, apex, k, made_centre, scale, long, extent, warp, pc, tilt
 ):

@@ -50,13 +50,16 @@ __all__ = ["CellMaps", "CellModel", "sensor_maps", "subset_terms"]
 
 _FORM_FEATURES = 48  # random Fourier frequencies of the form field: its covariance within ~15 % (1/√48)
 _PATH_MODES = 12  # Gauss–Markov eigenvectors kept along the travel (the rest hold little variance over a scan)
+_FLOAT64 = (0, 1, 4, 5)  # A, own, white, bias: kept in float64 (CellMaps)
 _MAX_STD = np.deg2rad(5.0)  # as the surrogate's weak prior: beyond it an error is not small
 
 
 @dataclass(frozen=True)
 class CellMaps:
     """One sensor pose's ΣJᵀr per unit random number of each source, per turn (index 0 the nominal
-    orientation), in O about the rotation centre; float32 (a search caches one per pose).
+    orientation), in O about the rotation centre; the wide maps (``shared``, ``path``, ``faces``) float32 (a
+    search caches one per pose), the 6 × 6 ones and the bias float64 (a subset's variance is a difference of
+    their products: in float32 a last bit moved part C's surrogate score by 10 %).
 
     A : (turns + 1, 6, 6) ΣJᵀJ of the voxel centroids.
     own : (turns + 1, 6, 6) the head's own calibration error (independent between heads).
@@ -208,11 +211,9 @@ def sensor_maps(model: CellModel, turns: list[tuple], T_O_S: np.ndarray, raw_per
     for m, p in enumerate(parts):
         if len(p[6]):
             faces[m, np.searchsorted(planes, p[6])] = p[7]
-    f32 = lambda i: np.array([p[i] for p in parts], np.float32)  # noqa: E731
     c = model.cell
-    return CellMaps(
-        f32(0), f32(1), f32(2), f32(3), planes, faces, f32(4), f32(5), c.robot.orientation, c.calibration.zeroed
-    )
+    kept = [np.array([p[i] for p in parts], np.float64 if i in _FLOAT64 else np.float32) for i in range(6)]
+    return CellMaps(*kept[:4], planes, faces, *kept[4:], c.robot.orientation, c.calibration.zeroed)
 
 
 def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, face, R) -> tuple:
