@@ -578,6 +578,27 @@ def test_the_hand_layout_shared_out_over_processes_by_its_scans_is_the_evaluator
     assert beside.stats.equals(here.stats) and beside.table == here.table
 
 
+def test_a_validation_of_a_share_of_the_scans_evaluates_found_and_hand_on_the_same_drawn_scans():
+    # validation.scans = 4 of the short protocol's 10: the hand layout beside the search (two processes) and the
+    # found one in the validation evaluate the same 4 scans, those the held-out seed draws, and the hand's rows are
+    # the evaluator's own on that share
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.search.validate import BaselineRun, validate
+    from optipose.seeds import validation_seed
+
+    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
+    hand = part.layouts["hand"]
+    found = {1: replace(hand, name="one", sensors=hand.sensors[1:2])}
+    seen = {}
+    with BaselineRun(part, objective, seed=3, processes=2, scans=4) as run:
+        validate(part, objective, found, 3, 1, "full", lambda name, r: seen.setdefault(name, r), run, scans=4)
+    with Evaluator(part, objective, seed=validation_seed(3), jobs=1, scans=4) as evaluator:
+        here = evaluator(hand)
+    drawn = set(here.per_scan["scan"])
+    assert len(drawn) == 4 and set(seen["hand"].per_scan["scan"]) == set(seen["found_k1"].per_scan["scan"]) == drawn
+    assert seen["hand"].per_scan.equals(here.per_scan)
+
+
 def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_evaluators():
     # the check under the band after a nominal search runs the hand layout's bracket draws in processes of
     # their own (each draw's noise levels together): the result must be RobustEvaluator's, condition by condition

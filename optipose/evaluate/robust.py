@@ -17,6 +17,7 @@ import pandas as pd
 from optipose.evaluate.assignment import Choice, best_choices, choose, restated, stats_by_key
 from optipose.evaluate.conditions import Condition, aggregate, conditions
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator, EvaluatorWrapper
+from optipose.errors import ConfigError
 from optipose.evaluate.objective import Objective, load_objective
 
 __all__ = [
@@ -72,13 +73,17 @@ class RobustEvaluator(EvaluatorWrapper):
         return robust_result(list(zip(self.conditions, self.evaluator.under(layout, self.conditions))), self.objective)
 
 
-def make_evaluator(part, objective, seed: int = 0, jobs: int = 1, quiet: bool = False, executor=None):
+def make_evaluator(part, objective, seed: int = 0, jobs: int = 1, quiet: bool = False, executor=None, scans: int = 0):
     """The evaluator an objective asks for: a plain :class:`Evaluator` when its band is trivial (one
     condition, the nominal one), else a :class:`RobustEvaluator`. Both give results with ``table``,
-    ``stats``, ``layout`` and ``n_scans``."""
+    ``stats``, ``layout`` and ``n_scans``. ``scans``: this many of the protocol's scans, drawn by the seed (0:
+    all; a plain evaluator only)."""
     objective = objective if isinstance(objective, Objective) else load_objective(objective)
-    kind = Evaluator if objective.conditions.trivial else RobustEvaluator
-    return kind(part, objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
+    if objective.conditions.trivial:
+        return Evaluator(part, objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor, scans=scans)
+    if scans:
+        raise ConfigError("a share of the scans is evaluated in one condition only, not under a band")
+    return RobustEvaluator(part, objective, seed=seed, jobs=jobs, quiet=quiet, executor=executor)
 
 
 def evaluate_robust(part, layout, objective, seed: int = 0, jobs: int = 1, quiet: bool = False) -> RobustResult:

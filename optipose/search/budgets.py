@@ -83,9 +83,9 @@ IN_A_CELL: dict[str, Preset] = {
     # then per sensor a local BOBYQA from the best start and its polish, few enough evaluations that BOBYQA mostly
     # probes each of the six numbers around its start: DIRECT-L's evaluations went to the surrogate's optimistic
     # corners, and ICP rated the local stage's layouts better (docs/results.md, "`--budget quick` in the real
-    # cell"). The verdict's draws of 6 scans each (3 a worker on two cores), so that its work sees several times
-    # as many cell instances as draws of the reduced protocol's 14 scans would (benchmarks/README.md,
-    # "bench_verdict_draw.py"), at most 12
+    # cell"). The validation on 7 of the reduced protocol's 14 scans (it makes each layout's choice); the verdict's
+    # draws of 3 scans each, so that its work sees several times as many cell instances as draws of the reduced
+    # protocol would, at most 8
     "quick": Preset(
         surrogate=dict(
             screen_samples=64,
@@ -95,8 +95,8 @@ IN_A_CELL: dict[str, Preset] = {
             global_evals=20,
             local_evals=10,
         ),
-        validation=dict(protocol="reduced"),
-        verdict=dict(draws=12, scans=6),
+        validation=dict(protocol="reduced", scans=7),
+        verdict=dict(draws=8, scans=3),
     ),
     # default: half the nominal surrogate search (a 512-pose screen, four starts polished, DIRECT-L's 200
     # evaluations, a joint stage of 60) and the selection's fewest candidates (four for one sensor, two for two, one

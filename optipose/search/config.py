@@ -116,6 +116,7 @@ class ValidationConfig:
     """The validation on the held-out seed (:mod:`optipose.search.validate`) and the check under a band after it."""
 
     protocol: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
+    scans: int = 0  # of that protocol's scans, this many, drawn by the held-out seed (0: all)
     # after the validation, the found layouts and the hand one again on the held-out seed under the
     # [conditions] of this objective (a shipped name or a TOML path; "": no check): a layout that wins only
     # at the preset's noise with perfect brackets is not bought. Skipped when the search's own objective
@@ -125,6 +126,8 @@ class ValidationConfig:
     def __post_init__(self) -> None:
         if self.protocol not in ("full", "reduced"):
             raise ConfigError(f"search validation must be full or reduced, not '{self.protocol}'")
+        if self.scans < 0:
+            raise ConfigError(f"search validation scans must be 0 (all) or more, not {self.scans}")
 
 
 SECTIONS = {
@@ -164,6 +167,7 @@ _RENAMED = {
     "select_candidates": ("selection", "candidates"),
     "select_time": ("selection", "time"),
     "validation": ("validation", "protocol"),
+    "validation_scans": ("validation", "scans"),
     "band": ("validation", "band_objective"),
     "verdict_draws": ("verdict", "draws"),
     "verdict_time": ("verdict", "time"),

@@ -248,7 +248,17 @@ def _baseline_run(ctx: SearchContext, objective, folder: str | None, last: bool 
     if objective is None or ctx.jobs < 2:
         return nullcontext()
     protocol = ctx.config.validation.protocol
-    return BaselineRun(ctx.part, objective, ctx.seed, protocol, last=last, processes=ctx.jobs, reference_dir=folder)
+    scans = _validation_scans(ctx, objective)
+    return BaselineRun(
+        ctx.part, objective, ctx.seed, protocol, last=last, processes=ctx.jobs, reference_dir=folder, scans=scans
+    )
+
+
+def _validation_scans(ctx: SearchContext, objective) -> int:
+    """The validation's share of its protocol's scans (``validation.scans``, 0: all): the search's own objective
+    in one condition only; under a band, and in the check under one, every scan."""
+    trivial = objective is ctx.objective and objective.conditions.trivial
+    return ctx.config.validation.scans if trivial else 0
 
 
 def _surrogate_search(ctx: SearchContext) -> None:
@@ -311,7 +321,15 @@ def _validation(ctx: SearchContext) -> None:
         ctx.sink.evaluation(name, result)
 
     report.validation = validate(
-        ctx.part, ctx.objective, report.layouts, ctx.seed, ctx.jobs, protocol, evaluation, ctx.baseline_run
+        ctx.part,
+        ctx.objective,
+        report.layouts,
+        ctx.seed,
+        ctx.jobs,
+        protocol,
+        evaluation,
+        ctx.baseline_run,
+        _validation_scans(ctx, ctx.objective),
     )
     if report.validation.baseline and not choice_draw_counts(ctx.objective) and ctx.objective.conditions.trivial:
         answered, report.validation = baseline_where_better(report.layouts, report.validation, ctx.baseline)

@@ -57,6 +57,7 @@ class BaselineRun:
         last: bool = False,
         processes: int = 1,
         reference_dir: str | None = None,
+        scans: int = 0,
     ):
         import multiprocessing
         import pickle
@@ -69,14 +70,14 @@ class BaselineRun:
             return
         objective = stage_objective(objective, "validation", protocol)
         self._objective, self._conditions = objective, conditions(objective.conditions)
-        self._part, self._seed, self._layout = part, validation_seed(seed), layout
+        self._part, self._seed, self._layout, self._scans = part, validation_seed(seed), layout, scans
         self._shares = _shares(self._conditions, processes)
         try:
             the_part = pickle.dumps(
                 part, protocol=pickle.HIGHEST_PROTOCOL
             )  # once, not once a process: a dense mesh takes seconds
             for under, scans in self._shares:
-                args = (the_part, objective, self._seed, layout, under, scans, reference_dir)
+                args = (the_part, objective, self._seed, layout, under, scans, reference_dir, self._scans)
                 self._calls.append(Background(_evaluate, *args, nice=_LAST if last else _NICE))
         except (OSError, pickle.PicklingError, AttributeError, TypeError) as exc:  # the validation evaluates it instead
             self.close()
@@ -91,7 +92,7 @@ class BaselineRun:
             for (under, _), call in zip(self._shares, self._calls):
                 for condition, raw in zip(under, call.result()):
                     raws.setdefault(condition, []).append(raw)
-            with Evaluator(self._part, self._objective, seed=self._seed, quiet=True) as evaluator:
+            with Evaluator(self._part, self._objective, seed=self._seed, quiet=True, scans=self._scans) as evaluator:
                 each = [evaluator.result(self._layout, raws[c]) for c in self._conditions]
             self._result = (
                 each[0]
@@ -137,14 +138,21 @@ def _shares(conditions: list, processes: int) -> list[tuple[list, tuple[int, int
 
 
 def _evaluate(
-    part: bytes, objective, seed: int, layout, under: list, scans: tuple[int, int], reference_dir: str | None
+    part: bytes,
+    objective,
+    seed: int,
+    layout,
+    under: list,
+    scans: tuple[int, int],
+    reference_dir: str | None,
+    share: int = 0,
 ) -> list:
     """The hand layout's raw evaluation under some conditions, on some of its scans (``scans``: first,
-    every), in a process of its own; ``part`` pickled."""
+    every, of the ``share`` the seed draws, 0: all), in a process of its own; ``part`` pickled."""
     import pickle
 
     with Evaluator(
-        pickle.loads(part), objective, seed=seed, jobs=1, quiet=True, reference_dir=reference_dir
+        pickle.loads(part), objective, seed=seed, jobs=1, quiet=True, reference_dir=reference_dir, scans=share
     ) as evaluator:
         return evaluator.raw(layout, under, scans)
 
@@ -158,6 +166,7 @@ def validate(
     protocol: str = "full",
     on_evaluation=None,
     baseline_run=None,
+    scans: int = 0,
 ) -> Validation:
     """Evaluate ``layouts`` (k → found layout) and the part's hand layout on the held-out seed of ``seed``.
 
@@ -173,7 +182,7 @@ def validate(
     objective = stage_objective(objective, "validation", protocol)
     done = on_evaluation or (lambda name, result: None)
     found, baseline_choices = {}, {}
-    with make_evaluator(part, objective, seed=vseed, jobs=jobs) as evaluator:
+    with make_evaluator(part, objective, seed=vseed, jobs=jobs, scans=scans) as evaluator:
         for members in nested_groups(layouts):
             big = layouts[max(members)]
             result = evaluator(big)
