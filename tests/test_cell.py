@@ -502,6 +502,13 @@ BAD_CELLS = {
     ),
     "flag.toml": ('[part]\nas_made = "yes"\n', "must be true or false"),
     "correlation.toml": ("[robot]\npath_correlation_mm = 0\n", "path_correlation_mm must be > 0"),
+    # magnitudes no cell can have (a path error of 50 mm ran `evaluate` for minutes, 1e308 ended in a traceback)
+    "path_50.toml": ("[robot]\npath_mm = 50\n", "path_mm = 50 is more than any cell has (at most 10)"),
+    "path_huge.toml": ("[robot]\npath_mm = 1e308\n", "path_mm = 1e+308 is more than any cell has"),
+    "tilt.toml": ("[calibration]\nsensor_rotation_deg = 30\n", "sensor_rotation_deg = 30 is more than any cell has"),
+    "step.toml": ("[robot]\nstep = 0.5\n", "step = 0.5 is more than any cell has (at most 0.1)"),
+    "empty.toml": ("", "no [robot], [calibration], [part] or [material] table"),
+    "name_only.toml": ('name = "mine"\n', "an empty cell file; the cell without error sources is --cell ideal"),
 }
 
 

@@ -42,28 +42,33 @@ __all__ = ["Cell", "CELLS_DIR", "load_cell", "load_process", "process_names", "I
 CELLS_DIR = Path(__file__).resolve().parents[2] / "cells"
 _PROCESSES = Path(__file__).resolve().parents[1] / "data" / "processes.toml"
 _MM, _DEG = 1e-3, np.pi / 180
+# The largest σ a cell can have, in file units: a part moved or made 10 mm off (twice the 5 mm correspondence
+# distance of every shipped objective, half the LJ-X8080's ±20.5 mm measuring range) or turned 5° (more than the
+# ±2° protocol itself) is not scanned and registered but lost; a scan step 10 % off is no calibrated axis. Beyond
+# them a cell file holds a typo, not a cell (a path error of 50 mm ran for minutes without an end).
+_LENGTH, _ANGLE, _SHARE = 10.0, 5.0, 0.1
 
 _ROBOT = {
-    "path_mm": ("path", _MM),
-    "path_rotation_deg": ("path_rotation", _DEG),
-    "path_correlation_mm": ("path_correlation", _MM),
-    "step": ("step", 1.0),
-    "orientation_deg": ("orientation", _DEG),
+    "path_mm": ("path", _MM, _LENGTH),
+    "path_rotation_deg": ("path_rotation", _DEG, _ANGLE),
+    "path_correlation_mm": ("path_correlation", _MM, 1e4),  # up to 10 m: a path error constant over any scan
+    "step": ("step", 1.0, _SHARE),
+    "orientation_deg": ("orientation", _DEG, _ANGLE),
 }
 _CALIBRATION = {
-    "sensor_translation_mm": ("sensor_translation", _MM),
-    "sensor_rotation_deg": ("sensor_rotation", _DEG),
-    "frame_translation_mm": ("frame_translation", _MM),
-    "frame_rotation_deg": ("frame_rotation", _DEG),
+    "sensor_translation_mm": ("sensor_translation", _MM, _LENGTH),
+    "sensor_rotation_deg": ("sensor_rotation", _DEG, _ANGLE),
+    "frame_translation_mm": ("frame_translation", _MM, _LENGTH),
+    "frame_rotation_deg": ("frame_rotation", _DEG, _ANGLE),
 }
 _PROCESS = {
-    "form_rms_mm": ("form_rms", _MM),
-    "face_offset_mm": ("face_offset", _MM),
-    "face_tilt_deg": ("face_tilt", _DEG),
-    "scale": ("scale", 1.0),
-    "warp_mm": ("warp", _MM),
-    "layer_height_mm": ("layer_height", _MM),
-    "layer_amplitude_mm": ("layer_amplitude", _MM),
+    "form_rms_mm": ("form_rms", _MM, _LENGTH),
+    "face_offset_mm": ("face_offset", _MM, _LENGTH),
+    "face_tilt_deg": ("face_tilt", _DEG, _ANGLE),
+    "scale": ("scale", 1.0, _SHARE),
+    "warp_mm": ("warp", _MM, _LENGTH),
+    "layer_height_mm": ("layer_height", _MM, _LENGTH),
+    "layer_amplitude_mm": ("layer_amplitude", _MM, _LENGTH),
 }
 
 
@@ -110,8 +115,14 @@ def load_cell(spec: "str | Path | Cell | None") -> Cell:
 
 
 def cell_from_table(table: dict, where: str, default_name: str = "cell", source_text: str = "") -> Cell:
-    """A cell file's table as a :class:`Cell`; every mistake one :class:`ConfigError` naming the key."""
+    """A cell file's table as a :class:`Cell`; every mistake one :class:`ConfigError` naming the key. A file that
+    sets none of the four tables is refused (the ideal cell is ``--cell ideal``, not an empty file)."""
     _keys(table, {"name", "description", "robot", "calibration", "part", "material"}, where)
+    if not {"robot", "calibration", "part", "material"} & set(table):
+        raise ConfigError(
+            f"{where}: no [robot], [calibration], [part] or [material] table (an empty cell file; the cell without "
+            "error sources is --cell ideal)"
+        )
     robot = RobotErrors(**_numbers(table.get("robot", {}), _ROBOT, f"{where} [robot]"))
     if robot.path_correlation <= 0:
         raise ConfigError(f"{where} [robot]: path_correlation_mm must be > 0")
@@ -186,15 +197,18 @@ def _keys(table: dict, allowed: set, where: str) -> None:
 
 
 def _numbers(table, keys: dict, where: str) -> dict:
-    """The table's numbers (file units) as record fields (SI); each must be finite and >= 0."""
+    """The table's numbers (file units) as record fields (SI); each must be finite, >= 0 and at most the largest
+    a cell can have (the third entry of its ``keys`` row)."""
     table = _table(table, where)
     _keys(table, set(keys), where)
     out = {}
     for key, value in table.items():
         if key.endswith("source"):
             continue
+        attr, unit, most = keys[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
             raise ConfigError(f"{where}: {key} must be a number >= 0, got {value!r}")
-        attr, unit = keys[key]
+        if value > most:
+            raise ConfigError(f"{where}: {key} = {value:g} is more than any cell has (at most {most:g})")
         out[attr] = float(value) * unit
     return out
