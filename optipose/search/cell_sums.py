@@ -15,20 +15,19 @@ from numba import njit
 __all__ = ["turn_sums"]
 
 
+# n! for the series' terms (floats: each a constant of the compiled code)
+_F3, _F4, _F5, _F6, _F7, _F8, _F9, _F10, _F11, _F12, _F13, _F14 = (float(math.factorial(n)) for n in range(3, 15))
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _cos_sin(phase):
     """cos and sin of a phase (rad), to ~1e-14: reduced to [−π, π], a Taylor series at a quarter of it and two
     doublings — plain arithmetic, so that a loop over phases vectorises (numba has no vector sin here)."""
     t = 0.25 * (phase - 2.0 * np.pi * math.floor(phase * (0.5 / np.pi) + 0.5))
     t2 = t * t
-    s = t * (
-        1.0
-        + t2 * (-1 / 6 + t2 * (1 / 120 + t2 * (-1 / 5040 + t2 * (1 / 362880 + t2 * (-1 / 39916800 + t2 / 6227020800)))))
-    )
+    s = t * (1.0 + t2 * (-1 / _F3 + t2 * (1 / _F5 + t2 * (-1 / _F7 + t2 * (1 / _F9 + t2 * (-1 / _F11 + t2 / _F13))))))
     c = 1.0 + t2 * (
-        -0.5
-        + t2
-        * (1 / 24 + t2 * (-1 / 720 + t2 * (1 / 40320 + t2 * (-1 / 3628800 + t2 * (1 / 479001600 - t2 / 87178291200)))))
+        -0.5 + t2 * (1 / _F4 + t2 * (-1 / _F6 + t2 * (1 / _F8 + t2 * (-1 / _F10 + t2 * (1 / _F12 - t2 / _F14)))))
     )
     s, c = 2.0 * s * c, 1.0 - 2.0 * s * s
     return 1.0 - 2.0 * s * s, 2.0 * s * c
