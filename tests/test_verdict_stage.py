@@ -391,6 +391,33 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     assert back.validation.found[3].name == v.found[3].name
 
 
+def test_where_every_k_is_answered_with_the_hand_choice_the_race_takes_the_kept_draws_of_the_hand_alone(monkeypatch):
+    # every k worse than the hand's own choice on the validation's draw: each an exact TIE from the first draw, so no
+    # draw can change a decision; the race takes KEPT_DRAWS (here 3 of the budget's 6) of the hand layout alone
+    from optipose.model.layout import is_part_of
+    from optipose.search import draws
+    from optipose.search.validate import baseline_where_better
+
+    monkeypatch.setattr(draws, "KEPT_DRAWS", 3)
+    part = load_part("part_b")
+    hand = part.layouts["hand"]
+    objective = load_objective("paper").in_cell("ur10e")
+    config = SearchConfig(validation=ValidationConfig(protocol="reduced"), verdict=VerdictConfig(draws=6, scans=2))
+    layouts = {k: _as_found(hand, k) for k in (1, 2, 3)}
+    first, names = {}, []
+    validation = validate(part, objective, layouts, seed=5, protocol="reduced", on_evaluation=first.__setitem__)
+    worse = replace(
+        validation, found={k: replace(f, score=validation.baseline[k].score * 2) for k, f in validation.found.items()}
+    )
+    answered, v = baseline_where_better(layouts, worse, hand)
+    assert all(is_part_of(answered[k], hand) for k in (1, 2, 3))
+    verdicts = confident_verdicts(
+        part, objective, answered, v, first, 5, config, on_draw=lambda i, name, result: names.append((i, name))
+    )
+    assert names == [(1, "hand"), (2, "hand"), (3, "hand")]
+    assert all(x.decision == Decision.TIE and x.n_draws == 3 for x in verdicts.by_k.values())
+
+
 def test_what_a_users_clock_cut_is_named_with_the_way_to_the_seeds_own_answer():
     from optipose.search.pipeline import SearchReport
     from optipose.search.records import SearchOutcome

@@ -10,7 +10,8 @@ axis); a draw gives that choice's per-scan errors (:func:`optipose.verdict.confi
 registers only the subsets the choices use (``Evaluator(...)(layout, subsets=...)``). A k the search answered with
 the hand layout's own choice (:func:`optipose.search.validate.baseline_where_better`) is not evaluated: its side is the
 hand layout's evaluation with that choice, an exact TIE that rides along without holding the race (when every k is
-one, they are the race, decided at one look at its last draw: the draws go to the hand layout's predicted error).
+one, they are the race, decided at one look at its last draw: the draws go to the hand layout's predicted error, at
+most :data:`KEPT_DRAWS`).
 
 Draws are added (:func:`optipose.verdict.racing.race_many`) until every k is BUY, KEEP or TIE, or
 ``SearchConfig.verdict.draws`` are in, or another draw would end past ``SearchConfig.verdict.time``. In the
@@ -42,6 +43,10 @@ from optipose.verdict.racing import race_many
 __all__ = ["choice_draw_counts", "confident_verdicts", "first_look", "sides"]
 
 log = logging.getLogger(__name__)
+
+# the draws of a race in which the search answered every k with the hand layout's own choice: each k is an exact TIE,
+# so the draws only measure the hand layout's predicted error per axis (its interval's width ∝ 1/√draws)
+KEPT_DRAWS = 20
 
 
 def first_look(objective) -> int:
@@ -159,15 +164,17 @@ def confident_verdicts(
         return pairs(results)
 
     # a k answered with the baseline's own choice is an exact TIE from the first draw: it rides along without
-    # holding the race, and when every k is one, the draws go to its predicted error (one look, at the end)
+    # holding the race, and when every k is one, no draw can change a decision: the draws go to its predicted error
+    # (one look, at the end), at most KEPT_DRAWS of them
     riders = fewer | (frozenset((k, k) for k in kept) if kept != set(ks) else frozenset())
+    most = min(config.verdict.draws, KEPT_DRAWS) if kept == set(ks) else config.verdict.draws
     try:
         seconds = config.verdict.time if config.verdict.time > 0 else math.inf
         raced = race_many(
             next_draws,
             rules,
-            min_draws=config.verdict.draws if kept == set(ks) else first_look(objective),
-            max_draws=config.verdict.draws,
+            min_draws=most if kept == set(ks) else first_look(objective),
+            max_draws=most,
             seconds=seconds,
             draws=draws,
             names=labels,
