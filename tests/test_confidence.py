@@ -332,6 +332,22 @@ def test_reproducible_from_the_seed():
     assert other.score.estimate == one.score.estimate and other.score.low != one.score.low
 
 
+def test_a_ratio_past_a_thousand_is_written_so_and_a_few_draws_fewer_line_still_ends_in_its_words():
+    # three draws' Student interval reached 4.5e21 in a search's fewer-sensors line, and the line was cut at 80
+    # columns in the middle of "not settled"
+    assert ratio_cell(Interval(1.12, 0.0, 4.47e21)) == "1.12x [0.00, >999]"
+    assert ratio_cell(Interval(999.994, 2.5, 1000.0)) == "999.99x [2.50, >999]"
+    assert ratio_cell(Interval(1.0, float("nan"), 2.0)) == "1.00x [nan, 2.00]"
+    rng = np.random.default_rng(9)
+    hand = _draws(rng, 1)[0].baseline
+    wide = compare_draws(
+        [PairedDraw(0, hand, hand)] * 2, FAST, k=1, found_name="F1", baseline_name="S1S2S3", baseline_k=3
+    )
+    wide = replace(wide, decision=Decision.UNDECIDED, score=Interval(1.12, 0.0, 4.47e21))
+    line = fewer_line(wide)
+    assert len(line) <= 80 and line.endswith("not settled") and ">999" in line
+
+
 def test_one_line_of_at_most_80_columns_naming_the_sensors():
     rng = np.random.default_rng(9)
     hand = _draws(rng, 1)[0].baseline

@@ -101,8 +101,13 @@ def interval_cell(interval: Interval, scale: float = 1e3, digits: int = 3) -> st
 
 
 def ratio_cell(interval: Interval) -> str:
-    """``1.42x [1.21, 1.66]``: a ratio and its interval."""
-    return f"{interval.estimate:.2f}x [{interval.low:.2f}, {interval.high:.2f}]"
+    """``1.42x [1.21, 1.66]``: a ratio and its interval (an end past 1000 as ``>999``: a few draws' Student
+    interval can reach 1e21, which says no more and would push the line past 80 columns)."""
+    return f"{_ratio(interval.estimate)}x [{_ratio(interval.low)}, {_ratio(interval.high)}]"
+
+
+def _ratio(x: float) -> str:
+    return ">999" if x >= 1000 else f"{x:.2f}"
 
 
 def xyz_rpy_text(T_O_S) -> str:
