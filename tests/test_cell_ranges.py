@@ -289,6 +289,7 @@ def test_a_shipped_preset_has_every_magnitude_a_sourced_range(name):
             assert len(table[section][f"{key}_source"]) > 40, key  # a source, not a word
     zeroed = load_cell(f"{name}:zeroed")
     assert zeroed.calibration.zeroed and zeroed.name == f"{name}:zeroed" and zeroed.ranges == cell.ranges
+    assert zeroed.description.endswith("zeroed on a master part") and "not zeroed" not in zeroed.description
     assert load_cell(zeroed.name) == zeroed  # a run's config names it so, and --cell reads it back
 
 

@@ -165,7 +165,9 @@ def _zeroed(spec: str) -> Cell:
     cell = load_cell(name)
     if not cell.calibration.off:
         raise ConfigError(f"cell '{spec}': cell '{cell.name}' has no calibration error to zero")
-    return replace(cell, name=f"{cell.name}:zeroed", calibration=replace(cell.calibration, zeroed=True))
+    description = cell.description.removesuffix(", not zeroed") + ", zeroed on a master part"
+    calibration = replace(cell.calibration, zeroed=True)
+    return replace(cell, name=f"{cell.name}:zeroed", description=description, calibration=calibration)
 
 
 def cell_from_table(table: dict, where: str, default_name: str = "cell", source_text: str = "") -> Cell:
