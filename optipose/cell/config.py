@@ -23,21 +23,27 @@ names its source in the file::
     [material]
     effects = true                 # the material preset's `cell` table: speckle, sub-surface, spurious
 
+Any magnitude of ``[robot]`` and ``[calibration]``, and ``process_scale``, may be a range ``[low, high]`` instead
+of a point (:mod:`optipose.cell.ranges`): a :class:`Cell` keeps its ranges beside point records that hold their
+middles, and :meth:`Cell.instance` draws the point cell of a run's seed (log-uniform between low and high when
+low > 0, uniform on [0, high] when low is 0). ``--cell NAME:zeroed`` is a cell zeroed on a master part.
+
 The cell ``ideal`` (every source off) is the model without a cell, bit for bit.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from optipose.cell.asmade import Process
+from optipose.cell.ranges import draws, magnitude, middle
 from optipose.cell.robot import CalibrationErrors, RobotErrors
 from optipose.errors import ConfigError, read_toml, shipped_toml
 
-__all__ = ["Cell", "CELLS_DIR", "load_cell", "load_process", "process_names", "IDEAL"]
+__all__ = ["Cell", "CELLS_DIR", "load_cell", "cell_names", "load_process", "process_names", "IDEAL"]
 
 CELLS_DIR = Path(__file__).resolve().parents[2] / "cells"
 _PROCESSES = Path(__file__).resolve().parents[1] / "data" / "processes.toml"
@@ -74,7 +80,12 @@ _PROCESS = {
 
 @dataclass(frozen=True)
 class Cell:
-    """A cell's error sources (SI). The default is the ideal cell."""
+    """A cell's error sources (SI). The default is the ideal cell.
+
+    ranges : ``(field, low, high)`` rows (SI), sorted by field (``robot.path``, ``calibration.frame_rotation``,
+    ``process_scale``): the magnitudes known only to a bracket; the point records hold their middles
+    (:func:`optipose.cell.ranges.middle`), and :meth:`instance` draws them per run seed.
+    """
 
     name: str = "ideal"
     description: str = ""
@@ -85,6 +96,7 @@ class Cell:
     process_scale: float = 1.0
     material: bool = False
     source_text: str = field(default="", repr=False, compare=False)
+    ranges: tuple = ()
 
     @property
     def ideal(self) -> bool:
@@ -99,6 +111,27 @@ class Cell:
             return Process()
         return load_process(name or self.default_process).scaled(self.process_scale)
 
+    def instance(self, seed: int) -> "Cell":
+        """The point cell of the run seed ``seed``: each range's magnitude drawn (:func:`optipose.cell.ranges.draws`);
+        the cell itself when it has no range (no draw is made)."""
+        return self if not self.ranges else self._with(draws(self.ranges, seed))
+
+    def middle(self) -> "Cell":
+        """The point cell of the ranges' middles (what the surrogate scores); the cell itself without ranges."""
+        return self if not self.ranges else self._with({f: middle(lo, hi) for f, lo, hi in self.ranges})
+
+    def _with(self, values: dict) -> "Cell":
+        """This cell with the fields ``values`` names (``robot.path``, ..., ``process_scale``) set, and no range."""
+        robot = {k.split(".")[1]: v for k, v in values.items() if k.startswith("robot.")}
+        calibration = {k.split(".")[1]: v for k, v in values.items() if k.startswith("calibration.")}
+        return replace(
+            self,
+            robot=replace(self.robot, **robot),
+            calibration=replace(self.calibration, **calibration),
+            process_scale=values.get("process_scale", self.process_scale),
+            ranges=(),
+        )
+
 
 IDEAL = Cell()
 
@@ -109,9 +142,32 @@ def load_cell(spec: "str | Path | Cell | None") -> Cell:
         return spec
     if spec is None or spec == "ideal":
         return IDEAL
+    if isinstance(spec, str) and ":" in spec and not Path(spec).exists():
+        return _zeroed(spec)
     path = shipped_toml(spec, CELLS_DIR, "cell")
     table, text = read_toml(path, "cell file")
     return cell_from_table(table, str(path), default_name=path.stem, source_text=text)
+
+
+def cell_names() -> list[str]:
+    """The shipped cells (``cells/*.toml``), by name."""
+    return sorted(p.stem for p in CELLS_DIR.glob("*.toml"))
+
+
+def _zeroed(spec: str) -> Cell:
+    """``NAME:zeroed``: the cell ``NAME`` (a shipped name or a path) zeroed on a master part; any other suffix,
+    or a cell without a calibration error to zero, is one :class:`ConfigError`."""
+    name, suffix = spec.rsplit(":", 1)
+    if suffix != "zeroed":
+        raise ConfigError(
+            f"cell '{spec}': unknown suffix ':{suffix}' (a cell is NAME, or NAME:zeroed for it zeroed on a master part)"
+        )
+    cell = load_cell(name)
+    if not cell.calibration.off:
+        raise ConfigError(f"cell '{spec}': cell '{cell.name}' has no calibration error to zero")
+    description = cell.description.removesuffix(", not zeroed") + ", zeroed on a master part"
+    calibration = replace(cell.calibration, zeroed=True)
+    return replace(cell, name=f"{cell.name}:zeroed", description=description, calibration=calibration)
 
 
 def cell_from_table(table: dict, where: str, default_name: str = "cell", source_text: str = "") -> Cell:
@@ -123,15 +179,16 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
             f"{where}: no [robot], [calibration], [part] or [material] table (an empty cell file; the cell without "
             "error sources is --cell ideal)"
         )
-    robot = RobotErrors(**_numbers(table.get("robot", {}), _ROBOT, f"{where} [robot]"))
-    if robot.path_correlation <= 0:
+    ranges: dict[str, tuple[float, float]] = {}
+    robot = RobotErrors(**_numbers(table.get("robot", {}), _ROBOT, f"{where} [robot]", ranges, "robot."))
+    if min(robot.path_correlation, *ranges.get("robot.path_correlation", (1.0,))) <= 0:
         raise ConfigError(f"{where} [robot]: path_correlation_mm must be > 0")
     calibration_table = dict(_table(table.get("calibration", {}), f"{where} [calibration]"))
     zeroed = calibration_table.pop("zeroed", False)
     if not isinstance(zeroed, bool):
         raise ConfigError(f"{where} [calibration]: zeroed must be true or false, got {zeroed!r}")
     calibration = CalibrationErrors(
-        **_numbers(calibration_table, _CALIBRATION, f"{where} [calibration]"), zeroed=zeroed
+        **_numbers(calibration_table, _CALIBRATION, f"{where} [calibration]", ranges, "calibration."), zeroed=zeroed
     )
     part = _table(table.get("part", {}), f"{where} [part]")
     _keys(part, {"as_made", "default_process", "process_scale"}, f"{where} [part]")
@@ -140,9 +197,9 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
     as_made, effects = part.get("as_made", False), material.get("effects", False)
     if not isinstance(as_made, bool) or not isinstance(effects, bool):
         raise ConfigError(f"{where}: [part] as_made and [material] effects must be true or false")
-    scale = part.get("process_scale", 1.0)
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale < 1e3:
-        raise ConfigError(f"{where} [part]: process_scale must be a number >= 0, got {scale!r}")
+    scale = magnitude(part.get("process_scale", 1.0), "process_scale", 1.0, 1e3, f"{where} [part]")
+    if isinstance(scale, tuple):
+        ranges["process_scale"], scale = scale, middle(*scale)
     default_process = str(part.get("default_process", "cad"))
     load_process(default_process)  # an unknown name fails here, with the file named
     return Cell(
@@ -155,6 +212,7 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
         float(scale),
         effects,
         source_text,
+        tuple((name, *ranges[name]) for name in sorted(ranges)),
     )
 
 
@@ -196,9 +254,11 @@ def _keys(table: dict, allowed: set, where: str) -> None:
         raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(allowed))})")
 
 
-def _numbers(table, keys: dict, where: str) -> dict:
+def _numbers(table, keys: dict, where: str, ranges: dict | None = None, prefix: str = "") -> dict:
     """The table's numbers (file units) as record fields (SI); each must be finite, >= 0 and at most the largest
-    a cell can have (the third entry of its ``keys`` row)."""
+    a cell can have (the third entry of its ``keys`` row). With ``ranges`` (a dict), a value may be a range
+    ``[low, high]`` (:func:`optipose.cell.ranges.magnitude`): its ends go to ``ranges[prefix + field]``, its
+    middle to the record; without, a range is refused as any other non-number."""
     table = _table(table, where)
     _keys(table, set(keys), where)
     out = {}
@@ -206,9 +266,10 @@ def _numbers(table, keys: dict, where: str) -> dict:
         if key.endswith("source"):
             continue
         attr, unit, most = keys[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+        if ranges is None and (isinstance(value, (list, bool)) or not isinstance(value, (int, float)) or value < 0):
             raise ConfigError(f"{where}: {key} must be a number >= 0, got {value!r}")
-        if value > most:
-            raise ConfigError(f"{where}: {key} = {value:g} is more than any cell has (at most {most:g})")
-        out[attr] = float(value) * unit
+        value = magnitude(value, key, unit, most, where)
+        if isinstance(value, tuple):
+            ranges[prefix + attr], value = value, middle(*value)
+        out[attr] = value
     return out

@@ -12,8 +12,9 @@ really stand, and builds each cloud with the poses the cell believes (:meth:`Liv
   the sub-surface spread), and returns spurious points (anywhere, and more near concave edges: the
   line's reflection off the other face), each along the ray.
 
-Per run seed one cell instance (the part as made, the calibration); per scan (the orientation's noise
-seed) one robot path and the material's draws — the same at every noise level of the scan, so the
+Per run seed one cell instance (its magnitudes first, drawn from the cell's ranges when it has any:
+:meth:`optipose.cell.config.Cell.instance`; then the part as made, the calibration); per scan (the orientation's
+noise seed) one robot path and the material's draws — the same at every noise level of the scan, so the
 levels differ by the sensor's noise alone.
 
 What a point draws depends on the seeds and the surface, not on the mesh's triangles: the part as made's
@@ -86,11 +87,30 @@ class CellSetup:
         effects = load_material(part.material).effects if cell.material else MaterialEffects()
         return cls(cell, cell.process(getattr(part, "process", "") or None), effects)
 
+    def instance(self, seed: int) -> "CellSetup":
+        """The setup of the cell instance of run seed ``seed``: the cell's magnitudes drawn from its ranges
+        (:meth:`optipose.cell.config.Cell.instance`), the part's process scaled by the drawn ``process_scale``;
+        itself when the cell has no range."""
+        return self._as(self.cell.instance(seed))
+
+    def middle(self) -> "CellSetup":
+        """The setup of the cell of the ranges' middles (:meth:`optipose.cell.config.Cell.middle`)."""
+        return self._as(self.cell.middle())
+
+    def _as(self, cell: Cell) -> "CellSetup":
+        if cell is self.cell:
+            return self
+        # the process was scaled by the range's middle (never 0 for a range): rescale it to the drawn factor
+        factor = cell.process_scale / self.cell.process_scale if cell.process_scale != self.cell.process_scale else 1.0
+        return CellSetup(cell, self.process.scaled(factor) if factor != 1.0 else self.process, self.effects)
+
 
 class LiveCell:
-    """One cell instance in a worker: the part as made and the calibration drawn from the run's ``seed``."""
+    """One cell instance in a worker: its magnitudes (from the cell's ranges), the part as made and the
+    calibration drawn from the run's ``seed``; two layouts evaluated with one seed get the same instance."""
 
     def __init__(self, setup: CellSetup, vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray, seed: int):
+        setup = setup.instance(seed)  # a cell of points: itself, no draw made
         self.setup, self.centre, self.seed = setup, np.asarray(centre, float), int(seed)
         self.as_made = None
         if not setup.process.exact:

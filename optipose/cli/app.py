@@ -18,7 +18,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli import batch, evaluate, parts, report, robustness, scan, search
+from optipose.cli import batch, cells, evaluate, parts, report, robustness, scan, search
 from optipose.cli.options import EXIT_INTERRUPTED, EXIT_USER_ERROR
 
 # rich_markup_mode=None: click's plain help, which re-wraps every paragraph to the terminal and never cuts
@@ -80,6 +80,7 @@ for _command in (
     parts.parts,
     parts.show,
     parts.counts,
+    cells.cells,
     evaluate.evaluate,
     search.search,
     robustness.robustness,

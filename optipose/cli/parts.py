@@ -14,7 +14,7 @@ import typer
 from optipose.cli.options import Part, Units, check_output, friendly_errors
 from optipose.errors import ConfigError
 
-__all__ = ["parts", "show", "counts", "parts_command", "show_command", "counts_command", "counts_table"]
+__all__ = ["parts", "show", "counts", "parts_command", "show_command", "counts_command", "counts_table", "console"]
 
 
 @friendly_errors
@@ -66,7 +66,7 @@ def parts_command() -> None:
         scan = f"{part.motion.length * 1e3:g}/{part.motion.step * 1e3:g}"
         table.add_row(name, size, part.material, scan, layouts, keepouts)
     table.caption = "scan: length/step; layouts: name:sensors; the part travels along +x"
-    _console().print(table)
+    console().print(table)
 
 
 def show_command(part: str, out: Path | None = None, units: str = "auto", layout: str = "hand") -> Path:
@@ -94,7 +94,7 @@ def show_command(part: str, out: Path | None = None, units: str = "auto", layout
             f"part '{loaded.name}' has no layout '{layout}' (it has: {', '.join(loaded.layouts) or 'none'}; or give a .toml file)"
         )
     path = render_part(loaded, out or Path(f"{loaded.name}.png"), layout)
-    _console().print(f"wrote {path}")
+    console().print(f"wrote {path}")
     return path
 
 
@@ -140,14 +140,14 @@ def counts_command(part: str | None = None, layout: str = "hand", markdown: bool
         table.add_column(column, justify="left" if column in ("part", "sensor") else "right")
     for r in rows:
         table.add_row(r["part"], r["sensor"], f"{r['points']:,}", str(r["profiles"]), f"{r['per_profile']:.0f}")
-    _console().print(table)
+    console().print(table)
     return rows
 
 
-def _console():
-    """A rich console; 100 columns when the output is not a terminal, so piped tables do not wrap."""
+def console(width: int = 100):
+    """A rich console; ``width`` columns when the output is not a terminal, so piped tables do not wrap."""
     import sys
 
     from rich.console import Console
 
-    return Console(width=None if sys.stdout.isatty() else 100)
+    return Console(width=None if sys.stdout.isatty() else width)

@@ -139,7 +139,13 @@ def _saved_cell(t: dict | None) -> Cell:
         return IDEAL
     t = dict(t)
     robot, calibration = RobotErrors(**t.pop("robot", {})), CalibrationErrors(**t.pop("calibration", {}))
-    return Cell(robot=robot, calibration=calibration, **{k: v for k, v in t.items() if k in Cell.__dataclass_fields__})
+    ranges = tuple((str(name), float(low), float(high)) for name, low, high in t.pop("ranges", ()))
+    return Cell(
+        robot=robot,
+        calibration=calibration,
+        ranges=ranges,
+        **{k: v for k, v in t.items() if k in Cell.__dataclass_fields__},
+    )
 
 
 def reduced_objective(objective: Objective) -> Objective:

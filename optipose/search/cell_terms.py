@@ -99,6 +99,7 @@ class CellModel:
     ):
         from optipose.cell.asmade import AsMade
 
+        setup = setup.middle()  # a cell of ranges is scored at their middles (docs/method.md, a known limit)
         cell, p, e = setup.cell, setup.process, setup.effects
         self.cell, self.process, self.centre, self.apex_z = cell, p, np.asarray(centre, float), float(apex_z)
         c = cell.calibration
