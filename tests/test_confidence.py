@@ -385,7 +385,7 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
         assert (
             "F1 alone" in line
             and "conventional S1S2S3" in line
-            and f"{s.estimate:.2f}x [{s.low:.2f}, {s.high:.2f}]" in line
+            and ratio_cell(s) in line
         )
 
 
