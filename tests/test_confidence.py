@@ -382,11 +382,7 @@ def test_one_line_of_at_most_80_columns_naming_the_sensors():
         )
         line, s = fewer_line(fewer), fewer.score
         assert fewer.decision == decision and len(line) <= 80, line
-        assert (
-            "F1 alone" in line
-            and "conventional S1S2S3" in line
-            and ratio_cell(s) in line
-        )
+        assert "F1 alone" in line and "conventional S1S2S3" in line and ratio_cell(s) in line
 
 
 def _result(seed, errors, ok, subsets=("S1", "S2", "S1S2")):
