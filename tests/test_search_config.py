@@ -232,11 +232,16 @@ def test_the_committed_search_folders_written_flat_still_resume_with_their_setti
     from optipose.cli.search import _settings
     from optipose.io.folders import read_config
 
+    # every committed search folder, and one written flat before the sections (a quick search of part A, kept in
+    # tests/data as it was written, its part's path made relative)
     folders = [
-        p.parent for p in sorted((ROOT / "results").rglob("config.toml")) if 'command = "search"' in p.read_text()
+        p.parent
+        for root in (ROOT / "results", ROOT / "tests" / "data")
+        for p in sorted(root.rglob("config.toml"))
+        if 'command = "search"' in p.read_text()
     ]
     flat_folders = [folder for folder in folders if "global_evals" in read_config(folder).search]
-    assert flat_folders  # results/verdict-quick and the others
+    assert ROOT / "tests" / "data" / "flat_search" in flat_folders
     for folder in flat_folders:
         saved = read_config(folder)
         config = _settings(saved)[1]
