@@ -50,7 +50,7 @@ def _reference_turn(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v
     cos = np.einsum("ij,ij->i", rays, n_O)
     white = (J * (cos**2 * model.white / max(raw_per_voxel, 1.0))[:, None]).T @ J
     bias = J.T @ (cos * model.sub_bias)
-    plane, cols = model.face_columns(v, n, face)
+    plane, cols = _face_columns(model, v, n, face)
     planes = np.unique(plane) if cols.shape[1] else np.zeros(0, np.int64)
     per_plane = np.zeros((len(planes), 6, cols.shape[1]))
     if len(planes):
@@ -58,6 +58,16 @@ def _reference_turn(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v
         runs = np.searchsorted(plane[order], planes)
         per_plane = np.add.reduceat((J[order, :, None] * cols[order, None, :]), runs, axis=0)
     return J.T @ J, own, shared, path, white, bias, planes, per_plane
+
+
+def _face_columns(model: CellModel, x, n, face) -> tuple:
+    """Each point's plane number (m,), and per unit random number its plane's offset and tilt (m, 4)."""
+    p = model.process
+    if not model.face_width:
+        return np.zeros(len(x), np.int64), np.zeros((len(x), 0))
+    plane = model.plane[face]
+    arm = np.cross(x - model.made.plane_centroid[plane], n)  # tilt τ turns the point's normal offset by τ·(arm × n)
+    return plane, np.hstack([np.full((len(x), 1), p.face_offset), arm * p.face_tilt])
 
 
 def _assert_same_maps(new: CellMaps, model: CellModel, turns: list, T_O_S: np.ndarray, raw_per_voxel: float):

@@ -182,15 +182,6 @@ class CellModel:
         p = self.process
         return 4 if self.made is not None and (p.face_offset or p.face_tilt) else 0
 
-    def face_columns(self, x: np.ndarray, n: np.ndarray, face: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Each point's plane number (m,), and per unit random number its plane's offset and tilt (m, 4)."""
-        p = self.process
-        if not self.face_width:
-            return np.zeros(len(x), np.int64), np.zeros((len(x), 0))
-        plane = self.plane[face]
-        arm = np.cross(x - self.made.plane_centroid[plane], n)  # tilt τ turns the point's normal offset by τ·(arm × n)
-        return plane, np.hstack([np.full((len(x), 1), p.face_offset), arm * p.face_tilt])
-
 
 def _gauss_markov_modes(s: np.ndarray, length: float) -> np.ndarray:
     """(profiles, q): the leading eigenvectors of exp(−|Δs|/length) on the travel s, times √eigenvalue."""
