@@ -166,14 +166,15 @@ def confident_verdicts(
     # a k answered with the baseline's own choice is an exact TIE from the first draw: it rides along without
     # holding the race, and when every k is one, no draw can change a decision: the draws go to its predicted error
     # (one look, at the end), at most KEPT_DRAWS of them
-    riders = fewer | (frozenset((k, k) for k in kept) if kept != set(ks) else frozenset())
-    most = min(config.verdict.draws, KEPT_DRAWS) if kept == set(ks) else config.verdict.draws
+    every_kept = kept == set(ks)
+    riders = fewer | (frozenset((k, k) for k in kept) if not every_kept else frozenset())
+    most = min(config.verdict.draws, KEPT_DRAWS) if every_kept else config.verdict.draws
     try:
         seconds = config.verdict.time if config.verdict.time > 0 else math.inf
         raced = race_many(
             next_draws,
             rules,
-            min_draws=most if kept == set(ks) else first_look(objective),
+            min_draws=most if every_kept else first_look(objective),
             max_draws=most,
             seconds=seconds,
             draws=draws,
