@@ -379,11 +379,14 @@ def predicted_stats(
     """
     k = len(infos)
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
-    levels = np.zeros((len(noise_scales), len(subsets), 2, 3))  # each level's own median and p75 (rad)
+    cells = [i.cell for i in infos if i.cell is not None]
+    instances = len(cells[0].magnitudes) if cells else 1  # a cell of ranges: its magnitude instances
+    # each level's and magnitude instance's own median and p75 (rad)
+    levels = np.zeros((len(noise_scales), instances, len(subsets), 2, 3))
     for s, c in enumerate(subsets):
         key = None if memo is None else (tuple(keys[i] for i in c), tuple(noise_scales), mounting)
         if key is not None and key in memo:
-            levels[:, s] = memo[key]
+            levels[:, :, s] = memo[key]
             continue
         H = sum(infos[i].H for i in c)
         have_bias = all(infos[i].G is not None for i in c)
@@ -402,10 +405,15 @@ def predicted_stats(
             d = delta
             if noisy:  # the noise's own bias grows as σ²: measured at each sensor's band top, scaled to this level
                 d = bias_rotation(A, sum(infos[i].G + (scale / infos[i].noise_band) ** 2 * infos[i].G_noise for i in c))
-            m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d if d is None else d + cell_bias)
-            levels[n, s] = m, q
+            for i in range(instances):
+                var = mount if mount is None or np.ndim(mount) < 3 else mount[i]
+                dd = d if d is None else d + cell_bias
+                levels[n, i, s] = _axis_stats(sigma if var is None else np.sqrt(sigma**2 + var), dd)
         if key is not None:
-            memo[key] = levels[:, s].copy()
+            memo[key] = levels[:, :, s].copy()
+    if instances > 1:
+        return _across_instances(subsets, levels, weights, median_weight, p75_weight)
+    levels = levels[:, 0]
     median, p75 = np.rad2deg(levels.max(axis=0)).transpose(1, 0, 2)  # the worst over the levels
     best = _best_subsets(median, p75)
     axis = np.array([median_weight * median[s, a] + p75_weight * p75[s, a] for a, s in enumerate(best)])
@@ -423,6 +431,34 @@ def predicted_stats(
         level_axis_score=level_axis,
         level_axis_stats=level_stats,
         score=float(np.dot(weights, axis)),
+    )
+
+
+def _across_instances(subsets, levels, weights, median_weight, p75_weight) -> Prediction:
+    """:func:`predicted_stats` under a cell of ranges, from each level's and instance's statistics (levels,
+    instances, subsets, 2, 3) rad: a statistic is the geometric mean over the instances of the worst over the
+    levels; each axis's subset is chosen on those; the score is the geometric mean over the instances of each
+    instance's weighted score on those subsets (what the verdict's paired ratio averages in logarithms)."""
+    logs = np.log(np.maximum(np.rad2deg(levels), 1e-12))
+    median, p75 = np.exp(logs.max(axis=0).mean(axis=0)).transpose(1, 0, 2)
+    best = _best_subsets(median, p75)
+    axis = np.array([median_weight * median[s, a] + p75_weight * p75[s, a] for a, s in enumerate(best)])
+    worst = np.exp(logs.max(axis=0))  # (instances, subsets, 2, 3) degrees
+    per_instance = [
+        sum(w * (median_weight * x[s, 0, a] + p75_weight * x[s, 1, a]) for a, (w, s) in enumerate(zip(weights, best)))
+        for x in worst
+    ]
+    level = np.exp(logs.mean(axis=1))  # (levels, subsets, 2, 3): each level's geometric mean over the instances
+    level_stats = np.array([[lv[s, :, a] for a, s in enumerate(_best_subsets(lv[:, 0], lv[:, 1]))] for lv in level])
+    return Prediction(
+        subsets=tuple(subsets),
+        median_deg=median,
+        p75_deg=p75,
+        best_subset=tuple(subsets[s] for s in best),
+        axis_score=axis,
+        level_axis_score=median_weight * level_stats[:, :, 0] + p75_weight * level_stats[:, :, 1],
+        level_axis_stats=level_stats,
+        score=float(np.exp(np.mean(np.log(np.maximum(per_instance, 1e-12))))),
     )
 
 
