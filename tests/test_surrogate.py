@@ -161,7 +161,8 @@ def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
 
 def test_without_mounting_the_prediction_is_todays(hand_b_infos):
     # today's formula written out: the bias step over the summed equations, noise σ from H / scale²
-    from optipose.search.surrogate import _axis_stats, rotation_sigma
+    from optipose.search.prediction import axis_stats as _axis_stats
+    from optipose.search.surrogate import rotation_sigma
 
     stats = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0))
     assert all(
