@@ -300,8 +300,22 @@ def test_optipose_cells_lists_the_shipped_cells(capsys):
         main(["cells"])
     assert info.value.code in (0, None)
     lines = capsys.readouterr().out.splitlines()
-    assert set(cell_names()) == {"ideal", "ur10e", *PRESETS}
+    assert set(cell_names()) == {"ideal", "ur10e", "common", *PRESETS}
     for name in cell_names():
         (line,) = [line for line in lines if line.split() and line.split()[0] == name]
-        assert ("9 ranges" in line) == (name in PRESETS) and "not zeroed" in line
+        assert ("9 ranges" in line) == (name in (*PRESETS, "common")) and "not zeroed" in line
         assert load_cell(CELLS_DIR / f"{name}.toml").description[:30] in line
+
+
+def test_the_common_cell_is_the_envelope_of_the_presets_ranges():
+    from optipose.cell.config import load_cell
+
+    kinds = [
+        dict((f, (lo, hi)) for f, lo, hi in load_cell(n).ranges) for n in ("cobot", "industrial-arm", "linear-axis")
+    ]
+    common = load_cell("common")
+    assert {f for f, _, _ in common.ranges} == set(kinds[0]) == set(kinds[1]) == set(kinds[2])
+    for field, low, high in common.ranges:
+        assert low == pytest.approx(min(k[field][0] for k in kinds), rel=1e-12)
+        assert high == pytest.approx(max(k[field][1] for k in kinds), rel=1e-12)
+    assert not common.calibration.zeroed and common.as_made and common.material
