@@ -123,6 +123,7 @@ def evaluate_scans(
         reader = ProfileReader(
             folder, manifest.layout, _models(manifest.layout, part), files, _shifts(manifest, evaluator), rpy
         )
+        reader.check()
         return evaluator.replay(manifest.layout, reader), manifest
 
 

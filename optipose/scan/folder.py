@@ -217,16 +217,46 @@ class ProfileReader:
     shifts: np.ndarray
     rpy: dict
 
+    def check(self) -> None:
+        """Before the work: every file the manifest names is there, and each ``.npy`` file (read mapped) has
+        the manifest's profiles of the sensor's length and no NaN; a device's text files are checked as read."""
+        lengths = [load_sensor(s).points_per_profile for s in self.sensors]
+        for i in sorted(self.files):
+            for j, name in enumerate(self.files[i]):
+                path = self._path(i, j)
+                if path.suffix != ".npy":
+                    continue
+                try:
+                    raw = np.load(path, mmap_mode="r", allow_pickle=False)
+                except (ValueError, OSError, EOFError) as exc:
+                    raise ConfigError(f"{path}: not a .npy array of profiles ({exc})") from None
+                if raw.ndim != 2 or raw.shape[1] != lengths[j]:
+                    raise ConfigError(
+                        f"{path}: profiles of shape {raw.shape[1:]}, the sensor gives {lengths[j]} values a profile"
+                    )
+                self._count(path, len(raw))
+                bad = np.flatnonzero(~np.isfinite(raw).all(axis=1))
+                if len(bad):
+                    raise ConfigError(f"{path}: profile {bad[0]} holds NaN or infinity (an empty point is -9999.9999)")
+
+    def _path(self, i: int, j: int) -> Path:
+        path = Path(self.folder) / self.files[i][j]
+        if not path.is_file():
+            name = self.layout.sensors[j].name
+            raise ConfigError(f"{self.folder}: {self.files[i][j]} (scan {i}, sensor {name} in the manifest) is missing")
+        return path
+
+    def _count(self, path: Path, n: int) -> None:
+        if n != len(self.shifts):
+            raise ConfigError(f"{path}: {n} profiles, the manifest says {len(self.shifts)}")
+
     def __call__(self, i: int) -> list[Scan]:
         scans = []
-        for j, (pose, name) in enumerate(zip(self.layout.sensors, self.files[i])):
-            path = Path(self.folder) / name
-            if not path.is_file():
-                raise ConfigError(f"{self.folder}: {name}, scan {i} of sensor {pose.name} in the manifest, is missing")
+        for j, pose in enumerate(self.layout.sensors):
+            path = self._path(i, j)
             sensor = load_sensor(self.sensors[j])
             raw = read_profiles(path, sensor.points_per_profile)
-            if len(raw) != len(self.shifts):
-                raise ConfigError(f"{path}: {len(raw)} profiles, the manifest says {len(self.shifts)}")
+            self._count(path, len(raw))
             points, profile, column = profiles_to_points(raw, sensor, pose.T_O_S, self.shifts)
             n = len(points)
             scans.append(
