@@ -33,7 +33,6 @@ from optipose.evaluate.objective import RegistrationConfig, ScanConfig
 from optipose.evaluate.subset_errors import register_subset, scan_clouds, subset_rows
 from optipose.model.layout import Layout
 from optipose.registration import voxel_down
-from optipose.scan.heights import as_reported
 from optipose.scan.pose import PartPose
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T
@@ -209,10 +208,8 @@ class _Worker:
         normals = [sc.face_normals for sc in scanners]
         apex = [sc.sensor.apex_z for sc in scanners]
         motion = self.setup.motion
-        shifts = motion.offsets()
-        moved = self.cell.perturb(scans, normals, apex, shifts, scans[0][0].T_O_P, motion.step, seed)
-        # as the device reports them: each moved point is what its height on its ray gives (scan.heights)
-        return [[as_reported(s, sc.lines, shifts) for s, sc in zip(level, scanners)] for level in moved]
+        lines = [sc.lines for sc in scanners]
+        return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed, lines)
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
         """Per subset, the constant bias Z (4, 4) the brackets give a cell, so that a later estimate T is
