@@ -143,7 +143,7 @@ def along_rays(
         else:
             c = max(c, grazing)
         s = d / c + extra[i]
-        if x0.shape[0] == 0:  # no rays given: the moved point itself
+        if x0.shape[0] == 0 or s == 0.0:  # no rays given, or not moved (the scanner placed it): the point itself
             out[i, 0], out[i, 1], out[i, 2] = px + rx * s, py + ry * s, pz + rz * s
             continue
         # the moved point's height on the ray, as in optipose.scan.heights.through_heights, and its point

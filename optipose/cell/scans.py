@@ -199,9 +199,12 @@ class LiveCell:
             if len(out) > 1:  # the other noise levels: the same rays, the same moves
                 delta = moved - scan.points
                 for level in out[1:]:
-                    level[j] = replace(level[j], points=level[j].points + delta)
                     if lines:
-                        as_reported(level[j], lines[j], shifts)
+                        level[j] = as_reported(
+                            replace(level[j], points=level[j].points.copy()), delta, lines[j], shifts
+                        )
+                    else:
+                        level[j] = replace(level[j], points=level[j].points + delta)
         return out
 
     def _material(self, e: MaterialEffects, scan, R: np.ndarray, t: np.ndarray, key: np.uint64) -> np.ndarray:

@@ -39,30 +39,35 @@ def heights_to_points(heights, profile, column, shifts, x0, slope, R, t):
 
 
 @njit(cache=True, nogil=True)
-def through_heights(points, profile, column, shifts, x0, slope, R, t, raw, n_col):
-    """Each point (n, 3) in O, moved along its ray off where the scanner put it (a cell's sources), replaced
-    in place by the point its reported height gives; the height is written into ``raw`` (flat, profile ×
-    ``n_col`` + column, mm) unless it is empty. The point stays on its ray: only rounding changes."""
+def through_heights(points, delta, profile, column, shifts, x0, slope, R, t, raw, n_col):
+    """Each point (n, 3) in O moved by ``delta`` (n, 3) along its ray (a cell's sources), in place, then
+    replaced by the point its reported height gives; the height is written into ``raw`` (flat, profile ×
+    ``n_col`` + column, mm) unless it is empty. A point not moved stays as it is: the scanner placed it from
+    its height already. The point stays on its ray: placing it changes only rounding."""
     with_raw = raw.shape[0] > 0
     for h in range(points.shape[0]):
+        if delta[h, 0] == 0.0 and delta[h, 1] == 0.0 and delta[h, 2] == 0.0:
+            continue
         k = profile[h]
         shift = shifts[k]
-        dx, dy, dz = points[h, 0] + shift - t[0], points[h, 1] - t[1], points[h, 2] - t[2]
+        dx = points[h, 0] + delta[h, 0] + shift - t[0]
+        dy, dz = points[h, 1] + delta[h, 1] - t[1], points[h, 2] + delta[h, 2] - t[2]
         height = -1e3 * (R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz)
         if with_raw:
             raw[k * n_col + column[h]] = height
         place(height, column[h], shift, x0, slope, R, t, points, h)
 
 
-def as_reported(scan, lines: tuple[np.ndarray, np.ndarray], shifts: np.ndarray):
-    """A :class:`~optipose.scan.cloud.Scan` whose points were moved along their rays (in place: its arrays
-    are the caller's), each replaced by the point its reported height gives, and its ``raw`` profiles (when
-    kept) those heights. ``lines``: the sensor's column rays (:func:`optipose.scan.profiles.ray_lines`);
-    ``shifts`` (n_profiles,) m: the motion's offsets."""
+def as_reported(scan, delta: np.ndarray, lines: tuple[np.ndarray, np.ndarray], shifts: np.ndarray):
+    """``scan`` (a :class:`~optipose.scan.cloud.Scan` whose arrays are the caller's: changed in place) with its
+    points moved by ``delta`` (n, 3) m along their rays and each moved one placed from its reported height,
+    its ``raw`` profiles (when kept) those heights. ``lines``: the sensor's column rays
+    (:func:`optipose.scan.profiles.ray_lines`); ``shifts`` (n_profiles,) m: the motion's offsets."""
     if len(scan.points):
         T = scan.T_O_S
         through_heights(
             scan.points,
+            np.ascontiguousarray(delta, dtype=np.float64),
             scan.profile,
             scan.column,
             np.ascontiguousarray(shifts, dtype=np.float64),
