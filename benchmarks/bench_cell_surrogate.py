@@ -132,7 +132,14 @@ def _models(part, objective, problem) -> dict:
     cell, none = (
         setup.cell,
         CellSetup(
-            replace(setup.cell, robot=RobotErrors(), calibration=CalibrationErrors(), as_made=False, material=False),
+            replace(
+                setup.cell,
+                robot=RobotErrors(),
+                calibration=CalibrationErrors(),
+                as_made=False,
+                material=False,
+                ranges=(),
+            ),
             setup.process.scaled(0.0),
             MaterialEffects(),
         ),
