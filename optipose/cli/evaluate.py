@@ -21,7 +21,6 @@ from optipose.cli.options import (
     Units,
     check_output,
     friendly_errors,
-    warn_if_band,
 )
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
@@ -89,7 +88,6 @@ def evaluate_command(
     else:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give one with --layout")
     the_objective = load_objective(objective).in_cell(cell)
-    warn_if_band(the_objective, "evaluate")
     console = make_console(stderr=True)
     with status(
         console, f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"

@@ -134,7 +134,6 @@ def search_command(
             budget,
             _parse_sensors(sensors),
             _overrides(config),
-            band=not the_objective.conditions.trivial,
             cell=not the_objective.cell.ideal,
         )
     if max_time:  # the user's clock on the whole search (a resumed search takes it anew)
@@ -157,14 +156,9 @@ def search_command(
         )
         raise typer.Exit(EXIT_INTERRUPTED) from None
     pictures = _draw_layouts(folder, the_part, searched.layouts, jobs) if searched.validated else None
-    # a nominal search that did not check its answer under a band (quick, or `band = ""`) says so: its "better"
-    # holds in the simulation's ideal cell only, which is not yet a reason to buy
-    unchecked = (
-        the_objective.conditions.trivial
-        and the_objective.cell.ideal
-        and searched.band is None
-        and not searched.band_interrupted
-    )
+    # a search in the ideal cell says so: its "better" holds in the simulation's ideal cell only, which is not yet a
+    # reason to buy (a cell with ranges, --cell cobot etc., says what a real cell does not know)
+    unchecked = the_objective.cell.ideal
     print_answer(
         Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal, time_limit=search_config.time_limit
     )
@@ -181,13 +175,6 @@ def search_command(
         write_report_after(folder, console, ready)
     if ready:
         ready()
-    if searched.band_interrupted:  # the validation above is complete; only its check under the band is missing
-        console.print(
-            f"[yellow]interrupted[/] during the check under the band: the verdicts above hold for the nominal cell "
-            f"only (results in {folder}); check them with `optipose robustness {part} --layout "
-            f"{folder}/layouts/found_k{max(searched.layouts)}.toml`, or run the whole search again"
-        )
-        raise typer.Exit(EXIT_INTERRUPTED)
     console.print(f"results: {folder}")
     return folder
 

@@ -28,6 +28,7 @@ __all__ = [
     "Choice",
     "best_choices",
     "choose",
+    "choice_of",
     "restated",
     "stats_by_key",
     "MAX_FAILED_FRACTION",
@@ -161,6 +162,15 @@ def choose(
         axes.append(AxisChoice(axis, tuple(s), best.subset, best.median, best.p75))
         score += weight * (cfg.median_weight * best.median + cfg.p75_weight * best.p75)
     return Choice(len(sensors), tuple(sensors), subset_name(sensors, names), tuple(axes), float(score))
+
+
+def choice_of(result, sensors: tuple[int, ...]) -> Choice:
+    """The choice of exactly these sensors of an evaluated layout (an ``EvaluationResult``: each axis its best
+    subset of them). The sensors are a set: in any order (a found pair can sit inside the found triple in another
+    order)."""
+    sensors = tuple(sorted(sensors))
+    by_key = stats_by_key(result.stats)
+    return choose(sensors, result.layout.names, by_key, result.objective.statistic, result.n_scans)
 
 
 def restated(choice: Choice, by_key: dict, cfg: StatisticConfig) -> Choice:

@@ -100,18 +100,6 @@ class RunConfig:
         """The name of the cell the run was evaluated in (its sources are in ``[objective.cell]``; ideal without one)."""
         return str((self.objective or {}).get("cell", {}).get("name", "ideal"))
 
-    def searched_conditions(self):
-        """The objective's band as the search ran it (noise scales and bracket tolerance; a folder without
-        them: the nominal cell) — a :class:`~optipose.evaluate.conditions.ConditionsConfig`."""
-        from optipose.evaluate.conditions import ConditionsConfig
-
-        c = self.objective.get("conditions", {})
-        return ConditionsConfig(
-            noise_scales=tuple(c.get("noise_scales", (1.0,))),
-            mounting_translation=c.get("mounting_translation", 0.0),
-            mounting_rotation=c.get("mounting_rotation", 0.0),
-        )
-
 
 def run_config(table: dict) -> RunConfig:
     """The :class:`RunConfig` of a parsed ``config.toml`` (keys it lacks left at their defaults)."""
