@@ -116,6 +116,13 @@ class Cell:
         the cell itself when it has no range (no draw is made)."""
         return self if not self.ranges else self._with(draws(self.ranges, seed))
 
+    def at(self, end: str) -> "Cell":
+        """The point cell with every range at its ``end`` (``low`` or ``high``; a range from 0 is 0 at its low end);
+        the cell itself when it has no range. A held-out check's instance at the ranges' ends."""
+        if end not in ("low", "high"):
+            raise ValueError(f"a range's end is 'low' or 'high', not {end!r}")
+        return self if not self.ranges else self._with({f: lo if end == "low" else hi for f, lo, hi in self.ranges})
+
     def middle(self) -> "Cell":
         """The point cell of the ranges' middles (what the surrogate scores); the cell itself without ranges."""
         return self if not self.ranges else self._with({f: middle(lo, hi) for f, lo, hi in self.ranges})
