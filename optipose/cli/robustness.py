@@ -148,10 +148,10 @@ def _holds(result) -> list[str]:
     for r in result.holds().itertuples(index=False):
         mine = ratios[(ratios.layout == r.layout) & (ratios.k == r.k)]
         weakest = mine.loc[mine.ratio.idxmin()]
-        word = "holds" if r.held == r.instances else "does not hold"
+        every = f"in {'every one' if r.held == r.instances else r.held} of the {r.instances}"
         lines.append(
-            f"{r.layout} k={r.k}: {word} in {r.held} of {r.instances} cell instances "
-            f"(hand / found {weakest.ratio:.2f}x at its weakest: {weakest.cell}, {weakest.instance})"
+            f"{r.layout} k={r.k}: holds {every} cell instances checked (hand / found {weakest.ratio:.3f}x at "
+            f"its weakest: {weakest.cell}, {weakest.instance})"
         )
     return lines or ["only the hand layout was given: nothing to compare (give --layout FILE)"]
 

@@ -207,12 +207,12 @@ def _settings(saved):
     """The settings of a config.toml (``saved``, a RunConfig); KeyError, TypeError, ValueError or
     ConfigError where this version cannot take them."""
     from optipose.evaluate.objective import objective_from_table
-    from optipose.search.config import SearchConfig, search_preset, unknown_keys
+    from optipose.search.config import SearchConfig, saved_table, search_preset, unknown_keys
 
     part = _needed(saved.part_source, "part" if saved.part_name is None else "source") or _needed(
         saved.part_name, "name"
     )
-    cfg = _needed(saved.search, "search")  # sectioned, or flat as folders written before the sections have it
+    cfg = saved_table(_needed(saved.search, "search"))  # sectioned, or flat as folders written before the sections
     unknown = unknown_keys(cfg)
     if unknown:  # a setting this version no longer has
         raise ConfigError(f"unknown search setting(s) {', '.join(unknown)}")

@@ -167,8 +167,9 @@ def objective_from_table(
     table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective"
 ) -> Objective:
     """Validate a parsed objective table; every problem is a :class:`ConfigError` naming the key."""
-    if "conditions" in table:
+    if _asks_for_a_band(table.get("conditions")):
         raise ConfigError(f"{where}: {BAND_RETIRED}")
+    table = {k: v for k, v in table.items() if k != "conditions"}
     _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "scan", "cell"}, where)
     cell = table.get("cell", "ideal")
     if not isinstance(cell, str):
@@ -188,6 +189,19 @@ def objective_from_table(
 
 
 # ---------------------------------------------------------------------------------------------------------
+def _asks_for_a_band(conditions) -> bool:
+    """Whether an objective's retired ``[conditions]`` table asks for a band: anything but the nominal cell alone
+    (one noise level at the preset's, exact brackets), which the shipped objectives wrote out before the band was
+    retired and which is what every evaluation is now, so copies of them still load."""
+    if conditions is None:
+        return False
+    if not isinstance(conditions, dict):
+        return True
+    nominal = {"noise_scale": (1, [1]), "mounting_translation_mm": (0,), "mounting_rotation_deg": (0,)}
+    nominal |= {"mounting_draws": (1,), "aggregate": ("worst",)}
+    return any(k not in nominal or v not in nominal[k] for k, v in conditions.items())
+
+
 def _protocol(t: dict, where: str) -> ProtocolConfig:
     keys = {
         "kind",

@@ -22,10 +22,11 @@ def holds_blocks(result, label: str) -> list[Block]:
         mine = ratios[(ratios.layout == r.layout) & (ratios.k == r.k)]
         weakest = mine.loc[mine.ratio.idxmin()]
         held = r.held == r.instances
+        every = f"in {'every one' if held else r.held} of the {r.instances}"
         out.append(
             Paragraph(
-                f"{r.layout} k={r.k}: {'holds' if held else 'does not hold'} in {r.held} of {r.instances} cell "
-                f"instances; {label} / found {weakest.ratio:.2f}x at its weakest ({weakest.cell}, {weakest.instance})",
+                f"{r.layout} k={r.k}: holds {every} cell instances checked; {label} / found "
+                f"{weakest.ratio:.3f}x at its weakest ({weakest.cell}, {weakest.instance})",
                 "verdict good" if held else "verdict bad",
             )
         )
@@ -49,7 +50,7 @@ def instance_blocks(result, label: str) -> list[Block]:
                     f"{g.cell}, {g.instance}",
                     f"{g.sensors}: {1e3 * score:.1f}",
                     f"{g.hand_sensors}: {1e3 * hand:.1f}",
-                    f"{g.ratio:.2f}x",
+                    f"{g.ratio:.3f}x",
                     "yes" if g.holds else "no",
                 )
             )

@@ -30,6 +30,7 @@ __all__ = [
     "FLAT_KEYS",
     "search_preset",
     "unknown_keys",
+    "saved_table",
     "search_table",
     "algorithm_code",
 ]
@@ -200,6 +201,17 @@ class Preset:
         }
         top = {name: v for name in ("sensors", "time_limit") if (v := getattr(self, name)) is not None}
         return replace(config, **sections, **top)
+
+
+def saved_table(table: dict) -> dict:
+    """A result folder's ``[search]`` table as this version reads it: the band's key of a folder written before the
+    band was retired (``band = ""``, ``validation.band_objective = ""``: no check asked for) left out; a band that
+    was asked for stays, and :func:`unknown_keys` refuses it."""
+    out = {k: v for k, v in table.items() if not (k in ("band", "band_objective") and v == "")}
+    validation = out.get("validation")
+    if isinstance(validation, dict) and validation.get("band_objective") == "":
+        out["validation"] = {k: v for k, v in validation.items() if k != "band_objective"}
+    return out
 
 
 def unknown_keys(table: dict) -> list[str]:
