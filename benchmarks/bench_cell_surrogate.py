@@ -142,9 +142,7 @@ def _models(part, objective, problem) -> dict:
         "part as made alone": replace(none, process=setup.process),
         "material alone": replace(none, effects=setup.effects),
     }
-    make = lambda s: Surrogate(
-        part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), mounting=False, cell=s
-    )
+    make = lambda s: Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), cell=s)
     return {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)} | {
         k: make(s) for k, s in alone.items()
     }
