@@ -43,8 +43,8 @@ Cells = Annotated[
     Optional[str],
     typer.Option(
         "--cells",
-        help="Other cells to check in besides --cell, comma-separated (e.g. cobot,industrial-arm,linear-axis; "
-        "NAME:zeroed and TOML paths too): their held-out draws and ranges' ends.",
+        help="Other cells to check in besides --cell, separated by commas (names in cells/, NAME:zeroed or "
+        "TOML paths): their held-out draws and ranges' ends.",
     ),
 ]
 Draws = Annotated[int, typer.Option("--draws", min=1, help="Held-out draws (cell instances) of each cell's ranges.")]
