@@ -322,9 +322,42 @@ def test_optipose_cells_lists_the_shipped_cells(capsys):
         main(["cells"])
     assert info.value.code in (0, None)
     lines = capsys.readouterr().out.splitlines()
-    assert set(cell_names()) == {"ideal", "ur10e", "machined-bracket", *PRESETS}
+    assert set(cell_names()) == {"ideal", "ur10e", "common", "machined-bracket", *PRESETS}
     for name in cell_names():
         (line,) = [line for line in lines if line.split() and line.split()[0] == name]
-        assert ("9 ranges" in line) == (name in PRESETS)
+        assert ("9 ranges" in line) == (name in (*PRESETS, "common"))
         assert ("not zeroed" in line) == (name != "machined-bracket")
         assert load_cell(CELLS_DIR / f"{name}.toml").description[:30] in line
+
+
+def test_the_common_cell_is_the_envelope_of_the_presets_ranges():
+    from optipose.cell.config import load_cell
+
+    kinds = [
+        dict((f, (lo, hi)) for f, lo, hi in load_cell(n).ranges) for n in ("cobot", "industrial-arm", "linear-axis")
+    ]
+    common = load_cell("common")
+    assert {f for f, _, _ in common.ranges} == set(kinds[0]) == set(kinds[1]) == set(kinds[2])
+    for field, low, high in common.ranges:
+        assert low == pytest.approx(min(k[field][0] for k in kinds), rel=1e-12)
+        assert high == pytest.approx(max(k[field][1] for k in kinds), rel=1e-12)
+    assert not common.calibration.zeroed and common.as_made and common.material
+
+
+def test_a_cells_ends_put_every_range_at_its_low_or_its_high_end():
+    from optipose.cell.config import load_cell
+    from optipose.errors import ConfigError
+
+    cobot = load_cell("cobot")
+    for end, pick in (("low", 0), ("high", 1)):
+        cell = load_cell(f"cobot:{end}")
+        assert cell.name == f"cobot:{end}" and not cell.ranges
+        assert cell.robot.path == pytest.approx(dict((f, (lo, hi)) for f, lo, hi in cobot.ranges)["robot.path"][pick])
+        values = {f: (lo, hi)[pick] for f, lo, hi in cobot.ranges}
+        assert cell.calibration.frame_rotation == pytest.approx(values["calibration.frame_rotation"])
+        assert cell.robot.step == pytest.approx(values["robot.step"]) and cell.instance(7) == cell
+    assert load_cell("cobot:high:zeroed").calibration.zeroed
+    with pytest.raises(ConfigError, match="no range"):
+        load_cell("ur10e:low")
+    with pytest.raises(ConfigError, match="unknown suffix"):
+        load_cell("cobot:middle")

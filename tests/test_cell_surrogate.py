@@ -181,3 +181,78 @@ def test_the_form_fields_features_carry_its_rms_at_every_point():
     form = model.part_columns(x, np.tile([0.0, 0.0, 1.0], (3, 1)))[:, :-4]  # the scale and warp columns are zero here
     assert (form**2).sum(axis=1) == pytest.approx(np.full(3, 3e-6**2))
     assert form[0] @ form[1] == pytest.approx(3e-6**2) and abs(form[0] @ form[2]) < 0.3 * 3e-6**2
+
+
+_RANGES = (
+    ("calibration.frame_rotation", 1e-4, 2e-3),
+    ("calibration.frame_translation", 0.0, 4e-4),
+    ("calibration.sensor_rotation", 2e-4, 3e-3),
+    ("calibration.sensor_translation", 5e-5, 2e-4),
+    ("process_scale", 0.5, 2.0),
+    ("robot.orientation", 1e-5, 4e-5),
+    ("robot.path", 1e-5, 3e-4),
+    ("robot.path_rotation", 0.0, 1e-4),
+    ("robot.step", 0.0, 2e-4),
+)
+
+
+def _variances(setup: CellSetup, R: np.ndarray) -> np.ndarray:
+    """subset_terms' variance for two heads on the four-plane cloud, at the nominal orientation and turned by R."""
+    import trimesh
+
+    box = trimesh.creation.box((0.04, 0.04, 0.01))
+    model = CellModel(setup, box.vertices, box.faces, np.zeros(3), np.linspace(-0.02, 0.02, 41), np.inf)
+    v, n = _cloud()
+    face = np.arange(len(v)) % len(box.faces)
+    turns = [(v, n, face, np.eye(3)), (v, n, face, R)]
+    return subset_terms([sensor_maps(model, turns, T, 4.0) for T in (T_DOWN, T_DOWN @ _shifted(0.03))])[0]
+
+
+@pytest.mark.parametrize("zeroed", [False, True])
+def test_each_magnitude_instance_of_a_ranged_cell_scores_as_that_point_cell(zeroed):
+    """A cell of ranges is scored on its spread (optipose.cell.ranges.spread) by rescaling each source's variance
+    from the maps built at the middles: each instance's variance is the one of the point cell of its magnitudes,
+    whose maps are built anew."""
+    from optipose.cell.config import load_process
+    from optipose.cell.ranges import middle, spread
+    from optipose.search.cell_terms import _INSTANCES
+
+    mids = {name: middle(lo, hi) for name, lo, hi in _RANGES}
+    robot = RobotErrors(path_correlation=0.02, **{k[6:]: v for k, v in mids.items() if k.startswith("robot.")})
+    calibration = CalibrationErrors(
+        zeroed=zeroed, **{k[12:]: v for k, v in mids.items() if k.startswith("calibration.")}
+    )
+    cell = Cell(
+        name="ranged",
+        robot=robot,
+        calibration=calibration,
+        as_made=True,
+        process_scale=mids["process_scale"],
+        ranges=_RANGES,
+    )
+    milled = load_process("milled")
+    c, s = np.cos(np.deg2rad(2.0)), np.sin(np.deg2rad(2.0))
+    R = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    ranged = _variances(CellSetup(cell, milled.scaled(cell.process_scale), MaterialEffects()), R)
+    assert ranged.shape == (_INSTANCES, 1, 3)
+    instances = spread(_RANGES, _INSTANCES)
+    for got, magnitudes in zip(ranged, instances):
+        point = cell._with(magnitudes)
+        want = _variances(CellSetup(point, milled.scaled(point.process_scale), MaterialEffects()), R)
+        np.testing.assert_allclose(got, want, rtol=1e-5)
+    # the instances differ: a range is scored across, not at its middle
+    assert np.ptp(ranged[:, 0, 0]) > 0.5 * ranged[:, 0, 0].min()
+
+
+def test_a_ranges_spread_takes_each_stratum_once_and_ends_inside():
+    from optipose.cell.ranges import quantile, spread
+
+    instances = spread(_RANGES, 8)
+    for name, low, high in _RANGES:
+        values = sorted(inst[name] for inst in instances)
+        want = [quantile(low, high, (i + 0.5) / 8) for i in range(8)]
+        np.testing.assert_allclose(values, want, rtol=1e-12)
+        assert low <= values[0] and values[-1] <= high
+    assert spread(_RANGES, 8) == instances  # the same on every call
+    # log-uniform: the middle stratum pair brackets the geometric mean
+    assert quantile(1e-5, 3e-4, 0.5) == pytest.approx(np.sqrt(1e-5 * 3e-4))

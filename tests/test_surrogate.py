@@ -156,7 +156,8 @@ def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
 
 def test_the_prediction_is_the_formula_written_out(hand_b_infos):
     # the bias step over the summed equations, noise σ from H
-    from optipose.search.surrogate import _axis_stats, rotation_sigma
+    from optipose.search.prediction import axis_stats as _axis_stats
+    from optipose.search.surrogate import rotation_sigma
 
     stats = predicted_stats(hand_b_infos)
     for s, c in enumerate(stats.subsets):

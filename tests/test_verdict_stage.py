@@ -12,10 +12,11 @@ import pytest
 from optipose.verdict.confidence import Decision, PairedDraw, Verdicts, compare_draws
 from optipose.verdict.rules import Rules, VerdictConfig
 from optipose.verdict.racing import race_many
-from optipose.verdict.words import axis_lines, confident_line, fewer_line
+from optipose.verdict.words import axis_lines, confident_line, fewer_line, ruling_line
 from optipose.evaluate.objective import load_objective
 from optipose.io.folders import write_csv
 from optipose.io.load import read_verdicts
+from optipose.verdict.ruling import Ruling
 from optipose.io.tables import verdict_frame
 from optipose.model.layout import Layout, SensorPose
 from optipose.model.part import load_part
@@ -142,6 +143,7 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
         for k in (1, 2)
     }
     verdicts[3] = replace(compare_draws([_pairs(rng, 0, 1.01)], FAST, k=3), decision=Decision.UNDECIDED, more_draws=7)
+    verdicts[2] = replace(verdicts[2], ruling=Ruling("robot.path", 5.2e-5, True, 0.41))  # in a cell of ranges
     fewer = compare_draws(
         [_pairs(rng, i, 0.5) for i in range(3)], FAST, k=1, found_name="F1", baseline_name="S1S2S3", baseline_k=3
     )
@@ -153,7 +155,9 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
             confident_line(read) == confident_line(v)
             and axis_lines(read) == axis_lines(v)
             and fewer_line(read) == fewer_line(v)
+            and ruling_line(read) == ruling_line(v)
         )
+        assert read.ruling == v.ruling
         assert read.score.low == pytest.approx(v.score.low, rel=1e-12) and read.more_draws == v.more_draws
     assert read_verdicts(tmp_path / "none.csv") == Verdicts()
     # a verdict.csv from before the failures' rule: its failed shares and tolerance unknown (NaN), not taken as applied

@@ -13,7 +13,9 @@ realisations (the part as made, the calibration, each scan's path) as a cell of 
 Each key draws from a generator of its own, keyed by the run's seed, :data:`_MAGNITUDES` and the key's name, the keys
 taken in sorted order: a draw depends neither on the file's order nor on which other keys are ranges, and a cell of
 points draws nothing (its answers are those of a cell without ranges, bit for bit). The **middle** of a range is the
-median of its draw: the geometric mean of its ends (low > 0), or high / 2 (low = 0).
+median of its draw: the geometric mean of its ends (low > 0), or high / 2 (low = 0). The **spread** of a cell's
+ranges is a few instances that cover them evenly (a Latin hypercube over the draws' quantiles, the same for every
+run): what the surrogate scores a cell of ranges on, where the evaluations draw.
 """
 
 from __future__ import annotations
@@ -24,9 +26,9 @@ import numpy as np
 
 from optipose.errors import ConfigError
 
-__all__ = ["magnitude", "middle", "draw", "draws"]
+__all__ = ["magnitude", "middle", "draw", "draws", "quantile", "spread"]
 
-_CELL, _MAGNITUDES = 0xCE11, 4  # the cell's seed tag (as in optipose.cell.scans) and the magnitudes' own
+_CELL, _MAGNITUDES, _SPREAD = 0xCE11, 4, 5  # the cell's seed tag (as in optipose.cell.scans), the draws', the spread's
 
 
 def magnitude(value, key: str, unit: float, most: float, where: str) -> "float | tuple[float, float]":
@@ -70,6 +72,25 @@ def draws(ranges, seed: int) -> dict[str, float]:
     for name, low, high in sorted(ranges):
         rng = np.random.default_rng([int(seed), _CELL, _MAGNITUDES, zlib.crc32(name.encode())])
         out[name] = draw(low, high, rng)
+    return out
+
+
+def quantile(low: float, high: float, q: float) -> float:
+    """The ``q`` quantile (0 <= q <= 1) of a range's draw (:func:`draw`)."""
+    if low > 0:
+        return float(np.exp(np.log(low) + q * (np.log(high) - np.log(low))))
+    return float(q * high)
+
+
+def spread(ranges, count: int) -> list[dict[str, float]]:
+    """``count`` magnitude instances that cover the ranges (``(name, low, high)`` rows, SI) evenly, the same on every
+    call: each range's draw cut into ``count`` strata of equal probability, each stratum's middle quantile taken by
+    one instance, the order per range permuted by a generator fixed by the range's name (a Latin hypercube)."""
+    out: list[dict[str, float]] = [{} for _ in range(count)]
+    for name, low, high in sorted(ranges):
+        rng = np.random.default_rng([_CELL, _SPREAD, zlib.crc32(name.encode())])
+        for i, stratum in enumerate(rng.permutation(count)):
+            out[i][name] = quantile(low, high, (stratum + 0.5) / count)
     return out
 
 

@@ -35,6 +35,8 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
             )
             if confident and (why := words.open_line(v, most)):  # wrapped by words, not where the terminal ends
                 console.print(textwrap.fill(why, 80, subsequent_indent="    "), highlight=False, soft_wrap=True)
+            if confident and (why := words.ruling_line(v)):
+                console.print(textwrap.fill(why, 80, subsequent_indent="    "), highlight=False, soft_wrap=True)
         for v in confident.values():
             if line := words.mount_line(v, report.layouts.get(v.k), baseline(part)):
                 console.print(line, highlight=False)

@@ -25,6 +25,7 @@ from optipose.io.choices import axis_choice, choices_from_comparison
 from optipose.io.config import RunConfig, given
 from optipose.io.folders import read_config
 from optipose.verdict.confidence import AxisError, AxisRatio, ConfidentVerdict, Decision, Interval, Verdicts
+from optipose.verdict.ruling import Ruling
 
 __all__ = ["load_result", "load_search", "load_history", "load_selection", "load_surrogate_scores"]
 
@@ -110,6 +111,7 @@ def read_verdicts(path: Path) -> Verdicts:
             ("failures", np.nan),
             ("kept", False),
             ("ended", ""),
+            ("ruling", ""),
         ):
             if (
                 name not in rows
@@ -152,12 +154,22 @@ def read_verdicts(path: Path) -> Verdicts:
                 failures=float(score["failures"]),
                 kept=str(score["kept"]) == "True",
                 ended=score["ended"] if isinstance(score["ended"], str) else "",  # "" reads back as NaN
+                ruling=_ruling(score),
             )
             if against_more:
                 fewer = verdict
             else:
                 by_k[int(k)] = verdict
     return Verdicts(by_k, fewer)
+
+
+def _ruling(row) -> Ruling | None:
+    """A verdict row's ruling range (``ruling``, ``ruling_at``, ``ruling_above``, ``ruling_share``), or None."""
+    if not isinstance(row["ruling"], str) or not row["ruling"]:
+        return None
+    return Ruling(
+        row["ruling"], float(row["ruling_at"]), str(row["ruling_above"]) == "True", float(row["ruling_share"])
+    )
 
 
 def load_history(folder: str | Path) -> list:

@@ -209,6 +209,11 @@ def verdict_frame(verdicts) -> pd.DataFrame:
             "more_draws": v.more_draws if v.more_draws is not None else -1,
             "seconds_per_draw": v.seconds_per_draw,
             "ended": v.ended,
+            # the range that rules it in a cell of ranges (optipose.verdict.ruling): its field, where, which side
+            "ruling": v.ruling.key if v.ruling else "",
+            "ruling_at": v.ruling.at if v.ruling else np.nan,
+            "ruling_above": bool(v.ruling and v.ruling.above),
+            "ruling_share": v.ruling.share if v.ruling else np.nan,
         }
         empty = {"median_ratio": None, "p75_ratio": None, "failed": None, "found_p75_deg": None, "hand_p75_deg": None}
         score = {

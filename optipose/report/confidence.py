@@ -18,6 +18,7 @@ from optipose.verdict.words import (
     interval_cell,
     mount_line,
     open_line,
+    ruling_line,
     ratio_cell,
 )
 
@@ -43,6 +44,7 @@ def confident_blocks(
     label = ordered[0].reference
     blocks: list[Block] = [Paragraph(confident_line(v), confident_css(v.decision)) for v in ordered]
     blocks += [Paragraph(line.strip(), "verdict info") for v in ordered if (line := open_line(v))]
+    blocks += [Paragraph(line.strip(), "verdict info") for v in ordered if (line := ruling_line(v))]
     blocks += [
         Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), baseline))
     ]

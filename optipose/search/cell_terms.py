@@ -39,10 +39,11 @@ per-turn re-scan, as the rest of the surrogate (turns are the nominal scan turne
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from optipose.cell.ranges import middle, spread
 from optipose.search.cell_sums import turn_sums
 from optipose.search.mounting import scaled_solve
 
@@ -52,6 +53,20 @@ _FORM_FEATURES = 48  # random Fourier frequencies of the form field: its covaria
 _PATH_MODES = 12  # Gauss–Markov eigenvectors kept along the travel (the rest hold little variance over a scan)
 _FLOAT64 = (0, 1, 4, 5)  # A, own, white, bias: kept in float64 (CellMaps)
 _MAX_STD = np.deg2rad(5.0)  # as the surrogate's weak prior: beyond it an error is not small
+_INSTANCES = 8  # magnitude instances a cell of ranges is scored on (optipose.cell.ranges.spread)
+# the magnitudes a source's variance scales with (as their square), in the order of CellModel.magnitudes' columns;
+# the path's correlation length changes the modes themselves and is kept at its range's middle
+GROUPS = (
+    "calibration.sensor_rotation",
+    "calibration.sensor_translation",
+    "calibration.frame_rotation",
+    "calibration.frame_translation",
+    "process_scale",
+    "robot.path_rotation",
+    "robot.path",
+    "robot.step",
+    "robot.orientation",
+)
 
 
 @dataclass(frozen=True)
@@ -71,6 +86,9 @@ class CellMaps:
     white : (turns + 1, 6, 6) Cov(ΣJᵀr) of the material's white noise (independent between heads).
     bias : (turns + 1, 6) ΣJᵀr of the material's sub-surface bias (deterministic).
     orientation : rad, σ of the set orientation's error; zeroed : the cell is zeroed on a master scan.
+    magnitudes : (instances, len(GROUPS)) each source group's variance factor per magnitude instance (the
+        squared ratio of its magnitude to the middle the maps were built at): one row of ones for a cell of
+        points, the model's :attr:`CellModel.magnitudes` (shared, not copied) for a cell of ranges.
     """
 
     A: np.ndarray
@@ -83,6 +101,7 @@ class CellMaps:
     bias: np.ndarray
     orientation: float
     zeroed: bool
+    magnitudes: np.ndarray = field(default_factory=lambda: np.ones((1, len(GROUPS))), repr=False)
 
 
 class CellModel:
@@ -99,7 +118,9 @@ class CellModel:
     ):
         from optipose.cell.asmade import AsMade
 
-        setup = setup.middle()  # a cell of ranges is scored at their middles (docs/method.md, a known limit)
+        ranges = setup.cell.ranges
+        setup = setup.middle()  # the maps at the ranges' middles; each instance rescales their variances
+        self.magnitudes = _magnitudes(ranges)
         cell, p, e = setup.cell, setup.process, setup.effects
         self.cell, self.process, self.centre, self.apex_z = cell, p, np.asarray(centre, float), float(apex_z)
         c = cell.calibration
@@ -183,6 +204,16 @@ class CellModel:
         return 4 if self.made is not None and (p.face_offset or p.face_tilt) else 0
 
 
+def _magnitudes(ranges) -> np.ndarray:
+    """(instances, len(GROUPS)) the variance factor of each source group in each instance of the ranges'
+    spread, relative to the ranges' middles; one row of ones without ranges."""
+    if not ranges:
+        return np.ones((1, len(GROUPS)))
+    mid = {name: middle(low, high) for name, low, high in ranges}
+    rows = [[(inst[g] / mid[g]) ** 2 if g in inst else 1.0 for g in GROUPS] for inst in spread(ranges, _INSTANCES)]
+    return np.array(rows)
+
+
 def _gauss_markov_modes(s: np.ndarray, length: float) -> np.ndarray:
     """(profiles, q): the leading eigenvectors of exp(−|Δs|/length) on the travel s, times √eigenvalue."""
     w, V = np.linalg.eigh(np.exp(-np.abs(s[:, None] - s[None, :]) / length))
@@ -205,7 +236,7 @@ def sensor_maps(model: CellModel, turns: list[tuple], T_O_S: np.ndarray, raw_per
             faces[m, np.searchsorted(planes, p[6])] = p[7]
     c = model.cell
     kept = [np.array([p[i] for p in parts], np.float64 if i in _FLOAT64 else np.float32) for i in range(6)]
-    return CellMaps(*kept[:4], planes, faces, *kept[4:], c.robot.orientation, c.calibration.zeroed)
+    return CellMaps(*kept[:4], planes, faces, *kept[4:], c.robot.orientation, c.calibration.zeroed, model.magnitudes)
 
 
 def _turn_maps(model: CellModel, T_O_S: np.ndarray, raw_per_voxel: float, v, n, face, R) -> tuple:
@@ -248,7 +279,8 @@ def subset_terms(maps: list[CellMaps]) -> tuple[np.ndarray, np.ndarray]:
     """A subset's variance (turns, 3) rad² of its rotation estimate from the cell's random sources, and the
     bias (turns, 3) rad the material's sub-surface bias adds to it. Zeroed: what a source fixed per cell
     instance does at the nominal orientation is taken off; a per-scan one (the path, the white noise, the
-    set orientation) adds the master scan's own draw."""
+    set orientation) adds the master scan's own draw. Under a cell of ranges (maps whose ``magnitudes`` have
+    more than one row) the variance is per magnitude instance: (instances, turns, 3)."""
     A = sum(m.A.astype(float) for m in maps)
     P = scaled_solve(A, np.broadcast_to(np.eye(6), A.shape))[:, :3]  # (turns + 1, 3, 6)
     planes = np.unique(np.concatenate([m.planes for m in maps]))
@@ -262,6 +294,8 @@ def subset_terms(maps: list[CellMaps]) -> tuple[np.ndarray, np.ndarray]:
     per_scan = sum(m.path for m in maps).astype(float)
     white = sum(m.white for m in maps).astype(float)
     bias = -np.einsum("tij,tj->ti", P, sum(m.bias for m in maps).astype(float))
+    if len(maps[0].magnitudes) > 1:
+        return _instance_variances(maps, P, faces, per_scan, white), (bias - bias[:1] if maps[0].zeroed else bias)[1:]
     PF = P @ fixed
     scan_var = (P @ per_scan) ** 2
     var = scan_var.sum(axis=2) + np.einsum("tij,tjk,tik->ti", P, white, P) + maps[0].orientation ** 2
@@ -271,3 +305,35 @@ def subset_terms(maps: list[CellMaps]) -> tuple[np.ndarray, np.ndarray]:
     var = var + (PF**2).sum(axis=2)
     # float32 maps in a direction no point pins down can round to a small negative variance: none
     return np.clip(var[1:], 0.0, _MAX_STD**2), bias[1:]
+
+
+def _instance_variances(maps: list[CellMaps], P, faces, per_scan, white) -> np.ndarray:
+    """(instances, turns, 3) rad²: :func:`subset_terms`' variance with each source group's part (GROUPS) scaled
+    by its factor in each magnitude instance (``maps[0].magnitudes``); the material's white noise as it is."""
+    own = [P @ m.own.astype(float) for m in maps]
+    shared = P @ sum(m.shared for m in maps).astype(float)
+    fixed = (  # per group, P times its columns: sources fixed per cell instance
+        np.concatenate([o[:, :, :3] for o in own], axis=2),
+        np.concatenate([o[:, :, 3:] for o in own], axis=2),
+        shared[:, :, :3],
+        shared[:, :, 3:6],
+        np.concatenate([shared[:, :, 6:], P @ faces.transpose(0, 2, 1, 3).reshape(len(P), 6, -1)], axis=2),
+    )
+    PS = P @ per_scan
+    step = PS.shape[2] % 6 == 1  # the path's modes come in sixes (rotation, then translation); the step is one more
+    column = np.arange(PS.shape[2] - step) % 6
+    V = np.zeros((len(GROUPS), *PS.shape[:2]))
+    modes = PS[:, :, : len(column)] ** 2
+    V[5], V[6] = modes[:, :, column < 3].sum(axis=2), modes[:, :, column >= 3].sum(axis=2)
+    if step:
+        V[7] = PS[:, :, -1] ** 2
+    V[8] = maps[0].orientation ** 2
+    rest = np.einsum("tij,tjk,tik->ti", P, white, P)
+    zeroed = maps[0].zeroed
+    if zeroed:  # per scan: the master scan's own draw adds
+        V, rest = V + V[:, :1], rest + rest[:1]
+    for g, F in enumerate(fixed):
+        F = F - F[:1] if zeroed else F
+        V[g] += (F**2).sum(axis=2)
+    var = rest[None] + np.einsum("kg,gti->kti", maps[0].magnitudes, V)
+    return np.clip(var[:, 1:], 0.0, _MAX_STD**2)

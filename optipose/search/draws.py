@@ -28,7 +28,9 @@ import logging
 import math
 import string
 import time
+from dataclasses import replace
 
+from optipose.cell.ranges import draws as cell_draws
 from optipose.evaluate.evaluator import EvaluationResult, Evaluator
 from optipose.model.baseline import baseline, baseline_label
 from optipose.model.layout import Layout, is_part_of
@@ -39,6 +41,7 @@ from optipose.search.validate import indices_in, nested_groups
 from optipose.seeds import verdict_seed
 from optipose.verdict.confidence import Rules, Verdicts, paired_draw
 from optipose.verdict.racing import race_many
+from optipose.verdict.ruling import draw_ratio, ruling
 
 __all__ = ["choice_draw_counts", "confident_verdicts", "first_look", "sides"]
 
@@ -120,12 +123,17 @@ def confident_verdicts(
     for key in fewer:
         labels[key] = dict(labels[(1, 1)], baseline_name=validation.baseline[top].name, baseline_k=top)
 
+    seen: dict = {}  # key → every paired draw the race was given, for what rules it across a cell's ranges
+
     def pairs(results: dict[str, EvaluationResult]) -> dict:
-        return {
+        out = {
             (f, h): paired_draw(results[side[f].evaluation], side[f].choice, results["hand"], validation.baseline[h])
             for f, h in compared
             if side[f].evaluation in results
         }
+        for key, pair in out.items():
+            seen.setdefault(key, []).append(pair)
+        return out
 
     draws = {k: [p] for k, p in pairs(first).items()} if counted else None
     if counted and config.verdict.draws <= 1:
@@ -182,7 +190,23 @@ def confident_verdicts(
         )
     finally:
         executor.close()
-    return _verdicts(raced)
+    return _verdicts(_ruled(raced, seen, objective))
+
+
+def _ruled(raced: dict, seen: dict, objective) -> dict:
+    """The race's verdicts, each with the range of the objective's cell that rules it (:mod:`optipose.verdict.ruling`;
+    none in a cell of points, or for a k the search answered with the hand layout's own choice)."""
+    ranges = objective.cell.ranges
+    if not ranges:
+        return raced
+    s = objective.statistic
+    out = {}
+    for key, v in raced.items():
+        pairs = seen.get(key, []) if not v.kept else []
+        ratios = [draw_ratio(p, s.weights, s.median_weight, s.p75_weight) for p in pairs]
+        found = ruling(ratios, [cell_draws(ranges, p.seed) for p in pairs], ranges)
+        out[key] = replace(v, ruling=found) if found else v
+    return out
 
 
 def _verdicts(raced: dict) -> Verdicts:

@@ -50,15 +50,23 @@ It ranks layouts; the full ICP protocol (:mod:`optipose.evaluate.evaluator`) giv
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.stats import norm
 
 from optipose.model.motion import ScanMotion
 from optipose.scan.pose import PartPose
 from optipose.scan.scanner import Scanner
 from optipose.search.cell_terms import CellMaps, CellModel, sensor_maps, subset_terms
+from optipose.search.prediction import (
+    MEDIAN_PER_SIGMA,
+    P75_PER_SIGMA,
+    Prediction,
+    across_instances,
+    axis_stats,
+    best_subsets,
+    instance_stats,
+)
 from optipose.transforms import part_motion
 
 __all__ = [
@@ -72,12 +80,10 @@ __all__ = [
     "predicted_stats",
 ]
 
-MEDIAN_PER_SIGMA = 0.6745  # median of |N(0, 1)|
 # Rays of one reduced scan at most: a part longer than about 300 mm (at the default 400 columns and twice
 # the part's step) is scanned in longer steps instead, so a pose costs what a 300 mm part's does; the
 # shipped parts' reduced scans cast a fifth of it.
 SURROGATE_RAYS = 1 << 17
-P75_PER_SIGMA = 1.1503  # 75th percentile of |N(0, 1)|
 _PRIOR_ROTATION = np.deg2rad(5.0)
 _PRIOR_TRANSLATION = 5e-3
 # ±2° about each axis, and the protocol's corners: the turns when no objective is given
@@ -254,44 +260,6 @@ def bias_rotation(A: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.clip(-(step / scale[:, None])[:3].T, -_PRIOR_ROTATION, _PRIOR_ROTATION)
 
 
-_Z = norm.ppf((np.arange(16) + 0.5) / 16)  # 16 equal-probability stand-ins for N(0, 1)
-
-
-def _axis_stats(sigma: np.ndarray, delta: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Median and 75th percentile (3,) rad of |error| per axis: noise σ (3,) or per turn (turns, 3), plus
-    the bias δ (turns, 3)."""
-    if delta is None or not len(delta):
-        return sigma * MEDIAN_PER_SIGMA, sigma * P75_PER_SIGMA
-    sigma = np.broadcast_to(sigma, delta.shape)
-    e = np.abs(delta[:, None, :] + sigma[:, None, :] * _Z[None, :, None]).reshape(-1, 3)
-    return np.median(e, axis=0), np.percentile(e, 75, axis=0)
-
-
-@dataclass(frozen=True)
-class Prediction:
-    """The surrogate's Table 1 for a layout of k sensors (:func:`predicted_stats`), the counterpart of
-    :class:`optipose.evaluate.assignment.Choice` for ICP; sensors by index in the layout, axes roll, pitch, yaw.
-
-    subsets : every non-empty subset of the k sensors (2ᵏ − 1 tuples of indices), by size then lexicographically.
-    median_deg, p75_deg : (subsets, 3) degrees, each subset's predicted median and 75th percentile of |error|
-        per axis, the worst over the noise levels.
-    best_subset : per axis (3), the subset with the lowest median, ties by the lower p75 (the paper's assignment).
-    axis_score : (3,) degrees, per axis ``median_weight · median + p75_weight · p75`` of its best subset.
-    level_axis_score : (levels, 3) degrees, the same for each noise level alone, on that level's own best subsets.
-    level_axis_stats : (levels, 3, 2) degrees, those subsets' median and 75th percentile per level and axis.
-    score : degrees, ``Σ weights · axis_score``.
-    """
-
-    subsets: tuple[tuple[int, ...], ...]
-    median_deg: np.ndarray = field(repr=False)
-    p75_deg: np.ndarray = field(repr=False)
-    best_subset: tuple[tuple[int, ...], ...]
-    axis_score: np.ndarray
-    level_axis_score: np.ndarray = field(repr=False)
-    level_axis_stats: np.ndarray = field(repr=False)
-    score: float
-
-
 def predicted_stats(
     infos: list[SensorInfo],
     weights=(1.0, 1.0, 1.0),
@@ -312,11 +280,14 @@ def predicted_stats(
     """
     k = len(infos)
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
-    levels = np.zeros((1, len(subsets), 2, 3))  # the median and p75 (rad), at the preset's noise
+    cells = [i.cell for i in infos if i.cell is not None]
+    instances = len(cells[0].magnitudes) if cells else 1  # a cell of ranges: its magnitude instances
+    # each magnitude instance's own median and p75 (rad), at the preset's noise (one level)
+    levels = np.zeros((1, instances, len(subsets), 2, 3))
     for s, c in enumerate(subsets):
-        key = None if memo is None else (tuple(keys[i] for i in c), (1.0,), None)
+        key = None if memo is None else tuple(keys[i] for i in c)
         if key is not None and key in memo:
-            levels[:, s] = memo[key]
+            levels[:, :, s] = memo[key]
             continue
         H = sum(infos[i].H for i in c)
         have_bias = all(infos[i].G is not None for i in c)
@@ -326,18 +297,23 @@ def predicted_stats(
         if delta is not None and all(infos[i].cell is not None for i in c):
             mount, cell_bias = subset_terms([infos[i].cell for i in c])
         sigma = rotation_sigma(H)
-        d = delta
-        m, q = _axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), d if d is None else d + cell_bias)
-        levels[0, s] = m, q
+        dd = delta if delta is None else delta + cell_bias
+        if mount is not None and np.ndim(mount) == 3:  # per magnitude instance, at once
+            levels[0, :, s] = np.stack(instance_stats(np.sqrt(sigma**2 + mount), dd), axis=1)
+        else:
+            levels[0, :, s] = axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), dd)
         if key is not None:
-            memo[key] = levels[:, s].copy()
+            memo[key] = levels[:, :, s].copy()
+    if instances > 1:
+        return across_instances(subsets, levels, weights, median_weight, p75_weight)
+    levels = levels[:, 0]
     median, p75 = np.rad2deg(levels.max(axis=0)).transpose(1, 0, 2)  # the worst over the levels
-    best = _best_subsets(median, p75)
+    best = best_subsets(median, p75)
     axis = np.array([median_weight * median[s, a] + p75_weight * p75[s, a] for a, s in enumerate(best)])
     # each level alone, its axes on that level's own best subsets: what the comparison with the hand layout
     # level by level sees (one level: the same numbers as ``axis_score``)
     per_level = np.rad2deg(levels)
-    level_stats = np.array([[lv[s, :, a] for a, s in enumerate(_best_subsets(lv[:, 0], lv[:, 1]))] for lv in per_level])
+    level_stats = np.array([[lv[s, :, a] for a, s in enumerate(best_subsets(lv[:, 0], lv[:, 1]))] for lv in per_level])
     level_axis = median_weight * level_stats[:, :, 0] + p75_weight * level_stats[:, :, 1]
     return Prediction(
         subsets=tuple(subsets),
@@ -349,8 +325,3 @@ def predicted_stats(
         level_axis_stats=level_stats,
         score=float(np.dot(weights, axis)),
     )
-
-
-def _best_subsets(median: np.ndarray, p75: np.ndarray) -> list[int]:
-    """Per axis, the subset (row) with the lowest median, ties by the lower p75: the paper's assignment."""
-    return [min(range(len(median)), key=lambda s: (median[s, a], p75[s, a])) for a in range(3)]

@@ -63,6 +63,7 @@ from optipose.verdict.bootstrap import (
 )
 
 from optipose.verdict.rules import Rules
+from optipose.verdict.ruling import Ruling
 
 __all__ = [
     "Decision",
@@ -215,6 +216,7 @@ class ConfidentVerdict:
     # how a race left it UNDECIDED: "draws" (its budget's draws ran out), "clock" (a user's clock ended it), ""
     # (decided, or not raced)
     ended: str = ""
+    ruling: Ruling | None = None  # in a cell of ranges: the range whose magnitude decides which layout is better
 
     @property
     def more_minutes(self) -> float:

@@ -23,6 +23,7 @@ from optipose.model.layout import kept_sensors
 from optipose.transforms import xyz_rpy
 from optipose.verdict.compare import Verdict, bought
 from optipose.verdict.confidence import ConfidentVerdict, Decision, Interval
+from optipose.verdict.ruling import FIELDS
 
 __all__ = [
     "IDEAL_CELL",
@@ -36,6 +37,7 @@ __all__ = [
     "xyz_rpy_text",
     "confident_line",
     "open_line",
+    "ruling_line",
     "clock_line",
     "fewer_line",
     "axis_lines",
@@ -206,6 +208,22 @@ def open_line(v: ConfidentVerdict, most: int = 0) -> str:
             f" ({'; '.join(p for p in (pace, more) if p)})" if pace or more else ""
         )
     return f"  k={v.k} open: {what}{ended}; {settle}"
+
+
+def ruling_line(v: ConfidentVerdict) -> str:
+    """Which magnitude of the cell's ranges decides the verdict and where (:mod:`optipose.verdict.ruling`), one
+    line below its verdict line, e.g. ``  k=2 holds for a robot path error above 0.052 mm (...)``; "" when none does."""
+    r = v.ruling
+    if r is None:
+        return ""
+    name, unit, factor = FIELDS.get(r.key, (r.key, "", 1.0))
+    side, other = ("above", "below") if r.above else ("below", "above")
+    at = f"{r.at * factor:.3g}{'' if unit in ('%', 'x') else ' '}{unit}"
+    head = {
+        Decision.BUY: f"holds for a {name} {side} {at}",
+        Decision.KEEP: f"the found layout wins only for a {name} {side} {at}",
+    }.get(v.decision, f"depends on the {name}: found better {side} {at}, hand {other}")
+    return f"  k={v.k} {head} (the draws' ratio crosses 1 there; {100 * r.share:.0f} % of their spread)"
 
 
 def clock_line(cut: tuple[str, ...], seconds: float) -> str:
