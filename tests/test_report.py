@@ -318,10 +318,10 @@ def _index_rows() -> list[dict]:
         budget = "thorough" if task == "search" else ""
         part = "part_b" if task == "search" else "/data/meshes/part_c.stl"
         row = {
-            "key": f"{Path(part).stem}-{task}-robust-k{k}-{budget}-s{seed}".replace("--", "-"),
+            "key": f"{Path(part).stem}-{task}-paper-k{k}-{budget}-s{seed}".replace("--", "-"),
             "part": part,
             "task": task,
-            "objective": "robust",
+            "objective": "paper",
             "sensors": k,
             "budget": budget,
             "seed": seed,
@@ -342,8 +342,6 @@ def _index_rows() -> list[dict]:
                 "hand_score_deg": 0.002,
                 "ratio": 1.5 + seed,
                 "no_worse": seed != 1,
-                "band_ratio": 1.2,
-                "band_no_worse": True,
             }
         rows.append(row)
     rows[1] = {

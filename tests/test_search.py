@@ -693,24 +693,7 @@ def test_each_stage_objective_is_derived_in_one_place():
         stage_objective(load_objective("paper"), "band")
 
 
-def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought():
-    from optipose.verdict.compare import Verdict
-    from optipose.verdict.words import verdict_headline
-
-    found, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)])
-    nominal = Verdict(1, found, hand)
-    assert verdict_headline(nominal).startswith("k=1: BUY found F1: 2.33x better")
-    worse_there = Verdict(1, _choice([(1, 2), (1, 2), (5, 6)]), hand)
-    assert (
-        verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: F1 2.33x better, but worse under the band"
-    )
-    assert verdict_headline(nominal, "hand", Verdict(1, found, hand)).startswith("k=1: BUY")
-    # a nominal search that never checked under a band (quick): better in the ideal cell, not a buy
-    assert verdict_headline(nominal, checked=False) == "k=1: found F1 2.33x better, no axis worse, in the ideal cell"
-    assert verdict_headline(worse_there, checked=False) == verdict_headline(worse_there)  # a worse axis reads the same
-
-
-def test_an_answer_never_checked_under_a_band_is_not_a_buy():
+def test_an_answer_checked_in_the_ideal_cell_only_is_not_a_buy():
     from optipose.verdict.compare import Verdict
     from optipose.io.config import run_config
     from optipose.io.results import SearchResult
@@ -722,7 +705,7 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
     assert (
         verdict_table([nominal], "hand", unchecked=True)
         .rows[0][-1]
-        .startswith("better in the ideal cell; check under the band")
+        .startswith("better in the ideal cell; check it in a real cell")
     )
     ideal = {"objective": {"cell": {"name": "ideal"}}}
     in_a_cell = {"objective": {"cell": {"name": "cobot"}}}
@@ -733,60 +716,6 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
 
     assert result(ideal).unchecked  # a search in the ideal cell: its better holds there only
     assert not result(in_a_cell).unchecked  # a search in a cell: its verdict is the cell's
-    assert not result({**ideal, "band": {"file": "robust"}}).unchecked  # a folder checked under the retired band
-
-
-def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():
-    from optipose.verdict.compare import Verdict, bought
-    from optipose.verdict.words import band_advice
-
-    good, bad, hand = (
-        _choice([(1, 2), (1, 2), (1, 2)]),
-        _choice([(1, 2), (1, 2), (5, 6)]),
-        _choice([(3, 4), (3, 4), (3, 4)]),
-    )
-    x1, x3, x5 = (f"noise x{s}, worst of 2 bracket draws" for s in (1, 3, 5))
-    levels = lambda *cs: replace(cs[0], under=tuple(zip((x1, x5) if len(cs) == 2 else (x1, x3, x5), cs)))  # noqa: E731
-    holds_low = Verdict(1, levels(good, bad), levels(hand, hand))
-    assert band_advice(holds_low, "hand", nominal_no_worse=True) == (
-        "k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), worse on some axis at "
-        "noise x5 (1.24x in sum): it is the better buy only if the sensor's noise on this part, measured on the bench, "
-        "is no more than the preset's"
-    )
-    assert band_advice(holds_low, "hand") == ""  # worse in the nominal cell already: no advice to buy it at any noise
-    holds_high = Verdict(1, levels(bad, good), levels(hand, hand))  # worse at the preset's noise with the brackets off
-    assert "its win rests on brackets more precise than the band's" in band_advice(
-        holds_high, "hand", nominal_no_worse=True
-    )
-    # a level that holds between two that do not is not listed as lost
-    three = band_advice(Verdict(1, levels(good, bad, good), levels(hand, hand, hand)), "hand", nominal_no_worse=True)
-    assert "worse on some axis at noise x3 (1.24x in sum): " in three and "at most 1x" not in three
-    assert (
-        band_advice(Verdict(1, levels(good, good), levels(hand, hand)), nominal_no_worse=True) == ""
-    )  # no worse everywhere
-    assert band_advice(Verdict(1, good, hand), nominal_no_worse=True) == ""  # no band
-    nominal = Verdict(1, good, hand)
-    assert (
-        bought(nominal)
-        and bought(nominal, Verdict(1, levels(good, good), levels(hand, hand)))
-        and not bought(nominal, holds_low)
-    )
-
-
-def test_a_search_with_nothing_to_compare_with_misses_no_check_under_the_band():
-    from optipose.io.config import RunConfig, run_config
-    from optipose.io.results import SearchResult
-    from optipose.search.records import Validation
-
-    found = {1: _choice([(1, 2), (1, 2), (1, 2)])}
-    config = run_config({"band": {"file": "robust"}})
-    assert not SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, {})).band_pending
-    assert SearchResult(
-        "f", "p", 0, "default", config, validation=Validation("full", 1, found, dict(found))
-    ).band_pending
-    assert not SearchResult(
-        "f", "p", 0, "default", RunConfig(), validation=Validation("full", 1, found, dict(found))
-    ).band_pending
 
 
 @pytest.mark.parametrize("algorithm", ["GN_DIRECT_L", "LN_BOBYQA", "GN_CRS2_LM"])

@@ -41,7 +41,7 @@ def search(
     budget: Annotated[
         str,
         typer.Option(
-            help="quick (a first look), default (the search in the objective's cell, the paper's by default, its verdict raced on draws of the cell; in the ideal cell then checked under the band too) or thorough."
+            help="quick (a first look), default (the search in the objective's cell, the paper's by default, its verdict raced on draws of the cell) or thorough."
         ),
     ] = "default",
     objective: Objective = "paper",

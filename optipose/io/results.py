@@ -34,7 +34,6 @@ class SearchResult:
     layouts : k → the found layout (sensors F1 … Fk); baseline : the hand-placed layout, when the part has one,
     else the conventional placement;
     validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
-    band : the same under the band of the check after a nominal search (``SearchConfig.validation.band_objective``), or None;
     confident : the verdicts with confidence (``verdict.csv``; none for a search without one).
     """
 
@@ -46,34 +45,16 @@ class SearchResult:
     layouts: dict[int, Layout] = field(default_factory=dict, repr=False)
     baseline: Layout | None = field(default=None, repr=False)
     validation: Validation | None = None
-    band: Validation | None = None
     confident: Verdicts = field(default_factory=Verdicts)
 
     def verdicts(self) -> list[Verdict]:
         """Found vs. hand per k (empty when there is no hand layout or no validation)."""
         return self.validation.verdicts() if self.validation is not None else []
 
-    def band_verdicts(self) -> dict[int, Verdict]:
-        """k → found vs. hand under the band of the check after a nominal search (empty without one); with
-        :meth:`verdicts`, what :func:`optipose.verdict.compare.bought` decides on."""
-        return self.band.by_k() if self.band is not None else {}
-
-    @property
-    def band_pending(self) -> bool:
-        """The search was to check its answer under a band but has no such check (it stopped before it; a
-        search with nothing to compare its layouts with has no check to miss)."""
-        return (
-            self.config.band is not None
-            and self.band is None
-            and self.validation is not None
-            and bool(self.validation.baseline)
-        )
-
     @property
     def unchecked(self) -> bool:
-        """The answer holds for the ideal cell only: a search in the ideal cell (before the band was retired, one
-        that was not to check it under a band)."""
-        return self.config.cell_name == "ideal" and self.config.band is None and self.validation is not None
+        """The answer holds for the ideal cell only: a search in the ideal cell."""
+        return self.config.cell_name == "ideal" and self.validation is not None
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` (or ``conventional.toml``) says."""

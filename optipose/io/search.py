@@ -130,16 +130,6 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
         constraint=np.array(["" if isinstance(v, SensorInfo) else v.constraint for v in infos], dtype=str),
         A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(len(infos), 6, 6),
         G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
-        # the mounting term's per-turn matrices (n_phases + 1 with the nominal orientation; NaN: none)
-        A_turns=np.array([_or_nan(v, "A_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(
-            len(infos), n_phases + 1, 6, 6
-        ),
-        N_turns=np.array([_or_nan(v, "N_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(
-            len(infos), n_phases + 1, 6, 6
-        ),
-        # the noise bias term at each sensor's band top (NaN: none; noise_band 1)
-        G_noise=np.array([_or_nan(v, "G_noise", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
-        noise_band=np.array([getattr(v, "noise_band", 1.0) for v in infos], dtype=float),
         space=space_version,
     )
     with atomic_path(folder / "cache.npz") as tmp, open(tmp, "wb") as file:  # a file: savez would add .npz to a name
@@ -149,11 +139,6 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
 def _or_zeros(info, name: str, shape: tuple) -> np.ndarray:
     value = getattr(info, name, None)  # a Violation has neither
     return np.zeros(shape) if value is None else value
-
-
-def _or_nan(info, name: str, shape: tuple) -> np.ndarray:
-    value = getattr(info, name, None)
-    return np.full(shape, np.nan) if value is None else value
 
 
 def load_cache(folder: Path, space_version: int) -> dict:
@@ -170,9 +155,7 @@ def _cache_entries(data, space_version: int) -> dict:
     from optipose.search.problem import Violation
     from optipose.search.surrogate import SensorInfo
 
-    if (
-        "G" not in data or "N_turns" not in data or "G_noise" not in data
-    ):  # from before the voxel bias, the mounting or the noise bias term: start over
+    if "G" not in data:  # from before the voxel bias: start over
         return {}
     if (int(data["space"]) if "space" in data else 1) != space_version:  # its u keys name other poses: start over
         return {}
@@ -186,18 +169,10 @@ def _cache_entries(data, space_version: int) -> dict:
         data["violation"],
         data["A"],
         data["G"],
-        data["A_turns"],
-        data["N_turns"],
-        data["G_noise"],
-        data["noise_band"],
         constraint,
     )
-    for u, ok, H, (n_points, n_voxels), violation, A, G, A_turns, N_turns, G_noise, band, why in rows:
-        turns = (None, None) if np.isnan(N_turns).any() else (A_turns, N_turns)
-        noise = (None, 1.0) if np.isnan(G_noise).any() else (G_noise, float(band))
+    for u, ok, H, (n_points, n_voxels), violation, A, G, why in rows:
         out[tuple(np.round(u, 9))] = (
-            SensorInfo(H, int(n_points), int(n_voxels), A, G, *turns, *noise)
-            if ok
-            else Violation(str(why), float(violation))
+            SensorInfo(H, int(n_points), int(n_voxels), A, G) if ok else Violation(str(why), float(violation))
         )
     return out

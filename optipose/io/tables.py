@@ -41,21 +41,12 @@ def table1_frame(choices) -> pd.DataFrame:
 
 def comparison_frame(validation) -> pd.DataFrame:
     """Found vs. hand per k and axis (``comparison.csv``, degrees): the found rows in the order they were
-    evaluated, then the hand rows. Under a band the ``condition`` column names the statistic's condition:
-    ``band`` for the robust one (the aggregate over the band), then one row group per condition."""
-    rows = [r for k, c in validation.found.items() for r in _band_rows("found", k, c)]
-    rows += [r for k, c in validation.baseline.items() for r in _band_rows("hand", k, c)]
+    evaluated, then the hand rows."""
+    rows = [r for k, c in validation.found.items() for r in _choice_rows("found", k, c)]
+    rows += [r for k, c in validation.baseline.items() for r in _choice_rows("hand", k, c)]
     for row in rows:
         row["protocol"] = validation.protocol
     return pd.DataFrame(rows)
-
-
-def _band_rows(label: str, k: int, choice) -> list[dict]:
-    """A choice's rows, and when it carries its statistics per condition (``Choice.under``), theirs."""
-    if not choice.under:
-        return _choice_rows(label, k, choice)
-    rows = [r | {"condition": "band"} for r in _choice_rows(label, k, choice)]
-    return rows + [r | {"condition": name} for name, c in choice.under for r in _choice_rows(label, k, c)]
 
 
 def _choice_rows(label: str, k: int, choice) -> list[dict]:

@@ -112,17 +112,10 @@ def _drawn(folder: Path | None, name: str) -> bytes | None:
 
 
 def _evaluations(sub: Path) -> tuple[object, str]:
-    """The evaluation saved in a validation folder (under a band: its first condition's), and a note."""
+    """The evaluation saved in a validation folder, and a note (none); None where there is none."""
     from optipose.io import load_result
 
-    if (sub / "config.toml").is_file():
-        return load_result(sub), ""
-    conditions = sorted(p for p in sub.iterdir() if (p / "config.toml").is_file())
-    if not conditions:
-        return None, ""
-    return load_result(
-        conditions[0]
-    ), f"condition {conditions[0].name} of the band ({len(conditions)} conditions in {sub})"
+    return (load_result(sub), "") if (sub / "config.toml").is_file() else (None, "")
 
 
 def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Block]]:

@@ -182,7 +182,7 @@ FLAT_KEYS: dict[str, tuple[str, str]] = {
 
 @dataclass(frozen=True)
 class Preset:
-    """Values set on top of a config: a budget, its adjustment under a band or in a real cell, a user's
+    """Values set on top of a config: a budget, its adjustment in a real cell, a user's
     ``[search]`` table. Per section, the fields it sets (the others are left as they are); ``sensors``
     when it sets the sensor counts."""
 

@@ -110,13 +110,6 @@ class SensorInfo:
     n_voxels: int
     A: np.ndarray | None = None  # (6, 6) unweighted point-to-plane normal matrix ΣJᵀJ of the voxel centroids
     G: np.ndarray | None = None  # (turns, 6) ΣJᵀr of the voxel centroids' residuals, per turn
-    # the bracket mounting term (:mod:`optipose.search.mounting`), in O at each turn, index 0 the nominal orientation
-    A_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀJ of the voxel centroids
-    N_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀr per unit bracket error (r rad, t m; sensor frame)
-    # the noise's own bias (the noise bias term, see the module doc): per turn, what the sensor noise at the
-    # surrogate's ``noise_band`` adds to G through the voxels' membership (turns, 6); None: no such term
-    G_noise: np.ndarray | None = None
-    noise_band: float = 1.0
     cell: CellMaps | None = None  # the cell's error sources (:mod:`optipose.search.cell_terms`); None: the ideal cell
 
 
