@@ -31,7 +31,7 @@ from optipose.parallel.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
-from optipose.evaluate.worker import WorkerSetup, run_chunk
+from optipose.evaluate.worker import WorkerSetup, record_chunk, run_chunk
 from optipose.model.layout import Layout, SensorPose
 from optipose.scan.scanner import registered_motion
 
@@ -202,6 +202,27 @@ class Evaluator:
             functools.partial(run_chunk, self.setup, layout, subsets=subsets), _chunks(tasks, self.jobs)
         )
         return outputs, time.perf_counter() - t0
+
+    def record(self, layout: Layout | list[np.ndarray], write) -> list[list]:
+        """Scan ``layout`` at every orientation of the protocol as :meth:`__call__` scans it (the cell's sources,
+        the noise: the same clouds) and hand each scan's raw profiles to ``write(i, j, raw)`` in the workers
+        (:func:`~optipose.evaluate.worker.record_chunk`); what it returned, per scan and sensor."""
+        layout = _as_layout(layout)
+        chunks = _chunks(self.tasks(), self.jobs)
+        outputs = self.executor.map(functools.partial(record_chunk, self.setup, layout, write=write), chunks)
+        by_scan = {task[0]: out for chunk, done in zip(chunks, outputs) for task, out in zip(chunk, done)}
+        return [by_scan[i] for i in range(len(self.perturbations))]
+
+    def replay(self, layout: Layout | list[np.ndarray], read) -> EvaluationResult:
+        """Evaluate recorded scans of ``layout`` (a real cell's, or :meth:`record`'s): ``read(i)`` gives scan
+        ``i`` of the protocol, one :class:`~optipose.scan.cloud.Scan` per sensor, registered as :meth:`__call__`
+        registers the scans it makes. The cell's sources are in the scans: none is added."""
+        layout = _as_layout(layout)
+        setup = replace(self.setup, token=uuid.uuid4().hex, cell=None)
+        t0 = time.perf_counter()
+        run = functools.partial(run_chunk, setup, layout, read=read)
+        outputs = self.executor.map(run, _chunks(self.tasks(), self.jobs))
+        return self._result(layout, list(outputs), time.perf_counter() - t0)
 
     def result(self, layout: Layout | list[np.ndarray], raws: list[tuple]) -> EvaluationResult:
         """The evaluation from the :meth:`raw` outputs of the shares of its orientations (their wall time the

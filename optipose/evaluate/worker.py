@@ -35,7 +35,7 @@ from optipose.scan.pose import PartPose
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T
 
-__all__ = ["WorkerSetup", "run_chunk", "sensor_groups"]
+__all__ = ["WorkerSetup", "run_chunk", "record_chunk", "sensor_groups", "worker_for"]
 
 log = logging.getLogger(__name__)
 
@@ -143,10 +143,12 @@ class _Worker:
         offset=None,
         exact=False,
         noise=True,
+        raw=False,
     ) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m), in the cell; ``seed`` is the orientation's noise seed;
-        ``exact``: as if the cell were ideal; ``noise=False``: exact surface points."""
+        ``exact``: as if the cell were ideal; ``noise=False``: exact surface points; ``raw``: keep each scan's raw
+        profiles, the heights the device reports."""
         groups = sensor_groups(models, self.setup.sensor)
         nominal, cell, mounted = poses, self.cell, False
         if (
@@ -165,7 +167,7 @@ class _Worker:
                 PartPose(rpy, self.setup.centre, offset),
                 rng=group_seed(seed, g),
                 noise=noise,
-                raw=False,
+                raw=raw,
                 built=[nominal[j] for j in idx] if mounted else None,
             )  # ... and the cell builds its cloud with the drawn pose
             for j, scan in zip(idx, out):
@@ -180,7 +182,8 @@ class _Worker:
         normals = [sc.face_normals for sc in scanners]
         apex = [sc.sensor.apex_z for sc in scanners]
         motion = self.setup.motion
-        return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed)
+        lines = [sc.lines for sc in scanners]
+        return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed, lines)
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
         """Per subset, the constant bias Z (4, 4) a cell zeroed on a master part takes off, so that a later
@@ -248,19 +251,27 @@ def _with_normals(points: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, np.
     return points, normals
 
 
+def worker_for(setup: WorkerSetup) -> "_Worker":
+    """This process's live state of the evaluator ``setup`` belongs to (built on first use; one evaluator's
+    state per process at a time)."""
+    worker = _STATE.get(setup.token)
+    if worker is None:
+        _STATE.clear()
+        worker = _STATE[setup.token] = _Worker(setup)
+    return worker
+
+
 def run_chunk(
-    setup: WorkerSetup, layout: Layout, tasks: list[tuple], subsets=None
+    setup: WorkerSetup, layout: Layout, tasks: list[tuple], subsets=None, read=None
 ) -> tuple[list[dict], list[dict], dict]:
     """Scan and register a list of orientations of ``layout``.
 
     tasks : (scan index, rpy (3,) rad, offset (3,) m, noise seed, label) per orientation. subsets : the sensor
-    subsets to register (index tuples; default every one), each row keeping its index among them all.
+    subsets to register (index tuples; default every one), each row keeping its index among them all. read :
+    instead of scanning, ``read(i)`` gives scan ``i``'s scans, one per sensor (recorded ones).
     Returns rows per (scan, subset), rows per (scan, sensor) and the seconds spent ("scan", "register").
     """
-    worker = _STATE.get(setup.token)
-    if worker is None:
-        _STATE.clear()  # one evaluator's state per process at a time
-        worker = _STATE[setup.token] = _Worker(setup)
+    worker = worker_for(setup)
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
     every = all_subsets(len(poses))
     if subsets is not None and setup.registration.subset_start == "combined":  # a subset starts from its sensors' own
@@ -272,7 +283,7 @@ def run_chunk(
     rows, point_rows, timing = [], [], {"scan": 0.0, "register": 0.0}
     for i, rpy, offset, seed, label in tasks:
         t0 = time.perf_counter()
-        scans = worker.scan(models, poses, seed, rpy=rpy, offset=offset)
+        scans = read(i) if read else worker.scan(models, poses, seed, rpy=rpy, offset=offset)
         t1 = time.perf_counter()
         rows += subset_rows(
             worker, setup, scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label, point_rows
@@ -280,3 +291,16 @@ def run_chunk(
         timing["scan"] += t1 - t0
         timing["register"] += time.perf_counter() - t1
     return rows, point_rows, timing
+
+
+def record_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple], write) -> list:
+    """Scan ``layout`` at the orientations ``tasks`` (as :func:`run_chunk`'s) as an evaluation does, and hand
+    each scan's raw profiles, the heights its sensors report, to ``write(i, j, raw)`` (scan ``i``, sensor
+    ``j``; raw (n_profiles, points_per_profile) mm); returns what ``write`` returned, per task and sensor."""
+    worker = worker_for(setup)
+    poses, models = layout.poses, [s.sensor for s in layout.sensors]
+    out = []
+    for i, rpy, offset, seed, _ in tasks:
+        scans = worker.scan(models, poses, seed, rpy=rpy, offset=offset, raw=True)
+        out.append([write(i, j, scan.raw) for j, scan in enumerate(scans)])
+    return out
