@@ -257,7 +257,6 @@ def _open(browser, path: Path):
             "search",
             [
                 "Table 1",
-                "found vs. conventional per k",
                 "R (the middle of the measuring range)",
                 "points per scan",
                 "search settings",
