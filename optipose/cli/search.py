@@ -162,6 +162,10 @@ def search_command(
     print_answer(
         Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal, time_limit=search_config.time_limit
     )
+    if cell is None and searched.validated and not the_objective.cell.ideal and not the_objective.cell.ranges:
+        from optipose.verdict.words import cell_advice
+
+        Console().print(cell_advice(the_objective.cell.name), style="yellow", highlight=False)
     ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:
         console.print(

@@ -37,6 +37,7 @@ __all__ = [
     "confident_line",
     "open_line",
     "ruling_line",
+    "cell_advice",
     "clock_line",
     "fewer_line",
     "axis_lines",
@@ -222,6 +223,14 @@ def ruling_line(v: ConfidentVerdict) -> str:
         Decision.KEEP: f"the found layout wins only for a {name} {side} {at}",
     }.get(v.decision, f"depends on the {name}: found better {side} {at}, hand {other}")
     return f"  k={v.k} {head} (the draws' ratio crosses 1 there; {100 * r.share:.0f} % of their spread)"
+
+
+def cell_advice(name: str) -> str:
+    """What a search run in its objective's cell of points (no ``--cell`` named) says under its answer."""
+    return (
+        f"answered in the objective's cell, {name} (one cell's points); for yours name its kind: --cell cobot, "
+        "industrial-arm or linear-axis, or --cell common for any of them (optipose cells)"
+    )
 
 
 def clock_line(cut: tuple[str, ...], seconds: float) -> str:
