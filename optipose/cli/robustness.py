@@ -174,6 +174,6 @@ def _table(result, part_name: str):
         table.add_column(f"{name} k={k}", justify="right")
     for (cell, instance), group in ratios.groupby(["cell", "instance"], sort=False):
         by = {(r.layout, r.k): r for r in group.itertuples(index=False)}
-        cells = [f"{by[c].ratio:.2f}x {'holds' if by[c].holds else '[red]no[/]'}" if c in by else "-" for c in columns]
+        cells = [f"{by[c].ratio:.3f}x {'holds' if by[c].holds else '[red]no[/]'}" if c in by else "-" for c in columns]
         table.add_row(f"{cell}, {instance}", *cells)
     return table
