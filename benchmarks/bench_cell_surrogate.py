@@ -150,9 +150,7 @@ def _models(part, objective, problem) -> dict:
         "part as made alone": replace(none, process=setup.process),
         "material alone": replace(none, effects=setup.effects),
     }
-    make = lambda s: Surrogate(
-        part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), mounting=False, cell=s
-    )
+    make = lambda s: Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), cell=s)
     middle = {"the cell's terms at the middles": make(setup.middle())} if setup.cell.ranges else {}
     return (
         {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)}
