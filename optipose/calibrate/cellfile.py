@@ -1,0 +1,96 @@
+"""The calibrated cell file: the prior's file with each calibrated range narrowed to the posterior's central 90 %
+(docs/calibration.md).
+
+Each calibrated key becomes ``[5 %, 95 %]`` of its posterior (file units, three significant digits), or a point
+(the posterior's median) where the data pin it (95 % / 5 % under :data:`PINNED`); a range that was uniform from 0 stays
+``[0, 95 %]`` when its 5 % is under a tenth of its 95 % (a log-uniform draw from a tiny low end would put most
+instances near it, which the posterior does not). Its ``*_source`` says where it came from. The keys the emulator
+does not calibrate (:attr:`optipose.calibrate.emulator.Emulator.fixed`) and every point keep the prior's value and
+source. The file loads with ``--cell my_cell.toml``.
+"""
+
+from __future__ import annotations
+
+import datetime
+import tomllib
+from pathlib import Path
+
+from optipose.calibrate.calibration import Calibration
+from optipose.cell.config import file_key
+from optipose.cell.ranges import middle
+
+__all__ = ["PINNED", "calibrated_text", "narrowed", "write_cell"]
+
+PINNED = 1.1  # a posterior's 95 % / 5 % below this is a point
+
+
+def narrowed(calibration: Calibration, key: str) -> tuple[float, float]:
+    """A calibrated key's new range (SI): ``(low, high)``, equal ends for a point."""
+    post = calibration.posterior
+    lo, hi = post.interval(key)
+    if hi <= PINNED * lo:
+        point = post.interval(key, 0.5, 0.5)[0]
+        return point, point
+    prior_low = next(low for name, low, _ in calibration.prior.ranges if name == key)
+    if prior_low == 0 and lo < 0.1 * hi:
+        return 0.0, hi
+    return lo, hi
+
+
+def calibrated_text(calibration: Calibration, name: str) -> str:
+    """The calibrated cell file's text, named ``name``."""
+    import tomli_w
+
+    prior = calibration.prior
+    table = tomllib.loads(prior.source_text) if prior.source_text else {}
+    origin = calibration.summaries.origin
+    for key in calibration.keys:
+        section, file_name, unit = file_key(key)
+        low, high = (round(v / unit, 2 - _digits(v / unit)) for v in narrowed(calibration, key))
+        prior_low, prior_high = next((lo / unit, hi / unit) for k, lo, hi in prior.ranges if k == key)
+        old_source = table.get(section, {}).get(f"{file_name}_source", "")
+        table.setdefault(section, {})[file_name] = low if low == high else [low, high]
+        table[section][f"{file_name}_source"] = (
+            f"calibrated from {origin} of {calibration.summaries.part} by optipose calibrate, posterior 5-95 %"
+            f"{' (pinned: its median)' if low == high else ''}, prior [{prior_low:.3g}, {prior_high:.3g}] "
+            f"({prior.name}: {old_source})"
+        )
+    for key in calibration.fixed:
+        section, file_name, _ = file_key(key)
+        source = table.get(section, {}).get(f"{file_name}_source", "")
+        table[section][f"{file_name}_source"] = (
+            f"not calibrated (the emulator keeps it at its middle, {middle(*_range(prior, key)) / file_key(key)[2]:.3g}): "
+            f"the prior's range ({prior.name}: {source})"
+        )
+    table["name"] = name
+    table["description"] = f"{prior.description}; calibrated from {origin} of {calibration.summaries.part}"
+    header = [
+        f"# {name}: the cell '{prior.name}' calibrated by optipose calibrate on {datetime.date.today().isoformat()}",
+        f"# from {origin} of {calibration.summaries.part} ({len(calibration.summaries.figures)} figures); each",
+        "# calibrated range is the posterior's central 90 % (docs/calibration.md).",
+    ]
+    if calibration.out:
+        header.append(
+            f"# WARNING: the prior's ranges cannot produce {len(calibration.out)} figure(s): "
+            + "; ".join(calibration.out)
+        )
+    return "\n".join(header) + "\n" + tomli_w.dumps(table)
+
+
+def _range(cell, key: str) -> tuple[float, float]:
+    return next((lo, hi) for k, lo, hi in cell.ranges if k == key)
+
+
+def _digits(value: float) -> int:
+    """The position of ``value``'s leading digit (0 for 1–9.99, -2 for 0.01–0.099), for three significant digits."""
+    from math import floor, log10
+
+    return 0 if value <= 0 else int(floor(log10(value)))
+
+
+def write_cell(calibration: Calibration, path: str | Path) -> Path:
+    """Write the calibrated cell file whole (:func:`optipose.files.write_text`), named after the file's stem."""
+    from optipose.files import write_text
+
+    path = Path(path)
+    return write_text(path, calibrated_text(calibration, path.stem))
