@@ -63,6 +63,7 @@ class Emulator:
             cell=CellSetup.of(cell, part),
         )
         infos = [surrogate.info(T) for T in layout.poses]
+        self.infos = infos  # the surrogate's, per sensor (its cell maps at the middles)
         self.names = list(layout.names)
         self.ranges = tuple(cell.ranges)
         self.keys = tuple(f for f, _, _ in self.ranges if f in GROUPS)
