@@ -13,7 +13,7 @@ from cli_checks import assert_one_line_error
 from optipose.calibrate.calibration import calibrate
 from optipose.calibrate.emulator import Emulator
 from optipose.calibrate.posterior import fit_correction
-from optipose.calibrate.summaries import AXES, STATS, Figure, Summaries, read_figures
+from optipose.calibrate.summaries import AXES, STATS, Figure, Summaries, from_evaluation, read_figures
 from optipose.cell.config import cell_from_table, load_cell
 from optipose.cell.ranges import spread
 from optipose.cli.app import main
@@ -179,3 +179,39 @@ def test_figures_outside_every_range_warn_in_one_line_and_exit_3(tmp_path, capsy
     warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("optipose: warning:")]
     assert len(warnings) == 1 and "missing a source" in warnings[0] and "S1 pitch median" in warnings[0]
     assert out.is_file() and "WARNING" in out.read_text()
+
+
+def _evaluation(emulator, values: dict, scans: int = 77) -> SimpleNamespace:
+    """A simulated EvaluationResult of the hand layout: its stats table as the emulator predicts it at ``values``, and
+    a subset that failed too often and an unobservable axis, which a calibration must leave out."""
+    import pandas as pd
+
+    stats = emulator.stats(np.array([[values[k] for k in emulator.keys]]))
+    rows = [
+        {
+            "subset": sub,
+            "axis": axis,
+            "median": float(stats[sub][0, 0, a]),
+            "p75": float(stats[sub][0, 1, a]),
+            "n_ok": scans,
+            "n_failed": 0,
+            "unobservable": False,
+        }
+        for sub in emulator.labels
+        for a, axis in enumerate(AXES)
+    ]
+    rows[0] |= {"n_ok": scans - 30, "n_failed": 30, "median": 0.17}  # S1 roll: 30 failures at 10°
+    rows[1] |= {"unobservable": True}
+    return SimpleNamespace(part="part_a", stats=pd.DataFrame(rows))
+
+
+def test_an_evaluation_of_scans_is_calibrated_on_its_observed_subsets(small, part_a):
+    objective, emulator = small
+    summaries = from_evaluation(_evaluation(emulator, HIDDEN), "scans simulated")
+    labels = {f.label for f in summaries.figures}
+    assert "S1 roll median" not in labels and "S1 pitch median" not in labels and "S1 yaw p75" in labels
+    assert len(summaries.figures) == 2 * (3 * len(emulator.labels) - 2)
+    result = calibrate(part_a, part_a.layouts["hand"], objective, summaries, draws=4000, icp=0, seed=2)
+    for key, hidden in HIDDEN.items():
+        low, high = result.posterior.interval(key)
+        assert low <= hidden <= high, (key, low, hidden, high)

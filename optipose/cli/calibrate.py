@@ -59,8 +59,8 @@ def calibrate(
 ) -> None:
     """Calibrate a cell: narrow a preset's ranges to a hand layout's measured figures.
 
-    Likelihood-free inference over the preset's ranges on the hand layout's per-subset, per-axis median and 75th
-    percentile of |error|, from a published table (--figures) or scans (--scans); writes a cell file for --cell."""
+    Inference over the preset's ranges on the hand layout's median and 75th percentile of |error| per sensor subset
+    and axis, from a published table (--figures) or scans (--scans); writes a cell file for --cell."""
     calibration = calibrate_command(part, figures, scans, cell, out, objective, layout, units, draws, icp, jobs, seed)
     if calibration.out:
         raise typer.Exit(EXIT_MISFIT)
