@@ -9,7 +9,8 @@ counterpart is the best-scoring k-subset of the same three sensors, so one ICP e
 
 The surrogates compared: the nominal one (sensor noise and voxel bias: what the search scores with today,
 blind to the cell), and the same with the cell's terms (:mod:`optipose.search.cell_terms`), all of them and
-each source alone. Printed: Spearman ρ of each against ICP under the cell, per part and k, and per axis.
+each source alone; in a cell of ranges (``--cell cobot``) the cell's terms across the ranges (the search's) and at
+the ranges' middles. Printed: Spearman ρ of each against ICP under the cell, per part and k, and per axis.
 With ``--icp-seeds 1,2`` ICP runs under each seed's cell instance: the later seeds' ICP is ranked against
 the first (how much one instance alone moves the ranking), and every surrogate also against the geometric
 mean of ICP's scores over the seeds. ICP results are cached per layout and seed in ``--cache`` (npz), so a
@@ -145,9 +146,12 @@ def _models(part, objective, problem) -> dict:
     make = lambda s: Surrogate(
         part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), mounting=False, cell=s
     )
-    return {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)} | {
-        k: make(s) for k, s in alone.items()
-    }
+    middle = {"the cell's terms at the middles": make(setup.middle())} if setup.cell.ranges else {}
+    return (
+        {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)}
+        | middle
+        | {k: make(s) for k, s in alone.items()}
+    )
 
 
 def _rank(part, objective, problem, layouts, icp: list[dict], seeds: list[int]) -> None:

@@ -4,9 +4,9 @@
                                                                [--budget default] [--cell ur10e] [--seed 0] [--out results/verdict-study] [--report]
                                                                [--search-config settings.toml]
     .venv/bin/python benchmarks/bench_verdict_study.py holdout [--out results/verdict-study] [--offset 1000] [--jobs 2] [--verdict-time 0]
-                                                               [--draws 30] [--file holdout.csv] [--choices kept]
+                                                               [--draws 30] [--file holdout.csv] [--choices kept] [--in-cell cobot,common:low]
     .venv/bin/python benchmarks/bench_verdict_study.py table   [--out results/reference,results/verdict-study] [--file holdout.csv]
-                                                               [--remade-file holdout-remade.csv]
+                                                               [--remade-file holdout-remade.csv] [--in-cell cobot,common:low]
     .venv/bin/python benchmarks/bench_verdict_study.py draws   [--out results/reference,results/verdict-study]
 
 ``run``: ``optipose search PART --budget B --cell C --seed S --jobs 2`` per part, one after another, each into
@@ -20,7 +20,9 @@ used (the search's seed + ``--offset``: another held-out validation seed, other 
 and the verdict raced as the search's was (:func:`optipose.search.draws.confident_verdicts`, the search's own
 settings, or up to ``--draws``) — into ``OUT/<part>/holdout.csv`` (or ``--file``). ``--choices kept`` (the default)
 keeps each layout's choice (its subset per axis) as the search made it: what a BUY mounts, checked on draws the
-search never saw (in a real cell without a held-out validation, whose draw the race would not read). ``--choices remade`` makes the choices again on the held-out validation's draw: whether another
+search never saw (in a real cell without a held-out validation, whose draw the race would not read). ``--in-cell``
+races the kept choices in other cells instead (a preset, or ``NAME:low`` / ``NAME:high``: every range at that end),
+each into ``holdout-<cell>.csv``: whether a BUY holds at the ranges' ends and in the other kinds of cell. ``--choices remade`` makes the choices again on the held-out validation's draw: whether another
 search's validation would choose, and buy, the same. A BUY holds when the held-out verdict is BUY too.
 ``table``: one row per part and k — the search's verdict, hand / found in sum with its interval, the predicted
 median per axis for found and baseline, the draws, and the held-out verdicts (with their draws; the choices remade in a
@@ -105,10 +107,10 @@ def holdout(args) -> None:
     from optipose.verdict.words import confident_line
 
     wanted = set(args.parts.split(","))
-    for folder in sorted(_folders(args.out, wanted).values()):
+    for folder, cell in ((f, c) for f in sorted(_folders(args.out, wanted).values()) for c in _in_cells(args)):
         result = load_result(folder)
         saved = result.config
-        objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(saved.cell_name)
+        objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(cell or saved.cell_name)
         config = search_preset(saved.search).apply(SearchConfig())  # sectioned or flat, as the folder has it
         if args.verdict_time is not None:  # 0: race on draws alone, whatever the machine's load
             config = Preset(verdict={"time": args.verdict_time}).apply(config)
@@ -129,12 +131,23 @@ def holdout(args) -> None:
             if args.choices == "kept":  # what the search bought, on the held-out draws (the ideal cell's first)
                 validation = replace(validation, found=result.validation.found, baseline=result.validation.baseline)
         verdicts = confident_verdicts(part, objective, result.layouts, validation, first, seed, config, args.jobs)
-        pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / args.file, index=False)
+        pd.DataFrame(verdict_frame(verdicts)).to_csv(folder / _held_file(args.file, cell), index=False)
         print(
-            f"{folder.name} ({time.perf_counter() - t0:.0f} s): "
+            f"{folder.name}{f' in {cell}' if cell else ''} ({time.perf_counter() - t0:.0f} s): "
             + "; ".join(confident_line(v) for v in verdicts.by_k.values()),
             flush=True,
         )
+
+
+def _in_cells(args) -> list:
+    """holdout's cells: the search's own (None), or each of ``--in-cell``."""
+    return args.in_cell.split(",") if args.in_cell else [None]
+
+
+def _held_file(file: str, cell: str | None) -> str:
+    """The file a holdout in ``cell`` writes: ``holdout.csv`` in the search's own cell, ``holdout-cobot-low.csv`` in
+    ``cobot:low``."""
+    return file if cell is None else f"{Path(file).stem}-{Path(cell).stem.replace(':', '-')}{Path(file).suffix}"
 
 
 def table(args) -> None:
@@ -143,14 +156,17 @@ def table(args) -> None:
 
     folders = _folders(args.out, set(PARTS))
     remade = args.remade_file and any((folder / args.remade_file).is_file() for folder in folders.values())
+    cells = [c for c in _in_cells(args) if c]
     print(
         "| part | k | verdict | found / baseline | baseline / found in sum | roll, found / baseline | pitch | yaw | draws | held out |"
         + (" held out, choices remade |" if remade else "")
+        + "".join(f" held out in {c} |" for c in cells)
     )
-    print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |" + (" --- |" if remade else ""))
+    print("| --- | ---: | --- | --- | --- | --- | --- | --- | ---: | --- |" + " --- |" * (bool(remade) + len(cells)))
     for name, folder in folders.items():
         by_k = load_result(folder).confident.by_k
-        held = [read_verdicts(folder / file).by_k for file in ([args.file] + ([args.remade_file] if remade else []))]
+        files = [args.file] + ([args.remade_file] if remade else []) + [_held_file(args.file, c) for c in cells]
+        held = [read_verdicts(folder / file).by_k for file in files]
         for k, v in by_k.items():
             axes = [
                 f"{interval_cell(f.median_deg)} / {interval_cell(h.median_deg)}" for f, h in zip(v.found, v.baseline)
@@ -229,6 +245,12 @@ def main() -> None:
         type=float,
         default=None,
         help="holdout: the race's seconds (default: the search's; 0: draws alone)",
+    )
+    ap.add_argument(
+        "--in-cell",
+        default="",
+        help="holdout, table: race (read) the held-out verdicts in these cells instead of the search's own, comma-separated "
+        "(a preset, NAME:low / NAME:high for every range at that end), each into holdout-<cell>.csv",
     )
     ap.add_argument("--draws", type=int, default=0, help="holdout: the race's draws at most (default: the search's)")
     ap.add_argument(

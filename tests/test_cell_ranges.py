@@ -319,3 +319,22 @@ def test_the_common_cell_is_the_envelope_of_the_presets_ranges():
         assert low == pytest.approx(min(k[field][0] for k in kinds), rel=1e-12)
         assert high == pytest.approx(max(k[field][1] for k in kinds), rel=1e-12)
     assert not common.calibration.zeroed and common.as_made and common.material
+
+
+def test_a_cells_ends_put_every_range_at_its_low_or_its_high_end():
+    from optipose.cell.config import load_cell
+    from optipose.errors import ConfigError
+
+    cobot = load_cell("cobot")
+    for end, pick in (("low", 0), ("high", 1)):
+        cell = load_cell(f"cobot:{end}")
+        assert cell.name == f"cobot:{end}" and not cell.ranges
+        assert cell.robot.path == pytest.approx(dict((f, (lo, hi)) for f, lo, hi in cobot.ranges)["robot.path"][pick])
+        values = {f: (lo, hi)[pick] for f, lo, hi in cobot.ranges}
+        assert cell.calibration.frame_rotation == pytest.approx(values["calibration.frame_rotation"])
+        assert cell.robot.step == pytest.approx(values["robot.step"]) and cell.instance(7) == cell
+    assert load_cell("cobot:high:zeroed").calibration.zeroed
+    with pytest.raises(ConfigError, match="no range"):
+        load_cell("ur10e:low")
+    with pytest.raises(ConfigError, match="unknown suffix"):
+        load_cell("cobot:middle")

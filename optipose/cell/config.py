@@ -131,6 +131,13 @@ class Cell:
         """The point cell of the ranges' middles (what the surrogate scores); the cell itself without ranges."""
         return self if not self.ranges else self._with({f: middle(lo, hi) for f, lo, hi in self.ranges})
 
+    def at(self, end: str) -> "Cell":
+        """The point cell with every range at its ``end`` (``"low"`` or ``"high"``): the best and the worst cell of
+        its kind; the cell itself without ranges."""
+        if end not in ("low", "high"):
+            raise ValueError(f"a range's end is 'low' or 'high', got {end!r}")
+        return self if not self.ranges else self._with({f: lo if end == "low" else hi for f, lo, hi in self.ranges})
+
     def _with(self, values: dict) -> "Cell":
         """This cell with the fields ``values`` names (``robot.path``, ..., ``process_scale``) set, and no range."""
         robot = {k.split(".")[1]: v for k, v in values.items() if k.startswith("robot.")}
@@ -154,7 +161,7 @@ def load_cell(spec: "str | Path | Cell | None") -> Cell:
     if spec is None or spec == "ideal":
         return IDEAL
     if isinstance(spec, str) and ":" in spec and not Path(spec).exists():
-        return _zeroed(spec)
+        return _suffixed(spec)
     path = shipped_toml(spec, CELLS_DIR, "cell")
     table, text = read_toml(path, "cell file")
     return cell_from_table(table, str(path), default_name=path.stem, source_text=text)
@@ -165,13 +172,20 @@ def cell_names() -> list[str]:
     return sorted(p.stem for p in CELLS_DIR.glob("*.toml"))
 
 
-def _zeroed(spec: str) -> Cell:
-    """``NAME:zeroed``: the cell ``NAME`` (a shipped name or a path) zeroed on a master part; any other suffix,
-    or a cell without a calibration error to zero, is one :class:`ConfigError`."""
+def _suffixed(spec: str) -> Cell:
+    """``NAME:zeroed``: the cell ``NAME`` (a shipped name, a path, or one with a suffix itself) zeroed on a master part;
+    ``NAME:low`` / ``NAME:high``: every range at that end (:meth:`Cell.at`). Any other suffix, a cell without a
+    calibration error to zero, or an end of a cell without ranges is one :class:`ConfigError`."""
     name, suffix = spec.rsplit(":", 1)
+    if suffix in ("low", "high"):
+        cell = load_cell(name)
+        if not cell.ranges:
+            raise ConfigError(f"cell '{spec}': cell '{cell.name}' has no range to take the {suffix} end of")
+        return replace(cell.at(suffix), name=f"{cell.name}:{suffix}")
     if suffix != "zeroed":
         raise ConfigError(
-            f"cell '{spec}': unknown suffix ':{suffix}' (a cell is NAME, or NAME:zeroed for it zeroed on a master part)"
+            f"cell '{spec}': unknown suffix ':{suffix}' (a cell is NAME, NAME:zeroed for it zeroed on a master part, "
+            "or NAME:low / NAME:high for every range at that end)"
         )
     cell = load_cell(name)
     if not cell.calibration.off:

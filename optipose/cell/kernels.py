@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from optipose.scan.heights import place
+
 __all__ = ["along_rays", "trilinear", "lattice_normals", "ray_draws"]
 
 
@@ -67,6 +69,13 @@ def along_rays(
     path_w,
     centre_O,
     extra,
+    column,
+    x0,
+    slope,
+    R_S,
+    t_S,
+    raw,
+    n_col,
     out,
 ):
     """``out`` (n, 3): ``points`` (n, 3) in O (the part at pose ``R``, ``t``; the motion undone: profile k
@@ -75,7 +84,10 @@ def along_rays(
     each face's plane offset and tilt, the scale, the warp, the layers) and the robot's pose error at the
     profile (``path_t``, ``path_w`` (profiles, 3), empty for none, about ``centre_O``), and ``cos`` the
     cosine between ray and normal, kept at least ``grazing`` in size. The ray comes from the laser's
-    ``apex`` in O (nan: parallel rays along ``view``)."""
+    ``apex`` in O (nan: parallel rays along ``view``). Each moved point is then what the device reports: the
+    point its height gives on its column's ray (:func:`optipose.scan.heights.place`, the sensor believed at
+    ``R_S``, ``t_S``, its rays ``x0``, ``slope``; empty ``x0``: the moved point), the height written into
+    ``raw`` (flat, profile × ``n_col`` + column, mm) unless it is empty."""
     n = points.shape[0]
     form_inv_h = 1.0 / form_h  # products, not quotients, in the loop: a division costs as much as the rest of it
     inv_warp, inv_layer = 1.0 / warp_half if warp != 0.0 else 0.0, 1.0 / layer_h if layer_amp != 0.0 else 0.0
@@ -131,7 +143,15 @@ def along_rays(
         else:
             c = max(c, grazing)
         s = d / c + extra[i]
-        out[i, 0], out[i, 1], out[i, 2] = px + rx * s, py + ry * s, pz + rz * s
+        if x0.shape[0] == 0 or s == 0.0:  # no rays given, or not moved (the scanner placed it): the point itself
+            out[i, 0], out[i, 1], out[i, 2] = px + rx * s, py + ry * s, pz + rz * s
+            continue
+        # the moved point's height on the ray, as in optipose.scan.heights.through_heights, and its point
+        dx, dy, dz = px + rx * s + sh - t_S[0], py + ry * s - t_S[1], pz + rz * s - t_S[2]
+        height = -1e3 * (R_S[0, 2] * dx + R_S[1, 2] * dy + R_S[2, 2] * dz)
+        if raw.shape[0] > 0:
+            raw[profile[i] * n_col + column[i]] = height
+        place(height, column[i], sh, x0, slope, R_S, t_S, out, i)
 
 
 _TWO_TO_MINUS_53, _TWO_TO_MINUS_32 = 2.0**-53, 2.0**-32

@@ -65,6 +65,9 @@ _NO_PART = (
 )
 
 
+_NO_RAYS = (np.zeros(0), np.zeros(0))  # the kernel's rays when the moved points are not placed on any
+
+
 @dataclass(frozen=True)
 class CellSetup:
     """What a worker needs of the cell (picklable): the cell, the part's process as the cell scales it,
@@ -138,12 +141,17 @@ class LiveCell:
         T_O_P: np.ndarray,
         step: float,
         scan_seed: int,
+        lines: list[tuple[np.ndarray, np.ndarray]] | None = None,
     ) -> list[list]:
         """Each scan of ``levels`` (per noise level, per sensor) with the cell's displacements added along
-        its rays. ``normals_P``: per sensor, its scanner's outward unit face normals in the part's frame;
-        ``apex_z``: the sensor's laser apex on its z axis (m; inf: parallel rays); ``shifts``: the motion's
-        offsets; ``T_O_P``: the part's pose as the robot set it."""
+        its rays, each point then what its reported height gives (:mod:`optipose.scan.heights`), as a reader
+        of the profiles gets it, and the scan's raw profiles (when kept) those heights. ``normals_P``: per
+        sensor, its scanner's outward unit face normals in the part's frame; ``apex_z``: the sensor's laser
+        apex on its z axis (m; inf: parallel rays); ``shifts``: the motion's offsets; ``T_O_P``: the part's
+        pose as the robot set it; ``lines``: per sensor, its columns' rays (``Scanner.lines``; ``None``: the
+        moved points as they are, on no sensor's rays)."""
         from optipose.cell.kernels import along_rays
+        from optipose.scan.heights import as_reported
 
         cell, effects = self.setup.cell, self.setup.effects
         path = (np.zeros((0, 3)), np.zeros((0, 3)))
@@ -179,13 +187,24 @@ class LiveCell:
                 *path,
                 centre_O,
                 extra,
+                np.ascontiguousarray(scan.column),
+                *(lines[j] if lines else _NO_RAYS),
+                np.ascontiguousarray(T[:3, :3]),
+                np.ascontiguousarray(T[:3, 3]),
+                scan.raw.reshape(-1),
+                scan.raw.shape[1],
                 moved,
             )
             out[0][j] = replace(scan, points=moved)
             if len(out) > 1:  # the other noise levels: the same rays, the same moves
                 delta = moved - scan.points
                 for level in out[1:]:
-                    level[j] = replace(level[j], points=level[j].points + delta)
+                    if lines:
+                        level[j] = as_reported(
+                            replace(level[j], points=level[j].points.copy()), delta, lines[j], shifts
+                        )
+                    else:
+                        level[j] = replace(level[j], points=level[j].points + delta)
         return out
 
     def _material(self, e: MaterialEffects, scan, R: np.ndarray, t: np.ndarray, key: np.uint64) -> np.ndarray:

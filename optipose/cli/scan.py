@@ -8,7 +8,17 @@ from typing import TYPE_CHECKING, Annotated, Optional, Sequence
 
 import typer
 
-from optipose.cli.options import LayoutFile, Part, Seed, Units, check_output, friendly_errors, parse_floats
+from optipose.cli.options import (
+    CellOption,
+    Jobs,
+    LayoutFile,
+    Part,
+    Seed,
+    Units,
+    check_output,
+    friendly_errors,
+    parse_floats,
+)
 from optipose.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -16,7 +26,7 @@ if TYPE_CHECKING:
 
     from optipose.model.layout import Layout
 
-__all__ = ["scan", "scan_command", "poses_from_cli", "write_cloud", "CLOUD_SUFFIXES"]
+__all__ = ["scan", "scan_command", "protocol_command", "poses_from_cli", "write_cloud", "CLOUD_SUFFIXES"]
 
 log = logging.getLogger(__name__)
 
@@ -42,14 +52,84 @@ def scan(
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise and Z quantisation.")] = True,
     out: Annotated[Optional[Path], typer.Option(help="Write the merged cloud (PLY, PCD, XYZ or NPY), metres.")] = None,
     raw: Annotated[
-        Optional[Path], typer.Option(help="Write each sensor's raw profiles (device format) into this folder.")
+        Optional[Path],
+        typer.Option(
+            help="Write each sensor's raw profiles (device format) into this folder; with --protocol, the scan folder."
+        ),
     ] = None,
     units: Units = "auto",
+    protocol: Annotated[
+        Optional[str],
+        typer.Option(
+            help="Scan every orientation of this objective's protocol (a name in objectives/ or a TOML path), "
+            "in its cell, and write the scan folder into --raw."
+        ),
+    ] = None,
+    cell: CellOption = None,
+    format: Annotated[
+        str, typer.Option("--format", help="With --protocol: npy (float64, reads back exactly) or csv (%.4f).")
+    ] = "npy",
+    jobs: Jobs = 1,
 ) -> None:
-    """Scan a part with one or more sensors and print what each sees."""
+    """Scan a part with one or more sensors and print what each sees; with --protocol, write a whole protocol.
+
+    With --protocol, the layout (--sensor-pose, --layout, else the part's hand one) is scanned at every
+    orientation of the objective's protocol in the cell (--cell, else the objective's), as an evaluation
+    scans it, and --raw gets one file of raw profiles per scan and sensor and a manifest.toml
+    (docs/scans.md); `optipose evaluate PART --scans DIR` reads it back."""
+    if protocol is not None:
+        given = [flag for flag, value in (("--out", out), ("--material", material), ("--sensor", sensor)) if value]
+        if given or not noise:
+            raise ConfigError(
+                f"{(given or ['--no-noise'])[0]} is not for --protocol: a protocol is scanned as evaluated"
+            )
+        protocol_command(part, protocol, raw, sensor_pose, layout, cell, seed, format, jobs or 1, units)
+        return
+    if cell is not None:
+        raise ConfigError("--cell needs --protocol (a single scan is the ideal cell's)")
     scan_command(
         part, sensor_pose, layout, material, sensor, parse_floats(rpy, 3, "--rpy"), seed, noise, out, raw, units
     )
+
+
+def protocol_command(
+    part: str,
+    objective: str,
+    raw_dir: Path | None,
+    sensor_pose: list[str] | None = None,
+    layout: Path | None = None,
+    cell: str | None = None,
+    seed: int = 0,
+    format: str = "npy",
+    jobs: int = 1,
+    units: str = "auto",
+) -> Path:
+    """Write the scan folder ``raw_dir`` of the layout under ``objective``'s protocol in ``cell``; returns it."""
+    import time
+
+    from rich.console import Console
+
+    from optipose.evaluate.objective import load_objective
+    from optipose.evaluate.recorded import record_protocol
+    from optipose.model.collision import check_sensors_outside
+    from optipose.model.part import load_part
+
+    if raw_dir is None:
+        raise ConfigError("--protocol needs --raw DIR, the folder to write the scans into")
+    check_output(raw_dir, what="--raw")
+    the_part = load_part(part, units=units)
+    the_layout = poses_from_cli(sensor_pose, layout, the_part)
+    check_sensors_outside(the_part, the_layout)
+    the_objective = load_objective(objective).in_cell(cell)
+    t0 = time.perf_counter()
+    manifest = record_protocol(the_part, the_layout, the_objective, raw_dir, seed=seed, jobs=jobs, format=format)
+    size = sum(f.stat().st_size for f in raw_dir.iterdir() if f.is_file())
+    Console().print(
+        f"scans: {raw_dir}/ ({len(manifest.scans)} scans x {len(the_layout)} sensors of {manifest.profiles} "
+        f"profiles, {format}, {size / 1e6:.0f} MB; objective '{the_objective.name}', cell "
+        f"'{the_objective.cell.name}', seed {seed}; {time.perf_counter() - t0:.1f} s) and {raw_dir}/manifest.toml"
+    )
+    return raw_dir
 
 
 def scan_command(

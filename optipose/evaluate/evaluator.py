@@ -32,7 +32,7 @@ from optipose.parallel.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
-from optipose.evaluate.worker import WorkerSetup, run_levels
+from optipose.evaluate.worker import WorkerSetup, record_chunk, run_levels
 from optipose.model.layout import Layout, SensorPose
 from optipose.scan.scanner import registered_motion
 
@@ -233,6 +233,27 @@ class Evaluator:
             for n, level in enumerate(levels):
                 out[replace(group[0], noise_scale=level)] = ([o[n] for o in outputs], wall)
         return [out[c] for c in conditions]
+
+    def record(self, layout: Layout | list[np.ndarray], write) -> list[list]:
+        """Scan ``layout`` at every orientation of the protocol as :meth:`__call__` scans it (the cell's sources,
+        the noise: the same clouds) and hand each scan's raw profiles to ``write(i, j, raw)`` in the workers
+        (:func:`~optipose.evaluate.worker.record_chunk`); what it returned, per scan and sensor."""
+        layout = _as_layout(layout)
+        chunks = _chunks(self.tasks(), self.jobs)
+        outputs = self.executor.map(functools.partial(record_chunk, self.setup, layout, write=write), chunks)
+        by_scan = {task[0]: out for chunk, done in zip(chunks, outputs) for task, out in zip(chunk, done)}
+        return [by_scan[i] for i in range(len(self.perturbations))]
+
+    def replay(self, layout: Layout | list[np.ndarray], read) -> EvaluationResult:
+        """Evaluate recorded scans of ``layout`` (a real cell's, or :meth:`record`'s): ``read(i)`` gives scan
+        ``i`` of the protocol, one :class:`~optipose.scan.cloud.Scan` per sensor, registered as :meth:`__call__`
+        registers the scans it makes. The cell's sources are in the scans: none is added."""
+        layout = _as_layout(layout)
+        setup = replace(self.setup, token=uuid.uuid4().hex, cell=None)
+        t0 = time.perf_counter()
+        run = functools.partial(run_levels, setup, layout, levels=(setup.condition.noise_scale,), read=read)
+        outputs = self.executor.map(run, _chunks(self.tasks(), self.jobs))
+        return self._result(layout, [o[0] for o in outputs], time.perf_counter() - t0)
 
     def result(self, layout: Layout | list[np.ndarray], raws: list[tuple]) -> EvaluationResult:
         """One condition's evaluation from the :meth:`raw` outputs of the shares of its orientations (their

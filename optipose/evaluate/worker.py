@@ -37,7 +37,7 @@ from optipose.scan.pose import PartPose
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T
 
-__all__ = ["WorkerSetup", "run_chunk", "run_levels", "sensor_groups"]
+__all__ = ["WorkerSetup", "run_chunk", "run_levels", "record_chunk", "sensor_groups", "worker_for"]
 
 log = logging.getLogger(__name__)
 
@@ -149,12 +149,13 @@ class _Worker:
         offset=None,
         exact=False,
         noise=True,
+        raw=False,
     ) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m) under the condition; ``seed`` is the orientation's
         noise seed; ``exact``: as if the brackets were exact and the cell ideal, whatever the condition; ``noise=False``: exact
-        surface points."""
-        return self.scan_levels(models, poses, seed, (self.condition.noise_scale,), rpy, offset, exact, noise)[0]
+        surface points; ``raw``: keep each scan's raw profiles, the heights the device reports."""
+        return self.scan_levels(models, poses, seed, (self.condition.noise_scale,), rpy, offset, exact, noise, raw)[0]
 
     def scan_levels(
         self,
@@ -166,6 +167,7 @@ class _Worker:
         offset=None,
         exact=False,
         noise=True,
+        raw=False,
     ) -> list[list]:
         """:meth:`scan` at each noise scale of ``levels`` (the condition's brackets, its noise scale
         replaced): one list of scans per level, from one ray cast (:meth:`Scanner.scan_levels`)."""
@@ -190,7 +192,7 @@ class _Worker:
                 PartPose(rpy, self.setup.centre, offset),
                 rng=group_seed(seed, g),
                 noise=noise,
-                raw=False,
+                raw=raw,
                 built=[nominal[j] for j in idx] if mounted else None,
             )  # ... and the cell builds its cloud with the drawn pose
             for level, level_out in zip(scans, out):
@@ -206,7 +208,8 @@ class _Worker:
         normals = [sc.face_normals for sc in scanners]
         apex = [sc.sensor.apex_z for sc in scanners]
         motion = self.setup.motion
-        return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed)
+        lines = [sc.lines for sc in scanners]
+        return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed, lines)
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
         """Per subset, the constant bias Z (4, 4) the brackets give a cell, so that a later estimate T is
@@ -298,17 +301,25 @@ def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[l
     return run_levels(setup, layout, tasks, (setup.condition.noise_scale,))[0]
 
 
+def worker_for(setup: WorkerSetup) -> "_Worker":
+    """This process's live state of the evaluator ``setup`` belongs to (built on first use; one evaluator's
+    state per process at a time)."""
+    worker = _STATE.get(setup.token)
+    if worker is None:
+        _STATE.clear()
+        worker = _STATE[setup.token] = _Worker(setup)
+    return worker
+
+
 def run_levels(
-    setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...], subsets=None
+    setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...], subsets=None, read=None
 ) -> list[tuple]:
     """:func:`run_chunk` under ``setup.condition`` at each noise scale of ``levels`` (its bracket draw, its
     noise scale replaced): each orientation is cast once for all of them. One (rows, point rows, seconds)
     per level; the casting's seconds are shared out equally. ``subsets``: the sensor subsets to register
-    (index tuples; default every one), each row keeping its index among them all."""
-    worker = _STATE.get(setup.token)
-    if worker is None:
-        _STATE.clear()  # one evaluator's state per process at a time
-        worker = _STATE[setup.token] = _Worker(setup)
+    (index tuples; default every one), each row keeping its index among them all. ``read``: instead of
+    scanning, ``read(i)`` gives scan ``i``'s scans, one per sensor (recorded ones: one level only)."""
+    worker = worker_for(setup)
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
     every = all_subsets(len(poses))
     if subsets is not None and setup.registration.subset_start == "combined":  # a subset starts from its sensors' own
@@ -325,7 +336,7 @@ def run_levels(
     for i, rpy, offset, seed, label in tasks:
         t0 = time.perf_counter()
         worker.condition = conditions[0]
-        scans = worker.scan_levels(models, poses, seed, levels, rpy=rpy, offset=offset)
+        scans = [read(i)] if read else worker.scan_levels(models, poses, seed, levels, rpy=rpy, offset=offset)
         cast = (time.perf_counter() - t0) / len(levels)
         for condition, level_scans, (references, zeros), (rows, point_rows, timing) in zip(
             conditions, scans, cells, outputs
@@ -351,3 +362,17 @@ def run_levels(
             timing["scan"] += cast
             timing["register"] += time.perf_counter() - t1
     return outputs
+
+
+def record_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple], write) -> list:
+    """Scan ``layout`` at the orientations ``tasks`` (as :func:`run_chunk`'s) as an evaluation does, and hand
+    each scan's raw profiles, the heights its sensors report, to ``write(i, j, raw)`` (scan ``i``, sensor
+    ``j``; raw (n_profiles, points_per_profile) mm); returns what ``write`` returned, per task and sensor."""
+    worker = worker_for(setup)
+    worker.condition = setup.condition
+    poses, models = layout.poses, [s.sensor for s in layout.sensors]
+    out = []
+    for i, rpy, offset, seed, _ in tasks:
+        scans = worker.scan(models, poses, seed, rpy=rpy, offset=offset, raw=True)
+        out.append([write(i, j, scan.raw) for j, scan in enumerate(scans)])
+    return out

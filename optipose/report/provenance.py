@@ -22,6 +22,8 @@ def command_line(config: RunConfig) -> str:
             args += ["--sensors", ",".join(str(s) for s in config.sensors)]
     if command == "evaluate":
         source = given(config.layout_source, "")
+        if source.startswith("scans:"):  # a scan folder: its manifest says the objective, layout, cell and seed
+            return shlex.join([*args, "--scans", source.removeprefix("scans:")])
         if source and not source.startswith("part:"):
             args += ["--layout", source]
     if command == "robustness":

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from optipose.scan.heights import place
+
 
 @njit(cache=True, nogil=True)
 def measure_hits(
@@ -287,12 +289,10 @@ def write_points(
             z += scale[h] * c  # along the ray, seen in z_S
             if z_resolution > 0.0:
                 z = np.floor(z / z_resolution + 0.5) * z_resolution
+        height = -1e3 * z  # the device's Z (mm); the point is what it gives, as a reader of the profile gets it
         if with_raw:
-            raw[i] = -1e3 * z
-        xs = x0[col] + z * slope[col]
-        points[h, 0] = R[0, 0] * xs + R[0, 2] * z + t[0] - shift_b[k]
-        points[h, 1] = R[1, 0] * xs + R[1, 2] * z + t[1]
-        points[h, 2] = R[2, 0] * xs + R[2, 2] * z + t[2]
+            raw[i] = height
+        place(height, col, shift_b[k], x0, slope, R, t, points, h)
         profile[h] = k0 + k
         column[h] = col
 

@@ -17,8 +17,9 @@ import numpy as np
 
 from optipose.errors import ConfigError
 from optipose.model.sensor import SensorModel
+from optipose.scan.heights import heights_to_points
 
-__all__ = ["EMPTY", "profiles_to_points", "heights_to_points", "ray_lines", "write_profiles", "read_profiles"]
+__all__ = ["EMPTY", "profiles_to_points", "ray_lines", "write_profiles", "read_profiles"]
 
 EMPTY = -9999.9999
 
@@ -39,9 +40,19 @@ def profiles_to_points(
         )
     if len(shifts) != len(raw):
         raise ConfigError(f"{len(raw)} profiles but {len(shifts)} scan positions")
-    prof, col = np.nonzero(raw > EMPTY + 1.0)
-    shift = np.asarray(shifts, dtype=np.float64)[prof]
-    points = heights_to_points(-raw[prof, col] * 1e-3, col, shift, ray_lines(*sensor.laser_rays()), T_O_S)
+    prof, col = np.nonzero(raw > EMPTY + 1.0)  # profile-major, columns ascending: the scanner's order of points
+    x0, slope = ray_lines(*sensor.laser_rays())
+    T = np.asarray(T_O_S, dtype=np.float64)
+    points = heights_to_points(
+        np.ascontiguousarray(raw[prof, col]),
+        prof,
+        col,
+        np.ascontiguousarray(shifts, dtype=np.float64),
+        x0,
+        slope,
+        np.ascontiguousarray(T[:3, :3]),
+        np.ascontiguousarray(T[:3, 3]),
+    )
     return points, prof.astype(np.int32), col.astype(np.int32)
 
 
@@ -54,48 +65,66 @@ def ray_lines(o_S: np.ndarray, d_S: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return o_S[:, 0] - o_S[:, 2] * slope, slope
 
 
-def heights_to_points(
-    z_S: np.ndarray, col: np.ndarray, shift: np.ndarray, lines: tuple[np.ndarray, np.ndarray], T_O_S: np.ndarray
-) -> np.ndarray:
-    """Points in O (n, 3) from depths ``z_S`` (n,) m on the laser rays ``col`` (n,), motion undone.
-
-    lines : the columns' rays from :func:`ray_lines`.
-    shift : (n,) m, the part's travel along +x_O when each point was taken (paper eq. 4 undoes it).
-    """
-    x0, slope = lines
-    x_S = x0[col] + z_S * slope[col]
-    R, t = T_O_S[:3, :3], T_O_S[:3, 3]
-    p_O = np.empty((3, len(z_S))).T  # column-major: each coordinate is one contiguous 1-D pass
-    for i in range(3):
-        p_O[:, i] = t[i]
-        if R[i, 0] != 0.0:  # axis-aligned sensors skip the zero terms
-            p_O[:, i] += x_S * R[i, 0]
-        if R[i, 2] != 0.0:
-            p_O[:, i] += z_S * R[i, 2]
-    p_O[:, 0] -= shift
-    return p_O
-
-
-def write_profiles(path: str | Path, raw: np.ndarray, header: str = "") -> Path:
-    """Write raw profiles (n, m) as ``.npy`` or as device-style text (``.csv`` / ``.txt``)."""
+def write_profiles(path: str | Path, raw: np.ndarray, header: str = "", format: str | None = None) -> Path:
+    """Write raw profiles (n, m) as ``.npy`` or as device-style text (``.csv`` / ``.txt``); ``format``
+    ("npy", "csv"): which, whatever the name (default: by its suffix)."""
     path = Path(path)
     raw = np.asarray(raw, dtype=np.float64)
-    if path.suffix == ".npy":
-        np.save(path, raw)
+    if (format or path.suffix.lstrip(".")) == "npy":
+        with open(path, "wb") as f:  # a file, not a name: numpy would add ".npy" to one without it
+            np.save(f, raw)
     else:
         np.savetxt(path, raw, fmt="%.4f", delimiter=",", header=header, comments="# ")
     return path
 
 
 def read_profiles(path: str | Path, points_per_profile: int | None = None) -> np.ndarray:
-    """Read raw profiles written by :func:`write_profiles` or exported from a device (one profile a line)."""
+    """Raw profiles (n, points_per_profile) mm read from a file written by :func:`write_profiles` or exported
+    from a device (one profile a line). A missing file, a profile of another length than
+    ``points_per_profile`` (when given) or a value that is no number (NaN: the empty point is -9999.9999)
+    is one :class:`ConfigError` naming the file and the profile (counting from 0)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"profile file not found: {path}")
-    try:
-        raw = np.load(path) if path.suffix == ".npy" else np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
-    except ValueError as exc:
-        raise ConfigError(f"cannot read profiles from {path}: {exc}") from None
-    if raw.ndim != 2 or (points_per_profile and raw.shape[1] != points_per_profile):
-        raise ConfigError(f"{path}: expected rows of {points_per_profile} values, got shape {raw.shape}")
+    if path.suffix == ".npy":
+        try:
+            raw = np.load(path, allow_pickle=False)
+        except (ValueError, OSError, EOFError) as exc:
+            raise ConfigError(f"{path}: not a .npy array of profiles ({exc})") from None
+        raw = np.atleast_2d(raw) if raw.ndim == 1 else raw
+        if raw.ndim != 2 or not np.issubdtype(raw.dtype, np.number):
+            raise ConfigError(f"{path}: expected an array (profiles, values) of numbers, got {raw.dtype} {raw.shape}")
+        rows = [raw.shape[1]] * len(raw)
+    else:
+        raw, rows = _read_text(path)
+    n = points_per_profile or (rows[0] if rows else 0)
+    wrong = next((k for k, m in enumerate(rows) if m != n), None)
+    if wrong is not None:
+        raise ConfigError(f"{path}: profile {wrong} has {rows[wrong]} values, the sensor gives {n} a profile")
+    raw = np.asarray(raw, dtype=np.float64).reshape(len(rows), n)
+    bad = np.flatnonzero(~np.isfinite(raw).all(axis=1))
+    if len(bad):
+        raise ConfigError(f"{path}: profile {bad[0]} holds NaN or infinity (an empty point is {EMPTY})")
     return raw
+
+
+def _read_text(path: Path) -> tuple[list, list[int]]:
+    """The numbers of a device-style text file, one profile a line (``#`` lines are comments), and each
+    profile's count."""
+    values, rows = [], []
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            try:
+                row = np.array(line.replace(";", ",").split(","), dtype=np.float64)
+            except ValueError:
+                raise ConfigError(f"{path}: profile {len(rows)} holds a value that is not a number") from None
+            values.append(row)
+            rows.append(len(row))
+    if not rows:
+        raise ConfigError(f"{path}: no profiles")
+    if len(set(rows)) > 1:
+        return values, rows  # the caller names the profile of the wrong length
+    return np.concatenate(values), rows

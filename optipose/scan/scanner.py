@@ -264,6 +264,11 @@ class Scanner:
         return view.rays(np.arange(len(shifts) * self.sensor.points_per_profile), shifts, self._t_max)
 
     @property
+    def lines(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each column's laser ray in the laser plane, ``x_S = x0 + slope·z_S``: x0 (n_col,), slope (n_col,)."""
+        return self._ray_lines
+
+    @property
     def face_normals(self) -> np.ndarray:
         """(f, 3): each face's outward unit normal in the part's frame (a plane's faces share one), keep-outs' faces after the part's."""
         return self._normals
