@@ -4,6 +4,7 @@ said in one line, bad figures files one line each, and the calibrated cell file 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -21,6 +22,15 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.search.surrogate import predicted_stats
 
+ROOT = Path(__file__).resolve().parents[1]
+TWO_SENSORS = """[[sensors]]
+name = "S1"
+T_O_S = [[0.0, 1.0, 0.0, 0.030], [0.7071, 0.0, 0.7071, -0.023], [0.7071, 0.0, -0.7071, 0.015], [0.0, 0.0, 0.0, 1.0]]
+
+[[sensors]]
+name = "S2"
+T_O_S = [[0.0, 1.0, 0.0, 0.030], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0175], [0.0, 0.0, 0.0, 1.0]]
+"""
 # cobot with two of its ranges left and the rest at points: the small case
 SMALL = {
     "name": "small",
@@ -215,3 +225,38 @@ def test_an_evaluation_of_scans_is_calibrated_on_its_observed_subsets(small, par
     for key, hidden in HIDDEN.items():
         low, high = result.posterior.interval(key)
         assert low <= hidden <= high, (key, low, hidden, high)
+
+
+def test_calibrate_reads_a_scan_folder(tmp_path):
+    """``scan --protocol --raw`` in the paper's cell (a reduced protocol of part B's S1 and S2), then ``calibrate
+    --scans`` with the cobot preset as the prior: the scans are registered, and a cell file loads."""
+    from cli_checks import run
+
+    paper = (ROOT / "objectives" / "paper.toml").read_text()
+    small = paper.replace('name = "paper"', 'name = "small"').replace("step_deg = 0.4", "step_deg = 2.0")
+    (tmp_path / "small.toml").write_text(
+        small.replace('sequences = ["R", "P", "Y", "RP", "PY", "YR", "RPY"]', 'sequences = ["R", "P"]')
+    )
+    (tmp_path / "two.toml").write_text(TWO_SENSORS)
+    scans = tmp_path / "scans"
+    wrote = run(
+        "scan",
+        "part_b",
+        "--protocol",
+        "small.toml",
+        "--cell",
+        "ur10e",
+        "--layout",
+        "two.toml",
+        "--raw",
+        str(scans),
+        cwd=tmp_path,
+    )
+    assert wrote.returncode == 0, wrote.stderr
+    out = tmp_path / "mine.toml"
+    done = run(
+        "calibrate", "part_b", "--scans", str(scans), "--cell", "cobot", "--out", str(out), "--icp", "0", cwd=tmp_path
+    )
+    assert done.returncode in (0, 3), done.stderr
+    assert "registering the scans" in done.stderr
+    assert load_cell(out).ranges and "calibrated from scans scans of part_b" in out.read_text()

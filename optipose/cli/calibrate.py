@@ -15,7 +15,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli.options import Jobs, LayoutFile, Objective, Part, Seed, Units, check_output, friendly_errors
+from optipose.cli.options import Jobs, LayoutFile, Part, Seed, Units, check_output, friendly_errors
 from optipose.errors import ConfigError
 
 __all__ = ["calibrate", "calibrate_command", "EXIT_MISFIT"]
@@ -36,6 +36,13 @@ Prior = Annotated[
     Optional[str], typer.Option("--cell", help="The prior: a cell of ranges (cobot, industrial-arm, ...) or its TOML.")
 ]
 OutCell = Annotated[Optional[Path], typer.Option("--out", help="The calibrated cell file to write (TOML).")]
+ScanObjective = Annotated[
+    Optional[str],
+    typer.Option(
+        "--objective",
+        help="Objective name in objectives/ or a TOML path; default: the scans' (--scans), else paper.",
+    ),
+]
 Draws = Annotated[int, typer.Option("--draws", min=100, help="Prior draws of the importance sampler, per round.")]
 Icp = Annotated[
     int, typer.Option("--icp", min=0, help="ICP evaluations at prior instances for the emulator's correction.")
@@ -49,7 +56,7 @@ def calibrate(
     scans: Scans = None,
     cell: Prior = None,
     out: OutCell = None,
-    objective: Objective = "paper",
+    objective: ScanObjective = None,
     layout: LayoutFile = None,
     units: Units = "auto",
     draws: Draws = 20000,
@@ -72,7 +79,7 @@ def calibrate_command(
     scans: Path | None,
     cell: str | None,
     out: Path | None,
-    objective: str = "paper",
+    objective: str | None = None,
     layout: Path | None = None,
     units: str = "auto",
     draws: int = 20000,
@@ -100,13 +107,15 @@ def calibrate_command(
         raise ConfigError(f"--out {out}: a cell file ends in .toml")
     check_output(out, file=True)
     the_part = load_part(part, units=units)
-    the_objective = load_objective(objective)
     if scans is not None:
-        summaries, the_objective, the_layout = _from_scans(the_part, scans, the_objective, jobs)
+        if layout is not None:
+            raise ConfigError("--layout is the scans' own with --scans (their manifest or result folder names it)")
+        summaries, the_objective, the_layout = _from_scans(the_part, scans, objective, jobs)
     else:
         from optipose.calibrate.summaries import read_figures
 
         summaries = read_figures(figures, the_part.name)
+        the_objective = load_objective(objective or "paper")
         the_layout = load_layout(layout) if layout is not None else baseline(the_part)
         if the_layout is None:
             raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give the measured one with --layout")
@@ -140,10 +149,12 @@ def calibrate_command(
     return calibration
 
 
-def _from_scans(part, folder: Path, objective, jobs):
-    """The summaries, objective and layout of a folder: an evaluate result folder, or raw scans where this version
-    reads them (``optipose.evaluate.recorded``)."""
+def _from_scans(part, folder: Path, objective: str | None, jobs):
+    """The summaries, objective and layout of a folder: a result folder of ``optipose evaluate`` (of scans or a
+    simulation), or a scan folder (``optipose scan --protocol --raw``), evaluated here by ICP first
+    (:func:`optipose.evaluate.recorded.evaluate_scans`). ``objective``: the registration's, default the folder's."""
     from optipose.calibrate.summaries import from_evaluation
+    from optipose.evaluate.objective import load_objective
 
     folder = Path(folder)
     if not folder.is_dir():
@@ -156,13 +167,11 @@ def _from_scans(part, folder: Path, objective, jobs):
             raise ConfigError(f"--scans {folder}: not the result folder of an evaluation")
         if result.part != part.name:
             raise ConfigError(f"--scans {folder}: an evaluation of '{result.part}', not of '{part.name}'")
+        the_objective = result.objective if objective is None else load_objective(objective)
     else:
-        try:
-            from optipose.evaluate.recorded import evaluate_scans
-        except ImportError:
-            raise ConfigError(
-                f"--scans {folder}: no config.toml (not a result folder of `optipose evaluate`), and this version "
-                "reads no raw scans"
-            ) from None
+        from optipose.evaluate.recorded import evaluate_scans
+
+        typer.echo(f"registering the scans of {folder} ({jobs or 1} job(s))", err=True)
         result, _ = evaluate_scans(part, folder, objective, jobs=jobs or 1)
-    return from_evaluation(result, f"scans {folder.name}"), result.objective, result.layout
+        the_objective = result.objective
+    return from_evaluation(result, f"scans {folder.name}"), the_objective, result.layout
