@@ -12,6 +12,7 @@ source. The file loads with ``--cell my_cell.toml``.
 from __future__ import annotations
 
 import datetime
+import re
 import tomllib
 from pathlib import Path
 
@@ -74,7 +75,9 @@ def calibrated_text(calibration: Calibration, name: str) -> str:
             f"# WARNING: the prior's ranges cannot produce {len(calibration.out)} figure(s): "
             + "; ".join(calibration.out)
         )
-    return "\n".join(header) + "\n" + tomli_w.dumps(table)
+    text = tomli_w.dumps(table)
+    text = re.sub(r"= \[\n\s+([^,\n]+),\n\s+([^,\n]+),\n\]", r"= [\1, \2]", text)  # a range on one line
+    return "\n".join(header) + "\n" + text
 
 
 def _range(cell, key: str) -> tuple[float, float]:
