@@ -2,6 +2,7 @@
 and C's 24 real figures the calibrated cell's predicted intervals cover, and how wide they are.
 
     .venv/bin/python benchmarks/bench_calibrate.py paper [--cell cobot] [--icp 4] [--seeds 10] [--jobs 2] [--out DIR]
+    .venv/bin/python benchmarks/bench_calibrate.py roundtrip [--part part_a] [--cell cobot] [--hidden 8] [--icp 4] [--jobs 2]
 
 Calibrates ``--cell`` on part A's rows of docs/figures/paper_table1.csv (``optipose calibrate``'s library call, timed),
 writes the cell to DIR/part_a-calibrated.toml, then predicts B's and C's figures of the paper's subsets, each as the
@@ -17,6 +18,11 @@ central 90 % across the calibrated cell's instances (5 % and 95 %):
 
 and the same intervals under the uncalibrated prior for comparison. Covered: the real figure within [5 %, 95 %];
 width: 95 % / 5 %. Tables to stdout and DIR/paper.txt.
+
+``roundtrip``: ``--hidden`` cells drawn across the prior's ranges (every range at its low end, at its high end, and
+instances between), each the hand layout's Table 1 by ICP (a seed of its own), calibrated on it with one emulator and
+one set of ICP runs for all; each hidden magnitude against the calibrated file's range, and the hand layout's medians
+by ICP in the calibrated cell (a seed the fit never saw) against the hidden cell's. To DIR/roundtrip-PART.txt.
 """
 
 from __future__ import annotations
@@ -163,6 +169,71 @@ def paper(args) -> None:
     (out / "paper.txt").write_text("\n".join(lines) + "\n")
 
 
+def roundtrip(args) -> None:
+    """Hidden cells across the prior's ranges (both ends, and instances between), each the hand layout's figures by
+    ICP; calibrated on them (one emulator and one set of ICP runs for all); each hidden magnitude against its
+    posterior's 5-95 %, and the calibrated cell's ICP medians (a seed the fit never saw) against the hidden cell's."""
+    from optipose.calibrate.calibration import calibrate, icp_runs
+    from optipose.calibrate.cellfile import narrowed, write_cell
+    from optipose.calibrate.emulator import Emulator, field_value
+    from optipose.calibrate.summaries import from_evaluation
+    from optipose.cell.config import load_cell
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.evaluate.objective import load_objective
+    from optipose.model.part import load_part
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = []
+
+    def say(text: str = "") -> None:
+        print(text, flush=True)
+        lines.append(text)
+
+    part, prior = load_part(args.part), load_cell(args.cell)
+    layout, objective = part.layouts["hand"], load_objective(args.objective).in_cell(prior)
+
+    def table1(cell, seed: int):
+        with Evaluator(part, objective.in_cell(cell), seed=seed, jobs=args.jobs, quiet=True) as evaluator:
+            return evaluator(layout)
+
+    start = time.perf_counter()
+    emulator = Emulator(part, layout, objective)
+    runs = icp_runs(part, layout, objective, emulator, args.icp, 0, args.jobs)
+    say(f"{args.part} in '{args.cell}': emulator and {args.icp} ICP runs {time.perf_counter() - start:.0f} s")
+    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
+    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
+    inside, total, close, medians = 0, 0, 0, 0
+    for i, (name, cell) in enumerate(hidden):
+        measured = table1(cell, 100 + i)
+        result = calibrate(
+            part, layout, objective, from_evaluation(measured, f"scans {name}"), emulator=emulator, runs=runs, seed=i
+        )
+        path = write_cell(result, out / f"roundtrip-{i}.toml")
+        keys = []
+        for key in result.keys:
+            lo, hi = narrowed(result, key)  # the cell file's range
+            value = field_value(cell, key)
+            hit = lo * 0.999 <= value <= hi * 1.001
+            inside, total = inside + hit, total + 1
+            keys.append(f"{key.split('.')[-1]} {'in' if hit else 'OUT'}")
+        check = table1(load_cell(path), 200 + i).stats
+        ratios = []
+        for row in measured.stats.itertuples(index=False):
+            other = check[(check["subset"] == row.subset) & (check["axis"] == row.axis)]["median"].iloc[0]
+            ratios.append(max(other / row.median, row.median / other))
+        ratios = np.array(ratios)
+        close, medians = close + int(np.sum(ratios <= 1.5)), medians + len(ratios)
+        say(
+            f"{name:13s} {len(result.summaries.figures)} figures, out: {len(result.out)}; within 1.5x: "
+            f"{int(np.sum(ratios <= 1.5))} of {len(ratios)} medians (worst {ratios.max():.2f}x); " + ", ".join(keys)
+        )
+    say(f"hidden magnitudes within the posterior's 5-95 %: {inside} of {total}")
+    say(f"calibrated cell's ICP medians within 1.5x of the hidden cell's: {close} of {medians}")
+    say(f"wall {time.perf_counter() - start:.0f} s")
+    (out / f"roundtrip-{args.part}.txt").write_text("\n".join(lines) + "\n")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
@@ -173,8 +244,16 @@ def main() -> None:
     p.add_argument("--seeds", type=int, default=0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--out", default="benchmarks/results/calibrate")
+    r = sub.add_parser("roundtrip")
+    r.add_argument("--part", default="part_a")
+    r.add_argument("--cell", default="cobot")
+    r.add_argument("--objective", default="paper")
+    r.add_argument("--hidden", type=int, default=8)
+    r.add_argument("--icp", type=int, default=4)
+    r.add_argument("--jobs", type=int, default=2)
+    r.add_argument("--out", default="benchmarks/results/calibrate")
     args = parser.parse_args()
-    {"paper": paper}[args.what](args)
+    {"paper": paper, "roundtrip": roundtrip}[args.what](args)
 
 
 if __name__ == "__main__":

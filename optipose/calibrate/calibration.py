@@ -20,7 +20,7 @@ from optipose.calibrate.posterior import Correction, Posterior, fit_correction, 
 from optipose.calibrate.summaries import AXES, STATS, Summaries
 from optipose.errors import ConfigError
 
-__all__ = ["Calibration", "calibrate", "figure_logs"]
+__all__ = ["Calibration", "IcpRuns", "calibrate", "figure_logs", "icp_runs"]
 
 log = logging.getLogger(__name__)
 
@@ -56,19 +56,69 @@ def figure_logs(summaries: Summaries, stats: dict[str, np.ndarray]) -> np.ndarra
     return np.column_stack(cols)
 
 
+@dataclass(frozen=True)
+class IcpRuns:
+    """The layout evaluated by ICP at prior instances, beside the emulator at their magnitudes: per subset name,
+    (m, 2, 3) rad median and p75 per axis, ``emulated`` and ``evaluated``; ``seeds`` the instances, ``seconds`` the
+    evaluations' wall time. One set serves every calibration of the same layout, objective and prior."""
+
+    seeds: tuple[int, ...]
+    emulated: dict
+    evaluated: dict
+    seconds: float
+
+
+def icp_runs(part, layout, objective, emulator: Emulator, icp: int, seed: int = 0, jobs: int = 1) -> IcpRuns:
+    """:class:`IcpRuns` at the prior's instances of seeds ``seed`` … ``seed + icp − 1`` (each its own magnitudes)."""
+    from optipose.evaluate.evaluator import Evaluator
+
+    start = time.perf_counter()
+    seeds = tuple(seed + i for i in range(icp))
+    emulated = {sub: [] for sub in emulator.labels}
+    evaluated = {sub: [] for sub in emulator.labels}
+    for s in seeds:
+        instance = objective.cell.instance(s)
+        values = np.array([[field_value(instance, k) for k in emulator.keys]])
+        for sub, stats in emulator.stats(values).items():
+            emulated[sub].append(stats[0])
+        with Evaluator(part, objective, seed=s, jobs=jobs, quiet=True) as evaluator:
+            result = evaluator(layout)
+        for sub in emulator.labels:
+            evaluated[sub].append([[_stat(result.stats, sub, axis, stat) for axis in AXES] for stat in STATS])
+        log.info("ICP at prior instance %d: %.1f s", s, time.perf_counter() - start)
+    shape = (len(seeds), 2, 3)
+    return IcpRuns(
+        seeds,
+        {k: np.reshape(v, shape) for k, v in emulated.items()},
+        {k: np.reshape(v, shape) for k, v in evaluated.items()},
+        time.perf_counter() - start,
+    )
+
+
 def calibrate(
-    part, layout, objective, summaries: Summaries, draws: int = 20000, icp: int = 4, seed: int = 0, jobs: int = 1
+    part,
+    layout,
+    objective,
+    summaries: Summaries,
+    draws: int = 20000,
+    icp: int = 4,
+    seed: int = 0,
+    jobs: int = 1,
+    emulator: Emulator | None = None,
+    runs: IcpRuns | None = None,
 ) -> Calibration:
     """Calibrate ``objective.cell`` (a cell of ranges, the prior) to ``summaries`` of ``layout`` on ``part``.
 
     draws : prior draws of the importance sampler (per round); icp : ICP evaluations of the layout at prior
     instances (seeds ``seed`` … ``seed + icp − 1``) for the emulator's correction (0: none, a default spread).
+    emulator, runs : the layout's emulator and ICP runs in this prior, when a caller already has them (a study of
+    several calibrations of one layout); ``runs`` replaces ``icp``.
     """
     start = time.perf_counter()
     prior = objective.cell
     if not prior.ranges:
         raise ConfigError(f"cell '{prior.name}' has no range to calibrate (a prior is a cell of ranges: cobot, ...)")
-    emulator = Emulator(part, layout, objective)
+    emulator = emulator or Emulator(part, layout, objective)
     unknown = sorted({f.subset for f in summaries.figures} - set(emulator.labels))
     if unknown:
         raise ConfigError(
@@ -77,7 +127,8 @@ def calibrate(
         )
     subsets = sorted({f.subset for f in summaries.figures})
     ranges = [r for r in prior.ranges if r[0] in emulator.keys]
-    correction = _correction(part, layout, objective, emulator, summaries, subsets, icp, seed, jobs)
+    runs = runs or icp_runs(part, layout, objective, emulator, icp, seed, jobs)
+    correction = _correction(summaries, runs)
     cov = summaries.noise() + correction.cov
 
     def simulate(values: np.ndarray) -> np.ndarray:
@@ -101,25 +152,8 @@ def calibrate(
     )
 
 
-def _correction(part, layout, objective, emulator, summaries, subsets, icp, seed, jobs) -> Correction:
-    """The emulator's correction to ICP from ``icp`` evaluations of the layout at prior instances."""
-    from optipose.evaluate.evaluator import Evaluator
-
-    start = time.perf_counter()
-    seeds = [seed + i for i in range(icp)]
-    emulated, evaluated = [], []
-    for s in seeds:
-        instance = objective.cell.instance(s)
-        values = np.array([[field_value(instance, k) for k in emulator.keys]])
-        emulated.append(figure_logs(summaries, emulator.stats(values, subsets))[0])
-        with Evaluator(part, objective, seed=s, jobs=jobs, quiet=True) as evaluator:
-            result = evaluator(layout)
-        stats = {
-            sub: np.array([[[_stat(result.stats, sub, axis, stat) for axis in AXES] for stat in STATS]])
-            for sub in subsets
-        }
-        evaluated.append(figure_logs(summaries, stats)[0])
-        log.info("ICP at prior instance %d: %.1f s", s, time.perf_counter() - start)
+def _correction(summaries: Summaries, runs: IcpRuns) -> Correction:
+    """The emulator's correction to ICP for the summaries' figures, from the ICP runs."""
     figures = summaries.figures
     pairs = [
         (i, j)
@@ -127,10 +161,11 @@ def _correction(part, layout, objective, emulator, summaries, subsets, icp, seed
         for j, b in enumerate(figures)
         if i < j and (a.subset, a.axis) == (b.subset, b.axis) and a.stat != b.stat
     ]
-    shape = (len(seeds), len(figures))
-    return fit_correction(
-        np.reshape(emulated, shape), np.reshape(evaluated, shape), pairs, seeds, time.perf_counter() - start
-    )
+    subsets = {f.subset for f in figures}
+    shape = (len(runs.seeds), len(figures))
+    emulated = figure_logs(summaries, {s: runs.emulated[s] for s in subsets}) if runs.seeds else np.zeros(shape)
+    evaluated = figure_logs(summaries, {s: runs.evaluated[s] for s in subsets}) if runs.seeds else np.zeros(shape)
+    return fit_correction(emulated, evaluated, pairs, runs.seeds, runs.seconds)
 
 
 def _stat(stats, subset: str, axis: str, stat: str) -> float:

@@ -52,10 +52,13 @@ def fit_correction(emulated: np.ndarray, icp: np.ndarray, pairs: list[tuple[int,
     (m, figures) each; ``pairs`` the (median, p75) figure indices of one subset and axis (their residuals correlate).
     Without evaluations (m = 0): no ratio, a spread of :data:`_DEFAULT_SPREAD`."""
     n = emulated.shape[1]
-    m = len(icp)
+    r = icp - emulated
+    if len(r):  # a figure ICP left undefined at an instance (an axis unobservable there) counts as the others' mean
+        r = np.where(np.isfinite(r), r, np.nanmean(np.where(np.isfinite(r), r, np.nan), axis=0, keepdims=True))
+        r = np.where(np.isfinite(r), r, 0.0)
+    m = len(r)
     if m == 0:
         return Correction(np.zeros(n), np.eye(n) * _DEFAULT_SPREAD**2, (), 0.0)
-    r = icp - emulated
     mean = r.mean(axis=0)
     if m == 1:
         var = np.full(n, _DEFAULT_SPREAD**2)
