@@ -2,7 +2,10 @@
 (docs/calibration.md).
 
 Each calibrated key becomes ``[5 %, 95 %]`` of its posterior (file units, three significant digits), or a point
-(the posterior's median) where the data pin it (95 % / 5 % under :data:`PINNED`); a range that was uniform from 0 stays
+(the posterior's median) where the data pin it (95 % / 5 % under :data:`PINNED`); a posterior piled against an end of
+its prior (its 10 % within the lowest tenth of the prior's draw, or its 90 % within the highest) keeps that end, a
+one-sided 90 % (``[prior low, 90 %]``: a cell at the end of a bracket is inside its calibrated range); a range that was
+uniform from 0 stays
 ``[0, 95 %]`` when its 5 % is under a tenth of its 95 % (a log-uniform draw from a tiny low end would put most
 instances near it, which the posterior does not). Its ``*_source`` says where it came from. The keys the emulator
 does not calibrate (:attr:`optipose.calibrate.emulator.Emulator.fixed`) and every point keep the prior's value and
@@ -23,6 +26,7 @@ from optipose.cell.ranges import middle
 __all__ = ["PINNED", "calibrated_text", "narrowed", "write_cell"]
 
 PINNED = 1.1  # a posterior's 95 % / 5 % below this is a point
+_EDGE = 0.1  # a posterior whose 10 % (90 %) lies within this share of its prior's draw from an end keeps the end
 
 
 def narrowed(calibration: Calibration, key: str) -> tuple[float, float]:
@@ -32,7 +36,13 @@ def narrowed(calibration: Calibration, key: str) -> tuple[float, float]:
     if hi <= PINNED * lo:
         point = post.interval(key, 0.5, 0.5)[0]
         return point, point
-    prior_low = next(low for name, low, _ in calibration.prior.ranges if name == key)
+    prior_low, prior_high = next((low, high) for name, low, high in calibration.prior.ranges if name == key)
+    j = post.keys.index(key)
+    u10, u90 = (post.quantile_u(j, q) for q in (0.1, 0.9))
+    if u10 < _EDGE:  # piled against the prior's low end: a one-sided 90 % that keeps it
+        return prior_low, post.interval(key, 0.9, 0.9)[0]
+    if u90 > 1 - _EDGE:
+        return post.interval(key, 0.1, 0.1)[0], prior_high
     if prior_low == 0 and lo < 0.1 * hi:
         return 0.0, hi
     return lo, hi

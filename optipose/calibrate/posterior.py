@@ -13,9 +13,11 @@ so an importance sampler draws it:
    half uniform on the box that holds the first round's weighted 0.5–99.5 % of each u, widened by a tenth), weighted
    by likelihood × prior / mixture; the posterior is the second round's.
 
-Whether the ranges can produce the figures at all (:func:`misfit`): a figure lies outside what every prior draw
-predicts by more than three of its noise's σ, or the best draw's χ² is beyond the 99.9 % quantile of χ² with as
-many degrees of freedom as figures: "the model is missing a source".
+Whether the ranges can produce the figures at all (:func:`misfit`): the best draw's χ² is beyond the 99.9 % quantile
+of χ² with as many degrees of freedom as figures ("the model is missing a source"); the figures named are those
+outside what every prior draw predicts by more than three of their noise's σ, else those the best draw misses by
+more than three σ. One figure far off among many that fit (one instance's part as made can put a roll figure far
+below the instances' average) is not a missing source.
 """
 
 from __future__ import annotations
@@ -92,6 +94,10 @@ class Posterior:
     rounds: int
     best: np.ndarray
 
+    def quantile_u(self, j: int, q: float) -> float:
+        """The weighted ``q`` quantile of key ``j``'s place in its prior's draw (0: its low end, 1: its high end)."""
+        return weighted_quantiles(self.u[:, j], self.weights, [q])[0]
+
     def interval(self, key: str, low: float = 0.05, high: float = 0.95) -> tuple[float, float]:
         """The weighted ``low`` and ``high`` quantiles of ``key``'s magnitude (SI)."""
         j = self.keys.index(key)
@@ -140,14 +146,14 @@ def sample(simulate, ranges, observed: np.ndarray, cov: np.ndarray, draws: int, 
 
 def misfit(first: np.ndarray, observed: np.ndarray, cov: np.ndarray, posterior: Posterior) -> list[int]:
     """The figures (indices) the ranges cannot produce (module doc); empty when they can."""
+    if float(posterior.best @ posterior.best) <= chi2.ppf(0.999, len(observed)):
+        return []  # one figure far off among many that fit is one instance's draw, not a missing source
     sd = np.sqrt(np.diag(cov))
     out = np.flatnonzero(
         (observed < first.min(axis=0) - _OUT_SIGMA * sd) | (observed > first.max(axis=0) + _OUT_SIGMA * sd)
     )
     if len(out):
         return [int(i) for i in out]
-    if float(posterior.best @ posterior.best) <= chi2.ppf(0.999, len(observed)):
-        return []
     worst = np.argsort(-np.abs(posterior.best))
     return [int(i) for i in worst if abs(posterior.best[i]) > _OUT_SIGMA] or [int(worst[0])]
 
