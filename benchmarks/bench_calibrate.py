@@ -212,7 +212,7 @@ def roundtrip(args) -> None:
         path = write_cell(result, out / f"roundtrip-{i}.toml")
         keys = []
         for key in result.keys:
-            lo, hi = narrowed(result, key)  # the cell file's range
+            lo, hi, _ = narrowed(result, key)  # the cell file's range
             value = field_value(cell, key)
             hit = lo * 0.999 <= value <= hi * 1.001
             inside, total = inside + hit, total + 1

@@ -29,23 +29,26 @@ PINNED = 1.1  # a posterior's 95 % / 5 % below this is a point
 _EDGE = 0.1  # a posterior whose 10 % (90 %) lies within this share of its prior's draw from an end keeps the end
 
 
-def narrowed(calibration: Calibration, key: str) -> tuple[float, float]:
-    """A calibrated key's new range (SI): ``(low, high)``, equal ends for a point."""
+def narrowed(calibration: Calibration, key: str) -> tuple[float, float, str]:
+    """A calibrated key's new range (SI) and how it was taken: ``(low, high, "posterior 5-95 %")``, equal ends for
+    a point (``"posterior median (pinned)"``), or a one-sided 90 % that keeps a prior's end."""
     post = calibration.posterior
     lo, hi = post.interval(key)
     if hi <= PINNED * lo:
         point = post.interval(key, 0.5, 0.5)[0]
-        return point, point
+        return point, point, "posterior median (pinned: 5-95 % within 10 %)"
     prior_low, prior_high = next((low, high) for name, low, high in calibration.prior.ranges if name == key)
     j = post.keys.index(key)
-    u10, u90 = (post.quantile_u(j, q) for q in (0.1, 0.9))
-    if u10 < _EDGE:  # piled against the prior's low end: a one-sided 90 % that keeps it
-        return prior_low, post.interval(key, 0.9, 0.9)[0]
-    if u90 > 1 - _EDGE:
-        return post.interval(key, 0.1, 0.1)[0], prior_high
+    at_low, at_high = post.quantile_u(j, 0.1) < _EDGE, post.quantile_u(j, 0.9) > 1 - _EDGE
+    if at_low and at_high:
+        return prior_low, prior_high, "posterior 5-95 % as wide as the prior: kept"
+    if at_low:  # piled against the prior's low end: a one-sided 90 % that keeps it
+        return prior_low, post.interval(key, 0.9, 0.9)[0], "posterior 0-90 % (piled at the prior's low end)"
+    if at_high:
+        return post.interval(key, 0.1, 0.1)[0], prior_high, "posterior 10-100 % (piled at the prior's high end)"
     if prior_low == 0 and lo < 0.1 * hi:
-        return 0.0, hi
-    return lo, hi
+        return 0.0, hi, "posterior 5-95 %, from 0 as its prior"
+    return lo, hi, "posterior 5-95 %"
 
 
 def calibrated_text(calibration: Calibration, name: str) -> str:
@@ -57,13 +60,14 @@ def calibrated_text(calibration: Calibration, name: str) -> str:
     origin = calibration.summaries.origin
     for key in calibration.keys:
         section, file_name, unit = file_key(key)
-        low, high = (round(v / unit, 2 - _digits(v / unit)) for v in narrowed(calibration, key))
+        *ends, how = narrowed(calibration, key)
+        low, high = (round(v / unit, 2 - _digits(v / unit)) for v in ends)
         prior_low, prior_high = next((lo / unit, hi / unit) for k, lo, hi in prior.ranges if k == key)
         old_source = table.get(section, {}).get(f"{file_name}_source", "")
         table.setdefault(section, {})[file_name] = low if low == high else [low, high]
         table[section][f"{file_name}_source"] = (
-            f"calibrated from {origin} of {calibration.summaries.part} by optipose calibrate, posterior 5-95 %"
-            f"{' (pinned: its median)' if low == high else ''}, prior [{prior_low:.3g}, {prior_high:.3g}] "
+            f"calibrated from {origin} of {calibration.summaries.part} by optipose calibrate, {how}, "
+            f"prior [{prior_low:.3g}, {prior_high:.3g}] "
             f"({prior.name}: {old_source})"
         )
     for key in calibration.fixed:

@@ -129,7 +129,7 @@ def calibrate_command(
     for key in calibration.keys:
         _, name, unit = file_key(key)
         prior = next((lo / unit, hi / unit) for k, lo, hi in calibration.prior.ranges if k == key)
-        low, high = (v / unit for v in narrowed(calibration, key))
+        low, high = (v / unit for v in narrowed(calibration, key)[:2])
         now = f"{low:.3g}" if low == high else f"[{low:.3g}, {high:.3g}]"
         typer.echo(f"  {name:24s} [{prior[0]:.3g}, {prior[1]:.3g}] -> {now}")
     for key in calibration.fixed:
