@@ -203,7 +203,7 @@ def roundtrip(args) -> None:
     say(f"{args.part} in '{args.cell}': emulator and {args.icp} ICP runs {time.perf_counter() - start:.0f} s")
     hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
     hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
-    inside, total, close, medians = 0, 0, 0, 0
+    inside, total, close, medians, same, t1, t1_all = 0, 0, 0, 0, 0, 0, 0
     for i, (name, cell) in enumerate(hidden):
         measured = table1(cell, 100 + i)
         result = calibrate(
@@ -218,20 +218,35 @@ def roundtrip(args) -> None:
             inside, total = inside + hit, total + 1
             keys.append(f"{key.split('.')[-1]} {'in' if hit else 'OUT'}")
         check = table1(load_cell(path), 200 + i).stats
-        ratios = []
-        for row in measured.stats.itertuples(index=False):
-            other = check[(check["subset"] == row.subset) & (check["axis"] == row.axis)]["median"].iloc[0]
-            ratios.append(max(other / row.median, row.median / other))
-        ratios = np.array(ratios)
+        again = table1(cell, 300 + i).stats  # the hidden cell itself, another instance: what no calibration beats
+        ratios, floor = _ratios(measured.stats, check), _ratios(measured.stats, again)
+        chosen = [(a.name, axis) for a, axis in zip(measured.table[-1].axes, AXES) if a.name]
+        table = _ratios(measured.stats, check, chosen)
         close, medians = close + int(np.sum(ratios <= 1.5)), medians + len(ratios)
+        same = same + int(np.sum(floor <= 1.5))
+        t1, t1_all = t1 + int(np.sum(table <= 1.5)), t1_all + len(table)
         say(
-            f"{name:13s} {len(result.summaries.figures)} figures, out: {len(result.out)}; within 1.5x: "
-            f"{int(np.sum(ratios <= 1.5))} of {len(ratios)} medians (worst {ratios.max():.2f}x); " + ", ".join(keys)
+            f"{name:13s} out: {len(result.out)}; medians within 1.5x: calibrated {int(np.sum(ratios <= 1.5))} of "
+            f"{len(ratios)} (worst {ratios.max():.2f}x), the hidden cell again {int(np.sum(floor <= 1.5))}; Table 1 "
+            f"k=3 {int(np.sum(table <= 1.5))} of {len(table)}; " + ", ".join(keys)
         )
     say(f"hidden magnitudes within the posterior's 5-95 %: {inside} of {total}")
     say(f"calibrated cell's ICP medians within 1.5x of the hidden cell's: {close} of {medians}")
+    say(f"... Table 1's k = 3 subsets only: {t1} of {t1_all}")
+    say(f"the hidden cell's own ICP medians at another seed within 1.5x: {same} of {medians}")
     say(f"wall {time.perf_counter() - start:.0f} s")
     (out / f"roundtrip-{args.part}.txt").write_text("\n".join(lines) + "\n")
+
+
+def _ratios(stats, other, only=None) -> np.ndarray:
+    """max(a / b, b / a) of two evaluations' medians per (subset, axis) (``only``: those (subset, axis) pairs)."""
+    out = []
+    for row in stats.itertuples(index=False):
+        if only is not None and (row.subset, row.axis) not in only:
+            continue
+        b = other[(other["subset"] == row.subset) & (other["axis"] == row.axis)]["median"].iloc[0]
+        out.append(max(b / row.median, row.median / b))
+    return np.array(out)
 
 
 def main() -> None:

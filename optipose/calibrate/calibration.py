@@ -9,6 +9,7 @@ and the command's lines are written from.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
 from dataclasses import dataclass
@@ -155,17 +156,16 @@ def calibrate(
 def _correction(summaries: Summaries, runs: IcpRuns) -> Correction:
     """The emulator's correction to ICP for the summaries' figures, from the ICP runs."""
     figures = summaries.figures
-    pairs = [
-        (i, j)
-        for i, a in enumerate(figures)
-        for j, b in enumerate(figures)
-        if i < j and (a.subset, a.axis) == (b.subset, b.axis) and a.stat != b.stat
+    pairs = list(itertools.combinations(range(len(figures)), 2))
+    related = [
+        [(i, j) for i, j in pairs if (figures[i].subset, figures[i].axis) == (figures[j].subset, figures[j].axis)],
+        [(i, j) for i, j in pairs if figures[i].axis == figures[j].axis and figures[i].subset != figures[j].subset],
     ]
     subsets = {f.subset for f in figures}
     shape = (len(runs.seeds), len(figures))
     emulated = figure_logs(summaries, {s: runs.emulated[s] for s in subsets}) if runs.seeds else np.zeros(shape)
     evaluated = figure_logs(summaries, {s: runs.evaluated[s] for s in subsets}) if runs.seeds else np.zeros(shape)
-    return fit_correction(emulated, evaluated, pairs, runs.seeds, runs.seconds)
+    return fit_correction(emulated, evaluated, related, runs.seeds, runs.seconds)
 
 
 def _stat(stats, subset: str, axis: str, stat: str) -> float:

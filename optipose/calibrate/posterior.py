@@ -49,35 +49,43 @@ class Correction:
     seconds: float
 
 
-def fit_correction(emulated: np.ndarray, icp: np.ndarray, pairs: list[tuple[int, int]], seeds, seconds) -> Correction:
+def fit_correction(emulated: np.ndarray, icp: np.ndarray, related: list, seeds, seconds) -> Correction:
     """The :class:`Correction` from the logs of the emulated and the ICP figures at the same magnitude settings,
-    (m, figures) each; ``pairs`` the (median, p75) figure indices of one subset and axis (their residuals correlate).
-    Without evaluations (m = 0): no ratio, a spread of :data:`_DEFAULT_SPREAD`."""
+    (m, figures) each. ``related``: lists of figure index pairs whose residuals share one correlation, each list's
+    pooled over its pairs (the median and p75 of one subset and axis; the figures of one axis on other subsets, whose
+    errors one robot path or one part drives together): without it, forty figures of one axis would count as forty
+    independent measurements of what is one. Without evaluations (m = 0): no ratio, a spread of
+    :data:`_DEFAULT_SPREAD`, the same correlations at 0.5."""
     n = emulated.shape[1]
     r = icp - emulated
     if len(r):  # a figure ICP left undefined at an instance (an axis unobservable there) counts as the others' mean
         r = np.where(np.isfinite(r), r, np.nanmean(np.where(np.isfinite(r), r, np.nan), axis=0, keepdims=True))
         r = np.where(np.isfinite(r), r, 0.0)
     m = len(r)
-    if m == 0:
-        return Correction(np.zeros(n), np.eye(n) * _DEFAULT_SPREAD**2, (), 0.0)
-    mean = r.mean(axis=0)
-    if m == 1:
-        var = np.full(n, _DEFAULT_SPREAD**2)
-        rho = 0.0
+    mean = r.mean(axis=0) if m else np.zeros(n)
+    if m < 2:
+        var, rhos = np.full(n, _DEFAULT_SPREAD**2), [0.5] * len(related)
     else:
         dev = r - mean
         own = (dev**2).sum(axis=0) / (m - 1)
         pooled = float(own.mean())
         var = ((m - 1) * own + _SHRINK * pooled) / (m - 1 + _SHRINK)  # each figure's, shrunk to the pooled one
-        num = sum(float(dev[:, i] @ dev[:, j]) for i, j in pairs)
-        den = sum(float(np.sqrt((dev[:, i] @ dev[:, i]) * (dev[:, j] @ dev[:, j]))) for i, j in pairs)
-        rho = float(np.clip(num / den, -0.95, 0.95)) if den > 0 else 0.0
-    var = var * (1 + 1 / m)  # a new instance about a mean of m
+        rhos = [_pooled_correlation(dev, pairs) for pairs in related]
+    if m:
+        var = var * (1 + 1 / m)  # a new instance about a mean of m
     cov = np.diag(var)
-    for i, j in pairs:
-        cov[i, j] = cov[j, i] = rho * np.sqrt(var[i] * var[j])
+    for pairs, rho in zip(related, rhos):
+        for i, j in pairs:
+            cov[i, j] = cov[j, i] = rho * np.sqrt(var[i] * var[j])
+    w, V = np.linalg.eigh(cov)  # pooled correlations need not make a covariance: its nearest one
+    cov = (V * np.maximum(w, 1e-3 * w.max())) @ V.T
     return Correction(mean, cov, tuple(int(s) for s in seeds), float(seconds))
+
+
+def _pooled_correlation(dev: np.ndarray, pairs) -> float:
+    num = sum(float(dev[:, i] @ dev[:, j]) for i, j in pairs)
+    den = sum(float(np.sqrt((dev[:, i] @ dev[:, i]) * (dev[:, j] @ dev[:, j]))) for i, j in pairs)
+    return float(np.clip(num / den, 0.0, 0.95)) if den > 0 else 0.0
 
 
 @dataclass(frozen=True)
