@@ -7,6 +7,7 @@ a cell, on the paper's rows of Table 1, and what each error source does.
     .venv/bin/python benchmarks/bench_cell.py speed   [--objective paper-literal] [--jobs 2] [--repeats 3]
     .venv/bin/python benchmarks/bench_cell.py spread  [--objective paper-literal] [--seeds 0,...,9] [--jobs 2]
     .venv/bin/python benchmarks/bench_cell.py bound   [--objective paper-literal] [--seeds 0,1]   (after sources and an ideal table)
+    .venv/bin/python benchmarks/bench_cell.py cover   [--cell cobot] [--objective paper-literal] [--seeds 0,...,19] [--level 0.9]
 
 ``table``: per real row of the paper's Table 1 (part, k, axis, the paper's sensor subset) the paper's simulated
 and real median / 75th percentile, ours (|error| of that subset over every scan of every seed: one cell
@@ -22,7 +23,9 @@ place among the instances. ``bound``: the most real figures any magnitudes of th
 3×) on these parts and hand layouts — each source scaled freely (one factor for the robot, one for the calibration, one
 per process for the part as made, one per material), even fitted on B and C, the sources combined as independent errors
 (the square root of the ideal cell's floor squared plus, per source, what it adds to the square alone); read from ``sources`` and the ideal
-cell's ``table`` in --out.
+cell's ``table`` in --out. ``cover``: how sure the prediction is: per real figure the central ``--level`` interval of
+our figure over the cell's instances (one per seed; a cell of ranges draws its magnitudes per instance), whether it
+covers the real figure and how wide it is (high / low), summed by part and axis.
 Evaluations are cached per (part, objective, cell, seed) in --cache, so a table and its sources share runs.
 """
 
@@ -182,6 +185,42 @@ def print_spread(rows: pd.DataFrame) -> None:
     print(f"real figures inside the instances' range (min to max of {rows.seed.nunique()}): {int(inside.sum())} of {n}")
 
 
+def print_cover(rows: pd.DataFrame, level: float) -> pd.DataFrame:
+    """Per real figure the central ``level`` interval of the instances' figures, whether it holds the real one, its
+    width (high / low); then the counts and widths: all, A (the fit), B and C (the check), per axis and statistic."""
+    g = rows.groupby(["part", "k", "axis", "subset", "stat"], sort=False)
+    iv = g.real.first().to_frame()
+    for name, p in (("low", (1 - level) / 2), ("median", 0.5), ("high", (1 + level) / 2)):
+        iv[name] = g.instance.quantile(p)  # an instance that never saw the axis (nan) is left out
+    iv["inside"] = (g.instance.min() <= iv.real) & (iv.real <= g.instance.max())  # the whole range, as spread's
+    iv = iv.reset_index()
+    iv["width"], iv["covers"] = iv.high / iv.low, (iv.low <= iv.real) & (iv.real <= iv.high)
+    print(f"\n| part | k | axis: subset | stat | real | ours: {level:.0%} interval | median | high / low | covers |")
+    print("| --- | --- | --- | --- | ---: | --- | ---: | ---: | --- |")
+    for r in iv.itertuples():
+        where = "yes" if r.covers else ("no, real below" if r.real < r.low else "no, real above")
+        print(
+            f"| {r.part} | {r.k} | {r.axis}: {r.subset} | {r.stat} | {r.real:g} | {r.low:.3f} - {r.high:.3f} ", end=""
+        )
+        print(f"| {r.median:.3f} | {r.width:.1f} | {where} |")
+    print(f"\n{level:.0%} intervals over {rows.seed.nunique()} instances: covered, width high / low median and largest")
+    for label, sel in [
+        ("all", iv.part.notna()),
+        ("A (the fit)", iv.part == "A"),
+        ("B and C (the check)", iv.part != "A"),
+        *[(f"axis {a}", iv.axis == a) for a in ("roll", "pitch", "yaw")],
+        *[(f"{s}s", iv.stat == s) for s in ("median", "p75")],
+    ]:
+        g = iv[sel]
+        below, above = int((g.real < g.low).sum()), int((g.real > g.high).sum())
+        print(
+            f"  {label:20s} covered {int(g.covers.sum()):2d} of {len(g):2d} (real below {below}, above {above}); "
+            f"width median {np.nanmedian(g.width):.2f}, largest {np.nanmax(g.width):.2f}"
+        )
+    print(f"  real figures inside the instances' whole range (min to max): {int(iv.inside.sum())} of {len(iv)}")
+    return iv
+
+
 def best_scales(
     alone: np.ndarray,
     floor: np.ndarray,
@@ -312,7 +351,7 @@ def main() -> None:
     from optipose.evaluate.objective import load_objective
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=["table", "sources", "fit", "speed", "spread", "bound"])
+    ap.add_argument("what", choices=["table", "sources", "fit", "speed", "spread", "bound", "cover"])
     ap.add_argument("--cell", default="ur10e")
     ap.add_argument("--objective", default=None, help="default: paper-literal (table, fit, speed), paper (sources)")
     ap.add_argument("--seeds", default="0,1,2")
@@ -321,6 +360,7 @@ def main() -> None:
     ap.add_argument("--paths", default=None, help="fit: the robot's path sigma (mm), each; default the cell's")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3, help="speed: interleaved rounds")
+    ap.add_argument("--level", type=float, default=0.9, help="cover: the intervals' central share of the instances")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/optipose-bench-cell"))
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "cell")
     a = ap.parse_args()
@@ -341,6 +381,11 @@ def main() -> None:
         )
         print_spread(rows)
         rows.to_csv(a.out / f"spread-{cell.name}-{objective.name}.csv", index=False)
+    elif a.what == "cover":
+        rows = instance_figures(objective.in_cell(cell), seeds, a.jobs, a.cache, parts)
+        print(f"cell '{cell.name}', objective '{objective.name}', seeds {a.seeds}: one cell instance per seed; degrees")
+        iv = print_cover(rows, a.level)
+        iv.to_csv(a.out / f"cover-{cell.name}-{objective.name}.csv", index=False)
     elif a.what == "bound":
         print_bound(a.out, cell, objective)
     elif a.what == "sources":

@@ -132,7 +132,14 @@ def _models(part, objective, problem) -> dict:
     cell, none = (
         setup.cell,
         CellSetup(
-            replace(setup.cell, robot=RobotErrors(), calibration=CalibrationErrors(), as_made=False, material=False),
+            replace(
+                setup.cell,
+                robot=RobotErrors(),
+                calibration=CalibrationErrors(),
+                as_made=False,
+                material=False,
+                ranges=(),
+            ),
             setup.process.scaled(0.0),
             MaterialEffects(),
         ),
@@ -143,9 +150,7 @@ def _models(part, objective, problem) -> dict:
         "part as made alone": replace(none, process=setup.process),
         "material alone": replace(none, effects=setup.effects),
     }
-    make = lambda s: Surrogate(
-        part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), mounting=False, cell=s
-    )
+    make = lambda s: Surrogate(part, voxel=objective.registration.voxel_size, turns=protocol_turns(objective), cell=s)
     middle = {"the cell's terms at the middles": make(setup.middle())} if setup.cell.ranges else {}
     return (
         {"nominal (today)": problem.surrogate, "with the cell's terms": make(setup)}

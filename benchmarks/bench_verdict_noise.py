@@ -1,14 +1,13 @@
 """How well the verdict "no worse on any axis" can resolve: one layout compared with itself on other seeds.
 
 The search's verdict compares a found layout with the hand-placed one on a held-out seed: every axis's
-median and 75th percentile at every noise level of the band (each the worst over its bracket draws) must
-be at most the hand layout's. Both are single draws: the noise of 77 scans and, under a band, two random
-bracket errors per sensor. This script evaluates the *same* layout (default: the part's hand layout) at
+median and 75th percentile must be at most the hand layout's. Both are single draws: the noise of 77 scans and,
+in a cell, one instance of it. This script evaluates the *same* layout (default: the part's hand layout) at
 several seeds and applies the product's own test (``verdict.compare.dominates``) to every ordered pair of
 seeds: how often a layout is "no worse" than an exact copy of itself, and how much better on every
 statistic a layout must be to pass. Only the evaluations' total time is printed, for the record.
 
-    .venv/bin/python benchmarks/bench_verdict_noise.py [--part part_b] [--objective robust] [--seeds 1,2,3] [--jobs 2]
+    .venv/bin/python benchmarks/bench_verdict_noise.py [--part part_b] [--objective paper] [--cell ideal] [--seeds 1,2,3] [--jobs 2]
 """
 
 from __future__ import annotations
@@ -20,7 +19,8 @@ import time
 import numpy as np
 
 from optipose.verdict.compare import dominates
-from optipose.evaluate.robust import make_evaluator
+from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.objective import load_objective
 from optipose.model.baseline import baseline
 from optipose.model.layout import load_layout
 from optipose.model.part import load_part
@@ -29,8 +29,8 @@ STATS = ("median", "p75")
 
 
 def _pairs(choice) -> list:
-    """(level label, choice) per noise level, or the choice alone without a band."""
-    return list(choice.under) if choice.under else [("nominal", choice)]
+    """(label, choice): the choice alone (one cell, one noise level)."""
+    return [("nominal", choice)]
 
 
 def _ratios(a, b) -> np.ndarray:
@@ -46,7 +46,8 @@ def _ratios(a, b) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", default="part_b", help="a part, or several separated by commas")
-    ap.add_argument("--objective", default="robust")
+    ap.add_argument("--objective", default="paper")
+    ap.add_argument("--cell", default=None, help="the cell (default: the objective's)")
     ap.add_argument("--layout", default=None, help="a layout TOML (default: the part's hand layout)")
     ap.add_argument("--seeds", default="1,2,3")
     ap.add_argument("--jobs", type=int, default=2)
@@ -59,7 +60,8 @@ def main() -> None:
         layout = load_layout(args.layout) if args.layout else baseline(part)
         tables, t0 = {}, time.perf_counter()
         for seed in seeds:
-            with make_evaluator(part, args.objective, seed=seed, jobs=args.jobs, quiet=True) as evaluator:
+            objective = load_objective(args.objective).in_cell(args.cell)
+            with Evaluator(part, objective, seed=seed, jobs=args.jobs, quiet=True) as evaluator:
                 tables[seed] = evaluator(layout).table
         took = time.perf_counter() - t0
         for k in range(1, len(layout.sensors) + 1):

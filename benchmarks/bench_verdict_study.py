@@ -101,7 +101,7 @@ def holdout(args) -> None:
     from optipose.io.load import load_result
     from optipose.io.tables import verdict_frame
     from optipose.model.part import load_part
-    from optipose.search.config import Preset, SearchConfig, search_preset
+    from optipose.search.config import Preset, SearchConfig, saved_table, search_preset
     from optipose.search.validate import validate
     from optipose.search.draws import choice_draw_counts, confident_verdicts
     from optipose.verdict.words import confident_line
@@ -111,7 +111,7 @@ def holdout(args) -> None:
         result = load_result(folder)
         saved = result.config
         objective = objective_from_table(tomllib.loads(saved.objective_file)).in_cell(cell or saved.cell_name)
-        config = search_preset(saved.search).apply(SearchConfig())  # sectioned or flat, as the folder has it
+        config = search_preset(saved_table(saved.search)).apply(SearchConfig())  # sectioned or flat, as the folder has it
         if args.verdict_time is not None:  # 0: race on draws alone, whatever the machine's load
             config = Preset(verdict={"time": args.verdict_time}).apply(config)
         if args.draws:  # a longer race than the search's, to settle what its draws left open

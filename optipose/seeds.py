@@ -16,9 +16,9 @@ __all__ = [
     "validation_seed",
     "nominal_reference_seed",
     "group_seed",
-    "mounting_seed",
     "zeroing_seed",
     "verdict_seed",
+    "held_out_seed",
 ]
 
 _SELECTION = 0x5E1EC7
@@ -27,6 +27,7 @@ _NOMINAL_REFERENCE = 7
 _SENSOR_MODEL = 0x5E4500  # plus the group's index
 _MOUNTING = 0xB4AC7E7
 _VERDICT = 0x7E4D1C7
+_HELD_OUT = 0x4E1D0  # plus the instance's index: the robustness check's cell instances
 
 
 def derived_seed(seed: int, tag: int) -> int:
@@ -67,11 +68,12 @@ def group_seed(seed: int, group: int) -> int:
     return int(seed) if group == 0 else derived_seed(seed, _SENSOR_MODEL + group)
 
 
-def mounting_seed(seed: int, draw: int, sensor: int) -> int:
-    """The seed of the bracket error of sensor ``sensor`` (its index in the layout) in mounting draw ``draw``."""
-    return int(np.random.SeedSequence([int(seed), _MOUNTING, int(draw), int(sensor)]).generate_state(1)[0])
+def zeroing_seed(seed: int) -> int:
+    """The noise seed of the master-part scan that zeroes a cell."""
+    return int(np.random.SeedSequence([int(seed), _MOUNTING, 0, -1 % 2**32]).generate_state(1)[0])
 
 
-def zeroing_seed(seed: int, draw: int) -> int:
-    """The noise seed of the master-part scan that zeroes the cell in mounting draw ``draw``."""
-    return int(np.random.SeedSequence([int(seed), _MOUNTING, int(draw), -1 % 2**32]).generate_state(1)[0])
+def held_out_seed(seed: int, i: int) -> int:
+    """The seed of held-out cell instance ``i`` of ``optipose robustness`` run with ``seed``: none of a search's
+    own seeds (its selection, validation and verdict draws derive from other tags)."""
+    return derived_seed(seed, _HELD_OUT + int(i))

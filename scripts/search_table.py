@@ -1,8 +1,6 @@
-"""Print the found-vs-hand table (Markdown) of one or more search result folders, in millidegrees; a search
-under a band of conditions (``--objective robust``), or checked under one after its validation (``[search]
-band``, the ``default`` budget), also gets hand / found per part, k and condition.
+"""Print the found-vs-hand table (Markdown) of one or more search result folders, in millidegrees.
 
-    .venv/bin/python scripts/search_table.py results/search-default-part_a results/search-default-part_b ...
+.venv/bin/python scripts/search_table.py results/search-default-part_a results/search-default-part_b ...
 """
 
 from __future__ import annotations
@@ -35,33 +33,6 @@ def main(folders: list[str]) -> None:
         lines = result.verdict_lines()
         if lines and lines[-1].startswith("one found sensor"):
             print(f"<!-- {result.part}: {lines[-1]} -->")
-    band(folders)
-
-
-def band(folders: list[str]) -> None:
-    """hand / found per noise level of the band (rows) and part and k (columns); * marks a level where
-    found is worse than hand on some axis."""
-    columns = []
-    for folder in folders:
-        result = load_result(folder)
-        verdicts = list(result.band_verdicts().values()) or result.verdicts()
-        columns += [(result.part, v) for v in verdicts if v.levels()]
-    if not columns:
-        return
-    print()
-    print("| condition | " + " | ".join(f"{part} k={v.k}" for part, v in columns) + " |")
-    print("| --- |" + " ---: |" * len(columns))
-    for row in zip(*(v.levels() for _, v in columns)):
-        print(
-            f"| {row[0][0]} | "
-            + " | ".join(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row)
-            + " |"
-        )
-    print(
-        "| **worst over the band** | "
-        + " | ".join(f"**{v.ratio:.2f}{'' if v.no_worse else '*'}**" for _, v in columns)
-        + " |"
-    )
 
 
 if __name__ == "__main__":

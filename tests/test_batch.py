@@ -70,8 +70,8 @@ def test_a_grid_is_every_combination_and_budgets_belong_to_searches(tmp_path):
     assert {t.budget for t in spec.trials if t.task == "evaluate"} == {""}
     assert {t.objective for t in spec.trials} == {"paper"}
     assert len({t.key for t in spec.trials}) == len(spec.trials)
-    robust = study_from_table({"trials": [{"part": "part_c", "task": "robustness", "sensors": 2}]})
-    assert [(t.objective, t.sensors, t.seed, t.budget) for t in robust.trials] == [("robust", 2, 0, "")]
+    with pytest.raises(ConfigError, match="task 'robustness' was retired with the band of conditions"):
+        study_from_table({"trials": [{"part": "part_c", "task": "robustness", "sensors": 2}]})
 
 
 @pytest.mark.parametrize(
@@ -403,23 +403,11 @@ def test_the_shipped_studies_load():
 
 
 # -- the other tasks: each row is what its folder says ----------------------------------------------------
-def test_search_and_robustness_trials_report_their_folders(tmp_path):
-    from optipose.evaluate.robust import evaluate_robust
-    from optipose.evaluate.objective import load_objective
+def test_search_trials_report_their_folders(tmp_path):
     from optipose.io import load_result
-    from optipose.model.part import load_part
 
-    band = tmp_path / "band.toml"  # the 6-scan protocol under two noise levels
-    band.write_text(
-        TINY.read_text().replace('name = "tiny"', 'name = "band"') + "\n[conditions]\nnoise_scale = [1.0, 3.0]\n"
-    )
     spec = study_from_table(
-        {
-            "trials": [
-                {"part": "part_c", "task": "search", "sensors": 1, "budget": "quick", "seed": 3},
-                {"part": "part_c", "task": "robustness", "objective": "band.toml", "sensors": 2},
-            ]
-        },
+        {"trials": [{"part": "part_c", "task": "search", "sensors": 1, "budget": "quick", "seed": 3}]},
         base=tmp_path,
     )
     index = run_study(spec, tmp_path / "t", SerialPool()).frame().set_index("task")
@@ -431,13 +419,6 @@ def test_search_and_robustness_trials_report_their_folders(tmp_path):
     assert search.hand_score_deg == pytest.approx(np.rad2deg(verdict.reference.score), rel=1e-12)
     assert search.ratio == pytest.approx(verdict.ratio) and search.no_worse == verdict.no_worse
     assert search.sensors_used == "F1"
-
-    robust = index.loc["robustness"]
-    again = evaluate_robust(load_part("part_c"), load_part("part_c").layouts["hand"], load_objective(band), seed=0)
-    choice = again.table[1]  # the hand layout's robust choice of 2 sensors, the worst over both noise levels
-    assert robust.sensors_used == choice.name
-    assert robust.score_deg == pytest.approx(np.rad2deg(choice.score), rel=1e-9)
-    assert robust.yaw_p75_deg == pytest.approx(np.rad2deg(choice.axes[2].p75), rel=1e-9)
 
 
 def test_no_report_leaves_the_study_without_its_report(tmp_path):
@@ -468,7 +449,7 @@ def test_a_ctrl_c_a_trial_kept_to_itself_still_stops_the_study(tmp_path, monkeyp
                 raise KeyboardInterrupt
             except KeyboardInterrupt as exc:
                 raise SystemError("returned a result with an exception set") from exc
-        return SimpleNamespace(outcome=SimpleNamespace(interrupted=False), band_interrupted=True, validated=True)
+        return SimpleNamespace(outcome=SimpleNamespace(interrupted=True), validated=False)
 
     monkeypatch.setattr(
         trial_module, "cap_threads", lambda threads: None

@@ -650,10 +650,13 @@ def test_a_zeroed_cell_takes_off_what_the_calibration_adds_at_the_nominal_orient
 
 
 def test_an_objective_file_names_its_cell(tmp_path):
-    # the shipped paper objectives run in the paper's cell, the band's in the ideal one
+    # the shipped paper objectives run in the paper's cell; a file that names none, in the ideal one
     assert load_objective("paper").cell == load_objective("paper-literal").cell == load_cell("ur10e")
-    assert load_objective("robust").cell.ideal
-    text = (OBJECTIVES_DIR / "robust.toml").read_text()
+    text = "\n".join(
+        line for line in (OBJECTIVES_DIR / "paper.toml").read_text().splitlines() if not line.startswith("cell")
+    )
+    (tmp_path / "none.toml").write_text(text)
+    assert load_objective(tmp_path / "none.toml").cell.ideal
     (tmp_path / "mine.toml").write_text('cell = "ur10e"\n' + text)
     objective = load_objective(tmp_path / "mine.toml")
     assert objective.cell == load_cell("ur10e") and not objective.cell.ideal

@@ -273,6 +273,28 @@ def test_a_process_preset_takes_no_range(tmp_path, monkeypatch):
 
 
 # -- the shipped presets ------------------------------------------------------------------------------------
+def test_the_machined_bracket_preset_is_the_retired_bands_brackets_as_sourced_ranges():
+    # the band: brackets off by up to +-0.2 mm and +-0.1 deg (uniform per axis), the cell zeroed, the CAD part and an
+    # exact robot; as a cell: sigma = tolerance / sqrt(3) at the high end, a dowel-pinned seat at the low end
+    import tomllib
+
+    table = tomllib.loads((CELLS_DIR / "machined-bracket.toml").read_text())
+    cell = load_cell("machined-bracket")
+    assert cell.calibration.zeroed and not cell.as_made and cell.material and not cell.robot.moves
+    ranges = {name: (lo, hi) for name, lo, hi in cell.ranges}
+    assert list(ranges) == ["calibration.sensor_rotation", "calibration.sensor_translation"]
+    assert ranges["calibration.sensor_translation"] == pytest.approx(
+        (0.005e-3, 0.2e-3 / np.sqrt(3)), rel=5e-3
+    )  # the file's three figures
+    assert ranges["calibration.sensor_rotation"] == pytest.approx(
+        (0.011 * DEG, 0.1 * DEG / np.sqrt(3)), rel=5e-3
+    )  # the file's three figures
+    for key in ("sensor_translation_mm", "sensor_rotation_deg"):
+        assert (
+            "retired band" in table["calibration"][f"{key}_source"] and "low:" in table["calibration"][f"{key}_source"]
+        )
+
+
 @pytest.mark.parametrize("name", PRESETS)
 def test_a_shipped_preset_has_every_magnitude_a_sourced_range(name):
     import tomllib
@@ -300,10 +322,11 @@ def test_optipose_cells_lists_the_shipped_cells(capsys):
         main(["cells"])
     assert info.value.code in (0, None)
     lines = capsys.readouterr().out.splitlines()
-    assert set(cell_names()) == {"ideal", "ur10e", "common", *PRESETS}
+    assert set(cell_names()) == {"ideal", "ur10e", "common", "machined-bracket", *PRESETS}
     for name in cell_names():
         (line,) = [line for line in lines if line.split() and line.split()[0] == name]
-        assert ("9 ranges" in line) == (name in (*PRESETS, "common")) and "not zeroed" in line
+        assert ("9 ranges" in line) == (name in (*PRESETS, "common"))
+        assert ("not zeroed" in line) == (name != "machined-bracket")
         assert load_cell(CELLS_DIR / f"{name}.toml").description[:30] in line
 
 

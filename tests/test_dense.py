@@ -207,7 +207,7 @@ def test_the_evaluation_of_a_metre_long_part_casts_bounded_rays(tmp_path):
         _, points, _ = run_chunk(ev.setup, part.layouts["conventional"], ev.tasks()[:1])
     columns = 3200  # the keyence-lj-x8080's points per profile
     assert 0 < max(p["n_points"] for p in points) <= SCAN_PROFILES * columns
-    surrogate = Surrogate(part, mounting=False, turns=np.zeros((0, 3)))
+    surrogate = Surrogate(part, turns=np.zeros((0, 3)))
     assert surrogate.motion.n_profiles * surrogate.scanner.sensor.points_per_profile <= SURROGATE_RAYS
 
 
@@ -216,5 +216,5 @@ def test_shipped_parts_surrogate_scans_are_unchanged():
 
     for name in SHIPPED:
         part = load_part(name)
-        surrogate = Surrogate(part, mounting=False, turns=np.zeros((0, 3)))
+        surrogate = Surrogate(part, turns=np.zeros((0, 3)))
         assert surrogate.motion == ScanMotion(part.motion.length, part.motion.step * 2.0)  # the default step_factor

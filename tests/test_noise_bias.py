@@ -1,5 +1,5 @@
-"""The noise's own bias through the voxels: each scan's grid of its own (``voxel_grid = "random"``), and the
-surrogate's term for what noise does to equal-weight voxel centroids (a bias that grows as σ²)."""
+"""The noise's own bias through the voxels: each scan's grid of its own (``voxel_grid = "random"``); and the
+hand-anchored candidates, whose kept sensors are measured exactly as in the hand layout."""
 
 from __future__ import annotations
 
@@ -13,8 +13,7 @@ from optipose.evaluate.evaluator import Evaluator
 from optipose.evaluate.objective import load_objective, objective_from_table, reduced_objective
 from optipose.model.part import load_part
 from optipose.registration import grid_origin, voxel_down
-from optipose.search.surrogate import Surrogate, SensorInfo, predicted_stats, protocol_turns
-from optipose.transforms import make_T, rpy_to_matrix
+from optipose.search.surrogate import SensorInfo, predicted_stats
 
 # a single sensor found by the nominal quick search on part B (seed 0): a grazing view of few voxels whose
 # error at 5x the preset's noise ICP measured at 35.7 mdeg in sum against hand S3's 9.7 (docs/conditions.md,
@@ -59,7 +58,10 @@ def test_voxel_grid_is_a_checked_key_of_the_objective():
     assert (
         load_objective("paper").in_cell("ideal").registration.voxel_grid == "part"
     )  # the paper's figures stand as they were
-    assert load_objective("robust").registration.voxel_grid == "random"
+    assert (
+        objective_from_table({"registration": {"voxel_grid": "random"}}, "mine.toml").registration.voxel_grid
+        == "random"
+    )
     with pytest.raises(ConfigError, match="voxel_grid"):
         objective_from_table({"registration": {"voxel_grid": "diagonal"}}, "bad.toml")
 
@@ -85,68 +87,6 @@ def test_a_random_grid_is_reproducible_and_moves_the_errors_only_by_the_grid(par
     assert (fixed_points.n_points_down != rand_points.n_points_down).any()  # ...on other voxels
 
 
-@pytest.fixture(scope="module")
-def infos(part_b):
-    turns = protocol_turns(load_objective("robust"))
-    nominal = Surrogate(part_b, turns=turns)
-    banded = Surrogate(part_b, turns=turns, noise_band=5.0)
-    S3 = part_b.layouts["hand"].poses[2]
-    return {
-        (name, band): s.info(T) for name, T in (("F1", F1), ("S3", S3)) for band, s in ((1.0, nominal), (5.0, banded))
-    }
-
-
-def _score(info, scale):
-    return predicted_stats([info], noise_scales=(scale,)).score
-
-
-def test_without_a_band_there_is_no_noise_bias_term(infos):
-    assert infos["F1", 1.0].G_noise is None and infos["F1", 5.0].G_noise is not None
-    for name in ("F1", "S3"):  # the same scan, the same voxel bias: only the term differs
-        assert np.array_equal(infos[name, 1.0].G, infos[name, 5.0].G) and np.array_equal(
-            infos[name, 1.0].H, infos[name, 5.0].H
-        )
-
-
-def test_the_noise_bias_term_turns_the_ranking_at_five_times_the_noise_as_icp_does(infos):
-    # at the preset's noise the grazing sensor is predicted the better one, with or without the term...
-    assert _score(infos["F1", 5.0], 1.0) < _score(infos["S3", 5.0], 1.0)
-    # ...and there the term, scaled by (1/5)², moves the score by a few per cent at most
-    assert _score(infos["F1", 5.0], 1.0) == pytest.approx(_score(infos["F1", 1.0], 1.0), rel=0.1)
-    # at 5x the noise alone would keep F1 ahead; with the voxels' bias it falls behind S3, as ICP measured
-    assert _score(infos["F1", 1.0], 5.0) < _score(infos["S3", 1.0], 5.0)
-    assert _score(infos["F1", 5.0], 5.0) > _score(infos["S3", 5.0], 5.0)
-    # the term hurts the grazing view of few voxels far more than S3's view of B's long faces
-    assert _score(infos["F1", 5.0], 5.0) / _score(infos["F1", 1.0], 5.0) > 1.6
-    assert _score(infos["S3", 5.0], 5.0) / _score(infos["S3", 1.0], 5.0) < 1.3
-
-
-def test_the_search_cache_keeps_the_noise_bias_term(tmp_path, infos):
-    from optipose.io.search import load_cache, save_cache
-    from optipose.search.space import SPACE_VERSION
-
-    cache = {(0.1,) * 6: infos["F1", 5.0], (0.2,) * 6: infos["S3", 1.0], (0.3,) * 6: SensorInfo(np.eye(6), 10, 5)}
-    save_cache(tmp_path, cache, SPACE_VERSION)
-    loaded = load_cache(tmp_path, SPACE_VERSION)
-    assert np.array_equal(loaded[(0.1,) * 6].G_noise, infos["F1", 5.0].G_noise) and loaded[(0.1,) * 6].noise_band == 5.0
-    assert loaded[(0.2,) * 6].G_noise is None and loaded[(0.3,) * 6].G_noise is None
-    assert _score(loaded[(0.1,) * 6], 5.0) == _score(infos["F1", 5.0], 5.0)
-    data = dict(np.load(tmp_path / "cache.npz"))  # a cache from before the term: its poses would score without it
-    np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k != "G_noise"})
-    assert load_cache(tmp_path, SPACE_VERSION) == {}
-
-
-def test_the_search_gives_the_surrogate_the_bands_top(part_b):
-    from optipose.search.config import SearchConfig
-    from optipose.search.problem import SurrogateProblem
-
-    assert SurrogateProblem(part_b, load_objective("robust"), SearchConfig()).surrogate.noise_band == 5.0
-    assert (
-        SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig()).surrogate.noise_band == 1.0
-    )
-
-
-# -- hand-anchored candidates ---------------------------------------------------------------------------
 _STATED = predicted_stats(
     [SensorInfo(np.eye(6), 1, 1)]
 )  # a stage's layouts carry a prediction; these tests never read it
@@ -194,20 +134,15 @@ def test_anchored_layouts_keep_the_used_hand_sensors_in_their_places(part_b):
 
 
 def test_a_kept_sensor_is_measured_exactly_as_in_the_hand_layout(part_b):
-    # same index, same seed: the same noise, bracket errors and grid, so its subsets' errors are identical
-    objective = load_objective("robust")
-    objective = replace(
-        objective,
-        protocol=replace(reduced_objective(objective).protocol, sequences=("R", "P")),
-        conditions=replace(objective.conditions, noise_scales=(5.0,), mounting_draws=1),
-    )
+    # same index, same seed: the same noise, calibration errors and grid in a cell with ranges, so its subsets'
+    # errors are identical
+    objective = load_objective("paper").in_cell("cobot")
+    objective = replace(objective, protocol=replace(reduced_objective(objective).protocol, sequences=("R", "P")))
     hand = part_b.layouts["hand"]
     mixed = replace(hand, sensors=[*hand.sensors[:2], replace(hand.sensors[2], name="F1", T_O_S=F1)])
-    from optipose.evaluate.robust import make_evaluator
-
-    with make_evaluator(part_b, objective, seed=9, quiet=True) as evaluator:
+    with Evaluator(part_b, objective, seed=9, quiet=True) as evaluator:
         a, b = evaluator(hand), evaluator(mixed)
-    rows_a, rows_b = a.results[0][1].per_scan, b.results[0][1].per_scan
+    rows_a, rows_b = a.per_scan, b.per_scan
     err = ["err_roll", "err_pitch", "err_yaw"]
     for subset in ("S1", "S2", "S1S2"):
         np.testing.assert_array_equal(
@@ -219,13 +154,13 @@ def test_a_kept_sensor_is_measured_exactly_as_in_the_hand_layout(part_b):
 
 
 def test_the_refinement_places_the_found_sensor_for_the_kept_ones(part_b):
-    # robust band: the kept S1 and S2 stay exactly, the found sensor moves, and the refined layout scores
+    # the kept S1 and S2 stay exactly, the found sensor moves, and the refined layout scores
     # no worse on the refinement's value (score + hand-margin penalty) than the best unrefined one
     from optipose.search.candidates import _anchored_value, _gap_floors, anchored
     from optipose.search.config import SearchConfig
     from optipose.search.problem import SurrogateProblem
 
-    problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
+    problem = SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig())
     hand = part_b.layouts["hand"].poses
     outcome = _outcome(problem, [])
     (plain,) = anchored(problem, hand, (0, 1), outcome, 3, n=1)
@@ -243,9 +178,7 @@ def test_the_refinement_places_the_found_sensor_for_the_kept_ones(part_b):
     assert _anchored_value(problem, np.concatenate([problem.space.from_pose(T) for T in hand]), kept, 3, floors) < 1e3
 
 
-def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
-    # under a band, an axis lost at the preset's noise is penalised even when the worst over the band
-    # (the top level's) is no worse than the hand layout's; one level: the old per-axis penalty exactly
+def test_the_hand_margin_penalty_is_the_per_axis_excess(part_b):
     from optipose.search.config import SearchConfig, SurrogateConfig
     from optipose.search.problem import SurrogateProblem
 
@@ -257,11 +190,6 @@ def test_the_hand_margin_penalty_compares_noise_level_by_noise_level(part_b):
     stats = replace(_STATED, axis_score=np.array([1.0, 2.0, 3.0]), level_axis_score=np.array([[1.0, 2.0, 3.0]]))
     one = problem.with_targets({1: np.array([[1.0, 1.0, 4.0]])})
     assert one.shortfall(1, stats) == pytest.approx(1.0)
-    band = replace(
-        _STATED, axis_score=np.array([5.0, 5.0, 5.0]), level_axis_score=np.array([[1.0, 2.0, 1.0], [5.0, 5.0, 5.0]])
-    )
-    targets = problem.with_targets({1: np.array([[1.0, 1.0, 1.0], [6.0, 6.0, 6.0]])})
-    assert targets.shortfall(1, band) == pytest.approx(1.0)  # pitch at the first level, though 5 < 6 at the worst
 
 
 def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
@@ -272,7 +200,7 @@ def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
     from optipose.search.problem import SurrogateProblem
     from optipose.search.records import Found, SearchOutcome
 
-    problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
+    problem = SurrogateProblem(part_b, load_objective("paper").in_cell("ideal"), SearchConfig())
     hand = part_b.layouts["hand"].poses
     far = np.clip(problem.space.from_pose(hand[2]) + 0.02, 0.0, 1.0)
     outcome = SearchOutcome({1: Found(1, "greedy", far, problem.space.to_poses(far), 0.0, _STATED)}, {}, {}, {}, [])
@@ -284,54 +212,3 @@ def test_one_refined_sensor_starts_from_the_hand_sensor_in_its_place(part_b):
     import time
 
     assert anchored(problem, hand, (0,), outcome, 1, n=2, evals=20, until=time.monotonic() - 1.0) == []
-
-
-def test_each_levels_statistics_are_those_of_the_level_alone(infos):
-    # predicted_stats' level_axis_stats (levels, axes, median/p75) must be what each noise level gives on its own
-    pair = [infos["F1", 5.0], infos["S3", 5.0]]
-    both = predicted_stats(pair, noise_scales=(1.0, 5.0)).level_axis_stats
-    for n, scale in enumerate((1.0, 5.0)):
-        alone = predicted_stats(pair, noise_scales=(scale,))
-        rows = [alone.subsets.index(c) for c in alone.best_subset]
-        expected = [[alone.median_deg[r, a], alone.p75_deg[r, a]] for a, r in enumerate(rows)]
-        np.testing.assert_array_equal(both[n], expected)
-    assert np.all(both[1] > both[0])  # five times the noise: every statistic worse
-
-
-def test_the_maxmin_layouts_keep_hand_sensors_and_hold_each_statistic_best(part_b):
-    # under the robust band: k - 1 hand sensors stay exactly in their places, and the free place holds the
-    # pose whose smallest ratio hand / layout over the 12 statistics is at least that of every pose of the pool
-    from scipy.stats import qmc
-
-    from optipose.search.candidates import _gap_floors, _gap_violation, maxmin_anchored
-    from optipose.search.config import SearchConfig
-    from optipose.search.problem import SurrogateProblem
-
-    problem = SurrogateProblem(part_b, load_objective("robust"), SearchConfig())
-    problem.prefetch(qmc.Sobol(6, scramble=True, seed=3).random(48))
-    hand = part_b.layouts["hand"].poses
-    hand_info = [problem.info(problem.space.from_pose(T)) for T in hand]
-
-    def smallest(infos):
-        level = lambda xs: (
-            predicted_stats(xs, noise_scales=(1.0, 5.0), mounting=problem.band["mounting"]).level_axis_stats
-        )  # noqa: E731
-        target = min(
-            (level([hand_info[i] for i in c]) for c in [(0, 1), (0, 2), (1, 2)]), key=lambda t: t.max(axis=0).sum()
-        )
-        return float(np.min(target / level(infos)))
-
-    (found,) = maxmin_anchored(problem, hand, 2, n=1, evals=10)
-    kept = [i for i in (0, 1) if np.allclose(found.poses[i], hand[i], atol=1e-9)]
-    assert len(kept) == 1 and found.strategy == "hand-anchored, max-min"
-    free = 1 - kept[0]
-    mine = smallest([problem.info(found.sensor(i)) for i in (0, 1)])
-    floors = _gap_floors(problem, hand, 2)
-    others = []
-    for key, info in problem.cache.items():
-        u = np.concatenate([np.array(key) if i == free else problem.space.from_pose(hand[i]) for i in (0, 1)])
-        if isinstance(info, SensorInfo) and _gap_violation(problem, u, [free], 2, floors) == 0:
-            others.append(smallest([info if i == free else hand_info[i] for i in (0, 1)]))
-    assert len(others) > 10
-    # below 1 it is chosen by its smallest ratio; from 1 on (predicted no worse) by its sum at x1
-    assert mine >= min(max(others), 1.0) - 1e-12

@@ -11,6 +11,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ from optipose.io import load_result
 from optipose.model.baseline import conventional_layout
 from optipose.model.collision import DEFAULT_MARGIN, clearance, heads_clearance
 from optipose.model.part import PARTS_DIR, load_part
-from optipose.verdict.words import confident_line, verdict_line
+from optipose.verdict.words import confident_line
 
 CHROMIUM = Path("/usr/bin/chromium")
 FLAGS = [
@@ -48,15 +49,6 @@ start_deg = -2.0
 stop_deg = 2.0
 step_deg = 4.0
 """
-BAND = (
-    SHORT.replace('"short"', '"short-band"')
-    + """[conditions]
-noise_scale = [1.0, 5.0]
-mounting_translation_mm = 0.2
-mounting_rotation_deg = 0.1
-mounting_draws = 1
-"""
-)
 
 
 def run(*args, columns: int = 80):
@@ -69,14 +61,9 @@ def run(*args, columns: int = 80):
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     """A search on a bare STL (its baseline: the conventional placement), a robustness run of its found
-    pair against part B's hand layout under a band, and an evaluation: each writes its report."""
+    pair against part B's hand layout in instances of the cobot cell, and an evaluation: each writes its report."""
     d = tmp_path_factory.mktemp("report")
-    # the search checks its answer under the band too (the default budget's stage, here on the short protocol)
-    for name, text in (
-        ("small.toml", SMALL + f'band = "{d / "band.toml"}"\n'),
-        ("short.toml", SHORT),
-        ("band.toml", BAND),
-    ):
+    for name, text in (("small.toml", SMALL), ("short.toml", SHORT)):
         (d / name).write_text(text)
     shutil.copy(PARTS_DIR / "part_b" / "part_b.stl", d / "block.stl")
     search = run(
@@ -102,11 +89,14 @@ def results(tmp_path_factory):
         "--layout",
         d / "search" / "layouts" / "found_k2.toml",
         "--objective",
-        d / "band.toml",
-        "--no-brackets",
+        d / "short.toml",
+        "--cell",
+        "cobot",
+        "--draws",
+        1,
         "--out",
         d / "robustness",
-    )  # the brackets' 13 evaluations: see the unit test
+    )  # one held-out draw of the cobot's ranges, and its ranges' low and high ends
     assert robust.returncode == 0, robust.stderr
     evaluation = run("evaluate", "part_b", "--objective", d / "short.toml", "--out", d / "evaluate")
     assert evaluation.returncode == 0, evaluation.stderr
@@ -118,8 +108,7 @@ def test_search_output_fits_80_columns_and_says_the_verdict_first(results):
     lines = results["stdout"].splitlines()
     assert max(len(line) for line in lines) <= 80
     result = load_result(results["search"])
-    verdicts, band = result.verdicts(), result.band_verdicts()
-    assert set(band) == {v.k for v in verdicts}  # checked under the band
+    verdicts = result.verdicts()
     # the verdict with confidence first, one line per k, then the predicted errors with their intervals
     # (an UNDECIDED one followed by what keeps it open, indented)
     heads = [i for i, line in enumerate(lines) if line.startswith("k=")][: len(verdicts)]
@@ -144,15 +133,20 @@ def test_a_bare_stl_search_is_compared_with_the_conventional_placement(results):
     assert all("than conventional" in line for line in result.verdict_lines()[:2])
 
 
-def test_a_robustness_folder_gives_its_verdicts_as_a_search_does(results):
+def test_a_robustness_folder_keeps_every_figure_of_its_check(results):
     result = load_result(results["robustness"])
-    verdicts = result.verdicts()  # a list, as a search's; each names its layout
-    assert isinstance(verdicts, list) and [v.layout for v in verdicts] == [
-        name for name in result.layouts if name != "hand"
-    ]
-    assert all(
-        v.reference is result.choices[("hand", v.k)] and v.found is result.choices[(v.layout, v.k)] for v in verdicts
-    )
+    assert result.verdicts() == [] and list(result.layouts) == ["hand", "found_k2"]
+    rows = result.rows
+    instances = [("cobot", "draw 1"), ("cobot", "low ends"), ("cobot", "high ends")]
+    assert list(dict.fromkeys(zip(rows.cell, rows.instance))) == instances
+    assert len(rows) == len(instances) * 2 * 3  # found_k2 at k = 1 and 2, three axes each
+    ratios = result.ratios()
+    assert (ratios.ratio == ratios.groupby(["k", "cell", "instance"]).ratio.transform("first")).all()
+    assert (ratios.holds == (ratios.ratio >= 1)).all()
+    held = result.holds()
+    assert held.instances.tolist() == [3, 3] and (held.held <= 3).all()
+    config = tomllib.loads((results["robustness"] / "config.toml").read_text())
+    assert [(i["cell"], i["instance"]) for i in config["instances"]] == instances
 
 
 @pytest.mark.parametrize("spec", ["part_b", "bare part_a.stl"])
@@ -189,17 +183,9 @@ def test_the_report_says_the_verdicts_of_the_result(results):
     assert by_k  # a search with a baseline races its verdict on draws: its lines, not the first draw's hedges, decide
     for line in [confident_line(v) for v in by_k.values()]:
         assert html.escape(line) in text and line in md
-    for line in result.verdict_lines():  # checked under a band, the first draw's lines stay beside it
-        assert html.escape(line) in text and line in md
-    assert (
-        text.index("Verdict")
-        < text.index("Table 1")
-        < text.index("Under the band of a real cell")
-        < text.index("Where the sensors go")
-    )
-    for v in result.band_verdicts().values():  # each k's verdict under the band, and its table per level
-        assert html.escape("under the band: " + verdict_line(v, "conventional")) in text
-        assert f"found (k={v.k}) at every condition of the band" in md
+    assert text.index("Verdict") < text.index("Table 1") < text.index("Where the sensors go")
+    robust = (results["robustness"] / "report.md").read_text()
+    assert "found_k2 k=2: " in robust and "in every cell instance" in robust and "cobot, high ends" in robust
 
 
 def _rz_ry_rx(rpy_deg):
@@ -222,80 +208,6 @@ def test_the_xyz_rpy_shown_rebuilds_each_sensors_T_O_S(results):
         values = np.array([float(v) for v in numbers.split(",")])
         np.testing.assert_allclose(values[:3], T[:3, 3] * 1e3, atol=1e-3)
         np.testing.assert_allclose(_rz_ry_rx(values[3:]), T[:3, :3], atol=2e-6)
-
-
-def test_the_bracket_tables_show_each_layout_with_all_its_sensors_in_mdeg_and_um():
-    import pandas as pd
-
-    from optipose.report.robustness import bracket_blocks
-
-    common = {"tolerance_mm": 0.2, "tolerance_deg": 0.1, "draws": 2, "n_scans": 14, "reduced_protocol": True}
-    axes = pd.DataFrame(
-        [
-            {
-                "layout": "hand",
-                "k": 1,
-                "axis": "roll",
-                "subset": "S1",
-                "unit": "deg",
-                "perfect_median_deg": 0.001,
-                "perfect_p75_deg": 0.002,
-                "mounted_median_deg": 0.003,
-                "mounted_p75_deg": 0.004,
-                "worst_abs_bias": 0.05,
-                **common,
-            },
-            {
-                "layout": "hand",
-                "k": 2,
-                "axis": "roll",
-                "subset": "S1S2",
-                "unit": "deg",
-                "perfect_median_deg": 0.0005,
-                "perfect_p75_deg": 0.0007,
-                "mounted_median_deg": 0.0011,
-                "mounted_p75_deg": 0.0013,
-                "worst_abs_bias": 0.02,
-                **common,
-            },
-            {
-                "layout": "hand",
-                "k": 2,
-                "axis": "x",
-                "subset": "S1S2",
-                "unit": "m",
-                "perfect_median_deg": np.nan,
-                "perfect_p75_deg": np.nan,
-                "mounted_median_deg": np.nan,
-                "mounted_p75_deg": np.nan,
-                "worst_abs_bias": 25e-6,
-                **common,
-            },
-        ]
-    )
-    sensors = pd.DataFrame(
-        [
-            {
-                "layout": "hand",
-                "k": 2,
-                "sensor": "S2",
-                "sensor_index": 1,
-                "rank": 1,
-                "change_roll_deg": 0.0004,
-                "change_pitch_deg": -0.0001,
-                "change_yaw_deg": 0.0,
-                "score_change_deg": 0.0003,
-            }
-        ]
-    )
-    blocks = bracket_blocks(axes, sensors, "hand")
-    spread, ranking = [b for b in blocks if hasattr(b, "rows")]
-    assert spread.rows == (
-        ("hand", "2", "roll", "S1S2", "0.500", "0.700", "1.100", "1.300", "20.000", "mdeg"),
-        ("hand", "2", "x", "S1S2", "", "", "", "", "25.0", "µm"),
-    )
-    assert ranking.rows == (("hand", "2", "S2", "+0.400", "-0.100", "+0.000", "+0.300", "1"),)
-    assert "±0.2 mm and ±0.1°" in blocks[1].text
 
 
 def test_a_study_table_links_each_trials_report(results, tmp_path):
@@ -345,13 +257,12 @@ def _open(browser, path: Path):
             "search",
             [
                 "Table 1",
-                "found vs. conventional per k",
                 "R (the middle of the measuring range)",
                 "points per scan",
                 "search settings",
             ],
         ),
-        ("robustness", ["Table 1", "score per condition", "R (the middle of the measuring range)"]),
+        ("robustness", ["the paper's score", "R (the middle of the measuring range)"]),
         ("evaluate", ["Table 1", "points per scan"]),
     ],
 )
@@ -406,10 +317,10 @@ def _index_rows() -> list[dict]:
         budget = "thorough" if task == "search" else ""
         part = "part_b" if task == "search" else "/data/meshes/part_c.stl"
         row = {
-            "key": f"{Path(part).stem}-{task}-robust-k{k}-{budget}-s{seed}".replace("--", "-"),
+            "key": f"{Path(part).stem}-{task}-paper-k{k}-{budget}-s{seed}".replace("--", "-"),
             "part": part,
             "task": task,
-            "objective": "robust",
+            "objective": "paper",
             "sensors": k,
             "budget": budget,
             "seed": seed,
@@ -430,8 +341,6 @@ def _index_rows() -> list[dict]:
                 "hand_score_deg": 0.002,
                 "ratio": 1.5 + seed,
                 "no_worse": seed != 1,
-                "band_ratio": 1.2,
-                "band_no_worse": True,
             }
         rows.append(row)
     rows[1] = {

@@ -161,7 +161,7 @@ def test_an_evaluation_folder_reads_back_with_the_same_table(tmp_path):
 
 
 def test_config_toml_reads_back_once_as_a_typed_record(tmp_path):
-    from optipose.io.config import BandCheck, RunConfig, run_config
+    from optipose.io.config import RunConfig, run_config
     from optipose.io.folders import RESULT_FORMAT, read_config
 
     write_config(
@@ -173,8 +173,7 @@ def test_config_toml_reads_back_once_as_a_typed_record(tmp_path):
             "validation_seed": 9,
             "budget": "default",
             "search": {"sensors": (1, 2)},
-            "objective": {"name": "robust"},
-            "band": {"file": "robust.toml", "conditions": {"noise_scales": (1.0, 5.0), "mounting_draws": 2}},
+            "objective": {"name": "mine"},
             "versions": {"optipose": "0.1.0"},
         },
     )
@@ -188,18 +187,11 @@ def test_config_toml_reads_back_once_as_a_typed_record(tmp_path):
         config.validation_seed,
         config.budget,
     ) == ("search", RESULT_FORMAT, "part_x", "p.toml", 7, 9, "default")
-    assert config.sensors == (1, 2) and config.objective_name == "robust" and config.versions == {"optipose": "0.1.0"}
-    assert config.band == BandCheck("robust.toml", "worst", (1.0, 5.0), 0.0, 0.0, 2) and not config.band.brackets
+    assert config.sensors == (1, 2) and config.objective_name == "mine" and config.versions == {"optipose": "0.1.0"}
     assert config.table["search"] == {"sensors": [1, 2]}  # the file as written, for showing it
     # a folder written before a key existed: its field is left empty, nothing fails
     old = run_config({"command": "evaluate"})
-    assert (
-        old == RunConfig(command="evaluate")
-        and old.format is None
-        and old.band is None
-        and old.layouts == ()
-        and old.sensors == ()
-    )
+    assert old == RunConfig(command="evaluate") and old.format is None and old.layouts == () and old.sensors == ()
 
 
 def test_a_folder_that_is_not_a_result_is_refused_in_one_line(tmp_path):
@@ -208,66 +200,6 @@ def test_a_folder_that_is_not_a_result_is_refused_in_one_line(tmp_path):
     write_config(tmp_path, {"command": "scan"})
     with pytest.raises(ConfigError, match="'scan' result"):
         load_result(tmp_path)
-
-
-def _banded(choice, per_condition):
-    """``choice`` carrying its statistics under two conditions (``Choice.under``), as a band's validation gives."""
-    from dataclasses import replace
-
-    return replace(choice, under=tuple(per_condition))
-
-
-def test_under_a_band_a_choice_must_be_no_worse_at_every_condition():
-    # found beats hand clearly at noise x1 but loses roll at x5: the robust (worst) statistics alone would
-    # say "no worse" (found's worst roll 0.8 < hand's worst 1.0), yet at x5 found's 0.8 exceeds hand's 0.6
-    lo, hi = "noise x1", "noise x5"
-    hand_lo, hand_hi = (
-        _choice((0,), S, [(1.0, 1.2), (0.1, 0.2), (0.1, 0.2)]),
-        _choice((0,), S, [(0.6, 0.7), (0.1, 0.2), (0.1, 0.2)]),
-    )
-    found_lo, found_hi = (
-        _choice((0,), F, [(0.2, 0.3), (0.1, 0.2), (0.1, 0.2)]),
-        _choice((0,), F, [(0.8, 0.9), (0.1, 0.2), (0.1, 0.2)]),
-    )
-    hand = _banded(_choice((0,), S, [(1.0, 1.2), (0.1, 0.2), (0.1, 0.2)]), [(lo, hand_lo), (hi, hand_hi)])
-    found = _banded(_choice((0,), F, [(0.8, 0.9), (0.1, 0.2), (0.1, 0.2)]), [(lo, found_lo), (hi, found_hi)])
-    assert dominates(found.under[0][1], hand.under[0][1]) and not dominates(found, hand)
-    # by hand: at x5 roll median 0.8 - 0.6 and p75 0.9 - 0.7 over the hand's; nothing at x1
-    assert excess(found, hand) == pytest.approx(np.deg2rad(0.4e-3))
-    verdict = Verdict(1, found, hand)
-    assert [(g.axis, g.statistic, g.condition) for g in verdict.worse] == [("roll", "median", hi), ("roll", "p75", hi)]
-    assert [label for label, _ in verdict.ratios()] == [lo, hi]
-    assert verdict.ratios()[0][1] == pytest.approx(2.8 / 1.1) and verdict.ratios()[1][1] == pytest.approx(1.9 / 2.3)
-    assert "at the worst over the band" in verdict_line(verdict) and "(noise x5)" in verdict_line(verdict)
-
-
-def test_a_band_validation_reads_back_with_every_condition(tmp_path):
-    lo, hi = "noise x1, mounting draw 0", "noise x5, mounting draw 0"
-    found_hi = _choice((0,), F, [(3.0, 5.0), (0.1, 0.2), (0.1, 0.2)])
-    hand_hi = _choice((0,), S, [(0.1, 0.2), (0.1, 0.25), (0.05, 0.1)])
-    found = {1: _banded(found_hi, [(lo, VALIDATION.found[1]), (hi, found_hi)])}
-    hand = {1: _banded(VALIDATION.baseline[1], [(lo, VALIDATION.baseline[1]), (hi, hand_hi)])}
-    validation = Validation("full", 99, found, hand)
-    write_config(
-        tmp_path,
-        {
-            "command": "search",
-            "part": {"name": "part_x", "source": ""},
-            "seed": 7,
-            "budget": "default",
-            "validation_seed": 99,
-        },
-    )
-    sink = SearchFolder(tmp_path)
-    sink.layouts({1: _layout("found_k1", 1, "F")}, _layout("hand", 3, "S"))
-    sink.validation(validation)
-    loaded = load_result(tmp_path).validation
-    assert [label for label, _ in loaded.found[1].under] == [lo, hi]
-    assert loaded.verdict_lines() == validation.verdict_lines()
-    (verdict,) = loaded.verdicts()
-    assert [(label, pytest.approx(r)) for label, r in verdict.ratios()] == [
-        (label, r) for label, r in validation.verdicts()[0].ratios()
-    ]
 
 
 def test_a_selection_with_an_unobservable_axis_reads_back(tmp_path):

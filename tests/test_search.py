@@ -11,12 +11,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from optipose.errors import ConfigError
 from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.search.space import PoseSpace, params_from_pose, pose_from_params
 from optipose.model.sensor import load_sensor
-from optipose.search.config import Preset, SearchConfig, SelectionConfig, SurrogateConfig, ValidationConfig
+from optipose.search.config import Preset, SearchConfig, SelectionConfig, SurrogateConfig
 from optipose.search.driver import optimize
 from optipose.search.problem import SurrogateProblem, Violation
 from optipose.search.records import PENALTY, Found, LayoutScore
@@ -570,7 +569,7 @@ def test_the_hand_layout_shared_out_over_processes_by_its_scans_is_the_evaluator
 
     part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
     with BaselineRun(part, objective, seed=3, processes=2) as run:
-        assert [scans for _, scans in run._shares] == [(0, 2), (1, 2)]
+        assert len(run._calls) == 2  # every other scan each
         beside = run.result()
     with Evaluator(part, objective, seed=validation_seed(3), jobs=1) as evaluator:
         here = evaluator(part.layouts["hand"])
@@ -597,27 +596,6 @@ def test_a_validation_of_a_share_of_the_scans_evaluates_found_and_hand_on_the_sa
     drawn = set(here.per_scan["scan"])
     assert len(drawn) == 4 and set(seen["hand"].per_scan["scan"]) == set(seen["found_k1"].per_scan["scan"]) == drawn
     assert seen["hand"].per_scan.equals(here.per_scan)
-
-
-def test_the_hand_layout_under_a_band_shared_out_over_processes_is_the_robust_evaluators():
-    # the check under the band after a nominal search runs the hand layout's bracket draws in processes of
-    # their own (each draw's noise levels together): the result must be RobustEvaluator's, condition by condition
-    from optipose.evaluate.robust import RobustEvaluator
-    from optipose.search.objectives import band_objective
-    from optipose.search.validate import BaselineRun
-    from optipose.seeds import validation_seed
-
-    part = load_part("part_b")
-    objective = band_objective(_short(load_objective("paper").in_cell("ideal")), "robust")
-    with BaselineRun(part, objective, seed=3, last=True, processes=2) as run:
-        assert len(run._calls) == 2  # one process per bracket draw
-        beside = run.result()
-    with RobustEvaluator(part, objective, seed=validation_seed(3)) as evaluator:
-        here = evaluator(part.layouts["hand"])
-    assert [c for c, _ in beside.results] == [c for c, _ in here.results] and len(here.results) == 4
-    for (_, a), (_, b) in zip(beside.results, here.results):
-        assert a.per_scan.equals(b.per_scan)
-    assert beside.stats.equals(here.stats) and beside.table == here.table
 
 
 def test_a_found_pair_inside_the_triple_in_another_order_shares_its_evaluation():
@@ -698,106 +676,24 @@ def test_ctrl_c_inside_a_compiled_kernel_stops_the_search_like_any_ctrl_c():
     assert not is_interrupt(SystemError("something else"))
 
 
-def test_a_nominal_search_is_checked_under_the_band_and_its_answer_read_back(tmp_path):
-    """After the validation, the found layouts and the hand one again on the held-out seed under the band of
-    ``SearchConfig.band``: per noise level, on disk and read back; the band's x1 level without brackets is
-    the nominal objective itself, so there the hand layout's numbers are the validation's."""
-    from optipose.io import load_result
-    from optipose.io.search import SearchFolder
-    from optipose.search.pipeline import run
-
-    band_file = tmp_path / "band.toml"
-    band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
-    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
-    config = SearchConfig(
-        sensors=(1, 2),
-        surrogate=SurrogateConfig(global_evals=20, local_evals=6, joint_evals=8, random_starts=2),
-        selection=SelectionConfig(candidates=0),
-        validation=ValidationConfig(band_objective=str(band_file)),
-    )
-    out = tmp_path / "search"
-    stages = []
-    report = run(part, objective, config, 2, SearchFolder(out), jobs=1, on_stage=stages.append)
-    assert report.band is not None and any("under the band" in s for s in stages)
-    for k in (1, 2):
-        levels = [label for label, _ in report.band.found[k].under]
-        assert levels == ["noise x1", "noise x5"] and [label for label, _ in report.band.baseline[k].under] == levels
-        assert (
-            report.band.baseline[k].under[1][1].score > report.band.baseline[k].under[0][1].score
-        )  # 5x the noise costs
-    import pandas as pd
-
-    at_x1, nominal = (pd.read_csv(out / sub / "stats.csv") for sub in ("band/hand/noise-x1", "validation/hand"))
-    assert np.array_equal(at_x1[["median", "p75"]].to_numpy(), nominal[["median", "p75"]].to_numpy())
-    assert (out / "band" / "comparison.csv").is_file() and (
-        out / "band" / "hand" / "noise-x5" / "per_scan.csv"
-    ).is_file()
-    saved = load_result(out)
-    assert {k: v.ratio for k, v in saved.band_verdicts().items()} == pytest.approx(
-        {v.k: v.ratio for v in report.band.verdicts()}
-    )
-    assert saved.config.band.noise_scales == (1.0, 5.0)
-    from optipose.batch.results import trial_results
-    from optipose.batch.spec import TrialSpec
-
-    row = trial_results(out, TrialSpec("part_b", "search", "paper", 2, "default", 2))  # a batch study's row of it
-    assert (
-        row["band_ratio"] == pytest.approx(saved.band_verdicts()[2].ratio)
-        and row["band_no_worse"] == saved.band_verdicts()[2].no_worse
-    )
-    # a search under a band of its own validates under it; no second check
-    from optipose.search.objectives import band_objective
-
-    assert band_objective(load_objective("robust"), str(band_file)) is None and band_objective(objective, "") is None
-    with pytest.raises(ConfigError, match="unknown objective"):
-        band_objective(objective, "no-such-band")
-
-
 def test_each_stage_objective_is_derived_in_one_place():
-    # the table of optipose.search.objectives: the surrogate as given; selection and polish on the reduced
-    # protocol, confirmation on the full one, both at the band's ends; validation on the whole band
-    from optipose.evaluate.conditions import band_ends
+    # the table of optipose.search.objectives: the surrogate and the confirmation as given; selection and polish
+    # on the reduced protocol; validation on the full one, or the reduced one
     from optipose.evaluate.objective import reduced_objective
     from optipose.search.objectives import STAGES, stage_objective
 
-    robust = load_objective("robust")
-    for objective in (load_objective("paper").in_cell("ideal"), robust):
-        stage = {name: stage_objective(objective, name, band="robust") for name in STAGES}
+    for objective in (load_objective("paper").in_cell("ideal"), load_objective("paper")):
+        stage = {name: stage_objective(objective, name) for name in STAGES}
         assert stage["surrogate"] is objective and stage["validation"] is objective
-        ends = objective.conditions if objective.conditions.trivial else band_ends(objective.conditions)
-        assert stage["confirmation"].conditions == ends and stage["confirmation"].protocol == objective.protocol
-        assert repr(stage["selection"]) == repr(stage["polish"]) == repr(reduced_objective(stage["confirmation"]))
+        assert stage["confirmation"] is objective
+        assert repr(stage["selection"]) == repr(stage["polish"]) == repr(reduced_objective(objective))
         assert repr(stage_objective(objective, "validation", "reduced")) == repr(reduced_objective(objective))
-        # a check under another band only after a nominal search, with that band's conditions
-        assert (stage["band"] is None) == (not objective.conditions.trivial)
-    band = stage_objective(load_objective("paper").in_cell("ideal"), "band", band="robust")
-    assert band.conditions == robust.conditions and band.protocol == load_objective("paper").in_cell("ideal").protocol
-    assert stage_objective(band, "selection").conditions.noise_scales == (
-        min(robust.conditions.noise_scales),
-        max(robust.conditions.noise_scales),
-    )
+    assert STAGES == ("surrogate", "selection", "polish", "confirmation", "validation")
     with pytest.raises(ValueError, match="no stage"):
-        stage_objective(robust, "polishing")
+        stage_objective(load_objective("paper"), "band")
 
 
-def test_a_layout_no_worse_at_the_preset_but_worse_under_the_band_is_not_bought():
-    from optipose.verdict.compare import Verdict
-    from optipose.verdict.words import verdict_headline
-
-    found, hand = _choice([(1, 2), (1, 2), (1, 2)]), _choice([(3, 4), (3, 4), (3, 4)])
-    nominal = Verdict(1, found, hand)
-    assert verdict_headline(nominal).startswith("k=1: BUY found F1: 2.33x better")
-    worse_there = Verdict(1, _choice([(1, 2), (1, 2), (5, 6)]), hand)
-    assert (
-        verdict_headline(nominal, "hand", worse_there) == "k=1: KEEP hand F1: F1 2.33x better, but worse under the band"
-    )
-    assert verdict_headline(nominal, "hand", Verdict(1, found, hand)).startswith("k=1: BUY")
-    # a nominal search that never checked under a band (quick): better in the ideal cell, not a buy
-    assert verdict_headline(nominal, checked=False) == "k=1: found F1 2.33x better, no axis worse, in the ideal cell"
-    assert verdict_headline(worse_there, checked=False) == verdict_headline(worse_there)  # a worse axis reads the same
-
-
-def test_an_answer_never_checked_under_a_band_is_not_a_buy():
+def test_an_answer_checked_in_the_ideal_cell_only_is_not_a_buy():
     from optipose.verdict.compare import Verdict
     from optipose.io.config import run_config
     from optipose.io.results import SearchResult
@@ -809,109 +705,17 @@ def test_an_answer_never_checked_under_a_band_is_not_a_buy():
     assert (
         verdict_table([nominal], "hand", unchecked=True)
         .rows[0][-1]
-        .startswith("better in the ideal cell; check under the band")
+        .startswith("better in the ideal cell; check it in a real cell")
     )
-    ideal = {
-        "objective": {"conditions": {"noise_scales": [1.0], "mounting_translation": 0.0, "mounting_rotation": 0.0}}
-    }
-    banded = {
-        "objective": {
-            "conditions": {"noise_scales": [1.0, 5.0], "mounting_translation": 2e-4, "mounting_rotation": 1.7e-3}
-        }
-    }
+    ideal = {"objective": {"cell": {"name": "ideal"}}}
+    in_a_cell = {"objective": {"cell": {"name": "cobot"}}}
     validation = Validation("full", 1, {}, {})
 
     def result(config):
         return SearchResult(None, "part_b", 0, "quick", run_config(config), validation=validation)
 
-    assert result(ideal).unchecked  # quick: a nominal search with no check planned
-    assert not result({**ideal, "band": {"file": "robust"}}).unchecked  # default: the check under the band
-    assert not result(banded).unchecked  # a search under the band validates under it
-
-
-def test_a_found_layout_that_holds_only_in_part_of_the_band_says_what_it_needs():
-    from optipose.verdict.compare import Verdict, bought
-    from optipose.verdict.words import band_advice
-
-    good, bad, hand = (
-        _choice([(1, 2), (1, 2), (1, 2)]),
-        _choice([(1, 2), (1, 2), (5, 6)]),
-        _choice([(3, 4), (3, 4), (3, 4)]),
-    )
-    x1, x3, x5 = (f"noise x{s}, worst of 2 bracket draws" for s in (1, 3, 5))
-    levels = lambda *cs: replace(cs[0], under=tuple(zip((x1, x5) if len(cs) == 2 else (x1, x3, x5), cs)))  # noqa: E731
-    holds_low = Verdict(1, levels(good, bad), levels(hand, hand))
-    assert band_advice(holds_low, "hand", nominal_no_worse=True) == (
-        "k=1: found F1 is no worse than hand F1 on every axis at noise x1 (2.33x better in sum), worse on some axis at "
-        "noise x5 (1.24x in sum): it is the better buy only if the sensor's noise on this part, measured on the bench, "
-        "is no more than the preset's"
-    )
-    assert band_advice(holds_low, "hand") == ""  # worse in the nominal cell already: no advice to buy it at any noise
-    holds_high = Verdict(1, levels(bad, good), levels(hand, hand))  # worse at the preset's noise with the brackets off
-    assert "its win rests on brackets more precise than the band's" in band_advice(
-        holds_high, "hand", nominal_no_worse=True
-    )
-    # a level that holds between two that do not is not listed as lost
-    three = band_advice(Verdict(1, levels(good, bad, good), levels(hand, hand, hand)), "hand", nominal_no_worse=True)
-    assert "worse on some axis at noise x3 (1.24x in sum): " in three and "at most 1x" not in three
-    assert (
-        band_advice(Verdict(1, levels(good, good), levels(hand, hand)), nominal_no_worse=True) == ""
-    )  # no worse everywhere
-    assert band_advice(Verdict(1, good, hand), nominal_no_worse=True) == ""  # no band
-    nominal = Verdict(1, good, hand)
-    assert (
-        bought(nominal)
-        and bought(nominal, Verdict(1, levels(good, good), levels(hand, hand)))
-        and not bought(nominal, holds_low)
-    )
-
-
-def test_ctrl_c_during_the_check_under_the_band_keeps_the_validation(tmp_path, monkeypatch):
-    """The validation is done and saved when the check under the band starts: a Ctrl-C there hands the
-    report back with it, the check marked missing (the report says so), instead of losing it."""
-    import optipose.search.validate as validate_module
-    from optipose.io import load_result
-    from optipose.io.search import SearchFolder
-    from optipose.search.pipeline import run
-
-    real, calls = validate_module.validate, []
-
-    def validate(part, objective, *args, **kwargs):
-        calls.append(objective.name)
-        if not objective.conditions.trivial:  # the check under the band
-            raise KeyboardInterrupt
-        return real(part, objective, *args, **kwargs)
-
-    monkeypatch.setattr(validate_module, "validate", validate)
-    band_file = tmp_path / "band.toml"
-    band_file.write_text('name = "band"\n[conditions]\nnoise_scale = [1.0, 5.0]\n')
-    part, objective = load_part("part_b"), _short(load_objective("paper").in_cell("ideal"))
-    config = SearchConfig(
-        sensors=(1,),
-        surrogate=SurrogateConfig(global_evals=12, local_evals=4, random_starts=1),
-        selection=SelectionConfig(candidates=0),
-        validation=ValidationConfig(band_objective=str(band_file)),
-    )
-    report = run(part, objective, config, 3, SearchFolder(tmp_path / "search"), jobs=1)
-    assert len(calls) == 2 and report.validated and report.band is None and report.band_interrupted
-    saved = load_result(tmp_path / "search")
-    assert saved.validation is not None and saved.band_pending and not saved.band_verdicts()
-
-
-def test_a_search_with_nothing_to_compare_with_misses_no_check_under_the_band():
-    from optipose.io.config import RunConfig, run_config
-    from optipose.io.results import SearchResult
-    from optipose.search.records import Validation
-
-    found = {1: _choice([(1, 2), (1, 2), (1, 2)])}
-    config = run_config({"band": {"file": "robust"}})
-    assert not SearchResult("f", "p", 0, "default", config, validation=Validation("full", 1, found, {})).band_pending
-    assert SearchResult(
-        "f", "p", 0, "default", config, validation=Validation("full", 1, found, dict(found))
-    ).band_pending
-    assert not SearchResult(
-        "f", "p", 0, "default", RunConfig(), validation=Validation("full", 1, found, dict(found))
-    ).band_pending
+    assert result(ideal).unchecked  # a search in the ideal cell: its better holds there only
+    assert not result(in_a_cell).unchecked  # a search in a cell: its verdict is the cell's
 
 
 @pytest.mark.parametrize("algorithm", ["GN_DIRECT_L", "LN_BOBYQA", "GN_CRS2_LM"])

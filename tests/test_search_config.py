@@ -11,7 +11,7 @@ import pytest
 
 from optipose.errors import ConfigError
 from optipose.search.budgets import config_from_budget
-from optipose.search.config import FLAT_KEYS, SECTIONS, SearchConfig, search_preset, search_table
+from optipose.search.config import FLAT_KEYS, SECTIONS, SearchConfig, saved_table, search_preset, search_table
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -50,7 +50,6 @@ FLAT_DEFAULTS = dict(
     clear_ratio=0.4,
     validation="full",
     validation_scans=0,
-    band="",
     verdict_draws=12,
     verdict_time=120.0,
     answer_time=0.0,
@@ -82,7 +81,6 @@ FLAT_BUDGETS = {
         polish_evals=90,
         confirm_candidates=3,
         screen_samples=4096,
-        band="robust",
         verdict_time=60.0,
     ),
     "thorough": dict(
@@ -99,15 +97,9 @@ FLAT_BUDGETS = {
         polish_time=900.0,
         polish_evals=200,
         confirm_candidates=6,
-        band="robust",
         verdict_draws=30,
         verdict_time=900.0,
     ),
-}
-FLAT_BAND = {
-    "default": dict(
-        max_time=180.0, select_time=100.0, polish_evals=0, confirm_candidates=0, screen_samples=1024, anchor_evals=80
-    )
 }
 FLAT_CELL = {
     "quick": dict(
@@ -139,15 +131,14 @@ FLAT_CELL = {
         polish_evals=0,
         confirm_candidates=0,
         validation="reduced",
-        band="",
         verdict_scans=3,
         verdict_draws=40,
         verdict_time=60.0,
     ),
-    "thorough": dict(band="", verdict_scans=3, verdict_draws=120),
+    "thorough": dict(verdict_scans=3, verdict_draws=120),
 }
 CLOCKS = ("max_time", "select_time", "polish_time", "verdict_time", "answer_time")  # 0 in every budget: none
-CASES = [(b, band, cell) for b in ("quick", "default", "thorough") for band in (False, True) for cell in (False, True)]
+CASES = [(b, cell) for b in ("quick", "default", "thorough") for cell in (False, True)]
 
 
 def flat(config: SearchConfig) -> dict:
@@ -155,9 +146,9 @@ def flat(config: SearchConfig) -> dict:
     return {key: getattr(getattr(config, s), f) for key, (s, f) in FLAT_KEYS.items()} | {"sensors": config.sensors}
 
 
-def budget_flat(budget: str, band: bool, cell: bool, sensors=(1, 2, 3)) -> dict:
+def budget_flat(budget: str, cell: bool, sensors=(1, 2, 3)) -> dict:
     """The flat config's settings, its clocks none (0)."""
-    adjusted = {**(FLAT_BAND.get(budget, {}) if band else {}), **(FLAT_CELL.get(budget, {}) if cell else {})}
+    adjusted = FLAT_CELL.get(budget, {}) if cell else {}
     return {**FLAT_DEFAULTS, "sensors": sensors, **FLAT_BUDGETS[budget], **adjusted} | dict.fromkeys(CLOCKS, 0.0)
 
 
@@ -168,26 +159,26 @@ def test_every_flat_key_names_one_field_of_one_section():
     assert flat(SearchConfig()) == FLAT_DEFAULTS | dict.fromkeys(CLOCKS, 0.0)
 
 
-@pytest.mark.parametrize("budget, band, cell", CASES)
-def test_every_budget_gives_the_settings_of_the_flat_config(budget, band, cell):
-    new = flat(config_from_budget(budget, (1, 2, 3), band=band, cell=cell))
-    old = budget_flat(budget, band, cell)
+@pytest.mark.parametrize("budget, cell", CASES)
+def test_every_budget_gives_the_settings_of_the_flat_config(budget, cell):
+    new = flat(config_from_budget(budget, (1, 2, 3), cell=cell))
+    old = budget_flat(budget, cell)
     assert new == old
     assert {k: type(v) for k, v in new.items()} == {k: type(v) for k, v in old.items()}  # 25.0 stays a float
 
 
-@pytest.mark.parametrize("budget, band, cell", CASES)
-def test_a_config_reads_back_from_its_sections_and_from_its_flat_keys(budget, band, cell):
-    config = config_from_budget(budget, (1, 3), band=band, cell=cell)
+@pytest.mark.parametrize("budget, cell", CASES)
+def test_a_config_reads_back_from_its_sections_and_from_its_flat_keys(budget, cell):
+    config = config_from_budget(budget, (1, 3), cell=cell)
     assert search_preset(search_table(config)).apply(SearchConfig()) == config
     assert search_preset(flat(config)).apply(SearchConfig()) == config  # an older result folder's table
 
 
 def test_a_search_table_takes_sections_flat_keys_or_both_and_the_user_word_last():
-    both = search_preset({"global_evals": 25, "selection": {"candidates": 0}, "band": "", "verdict": {"draws": 2}})
+    both = search_preset({"global_evals": 25, "selection": {"candidates": 0}, "verdict": {"draws": 2}})
     config = config_from_budget("default", (1,), both)
     assert (config.surrogate.global_evals, config.selection.candidates) == (25, 0)
-    assert (config.validation.band_objective, config.verdict.draws) == ("", 2)
+    assert config.verdict.draws == 2
     assert config.validation.protocol == "full" and config.surrogate.local_evals == 120  # the rest the budget's
     assert search_preset({"validation": "reduced"}).validation == {"protocol": "reduced"}  # the flat key
     assert search_preset({"validation": {"protocol": "reduced"}}).validation == {"protocol": "reduced"}  # the section
@@ -245,10 +236,11 @@ def test_the_committed_search_folders_written_flat_still_resume_with_their_setti
     for folder in flat_folders:
         saved = read_config(folder)
         config = _settings(saved)[1]
-        assert flat(config) == {**FLAT_DEFAULTS, **saved.search, "sensors": tuple(saved.search["sensors"])}, folder
+        written = saved_table(saved.search)  # a band = "" of a folder written before the band was retired: no check
+        assert flat(config) == {**FLAT_DEFAULTS, **written, "sensors": tuple(saved.search["sensors"])}, folder
     for folder in set(folders) - set(flat_folders):  # written by section: read back as written
         saved = read_config(folder)
-        assert search_preset(saved.search).apply(SearchConfig()) == _settings(saved)[1], folder
+        assert search_preset(saved_table(saved.search)).apply(SearchConfig()) == _settings(saved)[1], folder
 
 
 def test_the_report_shows_a_sectioned_config_one_value_a_row():

@@ -1,5 +1,5 @@
-"""The surrogate's voxel-bias model (the error it predicts exists, has the right size, and adds up) and its
-bracket mounting term (linear in the bracket errors, zeroed with the cell, kept in the search cache)."""
+"""The surrogate's voxel-bias model (the error it predicts exists, has the right size, and adds up) and the
+first-order map of a sensor off its believed pose (what the cell term builds on)."""
 
 from __future__ import annotations
 
@@ -104,16 +104,13 @@ def test_plane_seen_head_on_has_no_voxel_bias(flat_plate):
     assert np.abs(info.G).max() < 1e-12 * np.abs(info.A).max()
 
 
-# --- the bracket mounting term ---------------------------------------------------------------------------
-MOUNTING = (0.2e-3, np.deg2rad(0.1))  # the robust objective's tolerance: ±0.2 mm, ±0.1°
-
-
+# --- a sensor off its believed pose ----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def hand_b_infos(part_b):
     from optipose.search.surrogate import protocol_turns
 
     part, cfg, _ = part_b
-    surrogate = Surrogate(part, voxel=cfg.voxel_size, turns=protocol_turns(load_objective("robust")))
+    surrogate = Surrogate(part, voxel=cfg.voxel_size, turns=protocol_turns(load_objective("paper").in_cell("ideal")))
     return [surrogate.info(T) for T in part.layouts["hand"].poses]
 
 
@@ -121,23 +118,21 @@ def test_the_prediction_record_is_consistent(hand_b_infos):
     # the fields of one Prediction agree with each other: the per-axis best subsets are the paper's
     # assignment (lowest median, ties by p75), the axis scores are theirs, and the score is their weighted sum
     weights, median_weight, p75_weight = (1.0, 2.0, 0.5), 1.0, 0.5
-    p = predicted_stats(
-        hand_b_infos, weights, median_weight, p75_weight, noise_scales=(1.0, 3.0, 5.0), mounting=MOUNTING
-    )
+    p = predicted_stats(hand_b_infos, weights, median_weight, p75_weight)
     n = len(hand_b_infos)
     assert p.subsets == tuple(c for r in range(1, n + 1) for c in itertools.combinations(range(n), r))
     assert p.median_deg.shape == p.p75_deg.shape == (2**n - 1, 3) and p.axis_score.shape == (3,)
-    assert p.level_axis_score.shape == (3, 3) and p.level_axis_stats.shape == (3, 3, 2)
+    assert p.level_axis_score.shape == (1, 3) and p.level_axis_stats.shape == (1, 3, 2)
     for a, best in enumerate(p.best_subset):
         row = p.subsets.index(best)
         assert min(zip(p.median_deg[:, a], p.p75_deg[:, a])) == (p.median_deg[row, a], p.p75_deg[row, a])
         assert p.axis_score[a] == median_weight * p.median_deg[row, a] + p75_weight * p.p75_deg[row, a]
     assert p.score == float(np.dot(weights, p.axis_score))
-    # each level on its own best subsets: no level's best median is above the band's (the worst over levels)
+    # the one level's statistics are the axes' own
+    assert np.array_equal(p.level_axis_score[0], p.axis_score)
     assert np.array_equal(
         p.level_axis_score, median_weight * p.level_axis_stats[..., 0] + p75_weight * p.level_axis_stats[..., 1]
     )
-    assert np.all(p.level_axis_stats[..., 0].max(axis=0) <= p.median_deg.min(axis=0))
     with pytest.raises(AttributeError):
         p.score = 0.0  # frozen
 
@@ -159,102 +154,16 @@ def test_displacement_map_is_the_rebuilt_scan_to_first_order(part_b):
     assert np.abs(predicted - moved).max() < 1e-3 * np.abs(moved).max()
 
 
-def test_without_mounting_the_prediction_is_todays(hand_b_infos):
-    # today's formula written out: the bias step over the summed equations, noise σ from H / scale²
+def test_the_prediction_is_the_formula_written_out(hand_b_infos):
+    # the bias step over the summed equations, noise σ from H
     from optipose.search.prediction import axis_stats as _axis_stats
     from optipose.search.surrogate import rotation_sigma
 
-    stats = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0))
-    assert all(
-        np.array_equal(
-            getattr(stats, key), getattr(predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=None), key)
-        )
-        for key in ("median_deg", "p75_deg", "axis_score")
-    )
+    stats = predicted_stats(hand_b_infos)
     for s, c in enumerate(stats.subsets):
         delta = bias_rotation(sum(hand_b_infos[i].A for i in c), sum(hand_b_infos[i].G for i in c))
-        H = sum(hand_b_infos[i].H for i in c)
-        m = np.maximum(*[_axis_stats(rotation_sigma(H / k**2), delta)[0] for k in (1.0, 5.0)])
-        assert np.array_equal(stats.median_deg[s], np.rad2deg(m))
-    # a zero tolerance is no term at all
-    zero = predicted_stats(hand_b_infos, noise_scales=(1.0, 5.0), mounting=(0.0, 0.0))
-    assert np.array_equal(zero.median_deg, stats.median_deg) and np.array_equal(zero.p75_deg, stats.p75_deg)
-
-
-def test_one_sensors_bracket_translation_is_zeroed_away(hand_b_infos):
-    # a bracket shifted but not turned moves that sensor's whole cloud rigidly (no shear: that needs a turn),
-    # so alone the step recovers exactly that motion at every orientation and the master scan takes it off;
-    # two sensors viewing different faces disagree, and their compromise moves as the part turns
-    from optipose.search.mounting import mounting_variance
-
-    S1, S3 = hand_b_infos[0], hand_b_infos[2]
-    alone = mounting_variance([S1.A_turns], [S1.N_turns], MOUNTING[0], 0.0)
-    pair = mounting_variance([S1.A_turns, S3.A_turns], [S1.N_turns, S3.N_turns], MOUNTING[0], 0.0)
-    assert np.sqrt(alone).max() < 1e-6 * np.sqrt(pair).max()
-    assert np.rad2deg(np.sqrt(pair).max()) > 1e-3  # over a millidegree from 0.2 mm
-    # with the turn too, one sensor's term (the shear, the frame turning) stays well below the pair's
-    alone = mounting_variance([S1.A_turns], [S1.N_turns], *MOUNTING)
-    pair = mounting_variance([S1.A_turns, S3.A_turns], [S1.N_turns, S3.N_turns], *MOUNTING)
-    assert np.sqrt(alone.max(axis=0)).sum() < np.sqrt(pair.max(axis=0)).sum() / 3
-
-
-def test_mounting_term_grows_linearly_with_the_tolerance(hand_b_infos):
-    from optipose.search.mounting import mounting_variance
-
-    A, N = [hand_b_infos[0].A_turns, hand_b_infos[2].A_turns], [hand_b_infos[0].N_turns, hand_b_infos[2].N_turns]
-    assert np.array_equal(mounting_variance(A, N, 0.0, 0.0), np.zeros((len(A[0]) - 1, 3)))
-    one, two = mounting_variance(A, N, *MOUNTING), mounting_variance(A, N, 2 * MOUNTING[0], 2 * MOUNTING[1])
-    assert np.allclose(np.sqrt(two), 2 * np.sqrt(one), rtol=1e-9)  # standard deviation ∝ tolerance
-    # in the prediction: the pair's error grows with the tolerance, toward the term alone when it dominates
-    pair = [hand_b_infos[0], hand_b_infos[2]]
-    p75 = [predicted_stats(pair, mounting=(f * MOUNTING[0], f * MOUNTING[1])).p75_deg[2] for f in (0.0, 1.0, 4.0, 8.0)]
-    assert np.all(np.diff(np.array(p75), axis=0) >= 0) and np.all(p75[3] > p75[0])
-    assert np.allclose(p75[3] / p75[2], 2.0, rtol=0.15)
-
-
-def test_search_cache_keeps_the_mounting_term(tmp_path, hand_b_infos):
-    from optipose.io.search import load_cache, save_cache
-    from optipose.search.problem import Violation
-    from optipose.search.space import SPACE_VERSION
-
-    bare = SensorInfo(np.eye(6), 10, 5)  # an empty scan: no bias, no mounting term
-    cache = {
-        (0.1,) * 6: hand_b_infos[0],
-        (0.2,) * 6: hand_b_infos[2],
-        (0.3,) * 6: Violation("clearance", 1.5),
-        (0.4,) * 6: bare,
-    }
-    save_cache(tmp_path, cache, SPACE_VERSION)
-    loaded = load_cache(tmp_path, SPACE_VERSION)
-    for key in ((0.1,) * 6, (0.2,) * 6):
-        assert all(
-            np.array_equal(getattr(loaded[key], f), getattr(cache[key], f))
-            for f in ("H", "A", "G", "A_turns", "N_turns")
-        )
-    assert loaded[(0.4,) * 6].N_turns is None and loaded[(0.3,) * 6] == ("clearance", 1.5)
-    pair = [loaded[(0.1,) * 6], loaded[(0.2,) * 6]]
-    assert np.array_equal(
-        predicted_stats(pair, mounting=MOUNTING).p75_deg,
-        predicted_stats([hand_b_infos[0], hand_b_infos[2]], mounting=MOUNTING).p75_deg,
-    )
-    # a cache from before the mounting term is not reused: its poses would score without it
-    data = dict(np.load(tmp_path / "cache.npz"))
-    np.savez_compressed(tmp_path / "cache.npz", **{k: v for k, v in data.items() if k not in ("A_turns", "N_turns")})
-    assert load_cache(tmp_path, SPACE_VERSION) == {}
-
-
-def test_problem_band_carries_the_tolerance_only_when_mounted(part_b):
-    from dataclasses import replace as change
-
-    from optipose.search.config import SearchConfig
-    from optipose.search.problem import SurrogateProblem
-
-    part = part_b[0]
-    robust = load_objective("robust")
-    problem = SurrogateProblem(part, robust, SearchConfig())
-    assert problem.band["mounting"] == (robust.conditions.mounting_translation, robust.conditions.mounting_rotation)
-    plain = change(robust, conditions=change(robust.conditions, mounting_translation=0.0, mounting_rotation=0.0))
-    assert SurrogateProblem(part, plain, SearchConfig(), surrogate=problem.surrogate).band["mounting"] is None
+        m, q = _axis_stats(rotation_sigma(sum(hand_b_infos[i].H for i in c)), delta)
+        assert np.array_equal(stats.median_deg[s], np.rad2deg(m)) and np.array_equal(stats.p75_deg[s], np.rad2deg(q))
 
 
 def test_prefetching_poses_on_threads_fills_the_cache_as_scoring_them_one_by_one(part_b):
@@ -278,14 +187,13 @@ def test_prefetching_poses_on_threads_fills_the_cache_as_scoring_them_one_by_one
             feasible += 1
             np.testing.assert_array_equal(a.H, b.H)
             np.testing.assert_array_equal(a.G, b.G)
-            assert a.A_turns is None  # the paper objective has exact brackets: no bracket term computed
         else:
             assert (a.constraint, a.amount) == (b.constraint, b.amount)
     assert feasible >= 5
 
 
 def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
-    """Under the robust objective a pose costs ~0.1 s, and the screen's 4,096 do not fit in a sensor count's
+    """In the paper's cell a pose costs several nominal ones, and the screen's 4,096 do not fit in a sensor count's
     share of the clock: the screen computes its poses ahead in chunks and records each chunk, so when the
     clock ends it, what was computed is in the history (a first version computed them all ahead and
     recorded none: "no feasible layout in 0 evaluations")."""
@@ -295,8 +203,8 @@ def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
     from optipose.search.screen import screen
     from optipose.search.study import Stop, SurrogateStudy
 
-    config = config_from_budget("default", (1,), band=True)
-    study = SurrogateStudy(SurrogateProblem(part_b[0], load_objective("robust"), config))
+    config = config_from_budget("default", (1,))
+    study = SurrogateStudy(SurrogateProblem(part_b[0], load_objective("paper"), config))
     study.start_clock(4.0)
     with pytest.raises(Stop):
         screen(SubProblem(study, np.zeros(0)), config, 1, seed=0)
@@ -306,18 +214,12 @@ def test_a_screen_cut_short_by_the_clock_records_what_it_computed(part_b):
 
 def test_a_subset_met_before_is_looked_up_with_the_same_numbers():
     # the memo keyed by the sensors' keys, in order: a screen re-scores the placed sensors' subsets thousands
-    # of times; what it returns must be what computing them gives, bit for bit, under a band too
+    # of times; what it returns must be what computing them gives, bit for bit
     part = load_part("part_b")
-    objective = load_objective("robust")
-    band = objective.conditions
-    surrogate = Surrogate(
-        part,
-        voxel=objective.registration.voxel_size,
-        turns=np.deg2rad(np.array(TURNS[:3], float)),
-        noise_band=max(band.noise_scales),
-    )
+    objective = load_objective("paper").in_cell("ideal")
+    surrogate = Surrogate(part, voxel=objective.registration.voxel_size, turns=np.deg2rad(np.array(TURNS[:3], float)))
     infos = [surrogate.info(T) for T in part.layouts["hand"].poses]
-    kw = dict(noise_scales=band.noise_scales, mounting=(band.mounting_translation, band.mounting_rotation))
+    kw: dict = {}
     memo: dict = {}
     for order in ([0, 1], [0, 2], [0, 1, 2], [2, 0], [1]):
         chosen = [infos[i] for i in order]

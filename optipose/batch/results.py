@@ -1,16 +1,13 @@
 """A finished trial's per-axis results, read back from its folder as a report would read them.
 
-Evaluate and search folders go through :func:`optipose.io.load_result`; a robustness folder through
-its ``robustness.csv`` (the hand layout's robust choice over the band). The columns, in degrees:
+Evaluate and search folders go through :func:`optipose.io.load_result`. The columns, in degrees:
 
 - ``sensors_used`` (the choice's sensors), ``score_deg``, and per axis ``<axis>_median_deg``,
   ``<axis>_p75_deg``, ``<axis>_subset``: the trial's choice of k sensors (evaluate: the hand layout's
-  Table 1 row k; search: the found layout on the held-out validation; robustness: the hand layout's
-  robust choice, the worst over the band);
+  Table 1 row k; search: the found layout on the held-out validation);
 - search only: ``hand_score_deg``, ``hand_<axis>_median_deg``, ``hand_<axis>_p75_deg`` (the hand layout's
   k sensors on the same validation), ``ratio`` (hand score over found) and ``no_worse`` (found no worse
-  on every axis statistic); after a check under a band (``[search] band``: the ``default`` and ``thorough`` budgets),
-  ``band_ratio`` (the same at the worst over the band) and ``band_no_worse`` (no worse at every noise level).
+  on every axis statistic).
 """
 
 from __future__ import annotations
@@ -37,8 +34,6 @@ VERDICT_COLUMNS = [
 def trial_results(folder: str | Path, trial: TrialSpec) -> dict:
     """The per-axis columns of a complete trial's folder (see the module doc)."""
     folder = Path(folder)
-    if trial.task == "robustness":
-        return _robustness(folder, trial.sensors)
     from optipose.io import load_result
 
     result = load_result(folder)
@@ -51,14 +46,11 @@ def trial_results(folder: str | Path, trial: TrialSpec) -> dict:
         f"hand_{key}": value for key, value in _choice_columns(verdict.reference).items() if not key.endswith("subset")
     }
     baseline.pop("hand_sensors_used")
-    band = result.band_verdicts().get(trial.sensors)
-    checked = {} if band is None else {"band_ratio": band.ratio, "band_no_worse": bool(band.no_worse)}
     return {
         **_choice_columns(verdict.found),
         **baseline,
         "ratio": verdict.ratio,
         "no_worse": bool(verdict.no_worse),
-        **checked,
     }
 
 
@@ -69,24 +61,5 @@ def _choice_columns(choice) -> dict:
             f"{a.axis}_median_deg": float(np.rad2deg(a.median)),
             f"{a.axis}_p75_deg": float(np.rad2deg(a.p75)),
             f"{a.axis}_subset": a.label,
-        }
-    return out
-
-
-def _robustness(folder: Path, k: int) -> dict:
-    """The hand layout's robust choice of k sensors: the last condition of its rows (the robust statistic)."""
-    import pandas as pd
-
-    rows = pd.read_csv(folder / "robustness.csv")
-    rows = rows[(rows.layout == "hand") & (rows.k == k)]
-    if rows.empty:
-        raise ValueError(f"{folder}/robustness.csv has no row for the hand layout's k = {k}")
-    robust = rows[rows.condition == rows.condition.iloc[-1]]
-    out = {"sensors_used": str(robust.sensors.iloc[0]), "score_deg": float(robust.score_deg.iloc[0])}
-    for r in robust.itertuples(index=False):
-        out |= {
-            f"{r.axis}_median_deg": float(r.median_deg),
-            f"{r.axis}_p75_deg": float(r.p75_deg),
-            f"{r.axis}_subset": str(r.subset),
         }
     return out

@@ -7,8 +7,8 @@ A study file is TOML::
 
     [grid]                             # every combination of these is a trial
     parts = ["part_a", "parts/*.stl"]  # shipped names, part/mesh files or globs (relative to this file)
-    tasks = ["search"]                 # search | evaluate | robustness
-    objectives = ["paper"]             # shipped names or TOML paths (default: paper; robustness: robust)
+    tasks = ["search"]                 # search | evaluate
+    objectives = ["paper"]             # shipped names or TOML paths (default: paper)
     sensors = [1, 2, 3]                # k, the sensor count of each trial
     budgets = ["default"]              # search budgets (quick | default | thorough); other tasks have none
     seeds = [0]
@@ -35,8 +35,8 @@ from optipose.errors import ConfigError, read_toml
 
 __all__ = ["TASKS", "TrialSpec", "StudySpec", "load_study_spec", "study_from_table"]
 
-TASKS = ("search", "evaluate", "robustness")
-_DEFAULT_OBJECTIVE = {"search": "paper", "evaluate": "paper", "robustness": "robust"}
+TASKS = ("search", "evaluate")
+_DEFAULT_OBJECTIVE = {"search": "paper", "evaluate": "paper"}
 _TOP_KEYS = {"name", "description", "grid", "trials"}
 # axis in [grid] -> (key in [[trials]], element type, default values or None: required)
 _AXES = {
@@ -149,13 +149,23 @@ def _explicit(entry: dict, where: str, base: Path) -> list[TrialSpec]:
     return _combine(axes, where, base)
 
 
+def _check_task(task: str, where: str) -> None:
+    """A task name this version runs; the retired ``robustness`` task is one line saying what to use instead."""
+    if task == "robustness":
+        raise ConfigError(
+            f"{where}: task 'robustness' was retired with the band of conditions: evaluate the layouts in a "
+            "cell with ranges (an evaluate task per seed with a cell's objective, or optipose robustness PART --cell NAME)"
+        )
+    if task not in TASKS:
+        raise ConfigError(f"{where}: unknown task '{task}' (use {', '.join(TASKS)})")
+
+
 def _combine(axes: dict, where: str, base: Path) -> list[TrialSpec]:
     """Every combination of the axes; parts and objectives resolved, the budget only for searches."""
     from optipose.search.budgets import BUDGETS
 
     for task in axes["tasks"]:
-        if task not in TASKS:
-            raise ConfigError(f"{where}: unknown task '{task}' (use {', '.join(TASKS)})")
+        _check_task(task, where)
     for budget in axes["budgets"]:
         if budget not in BUDGETS:
             raise ConfigError(f"{where}: unknown budget '{budget}' (use {', '.join(BUDGETS)})")

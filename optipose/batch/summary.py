@@ -3,8 +3,7 @@
 :func:`summary_frame` groups the index by part, task, objective, budget and k; per group: how many
 trials, complete and failed, and over the complete ones the median and worst score and the median of
 each axis's median error (degrees); for searches also the median of hand over found and how many found
-layouts were no worse than the hand-placed ones on every axis, and (after a check under a band, the
-``default`` budget) how many stayed so at every noise level of the band (``band_no_worse``).
+layouts were no worse than the hand-placed ones on every axis.
 """
 
 from __future__ import annotations
@@ -53,8 +52,6 @@ def summary_frame(index: pd.DataFrame) -> pd.DataFrame:
                 "ratio_median": pd.to_numeric(done["ratio"], errors="coerce").median(),
                 "no_worse": f"{int(done['no_worse'].fillna(False).astype(bool).sum())}/{len(done)}",
             }
-        if "band_no_worse" in done and done["band_no_worse"].notna().any():  # the check under the band
-            row["band_no_worse"] = f"{int(done['band_no_worse'].fillna(False).astype(bool).sum())}/{len(done)}"
         rows.append(row)
     return pd.DataFrame(rows)
 

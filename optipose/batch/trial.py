@@ -145,28 +145,12 @@ def _search(trial: TrialSpec, folder: Path, jobs: int) -> None:
 
     part = load_part(trial.part)
     objective = load_objective(trial.objective)
-    config = config_from_budget(
-        trial.budget, (trial.sensors,), band=not objective.conditions.trivial, cell=not objective.cell.ideal
-    )
+    config = config_from_budget(trial.budget, (trial.sensors,), cell=not objective.cell.ideal)
     report = run(part, objective, config, trial.seed, SearchFolder(folder), trial.budget, jobs)
-    if report.outcome.interrupted or report.band_interrupted:  # the search kept a Ctrl-C to itself: the study stops
+    if report.outcome.interrupted:  # the search kept a Ctrl-C to itself: the study stops
         raise KeyboardInterrupt
     if not report.validated:
         raise RuntimeError("the search ended before its validation")
 
 
-def _robustness(trial: TrialSpec, folder: Path, jobs: int) -> None:
-    from optipose.evaluate.objective import load_objective
-    from optipose.evaluate.robust import evaluate_robust
-    from optipose.io.robustness import write_robustness
-    from optipose.model.part import load_part
-
-    part = load_part(trial.part)
-    layout = _hand(part)
-    _check_k(trial, layout)
-    objective = load_objective(trial.objective)
-    result = evaluate_robust(part, layout, objective, seed=trial.seed, jobs=jobs, quiet=True)
-    write_robustness(folder, part, objective, trial.seed, {"hand": result}, baseline="hand")
-
-
-TASK_RUNNERS = {"search": _search, "evaluate": _evaluate, "robustness": _robustness}
+TASK_RUNNERS = {"search": _search, "evaluate": _evaluate}

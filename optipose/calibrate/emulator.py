@@ -8,8 +8,7 @@ factors (all zero, then one group at a time), and then predicts the median and 7
 and axis for thousands of magnitude settings in seconds: a linear recombination of variances, then the surrogate's
 statistics of |δ + σ z| over its turns (:func:`~optipose.search.prediction.instance_stats`).
 
-What it leaves out, besides what the surrogate leaves out: a band's noise levels (the sensor's noise at its nominal
-σ) and the brackets' mounting term; the path's correlation length (the modes are built at its middle: a range of it
+What it leaves out, besides what the surrogate leaves out: the path's correlation length (the modes are built at its middle: a range of it
 is not emulated, :attr:`Emulator.fixed`).
 """
 
@@ -59,7 +58,6 @@ class Emulator:
             part,
             voxel=objective.registration.voxel_size,
             turns=protocol_turns(objective),
-            mounting=False,
             cell=CellSetup.of(cell, part),
         )
         infos = [surrogate.info(T) for T in layout.poses]

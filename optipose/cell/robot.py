@@ -15,8 +15,8 @@ The calibration leaves each sensor's pose off by a rigid error of its own (σ ``
 ``sensor_rotation`` per axis, in the sensor's frame) and every sensor off together by the error of the
 frame they are measured in (σ ``frame_translation``, ``frame_rotation``, about the part's rotation centre):
 one draw per cell instance (seed), the same for every scan of a run. A cell whose procedure zeroes it
-(``zeroed``) takes off what one master scan at the nominal orientation says the cell adds there, as the
-bracket conditions do (:meth:`optipose.evaluate.worker._Worker.zero`).
+(``zeroed``) takes off what one master scan at the nominal orientation says the cell adds there
+(:meth:`optipose.evaluate.worker._Worker.zero`).
 """
 
 from __future__ import annotations

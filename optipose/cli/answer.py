@@ -1,5 +1,5 @@
 """What ``optipose search`` prints at its end: the verdict first, then found vs. the baseline per axis, the
-subsets each axis uses, the band, the surrogate's strategies and the found poses (:func:`print_answer`). The
+subsets each axis uses, the surrogate's strategies and the found poses (:func:`print_answer`). The
 lines are :mod:`optipose.verdict.words`'; every table fits an 80-column terminal.
 """
 
@@ -14,9 +14,9 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
     """The verdict first, one line per k (:func:`optipose.verdict.words.verdict_headline`, or with confidence
     :func:`~optipose.verdict.words.confident_line`), then the details: found vs. the
     baseline per axis on the validation protocol (the records ``comparison.csv`` was written from, which
-    :func:`optipose.io.load_result` reads back), the subsets each axis uses, the band, the full verdict
+    :func:`optipose.io.load_result` reads back), the subsets each axis uses, the full verdict
     lines, the surrogate's strategies and the found poses. Every table fits an 80-column terminal.
-    ``unchecked``: the answer was never checked under a band (a nominal search without the check); ``ideal``:
+    ``unchecked``: the answer holds in the ideal cell only; ``ideal``:
     the search ran in the ideal cell (its verdicts say so); ``time_limit``: the user's clock on the search (0: none),
     whose cuts the answer names."""
     from optipose.model.baseline import baseline, baseline_label
@@ -26,14 +26,11 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
     label = baseline_label(baseline(part))
     if report.validated:
         verdicts = report.validation.verdicts()
-        band = report.band.by_k() if report.band is not None else {}
         confident = report.confident.by_k
         most = config_from_budget("thorough", tuple(report.layouts), cell=not ideal).verdict.draws
         for v in confident.values() or verdicts:
             console.print(
-                words.confident_line(v)
-                if confident
-                else words.verdict_headline(v, label, band.get(v.k), checked=not unchecked),
+                words.confident_line(v) if confident else words.verdict_headline(v, label, checked=not unchecked),
                 highlight=False,
             )
             if confident and (why := words.open_line(v, most)):  # wrapped by words, not where the terminal ends
@@ -64,20 +61,8 @@ def print_answer(console, report, part, unchecked: bool = False, ideal: bool = T
             )
         console.print(_validation_table(report.validation, part, label))
         console.print(_subsets_table(report.validation, label))
-        if any(v.ratios() for v in verdicts):
-            console.print(_band_table(report.validation, part, label))
-        for line in (
-            lines[: len(verdicts)] if band or not confident else ()
-        ):  # the validation draw's own lines, before the band's check
+        for line in lines[: len(verdicts)] if not confident else ():  # the validation draw's own lines
             console.print(line, highlight=False)
-        if band:
-            console.print(_band_table(report.band, part, label, "under the band"))
-            for v in band.values():
-                console.print(f"under the band: {words.verdict_line(v, label)}", highlight=False)
-            nominal = {v.k: v.no_worse for v in verdicts}
-            for v in band.values():
-                if advice := words.band_advice(v, label, nominal.get(v.k, False)):
-                    console.print(advice, highlight=False)
     if line := words.clock_line(report.clock_cut, time_limit):
         console.print(textwrap.fill(line, 80), style="yellow", highlight=False, soft_wrap=True)
     console.print(_strategies_table(report.outcome, label))
@@ -130,9 +115,8 @@ def _validation_table(validation, part, label: str = "hand"):
     from optipose.verdict.words import mdeg_compact
 
     protocol = "full protocol" if validation.protocol == "full" else "REDUCED protocol (14 scans)"
-    band = ", worst over the band" if any(c.under for c in validation.found.values()) else ""
     table = _narrow_table(
-        f"{part.name}: found vs. {label}, {protocol}, held-out seed{band}; mdeg median/p75",
+        f"{part.name}: found vs. {label}, {protocol}, held-out seed; mdeg median/p75",
         [
             ("k", "right"),
             ("layout", "left"),
@@ -165,18 +149,6 @@ def _subsets_table(validation, label: str = "hand"):
         for name, choices in (("found", validation.found), (label, validation.baseline)):
             if k in choices:
                 table.add_row(str(k), _short(name), *(a.label for a in choices[k].axes))
-    return table
-
-
-def _band_table(validation, part, label: str = "hand", title: str = "per condition"):
-    """Per k and noise level of the band: baseline / found in sum, and whether found is no worse on every axis."""
-    verdicts = [v for v in validation.verdicts() if v.levels()]
-    table = _narrow_table(
-        f"{part.name}: {label} / found {title} (* found worse on some axis)",
-        [("condition", "left")] + [(f"k={v.k}", "right") for v in verdicts],
-    )
-    for row in zip(*(v.levels() for v in verdicts)):
-        table.add_row(row[0][0], *(f"{ratio:.2f}{'' if no_worse else '*'}" for _, ratio, no_worse in row))
     return table
 
 

@@ -21,7 +21,6 @@ from optipose.cli.options import (
     Units,
     check_output,
     friendly_errors,
-    warn_if_band,
 )
 from optipose.cli.progress import make_console, status
 from optipose.cli.report import NoReport
@@ -148,7 +147,6 @@ def _simulated(the_part, layout: Path | None, objective: str, cell: str | None, 
     else:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout; give one with --layout")
     the_objective = load_objective(objective).in_cell(cell)
-    warn_if_band(the_objective, "evaluate")
     console = make_console(stderr=True)
     with status(
         console, f"evaluating {the_part.name} / {the_layout.name} under '{the_objective.name}' ({jobs} job(s))"
@@ -159,11 +157,10 @@ def _simulated(the_part, layout: Path | None, objective: str, cell: str | None, 
 
 def _from_scans(the_part, scans: Path, objective: str | None, jobs: int):
     """The evaluation of the scan folder ``scans`` (:func:`optipose.evaluate.recorded.evaluate_scans`)."""
-    from optipose.evaluate.recorded import evaluate_scans, scan_objective
+    from optipose.evaluate.recorded import evaluate_scans
     from optipose.scan.folder import read_manifest
 
     manifest = read_manifest(scans)
-    warn_if_band(scan_objective(manifest, objective), "evaluate")
     console = make_console(stderr=True)
     with status(console, f"evaluating the scans in {scans} ({len(manifest.scans)} scans, {jobs} job(s))"):
         return evaluate_scans(the_part, scans, objective, jobs=jobs)[0]

@@ -97,16 +97,6 @@ def check_output(path: Path | None, file: bool = False, what: str = "--out") -> 
     os.unlink(probe)
 
 
-def warn_if_band(objective, command: str) -> None:
-    """One line on stderr when an objective's band of conditions would be ignored by ``command``."""
-    if not objective.conditions.trivial:
-        typer.echo(
-            f"optipose: warning: {command} runs the nominal cell only; objective '{objective.name}' has a band "
-            "of conditions: use `optipose robustness` for them",
-            err=True,
-        )
-
-
 # -- options and arguments shared by several commands ----------------------------------------------------
 # Optional so a command may give PART a default (search with --resume, counts over every part); without
 # a default it is required.

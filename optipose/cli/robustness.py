@@ -1,15 +1,11 @@
-"""``optipose robustness``: the hand-placed and given layouts side by side under every condition of a band.
+"""``optipose robustness``: the hand-placed and given layouts in cell instances a search never saw.
 
-Each layout is evaluated under every condition of the objective's ``[conditions]`` (default objective:
-``robust``: noise at 1, 3 and 5 times the preset's, brackets off by up to 0.2 mm and 0.1°); per layout and
-condition the table shows its robust choice of all its sensors (at most as many as the hand layout has)
-against the hand layout's robust choice of as many, each axis on a fixed subset, and
-a verdict on the robust statistic (the worst over the conditions) says whether to keep the hand sensors.
-
-When the band has a mounting tolerance (``--brackets``, the default then), each layout's bracket
-sensitivity follows (:mod:`optipose.evaluate.sensitivity`, on the reduced protocol at the preset's noise):
-how far each axis spreads with the brackets off, the bias an un-zeroed cell sees, and which sensor's
-bracket to make precise.
+A cell with ranges says what is not known about a user's cell (docs/cell.md); a found layout is worth buying where
+it stays better than the hand one across what the ranges allow. Every layout is evaluated, as ``optipose evaluate``
+does, in each instance (:mod:`optipose.evaluate.instances`): held-out draws of ``--cell``'s ranges, the ranges at
+their low and at their high ends, and the same for each cell of ``--cells``. The table gives per instance and k the
+hand layout's score over the layout's (the paper's score, each layout choosing its subsets per axis in that
+instance) and whether the layout holds there (at least 1); the folder keeps every figure (``robustness.csv``).
 """
 
 from __future__ import annotations
@@ -43,13 +39,18 @@ Layouts = Annotated[
         help="A layout TOML to compare with the hand-placed one (repeatable), e.g. a search's layouts/found_k2.toml.",
     ),
 ]
-Brackets = Annotated[
-    Optional[bool],
+Cells = Annotated[
+    Optional[str],
     typer.Option(
-        "--brackets/--no-brackets",
-        help="Each layout's bracket sensitivity (reduced protocol, noise x1): spread, "
-        "un-zeroed bias, the sensor to mount precisely. Default: on when the objective has a mounting tolerance.",
+        "--cells",
+        help="Other cells to check in besides --cell, separated by commas (names in cells/, NAME:zeroed or "
+        "TOML paths): their held-out draws and ranges' ends.",
     ),
+]
+Draws = Annotated[int, typer.Option("--draws", min=1, help="Held-out draws (cell instances) of each cell's ranges.")]
+Ends = Annotated[
+    bool,
+    typer.Option("--ends/--no-ends", help="Check in each cell with ranges at its low ends and at its high ends too."),
 ]
 
 
@@ -57,46 +58,51 @@ Brackets = Annotated[
 def robustness(
     part: Part,
     layout: Layouts = None,
-    objective: Objective = "robust",
+    objective: Objective = "paper",
     cell: CellOption = None,
+    cells: Cells = None,
+    draws: Draws = 3,
+    ends: Ends = True,
     units: Units = "auto",
     out: ResultFolder = None,
     jobs: Jobs = 1,
     seed: Seed = 0,
-    brackets: Brackets = None,
     no_report: NoReport = False,
 ) -> None:
-    """Compare layouts with the hand one under a band of conditions.
+    """Check layouts against the hand one in cell instances a search never saw.
 
-    Evaluate the hand-placed and the given layouts under every condition of the objective's band (noise
-    levels, bracket tolerances) and say, per layout, whether it stays no worse than the hand one."""
+    Evaluate the hand-placed and the given layouts in held-out draws of the cell's ranges, at the ranges' ends and
+    in the other cells given, and say per instance whether each layout holds (hand / found of the score >= 1)."""
+    others = [c.strip() for c in (cells or "").split(",") if c.strip()]
     robustness_command(
-        part, layout or [], objective, units, out, jobs or 1, seed, brackets, report=not no_report, cell=cell
+        part, layout or [], objective, units, out, jobs or 1, seed, not no_report, cell, others, draws, ends
     )
 
 
 def robustness_command(
     part: str,
     layouts: list[Path],
-    objective: str = "robust",
+    objective: str = "paper",
     units: str = "auto",
     out: Path | None = None,
     jobs: int = 1,
     seed: int = 0,
-    brackets: bool | None = None,
     report: bool = True,
     cell: str | None = None,
+    cells: list[str] = (),
+    draws: int = 3,
+    ends: bool = True,
 ) -> Path:
-    """Run the evaluations, print the table and the verdicts, save the result folder; returns the folder."""
+    """Run the evaluations, print the table and where each layout holds, save the result folder; returns it."""
     from rich.console import Console
 
+    from optipose.evaluate.instances import check, instances
     from optipose.evaluate.objective import load_objective
-    from optipose.evaluate.robust import evaluate_robust
     from optipose.io.folders import RESULTS_DIR, make_result_dir
-    from optipose.io.robustness import write_robustness
+    from optipose.io.robustness import read_robustness, write_robustness
+    from optipose.model.baseline import baseline
     from optipose.model.collision import check_sensors_outside
     from optipose.model.layout import load_layout
-    from optipose.model.baseline import baseline
     from optipose.model.part import load_part
 
     check_output(out or RESULTS_DIR, what="--out" if out else "result folder")
@@ -105,33 +111,29 @@ def robustness_command(
     if reference is None:
         raise ConfigError(f"part '{the_part.name}' has no hand-placed layout to compare with")
     the_objective = load_objective(objective).in_cell(cell)
-    if brackets is None:
-        brackets = the_objective.conditions.mounted
-    elif brackets and not the_objective.conditions.mounted:
-        raise ConfigError(
-            f"--brackets: objective '{the_objective.name}' has no mounting tolerance (mounting_translation_mm, "
-            "mounting_rotation_deg in [conditions])"
-        )
-    given = [load_layout(p) for p in layouts]
-    for lay in given:
+    names = list(dict.fromkeys([cell or the_objective.cell.name, *cells]))
+    checked = instances(names, seed, draws, ends)  # a bad cell name fails here, before any work
+    given = {}
+    for path in layouts:
+        lay = load_layout(path)
         check_sensors_outside(the_part, lay)
+        given[lay.name if lay.name not in given and lay.name != "hand" else f"{lay.name}-{len(given) + 1}"] = lay
     console = make_console(stderr=True)
-    results = {}
-    for i, lay in enumerate([reference, *given]):
-        name = (
-            "hand" if i == 0 else (lay.name if lay.name not in results else f"{lay.name}-{len(results)}")
-        )  # two files of one name
-        with status(console, f"{the_part.name}: {name} under {len(_conditions(the_objective))} conditions"):
-            results[name] = evaluate_robust(the_part, lay, the_objective, seed=seed, jobs=jobs, quiet=True)
+    rows = []
+    for i, inst in enumerate(checked):
+        with status(
+            console,
+            f"{the_part.name}: {len(given) + 1} layouts in {inst.cell}, {inst.label} ({i + 1} of {len(checked)})",
+        ):
+            rows += check(the_part, reference, given, the_objective, [inst], jobs)
     folder = make_result_dir(the_part.name, "robustness", out)
-    rows = write_robustness(
-        folder, the_part, the_objective, seed, results, baseline="hand", sources=[str(p) for p in layouts]
+    write_robustness(
+        folder, the_part, the_objective, seed, {"hand": reference, **given}, checked, rows, [str(p) for p in layouts]
     )
-    Console().print(_table(rows, the_part.name))
-    for line in _verdicts(results):
-        Console().print(line)
-    if brackets:
-        _brackets(the_part, the_objective, seed, jobs, results, folder, console)
+    result = read_robustness(folder)
+    Console().print(_table(result, the_part.name))
+    for line in _holds(result):
+        Console().print(line, highlight=False)
     if report:
         from optipose.cli.report import write_report_after
 
@@ -140,158 +142,38 @@ def robustness_command(
     return folder
 
 
-def _brackets(part, objective, seed: int, jobs: int, results: dict, folder: Path, console) -> None:
-    """Each layout's bracket sensitivity (its robust choice per k), printed and saved beside the rest."""
-    from rich.console import Console
-
-    from optipose.evaluate.sensitivity import BracketEvaluator
-    from optipose.io.robustness import write_brackets
-
-    found = {}
-    with BracketEvaluator(part, objective, seed=seed, jobs=jobs) as evaluator:
-        for name, result in results.items():
-            n = len(result.layout)
-            with status(
-                console,
-                f"{part.name}: {name}'s brackets ({1 + objective.conditions.mounting_draws * (3 + n)} evaluations)",
-            ):
-                found[name] = evaluator(result.layout, result.table)
-    write_brackets(folder, found)
-    for renderable in _bracket_tables(found, part.name):
-        Console().print(renderable)
-
-
-def _conditions(objective):
-    from optipose.evaluate.conditions import conditions
-
-    return conditions(objective.conditions)
-
-
-def _verdicts(results: dict) -> list[str]:
-    """Per given layout, the verdict on the robust statistic against the hand layout's choice of as many sensors."""
-    from optipose.model.baseline import baseline_label
-    from optipose.verdict.compare import Verdict
-    from optipose.verdict.words import verdict_line
-
-    baseline, lines = results["hand"], []
-    label = baseline_label(baseline.layout)  # "conventional" for a part without a hand-placed layout
-    for name, result in results.items():
-        if name == "hand":
-            continue
-        k = min(len(result.layout), len(baseline.table))
-        line = verdict_line(Verdict(k, result.table[k - 1], baseline.table[k - 1]), label)
-        lines.append(f"{name} (worst over the band): {line}")
-    return lines
-
-
-def _table(rows, part_name: str):
-    """One row per layout and condition: per axis median/p75 (mdeg), the score, and hand / this; narrow
-    enough for an 80-column terminal (conditions as ``x3 m1``: noise times 3, mounting draw 1)."""
-    from rich import box
-    from rich.table import Table
-
-    table = Table(
-        title=f"{part_name}: under every condition, mdeg median/p75 (x: noise scale, m: bracket draw)",
-        box=box.SIMPLE_HEAD,
-        pad_edge=False,
-        collapse_padding=True,
-    )
-    for col in ("layout", "cond.", "roll", "pitch", "yaw", "score", "hand/it"):
-        table.add_column(col, justify="left" if col in ("layout", "cond.") else "right", no_wrap=True)
-    for (layout, k, condition), group in rows.groupby(["layout", "k", "condition"], sort=False):
-        cells = {r.axis: f"{1e3 * r.median_deg:.2f}/{1e3 * r.p75_deg:.2f}" for r in group.itertuples()}
-        first = group.iloc[0]
-        ratio = "" if layout == "hand" else f"{first['hand_score_deg'] / first['score_deg']:.2f}x"
-        short = condition.replace("noise x", "x").replace(", mounting draw ", " m")
-        name = f"{layout} k{k}" if layout == "hand" else layout
-        table.add_row(
-            name, short, cells["roll"], cells["pitch"], cells["yaw"], f"{1e3 * first['score_deg']:.2f}", ratio
-        )
-    return table
-
-
-def _bracket_tables(found: dict, part_name: str) -> list:
-    """Per layout (its choice of all its sensors): each axis's spread with perfect and off brackets (mdeg
-    median/p75, zeroed) and the mean error of an un-zeroed cell per draw and its worst magnitude (mdeg; µm
-    for x, y, z), narrow enough for an 80-column terminal; then each
-    sensor's score change with its bracket alone off, and per layout the bracket to make precise."""
-    import numpy as np
-    from rich import box
-    from rich.table import Table
-
-    first = next(iter(found.values()))
-    protocol = f"{'reduced protocol, ' if first.reduced else ''}{first.n_scans} scans"
-    axes = Table(
-        title=f"{part_name}: brackets off by ±{1e3 * first.translation:g} mm, ±{np.rad2deg(first.rotation):g}° "
-        f"({len(first.draws)} draw{'s' if len(first.draws) > 1 else ''}, noise x1, {protocol}); mdeg, µm for x y z",
-        box=box.SIMPLE_HEAD,
-        pad_edge=False,
-        collapse_padding=True,
-    )
-    for col in ("layout", "axis", "subset", "perfect", "off", "bias per draw", "worst"):
-        axes.add_column(col, justify="left" if col in ("layout", "axis", "subset") else "right", no_wrap=True)
-    sensors = Table(
-        title="one bracket off at a time: change of each axis's median+p75 and of the score, mdeg (worst draw)",
-        box=box.SIMPLE_HEAD,
-        pad_edge=False,
-        collapse_padding=True,
-    )
-    for col in ("layout", "sensor", "roll", "pitch", "yaw", "score", "rank"):
-        sensors.add_column(col, justify="left" if col in ("layout", "sensor") else "right", no_wrap=True)
-    lines = []
-    for name, sens in found.items():
-        k = len(sens.names)
-        label = f"{name} k{k}" if name == "hand" else name
-        for i, row in enumerate(_axis_rows(sens, k)):
-            axes.add_row(label if i == 0 else "", *row)
-        ranking = sens.ranking(k)
-        for rank, s in enumerate(ranking, start=1):
-            sensors.add_row(
-                label if rank == 1 else "",
-                s.name,
-                *(_mdeg(c, signed=True) for c in s.change),
-                _mdeg(s.score_change, signed=True),
-                str(rank),
-            )
-        best = ranking[0]
+def _holds(result) -> list[str]:
+    """One line per given layout and k: in how many instances it holds, and its weakest one."""
+    ratios, lines = result.ratios(), []
+    for r in result.holds().itertuples(index=False):
+        mine = ratios[(ratios.layout == r.layout) & (ratios.k == r.k)]
+        weakest = mine.loc[mine.ratio.idxmin()]
+        every = f"in {'every one' if r.held == r.instances else r.held} of the {r.instances}"
         lines.append(
-            f"{label}: make {best.name}'s bracket precise (score {_mdeg(best.score_change, signed=True)} mdeg with it alone off)"
+            f"{r.layout} k={r.k}: holds {every} cell instances checked (hand / found {weakest.ratio:.3f}x at "
+            f"its weakest: {weakest.cell}, {weakest.instance})"
         )
-    return [axes, sensors, *lines]
+    return lines or ["only the hand layout was given: nothing to compare (give --layout FILE)"]
 
 
-def _axis_rows(sens, k: int) -> list[tuple[str, ...]]:
-    """The cells of the axes table for the choice of k sensors: rotations in mdeg, translations in µm."""
-    worst = sens.worst_bias(k)
-    spread = {s.axis: s for s in sens.spread if s.k == k}
-    rows = []
-    for axis in dict.fromkeys(b.axis for b in sens.bias):
-        biases = [b for b in sens.bias if b.k == k and b.axis == axis]
-        rotation = axis in spread
-        value = _mdeg if rotation else (lambda v, signed=False: f"{1e6 * v:+.1f}" if signed else f"{1e6 * v:.1f}")
-        if rotation:
-            s = spread[axis]
-            perfect, off = (
-                f"{_mdeg(s.nominal_median)}/{_mdeg(s.nominal_p75)}",
-                f"{_mdeg(s.mounted_median)}/{_mdeg(s.mounted_p75)}",
-            )
-        else:
-            perfect = off = ""
-        rows.append(
-            (
-                axis,
-                biases[0].subset or "-",
-                perfect,
-                off,
-                " ".join(value(b.bias, signed=True) for b in biases),
-                value(worst[axis]),
-            )
-        )
-    return rows
+def _table(result, part_name: str):
+    """One row per cell instance: per given layout and k, hand / layout of the score and whether it holds."""
+    from rich import box
+    from rich.table import Table
 
-
-def _mdeg(rad: float, signed: bool = False) -> str:
-    """A rotation's cell: millidegrees to two places, ``n/a`` where not finite."""
-    from optipose.verdict.words import mdeg_text
-
-    return mdeg_text(rad, 2, signed, missing="n/a")
+    ratios = result.ratios()
+    columns = list(dict.fromkeys(zip(ratios.layout, ratios.k)))
+    table = Table(
+        title=f"{part_name}: hand / found of the score per cell instance (>= 1: the found layout holds)",
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        collapse_padding=True,
+    )
+    table.add_column("cell, instance")
+    for name, k in columns:
+        table.add_column(f"{name} k={k}", justify="right")
+    for (cell, instance), group in ratios.groupby(["cell", "instance"], sort=False):
+        by = {(r.layout, r.k): r for r in group.itertuples(index=False)}
+        cells = [f"{by[c].ratio:.3f}x {'holds' if by[c].holds else '[red]no[/]'}" if c in by else "-" for c in columns]
+        table.add_row(f"{cell}, {instance}", *cells)
+    return table

@@ -41,7 +41,7 @@ def search(
     budget: Annotated[
         str,
         typer.Option(
-            help="quick (a first look), default (the search in the objective's cell, the paper's by default, its verdict raced on draws of the cell; in the ideal cell then checked under the band too) or thorough."
+            help="quick (a first look), default (the search in the objective's cell, the paper's by default, its verdict raced on draws of the cell) or thorough."
         ),
     ] = "default",
     objective: Objective = "paper",
@@ -134,7 +134,6 @@ def search_command(
             budget,
             _parse_sensors(sensors),
             _overrides(config),
-            band=not the_objective.conditions.trivial,
             cell=not the_objective.cell.ideal,
         )
     if max_time:  # the user's clock on the whole search (a resumed search takes it anew)
@@ -157,17 +156,16 @@ def search_command(
         )
         raise typer.Exit(EXIT_INTERRUPTED) from None
     pictures = _draw_layouts(folder, the_part, searched.layouts, jobs) if searched.validated else None
-    # a nominal search that did not check its answer under a band (quick, or `band = ""`) says so: its "better"
-    # holds in the simulation's ideal cell only, which is not yet a reason to buy
-    unchecked = (
-        the_objective.conditions.trivial
-        and the_objective.cell.ideal
-        and searched.band is None
-        and not searched.band_interrupted
-    )
+    # a search in the ideal cell says so: its "better" holds in the simulation's ideal cell only, which is not yet a
+    # reason to buy (a cell with ranges, --cell cobot etc., says what a real cell does not know)
+    unchecked = the_objective.cell.ideal
     print_answer(
         Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal, time_limit=search_config.time_limit
     )
+    if cell is None and searched.validated and not the_objective.cell.ideal and not the_objective.cell.ranges:
+        from optipose.verdict.words import cell_advice
+
+        Console().print(cell_advice(the_objective.cell.name), style="yellow", highlight=False)
     ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:
         console.print(
@@ -181,13 +179,6 @@ def search_command(
         write_report_after(folder, console, ready)
     if ready:
         ready()
-    if searched.band_interrupted:  # the validation above is complete; only its check under the band is missing
-        console.print(
-            f"[yellow]interrupted[/] during the check under the band: the verdicts above hold for the nominal cell "
-            f"only (results in {folder}); check them with `optipose robustness {part} --layout "
-            f"{folder}/layouts/found_k{max(searched.layouts)}.toml`, or run the whole search again"
-        )
-        raise typer.Exit(EXIT_INTERRUPTED)
     console.print(f"results: {folder}")
     return folder
 
@@ -220,12 +211,12 @@ def _settings(saved):
     """The settings of a config.toml (``saved``, a RunConfig); KeyError, TypeError, ValueError or
     ConfigError where this version cannot take them."""
     from optipose.evaluate.objective import objective_from_table
-    from optipose.search.config import SearchConfig, search_preset, unknown_keys
+    from optipose.search.config import SearchConfig, saved_table, search_preset, unknown_keys
 
     part = _needed(saved.part_source, "part" if saved.part_name is None else "source") or _needed(
         saved.part_name, "name"
     )
-    cfg = _needed(saved.search, "search")  # sectioned, or flat as folders written before the sections have it
+    cfg = saved_table(_needed(saved.search, "search"))  # sectioned, or flat as folders written before the sections
     unknown = unknown_keys(cfg)
     if unknown:  # a setting this version no longer has
         raise ConfigError(f"unknown search setting(s) {', '.join(unknown)}")

@@ -12,7 +12,7 @@ costs ``UNOBSERVABLE_PENALTY`` instead, and says why (:attr:`AxisChoice.reason`)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from itertools import combinations
 
 import numpy as np
@@ -28,7 +28,7 @@ __all__ = [
     "Choice",
     "best_choices",
     "choose",
-    "restated",
+    "choice_of",
     "stats_by_key",
     "MAX_FAILED_FRACTION",
     "UNOBSERVABLE_PENALTY",
@@ -92,8 +92,6 @@ class Choice:
     """The best k sensors and, per axis, the subset of them to use.
 
     sensors : the k sensor indices in the layout; name : them for display, e.g. "S1S3"; score : rad.
-    under : under a band of conditions (:mod:`optipose.evaluate.robust`), the same choice restated under
-        each condition, ``((label, Choice), …)``; empty otherwise.
     """
 
     k: int
@@ -101,7 +99,6 @@ class Choice:
     name: str
     axes: tuple[AxisChoice, ...]
     score: float
-    under: tuple = field(default=(), repr=False, compare=False)
 
     @property
     def used(self) -> tuple[int, ...]:
@@ -163,19 +160,13 @@ def choose(
     return Choice(len(sensors), tuple(sensors), subset_name(sensors, names), tuple(axes), float(score))
 
 
-def restated(choice: Choice, by_key: dict, cfg: StatisticConfig) -> Choice:
-    """The same choice (sensors and each axis's subset, fixed) with the statistics of another evaluation of
-    the same layout, e.g. under another condition; an axis it left unobservable stays so."""
-    axes, score = [], 0.0
-    for a, weight in zip(choice.axes, cfg.weights):
-        if not a.observable:
-            axes.append(a)
-            score += weight * UNOBSERVABLE_PENALTY * (cfg.median_weight + cfg.p75_weight)
-            continue
-        row = by_key[(a.name, a.axis)]
-        axes.append(AxisChoice(a.axis, a.subset, a.name, row.median, row.p75))
-        score += weight * (cfg.median_weight * row.median + cfg.p75_weight * row.p75)
-    return Choice(choice.k, choice.sensors, choice.name, tuple(axes), float(score))
+def choice_of(result, sensors: tuple[int, ...]) -> Choice:
+    """The choice of exactly these sensors of an evaluated layout (an ``EvaluationResult``: each axis its best
+    subset of them). The sensors are a set: in any order (a found pair can sit inside the found triple in another
+    order)."""
+    sensors = tuple(sorted(sensors))
+    by_key = stats_by_key(result.stats)
+    return choose(sensors, result.layout.names, by_key, result.objective.statistic, result.n_scans)
 
 
 def _eligible(row, n_scans: int) -> bool:

@@ -26,17 +26,16 @@ import pandas as pd
 
 from optipose.parallel import shared
 from optipose.cell.scans import CellSetup
-from optipose.evaluate.conditions import Condition, by_draw
 from optipose.evaluate.assignment import Choice, best_choices
 from optipose.parallel.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
-from optipose.evaluate.worker import WorkerSetup, record_chunk, run_levels
+from optipose.evaluate.worker import WorkerSetup, record_chunk, run_chunk
 from optipose.model.layout import Layout, SensorPose
 from optipose.scan.scanner import registered_motion
 
-__all__ = ["Evaluator", "EvaluatorWrapper", "EvaluationResult", "evaluate", "log_failures"]
+__all__ = ["Evaluator", "EvaluationResult", "evaluate", "log_failures"]
 
 log = logging.getLogger(__name__)
 
@@ -112,8 +111,6 @@ class Evaluator:
     executor : where the orientations run (:mod:`optipose.parallel.executors`); default
         ``make_executor(jobs)``. An executor given here is the caller's to close; one made from
         ``jobs`` is closed with the evaluator.
-    condition : the noise scale and bracket errors to scan under (:mod:`optipose.evaluate.conditions`);
-        default the nominal one, the objective's own numbers.
     scans : evaluate this many of the protocol's scans, drawn by the seed (0: all; :meth:`Perturbations.sample`).
     reference_dir : a folder of the CAD-surface reference already on this machine (:mod:`optipose.parallel.shared`),
         which the workers map instead of building it (a search's, for the hand layout's processes).
@@ -127,7 +124,6 @@ class Evaluator:
         jobs: int = 1,
         quiet: bool = False,
         executor: Executor | None = None,
-        condition: Condition | None = None,
         scans: int = 0,
         reference_dir: str | None = None,
     ):
@@ -154,7 +150,6 @@ class Evaluator:
             seed=self.seed,
             threads=None if self.jobs == 1 else 1,
             occluders=tuple(getattr(part, "occluders", ())),
-            condition=condition or Condition(),
             column_stride=self.objective.scan.column_stride,
             cell=None if self.objective.cell.ideal else CellSetup.of(self.objective.cell, part),
         )
@@ -183,36 +178,17 @@ class Evaluator:
         p = self.perturbations
         return [(i, p.rpy[i], p.offset[i], int(p.seeds[i]), str(p.label[i])) for i in range(len(p))]
 
-    def __call__(
-        self, layout: Layout | list[np.ndarray], condition: Condition | None = None, subsets=None
-    ) -> EvaluationResult:
-        """Evaluate a layout (or a list of 4×4 ``T_O_S``, named S1, S2, …), under ``condition`` when given
-        (default: the evaluator's); the workers keep their scanners and reference across conditions.
-        ``subsets``: register only these sensor subsets (tuples of indices; default every one): the result's
-        table then chooses among them alone (a verdict's draw, which needs only the subsets its choices use)."""
-        return self.under(layout, [condition or self.setup.condition], subsets)[0]
+    def __call__(self, layout: Layout | list[np.ndarray], subsets=None) -> EvaluationResult:
+        """Evaluate a layout (or a list of 4×4 ``T_O_S``, named S1, S2, …). ``subsets``: register only these
+        sensor subsets (tuples of indices; default every one): the result's table then chooses among them alone
+        (a verdict's draw, which needs only the subsets its choices use)."""
+        return self.result(layout, [self.raw(layout, subsets=subsets)])
 
-    def under(
-        self, layout: Layout | list[np.ndarray], conditions: list[Condition], subsets=None
-    ) -> list[EvaluationResult]:
-        """One evaluation of ``layout`` per condition, in their order. Conditions that differ only in their
-        noise scale (one bracket draw at several noise levels) are scanned together: each orientation is
-        cast once for all of them (:func:`optipose.evaluate.worker.run_levels`), and each result is the one
-        ``self(layout, condition)`` gives."""
-        layout = _as_layout(layout)
-        return [self.result(layout, [raw]) for raw in self.raw(layout, conditions, subsets=subsets)]
-
-    def raw(
-        self,
-        layout: Layout | list[np.ndarray],
-        conditions: list[Condition],
-        share: tuple[int, int] = (0, 1),
-        subsets=None,
-    ) -> list[tuple]:
-        """What :meth:`under` makes its results of, per condition in their order: the workers' outputs and
-        the wall time (s), of the orientations ``share[0]``, ``share[0] + share[1]``, … only. The shares of
-        several calls (other processes') make one result together (:meth:`result`), the one ``under`` gives:
-        each scan's noise comes from the seed and its index."""
+    def raw(self, layout: Layout | list[np.ndarray], share: tuple[int, int] = (0, 1), subsets=None) -> tuple:
+        """What ``self(layout)`` makes its result of: the workers' outputs and the wall time (s), of the
+        orientations ``share[0]``, ``share[0] + share[1]``, … only. The shares of several calls (other
+        processes') make one result together (:meth:`result`), the one ``self(layout)`` gives: each scan's
+        noise comes from the seed and its index."""
         layout = _as_layout(layout)
         if subsets is not None:
             n = len(layout)
@@ -221,18 +197,11 @@ class Evaluator:
                 raise ValueError(f"subsets: non-empty tuples of sensor indices 0..{n - 1}, got {subsets}")
         first, every = share
         tasks = self.tasks()[first::every]
-        out = {}
-        for group in by_draw(conditions):
-            t0 = time.perf_counter()
-            levels = tuple(dict.fromkeys(c.noise_scale for c in group))
-            setup = replace(self.setup, condition=group[0])
-            outputs = self.executor.map(
-                functools.partial(run_levels, setup, layout, levels=levels, subsets=subsets), _chunks(tasks, self.jobs)
-            )
-            wall = (time.perf_counter() - t0) / len(levels)
-            for n, level in enumerate(levels):
-                out[replace(group[0], noise_scale=level)] = ([o[n] for o in outputs], wall)
-        return [out[c] for c in conditions]
+        t0 = time.perf_counter()
+        outputs = self.executor.map(
+            functools.partial(run_chunk, self.setup, layout, subsets=subsets), _chunks(tasks, self.jobs)
+        )
+        return outputs, time.perf_counter() - t0
 
     def record(self, layout: Layout | list[np.ndarray], write) -> list[list]:
         """Scan ``layout`` at every orientation of the protocol as :meth:`__call__` scans it (the cell's sources,
@@ -251,19 +220,19 @@ class Evaluator:
         layout = _as_layout(layout)
         setup = replace(self.setup, token=uuid.uuid4().hex, cell=None)
         t0 = time.perf_counter()
-        run = functools.partial(run_levels, setup, layout, levels=(setup.condition.noise_scale,), read=read)
+        run = functools.partial(run_chunk, setup, layout, read=read)
         outputs = self.executor.map(run, _chunks(self.tasks(), self.jobs))
-        return self._result(layout, [o[0] for o in outputs], time.perf_counter() - t0)
+        return self._result(layout, list(outputs), time.perf_counter() - t0)
 
     def result(self, layout: Layout | list[np.ndarray], raws: list[tuple]) -> EvaluationResult:
-        """One condition's evaluation from the :meth:`raw` outputs of the shares of its orientations (their
-        wall time the longest)."""
+        """The evaluation from the :meth:`raw` outputs of the shares of its orientations (their wall time the
+        longest)."""
         return self._result(
             _as_layout(layout), [o for outputs, _ in raws for o in outputs], max(wall for _, wall in raws)
         )
 
     def _result(self, layout: Layout, outputs: list[tuple], wall: float) -> EvaluationResult:
-        """The workers' (rows, point rows, seconds) of one condition as an :class:`EvaluationResult`."""
+        """The workers' (rows, point rows, seconds) as an :class:`EvaluationResult`."""
         rows = [r for out in outputs for r in out[0]]
         point_rows = [r for out in outputs for r in out[1]]
         per_scan = pd.DataFrame(rows).sort_values(["scan", "subset_index"], kind="stable").reset_index(drop=True)
@@ -293,22 +262,6 @@ def log_failures(per_scan: pd.DataFrame, level: int = logging.WARNING, what: str
     if failed:
         reasons = per_scan.loc[~per_scan["ok"], "failure"].value_counts().to_dict()
         log.log(level, "%s%d of %d registrations failed or did not converge: %s", what, failed, len(per_scan), reasons)
-
-
-class EvaluatorWrapper:
-    """Base of an evaluator built on an :class:`Evaluator` (``self.evaluator``, e.g. the robust and the
-    bracket ones): a context manager whose ``close`` releases that evaluator's workers."""
-
-    evaluator: Evaluator
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def close(self) -> None:
-        self.evaluator.close()
 
 
 def _chunks(tasks: list, n_workers: int) -> list[list]:

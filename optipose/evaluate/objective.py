@@ -17,8 +17,13 @@ from optipose.errors import ConfigError, read_toml, shipped_toml
 from optipose.registration.backends import BACKENDS as REGISTRATION_BACKENDS
 from optipose.cell.config import IDEAL, Cell, load_cell
 from optipose.cell.robot import CalibrationErrors, RobotErrors
-from optipose.evaluate.conditions import ConditionsConfig, conditions_from_table
 from optipose.registration.config import RegistrationConfig
+
+# what an objective's [conditions] table, the objective `robust` and a search's band_objective say now
+BAND_RETIRED = (
+    "the band of conditions ([conditions], objective 'robust', band_objective) was retired: a cell with ranges says "
+    "what a cell does not know; use --cell cobot, industrial-arm, linear-axis or machined-bracket (docs/conditions.md)"
+)
 
 __all__ = [
     "ScanConfig",
@@ -29,6 +34,7 @@ __all__ = [
     "load_objective",
     "objective_from_table",
     "reduced_objective",
+    "BAND_RETIRED",
     "objective_from_dict",
     "OBJECTIVES_DIR",
     "AXES",
@@ -87,7 +93,6 @@ class Objective:
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     statistic: StatisticConfig = field(default_factory=StatisticConfig)
-    conditions: ConditionsConfig = field(default_factory=ConditionsConfig)
     scan: ScanConfig = field(default_factory=ScanConfig)
     cell: Cell = IDEAL  # the real cell's error sources the layouts are evaluated in (optipose.cell; docs/cell.md)
     source_text: str = field(default="", repr=False, compare=False)  # the file as written, saved with results
@@ -106,6 +111,8 @@ class Objective:
 
 def load_objective(spec: str | Path) -> Objective:
     """An objective from a shipped name (``paper``) or a TOML path."""
+    if str(spec) == "robust" and not Path(spec).exists():
+        raise ConfigError(f"objective 'robust': {BAND_RETIRED}")
     path = shipped_toml(spec, OBJECTIVES_DIR, "objective")
     table, text = read_toml(path, "objective file")
     return objective_from_table(table, where=str(path), source_text=text, default_name=path.stem)
@@ -126,7 +133,6 @@ def objective_from_dict(table: dict, source_text: str = "") -> Objective:
         protocol=section(ProtocolConfig, table.get("protocol", {})),
         registration=section(RegistrationConfig, table.get("registration", {})),
         statistic=section(StatisticConfig, table.get("statistic", {})),
-        conditions=section(ConditionsConfig, table.get("conditions", {})),
         scan=section(ScanConfig, table.get("scan", {})),
         cell=_saved_cell(table.get("cell")),
         source_text=source_text,
@@ -161,9 +167,10 @@ def objective_from_table(
     table: dict, where: str = "objective", source_text: str = "", default_name: str = "objective"
 ) -> Objective:
     """Validate a parsed objective table; every problem is a :class:`ConfigError` naming the key."""
-    _no_unknown(
-        table, {"name", "description", "protocol", "registration", "statistic", "conditions", "scan", "cell"}, where
-    )
+    if _asks_for_a_band(table.get("conditions")):
+        raise ConfigError(f"{where}: {BAND_RETIRED}")
+    table = {k: v for k, v in table.items() if k != "conditions"}
+    _no_unknown(table, {"name", "description", "protocol", "registration", "statistic", "scan", "cell"}, where)
     cell = table.get("cell", "ideal")
     if not isinstance(cell, str):
         raise ConfigError(f"{where}: cell must be a cell's name or a path to its file, got {cell!r}")
@@ -175,7 +182,6 @@ def objective_from_table(
         protocol=_protocol(table.get("protocol", {}), f"{where} [protocol]"),
         registration=_registration(table.get("registration", {}), f"{where} [registration]"),
         statistic=_statistic(table.get("statistic", {}), f"{where} [statistic]"),
-        conditions=conditions_from_table(table.get("conditions", {}), f"{where} [conditions]"),
         scan=_scan(table.get("scan", {}), f"{where} [scan]"),
         cell=load_cell(cell),
         source_text=source_text,
@@ -183,6 +189,19 @@ def objective_from_table(
 
 
 # ---------------------------------------------------------------------------------------------------------
+def _asks_for_a_band(conditions) -> bool:
+    """Whether an objective's retired ``[conditions]`` table asks for a band: anything but the nominal cell alone
+    (one noise level at the preset's, exact brackets), which the shipped objectives wrote out before the band was
+    retired and which is what every evaluation is now, so copies of them still load."""
+    if conditions is None:
+        return False
+    if not isinstance(conditions, dict):
+        return True
+    nominal = {"noise_scale": (1, [1]), "mounting_translation_mm": (0,), "mounting_rotation_deg": (0,)}
+    nominal |= {"mounting_draws": (1,), "aggregate": ("worst",)}
+    return any(k not in nominal or v not in nominal[k] for k, v in conditions.items())
+
+
 def _protocol(t: dict, where: str) -> ProtocolConfig:
     keys = {
         "kind",

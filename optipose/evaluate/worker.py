@@ -9,11 +9,10 @@ its own model when the layout names one (``SensorPose.sensor``), else with the p
 of the part's model alone is scanned exactly as in one call; every other model's sensors are scanned with
 a seed of their own (:func:`optipose.seeds.group_seed`), so no two models share noise draws.
 
-Under a :class:`~optipose.evaluate.conditions.Condition` the sensors' noise is scaled, and when the
-brackets are off each sensor scans from its true pose while its cloud is rebuilt with the drawn one
-(built with it straight from the sensor-frame measurements: ``Scanner.scan_levels(built=...)``, what
-:func:`optipose.scan.cloud.rebuilt_with` gives without the round trip through the true pose); the cell is then zeroed on a master part at the nominal
-orientation: what the brackets add to each subset's estimate there is taken off every estimate
+In a real cell (:mod:`optipose.cell`) each sensor scans from where the calibration really left it while its cloud
+is built with the pose the cell believes (straight from the sensor-frame measurements: ``Scanner.scan_levels(built=...)``,
+what :func:`optipose.scan.cloud.rebuilt_with` gives without the round trip through the true pose); a cell zeroed on a
+master part at the nominal orientation takes what it adds to each subset's estimate there off every estimate
 (:meth:`_Worker.zero`).
 """
 
@@ -22,13 +21,12 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from optipose.cell.scans import CellSetup, LiveCell
 from optipose.evaluate.assignment import all_subsets
-from optipose.evaluate.conditions import Condition, mounting_error
 from optipose.evaluate.objective import RegistrationConfig, ScanConfig
 from optipose.evaluate.subset_errors import register_subset, scan_clouds, subset_rows
 from optipose.model.layout import Layout
@@ -37,7 +35,7 @@ from optipose.scan.pose import PartPose
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T
 
-__all__ = ["WorkerSetup", "run_chunk", "run_levels", "record_chunk", "sensor_groups", "worker_for"]
+__all__ = ["WorkerSetup", "run_chunk", "record_chunk", "sensor_groups", "worker_for"]
 
 log = logging.getLogger(__name__)
 
@@ -46,11 +44,10 @@ log = logging.getLogger(__name__)
 class WorkerSetup:
     """Everything a worker process needs to rebuild the scanners and reference (picklable).
 
-    token : identifies the evaluator (a worker keeps one evaluator's state at a time, whatever the condition).
+    token : identifies the evaluator (a worker keeps one evaluator's state at a time).
     vertices (v, 3) m, faces (f, 3) : the part's mesh. sensor, material : the part's models or names.
     centre : (3,) m, the rotation centre. threads : ray-casting threads per scan (None: all cores).
     occluders : the part's keep-outs, (lo, hi) boxes in m that hide what they cover.
-    condition : the noise scale and bracket errors the layouts are scanned under (default: nominal).
     column_stride : the scanners' anchor columns (:class:`optipose.scan.scanner.Scanner`).
     reference_dir : where the evaluator wrote the CAD-surface reference for its workers to map
         (:mod:`optipose.parallel.shared`); ``None`` or absent on this machine: each worker builds its own.
@@ -68,7 +65,6 @@ class WorkerSetup:
     seed: int
     threads: int | None
     occluders: tuple = ()
-    condition: Condition = field(default_factory=Condition)
     column_stride: int = ScanConfig.column_stride
     reference_dir: str | None = (
         None  # the CAD-surface reference's arrays, shared by this machine's workers (parallel.shared)
@@ -102,9 +98,8 @@ class _Worker:
         from optipose.registration.sampled import SampledReference, sample_surface
 
         self.setup = setup
-        self.condition = setup.condition  # the condition of the chunk being run (run_chunk sets it)
         self.mesh = trimesh.Trimesh(setup.vertices, setup.faces, process=False)
-        self.scanners: dict = {}  # model -> Scanner (at every noise scale)
+        self.scanners: dict = {}  # model -> Scanner
         cfg = setup.registration
         if cfg.reference == "cad-sample":
             self.reference = SampledReference(
@@ -121,10 +116,9 @@ class _Worker:
         )
         self._nominal: dict = {}
         self._zero: dict = {}
-        self._exact_master: dict = {}
 
     def _scanner(self, model):
-        """The scanner of a sensor model (``None``: the part's), built once; it scans every noise level."""
+        """The scanner of a sensor model (``None``: the part's), built once."""
         from optipose.scan.scanner import Scanner
 
         s = self.setup
@@ -152,54 +146,34 @@ class _Worker:
         raw=False,
     ) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
-        orientation ``rpy`` (rad) and ``offset`` (m) under the condition; ``seed`` is the orientation's
-        noise seed; ``exact``: as if the brackets were exact and the cell ideal, whatever the condition; ``noise=False``: exact
-        surface points; ``raw``: keep each scan's raw profiles, the heights the device reports."""
-        return self.scan_levels(models, poses, seed, (self.condition.noise_scale,), rpy, offset, exact, noise, raw)[0]
-
-    def scan_levels(
-        self,
-        models: list,
-        poses: list[np.ndarray],
-        seed: int,
-        levels: tuple[float, ...],
-        rpy=(0.0, 0.0, 0.0),
-        offset=None,
-        exact=False,
-        noise=True,
-        raw=False,
-    ) -> list[list]:
-        """:meth:`scan` at each noise scale of ``levels`` (the condition's brackets, its noise scale
-        replaced): one list of scans per level, from one ray cast (:meth:`Scanner.scan_levels`)."""
+        orientation ``rpy`` (rad) and ``offset`` (m), in the cell; ``seed`` is the orientation's noise seed;
+        ``exact``: as if the cell were ideal; ``noise=False``: exact surface points; ``raw``: keep each scan's raw
+        profiles, the heights the device reports."""
         groups = sensor_groups(models, self.setup.sensor)
-        condition, nominal, cell = self.condition, poses, self.cell
-        mounted = condition.draw is not None and not exact
-        if mounted:  # each sensor stands at its true pose
-            poses = [T @ mounting_error(condition, self.setup.seed, j) for j, T in enumerate(nominal)]
+        nominal, cell, mounted = poses, self.cell, False
         if (
             cell is not None and not exact
-        ):  # ... where the calibration left it, and the part where the robot really turned it
+        ):  # each sensor where the calibration left it, the part where the robot turned it
             poses, mounted, rpy = cell.poses(poses), True, cell.rpy(rpy, seed)
-        scans = [[None] * len(poses) for _ in levels]
+        scans = [None] * len(poses)
         for g, (model, idx) in enumerate(groups):
             if not idx:
                 continue
             scanner = self._scanner(model)
-            out = scanner.scan_levels(
+            (out,) = scanner.scan_levels(
                 [poses[j] for j in idx],
                 self.setup.motion,
-                levels,
+                (1.0,),
                 PartPose(rpy, self.setup.centre, offset),
                 rng=group_seed(seed, g),
                 noise=noise,
                 raw=raw,
                 built=[nominal[j] for j in idx] if mounted else None,
             )  # ... and the cell builds its cloud with the drawn pose
-            for level, level_out in zip(scans, out):
-                for j, scan in zip(idx, level_out):
-                    level[j] = scan
+            for j, scan in zip(idx, out):
+                scans[j] = scan
         if cell is not None and not exact:
-            scans = self._in_cell(models, scans, seed)
+            scans = self._in_cell(models, [scans], seed)[0]
         return scans
 
     def _in_cell(self, models: list, scans: list[list], seed: int) -> list[list]:
@@ -212,38 +186,28 @@ class _Worker:
         return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed, lines)
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
-        """Per subset, the constant bias Z (4, 4) the brackets give a cell, so that a later estimate T is
-        reported as Z⁻¹ T: identity when the brackets are not off (or the cell is not zeroed).
+        """Per subset, the constant bias Z (4, 4) a cell zeroed on a master part takes off, so that a later
+        estimate T is reported as Z⁻¹ T: identity when the cell is not zeroed.
 
-        The cell is zeroed on a master part at the nominal orientation: Z is the estimate of the mounted
-        cell there relative to that of a cell with exact brackets, both from noise-free scans (a cell
-        averages enough master scans that the zero's noise is negligible). The comparison takes off only
-        what the brackets add; a master registration's own error (one scan's noise, and at exactly the
-        nominal orientation the down-sampling grid lying along the part's edges, a bias of several
-        millidegrees on part B that no other orientation shares) is not the brackets', and would shift
-        every later measurement of the condition by one draw of it."""
-        condition = self.condition
-        cell_zeroed = (
-            self.cell is not None and self.setup.cell.cell.calibration.zeroed
-        )  # the cell's procedure zeroes it
-        if not cell_zeroed and (condition.draw is None or not condition.zeroed):
+        Z is the estimate of the cell at the nominal orientation relative to that of the ideal cell, both from
+        noise-free scans (a cell averages enough master scans that the zero's noise is negligible). The comparison
+        takes off only what the cell adds; a master registration's own error (one scan's noise, and at exactly the
+        nominal orientation the down-sampling grid lying along the part's edges, a bias of several millidegrees on
+        part B that no other orientation shares) is not the cell's, and would shift every later measurement by one
+        draw of it."""
+        if self.cell is None or not self.setup.cell.cell.calibration.zeroed:
             return [np.eye(4)] * len(subsets)
-        layout = (np.asarray(poses).tobytes(), tuple(map(str, models)), tuple(subsets))
-        if any(r is not self.reference for r in references):  # nominal-scan references: each condition its own
-            layout = (*layout, condition)
-        key = (*layout, replace(condition, noise_scale=1.0))  # noise-free scans: the noise level does not matter
+        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), tuple(subsets))
         if key not in self._zero:
-            if layout not in self._exact_master:  # the exact cell's, the same for every draw
-                self._exact_master[layout] = self._master(models, poses, subsets, references, exact=True)
+            exact = self._master(models, poses, subsets, references, exact=True)
             mounted = self._master(models, poses, subsets, references, exact=False)
-            self._zero[key] = [invert_T(off) @ on for off, on in zip(mounted, self._exact_master[layout])]
+            self._zero[key] = [invert_T(off) @ on for off, on in zip(mounted, exact)]
         return self._zero[key]
 
     def _master(self, models, poses, subsets, references, exact: bool) -> list[np.ndarray]:
-        """Per subset, ``T_target_source`` of a noise-free master scan at the nominal orientation, by the
-        mounted cell of this condition's draw (and the real cell's sources, one master scan's draw of them) or
-        (``exact``) by a cell with exact brackets and no source."""
-        seed = zeroing_seed(self.setup.seed, self.condition.draw or 0)
+        """Per subset, ``T_target_source`` of a noise-free master scan at the nominal orientation, in the cell (one
+        master scan's draw of its sources) or (``exact``) in the ideal cell."""
+        seed = zeroing_seed(self.setup.seed)
         scans = self.scan(models, poses, seed, exact=exact, noise=False)
         clouds, out = scan_clouds(self.setup.registration, scans, seed), []
         for subset, reference in zip(subsets, references):
@@ -257,12 +221,7 @@ class _Worker:
         """The reference of each subset: the part's, or the nominal scan of the subset's sensors."""
         if self.setup.registration.reference != "nominal-scan":
             return [self.reference] * len(subsets)
-        key = (
-            np.asarray(poses).tobytes(),
-            tuple(map(str, models)),
-            tuple(subsets),
-            self.condition,
-        )  # taught with the cell's own brackets
+        key = (np.asarray(poses).tobytes(), tuple(map(str, models)), tuple(subsets))  # taught in the cell
         if key not in self._nominal:
             self._nominal[key] = self._nominal_references(models, poses, subsets)
         return self._nominal[key]
@@ -292,15 +251,6 @@ def _with_normals(points: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, np.
     return points, normals
 
 
-def run_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple]) -> tuple[list[dict], list[dict], dict]:
-    """Scan and register a list of orientations of ``layout`` under ``setup.condition``.
-
-    tasks : (scan index, rpy (3,) rad, offset (3,) m, noise seed, label) per orientation.
-    Returns rows per (scan, subset), rows per (scan, sensor) and the seconds spent ("scan", "register").
-    """
-    return run_levels(setup, layout, tasks, (setup.condition.noise_scale,))[0]
-
-
 def worker_for(setup: WorkerSetup) -> "_Worker":
     """This process's live state of the evaluator ``setup`` belongs to (built on first use; one evaluator's
     state per process at a time)."""
@@ -311,14 +261,16 @@ def worker_for(setup: WorkerSetup) -> "_Worker":
     return worker
 
 
-def run_levels(
-    setup: WorkerSetup, layout: Layout, tasks: list[tuple], levels: tuple[float, ...], subsets=None, read=None
-) -> list[tuple]:
-    """:func:`run_chunk` under ``setup.condition`` at each noise scale of ``levels`` (its bracket draw, its
-    noise scale replaced): each orientation is cast once for all of them. One (rows, point rows, seconds)
-    per level; the casting's seconds are shared out equally. ``subsets``: the sensor subsets to register
-    (index tuples; default every one), each row keeping its index among them all. ``read``: instead of
-    scanning, ``read(i)`` gives scan ``i``'s scans, one per sensor (recorded ones: one level only)."""
+def run_chunk(
+    setup: WorkerSetup, layout: Layout, tasks: list[tuple], subsets=None, read=None
+) -> tuple[list[dict], list[dict], dict]:
+    """Scan and register a list of orientations of ``layout``.
+
+    tasks : (scan index, rpy (3,) rad, offset (3,) m, noise seed, label) per orientation. subsets : the sensor
+    subsets to register (index tuples; default every one), each row keeping its index among them all. read :
+    instead of scanning, ``read(i)`` gives scan ``i``'s scans, one per sensor (recorded ones).
+    Returns rows per (scan, subset), rows per (scan, sensor) and the seconds spent ("scan", "register").
+    """
     worker = worker_for(setup)
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
     every = all_subsets(len(poses))
@@ -326,42 +278,19 @@ def run_levels(
         subsets = [*subsets, *((j,) for s in subsets for j in s)]
     subsets = every if subsets is None else sorted(set(subsets), key=every.index)  # sorted index tuples (Evaluator.raw)
     numbers = [every.index(s) for s in subsets]
-    conditions = [replace(setup.condition, noise_scale=level) for level in levels]
-    cells = []  # per level: its references and zeros
-    for condition in conditions:
-        worker.condition = condition
-        references = worker.references(models, poses, subsets)
-        cells.append((references, worker.zero(models, poses, subsets, references)))
-    outputs = [([], [], {"scan": 0.0, "register": 0.0}) for _ in levels]
+    references = worker.references(models, poses, subsets)
+    zeros = worker.zero(models, poses, subsets, references)
+    rows, point_rows, timing = [], [], {"scan": 0.0, "register": 0.0}
     for i, rpy, offset, seed, label in tasks:
         t0 = time.perf_counter()
-        worker.condition = conditions[0]
-        scans = [read(i)] if read else worker.scan_levels(models, poses, seed, levels, rpy=rpy, offset=offset)
-        cast = (time.perf_counter() - t0) / len(levels)
-        for condition, level_scans, (references, zeros), (rows, point_rows, timing) in zip(
-            conditions, scans, cells, outputs
-        ):
-            t1 = time.perf_counter()
-            worker.condition = condition
-            rows += subset_rows(
-                worker,
-                setup,
-                level_scans,
-                seed,
-                subsets,
-                numbers,
-                references,
-                zeros,
-                names,
-                i,
-                rpy,
-                offset,
-                label,
-                point_rows,
-            )
-            timing["scan"] += cast
-            timing["register"] += time.perf_counter() - t1
-    return outputs
+        scans = read(i) if read else worker.scan(models, poses, seed, rpy=rpy, offset=offset)
+        t1 = time.perf_counter()
+        rows += subset_rows(
+            worker, setup, scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label, point_rows
+        )
+        timing["scan"] += t1 - t0
+        timing["register"] += time.perf_counter() - t1
+    return rows, point_rows, timing
 
 
 def record_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple], write) -> list:
@@ -369,7 +298,6 @@ def record_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple], write) 
     each scan's raw profiles, the heights its sensors report, to ``write(i, j, raw)`` (scan ``i``, sensor
     ``j``; raw (n_profiles, points_per_profile) mm); returns what ``write`` returned, per task and sensor."""
     worker = worker_for(setup)
-    worker.condition = setup.condition
     poses, models = layout.poses, [s.sensor for s in layout.sensors]
     out = []
     for i, rpy, offset, seed, _ in tasks:

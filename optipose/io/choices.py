@@ -7,7 +7,6 @@ radians). The search's reader (:mod:`optipose.io.load`) and the robustness reade
 from __future__ import annotations
 
 import re
-from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -20,18 +19,11 @@ __all__ = ["choices_from_comparison", "axis_choice", "sensor_indices"]
 
 
 def choices_from_comparison(rows: pd.DataFrame, names: list[str]) -> dict[int, Choice]:
-    """k → Choice from ``comparison.csv`` rows of one layout (degrees back to radians), in file order;
-    under a band (a ``condition`` column) the robust choice, carrying its statistics per condition."""
-    if "condition" not in rows:
-        return {k: _choice(group, k, names) for k, group in rows.groupby("k", sort=False)}
-    out = {}
-    for k, group in rows.groupby("k", sort=False):
-        labels = list(dict.fromkeys(group["condition"]))
-        under = tuple(
-            (label, _choice(group[group.condition == label], k, names)) for label in labels if label != "band"
-        )
-        out[int(k)] = replace(_choice(group[group.condition == "band"], k, names), under=under)
-    return out
+    """k → Choice from ``comparison.csv`` rows of one layout (degrees back to radians), in file order; a folder
+    validated under the retired band of conditions (a ``condition`` column): its robust choice (``band`` rows)."""
+    if "condition" in rows:
+        rows = rows[rows.condition == "band"]
+    return {k: _choice(group, k, names) for k, group in rows.groupby("k", sort=False)}
 
 
 def _choice(group: pd.DataFrame, k, names: list[str]) -> Choice:

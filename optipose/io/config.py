@@ -13,25 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["RunConfig", "BandCheck", "run_config", "given"]
-
-
-@dataclass(frozen=True)
-class BandCheck:
-    """``[band]`` of a nominal search's config: the objective file of its check under a band and that band's
-    conditions (SI, as :class:`~optipose.evaluate.conditions.ConditionsConfig` wrote them)."""
-
-    file: str = "?"
-    aggregate: str | float = "worst"
-    noise_scales: tuple[float, ...] = ()
-    mounting_translation: float = 0.0  # m
-    mounting_rotation: float = 0.0  # rad
-    mounting_draws: int = 1
-
-    @property
-    def brackets(self) -> bool:
-        """The band moves the brackets (a mounting tolerance in translation or rotation)."""
-        return bool(self.mounting_translation or self.mounting_rotation)
+__all__ = ["RunConfig", "run_config", "given"]
 
 
 @dataclass(frozen=True)
@@ -48,7 +30,7 @@ class RunConfig:
     reads it), objective_name its name, objective_file the objective file as written; layout : an
     evaluation's layout table (:func:`~optipose.model.layout.layout_from_table` reads it), layout_name and
     layout_source its name and where it came from; layouts, layout_sources : a robustness run's layout
-    names and the files given; band : a nominal search's check under a band; timings : an evaluation's
+    names and the files given; timings : an evaluation's
     seconds per phase; failed_registrations : an evaluation's count; versions : package → version.
     """
 
@@ -69,7 +51,6 @@ class RunConfig:
     layout_source: str | None = None
     layouts: tuple[str, ...] = ()
     layout_sources: tuple[str, ...] = ()
-    band: BandCheck | None = None
     timings: dict = field(default_factory=dict, repr=False)
     failed_registrations: int | None = None
     versions: dict = field(default_factory=dict, repr=False)
@@ -100,23 +81,10 @@ class RunConfig:
         """The name of the cell the run was evaluated in (its sources are in ``[objective.cell]``; ideal without one)."""
         return str((self.objective or {}).get("cell", {}).get("name", "ideal"))
 
-    def searched_conditions(self):
-        """The objective's band as the search ran it (noise scales and bracket tolerance; a folder without
-        them: the nominal cell) — a :class:`~optipose.evaluate.conditions.ConditionsConfig`."""
-        from optipose.evaluate.conditions import ConditionsConfig
-
-        c = self.objective.get("conditions", {})
-        return ConditionsConfig(
-            noise_scales=tuple(c.get("noise_scales", (1.0,))),
-            mounting_translation=c.get("mounting_translation", 0.0),
-            mounting_rotation=c.get("mounting_rotation", 0.0),
-        )
-
 
 def run_config(table: dict) -> RunConfig:
     """The :class:`RunConfig` of a parsed ``config.toml`` (keys it lacks left at their defaults)."""
     part, layout, objective = _table(table.get("part")), _table(table.get("layout")), _table(table.get("objective"))
-    band = table.get("band")
     return RunConfig(
         command=table.get("command"),
         format=table.get("format"),
@@ -135,7 +103,6 @@ def run_config(table: dict) -> RunConfig:
         layout_source=layout.get("source"),
         layouts=_names(table.get("layouts")),
         layout_sources=_names(table.get("layout_sources")),
-        band=None if band is None else _band(_table(band)),
         timings=_table(table.get("timings_s")),
         failed_registrations=table.get("failed_registrations"),
         versions=_table(table.get("versions")),
@@ -146,19 +113,6 @@ def run_config(table: dict) -> RunConfig:
 def given(value, default):
     """A field of a :class:`RunConfig`, or ``default`` where the file has no such key (None)."""
     return default if value is None else value
-
-
-def _band(band: dict) -> BandCheck:
-    c = _table(band.get("conditions"))
-    defaults = BandCheck()
-    return BandCheck(
-        band.get("file", defaults.file),
-        c.get("aggregate", defaults.aggregate),
-        _names(c.get("noise_scales")),
-        c.get("mounting_translation", defaults.mounting_translation),
-        c.get("mounting_rotation", defaults.mounting_rotation),
-        c.get("mounting_draws", defaults.mounting_draws),
-    )
 
 
 def _table(value) -> dict:

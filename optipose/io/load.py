@@ -89,7 +89,6 @@ def load_search(folder: Path, config: RunConfig | None = None):
         layouts,
         baseline,
         validation(folder / "comparison.csv"),
-        validation(folder / "band" / "comparison.csv") if config.band is not None else None,
         read_verdicts(folder / "verdict.csv"),
     )
 

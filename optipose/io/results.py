@@ -5,11 +5,9 @@
   recomputed from the statistics), re-exported here.
 - :class:`SearchResult` — an ``optipose search`` folder: the found layouts and their validation against the
   hand layout (the frozen record of a finished :class:`~optipose.search.pipeline.SearchReport`).
-- :class:`RobustnessResult` — an ``optipose robustness`` folder: the frozen record of the live
-  :class:`~optipose.evaluate.robust.RobustResult` of each layout it evaluated.
+- :class:`RobustnessResult` — an ``optipose robustness`` folder: every figure of its check across cell instances.
 
-``verdicts()`` is a ``list[Verdict]`` in each that has one (a robustness result's verdicts name their
-layout, ``Verdict.layout``); ``config`` is the folder's :class:`~optipose.io.config.RunConfig`.
+``verdicts()`` is a ``list[Verdict]`` in each (a robustness result's is empty); ``config`` is the folder's :class:`~optipose.io.config.RunConfig`.
 """
 
 from __future__ import annotations
@@ -36,7 +34,6 @@ class SearchResult:
     layouts : k → the found layout (sensors F1 … Fk); baseline : the hand-placed layout, when the part has one,
     else the conventional placement;
     validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
-    band : the same under the band of the check after a nominal search (``SearchConfig.validation.band_objective``), or None;
     confident : the verdicts with confidence (``verdict.csv``; none for a search without one).
     """
 
@@ -48,35 +45,16 @@ class SearchResult:
     layouts: dict[int, Layout] = field(default_factory=dict, repr=False)
     baseline: Layout | None = field(default=None, repr=False)
     validation: Validation | None = None
-    band: Validation | None = None
     confident: Verdicts = field(default_factory=Verdicts)
 
     def verdicts(self) -> list[Verdict]:
         """Found vs. hand per k (empty when there is no hand layout or no validation)."""
         return self.validation.verdicts() if self.validation is not None else []
 
-    def band_verdicts(self) -> dict[int, Verdict]:
-        """k → found vs. hand under the band of the check after a nominal search (empty without one); with
-        :meth:`verdicts`, what :func:`optipose.verdict.compare.bought` decides on."""
-        return self.band.by_k() if self.band is not None else {}
-
-    @property
-    def band_pending(self) -> bool:
-        """The search was to check its answer under a band but has no such check (it stopped before it; a
-        search with nothing to compare its layouts with has no check to miss)."""
-        return (
-            self.config.band is not None
-            and self.band is None
-            and self.validation is not None
-            and bool(self.validation.baseline)
-        )
-
     @property
     def unchecked(self) -> bool:
-        """The answer holds for the ideal cell only: a nominal search (one noise level, exact brackets) in the
-        ideal cell that was not to check it under a band (``--budget quick``, or ``[search] band = ""``)."""
-        nominal = self.config.searched_conditions().trivial and self.config.cell_name == "ideal"
-        return nominal and self.config.band is None and self.validation is not None
+        """The answer holds for the ideal cell only: a search in the ideal cell."""
+        return self.config.cell_name == "ideal" and self.validation is not None
 
     def verdict_lines(self) -> list[str]:
         """:meth:`Validation.verdict_lines`, the baseline named as the folder's ``layouts/hand.toml`` (or ``conventional.toml``) says."""
@@ -87,15 +65,10 @@ class SearchResult:
 
 @dataclass(frozen=True)
 class RobustnessResult:
-    """A robustness folder read back (:func:`optipose.io.load_result`): the frozen record of what
-    ``optipose robustness`` found with one live :class:`~optipose.evaluate.robust.RobustResult` per layout.
-    It keeps each layout's robust choices (as ``robustness.csv`` wrote them), not the per-condition
-    evaluations a ``RobustResult`` holds.
+    """A robustness folder read back (:func:`optipose.io.load_result`): the layouts checked and every figure of the
+    check (``robustness.csv``: one row per cell, instance, layout, k and axis, degrees; :mod:`optipose.io.robustness`).
 
-    layouts : name → Layout (the hand layout under ``hand``); choices : (name, k) → the layout's robust
-    choice of k sensors carrying its statistics per condition (``Choice.under``), the hand layout's under
-    ``("hand", k)``; brackets, bracket_sensors : the tables of ``brackets.csv`` and
-    ``bracket_sensors.csv`` (None without a bracket sensitivity).
+    layouts : name → Layout (the hand layout under ``hand``); rows : the table of ``robustness.csv``.
     """
 
     folder: Path
@@ -103,15 +76,18 @@ class RobustnessResult:
     seed: int
     config: RunConfig = field(repr=False)
     layouts: dict[str, Layout] = field(default_factory=dict, repr=False)
-    choices: dict = field(default_factory=dict, repr=False)
-    brackets: pd.DataFrame | None = field(default=None, repr=False)
-    bracket_sensors: pd.DataFrame | None = field(default=None, repr=False)
+    rows: pd.DataFrame = field(default_factory=pd.DataFrame, repr=False)
 
-    def verdicts(self) -> list[Verdict]:
-        """Per given layout (``Verdict.layout``, in file order), its robust choice against the hand layout's
-        choice of as many sensors."""
-        return [
-            Verdict(k, choice, self.choices[("hand", k)], layout=name)
-            for (name, k), choice in self.choices.items()
-            if name != "hand" and ("hand", k) in self.choices
-        ]
+    def ratios(self) -> pd.DataFrame:
+        """One row per (layout, k, cell, instance): hand / layout of the score and whether the layout holds."""
+        keys = ["layout", "k", "cell", "instance"]
+        return self.rows.groupby(keys, sort=False)[["ratio", "holds", "sensors", "hand_sensors"]].first().reset_index()
+
+    def holds(self) -> pd.DataFrame:
+        """Per (layout, k): in how many instances it holds, of how many, and its smallest ratio."""
+        by = self.ratios().groupby(["layout", "k"], sort=False)
+        return by.agg(held=("holds", "sum"), instances=("holds", "size"), weakest=("ratio", "min")).reset_index()
+
+    def verdicts(self) -> list:
+        """None: a robustness check says where a layout holds, not a verdict on one draw."""
+        return []

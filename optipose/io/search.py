@@ -4,9 +4,7 @@
 is never lost, and ``--resume`` replays it), ``layouts/found_k*.toml`` (the surrogate's best first, the
 finalists after the selection), ``selection.csv``, ``surrogate_scores.csv``, ``validation/`` (one
 evaluation folder per evaluated layout) and ``comparison.csv`` (found vs. hand per k and axis), ``verdict/``
-(the verdict's further draws, one folder each) and ``verdict.csv`` (the verdict with confidence); after a
-check under a band (``SearchConfig.validation.band_objective``), ``band/`` holds the same for it: one folder per layout with one
-evaluation per condition, and ``band/comparison.csv``.
+(the verdict's further draws, one folder each) and ``verdict.csv`` (the verdict with confidence).
 """
 
 from __future__ import annotations
@@ -23,7 +21,6 @@ from optipose.io.tables import (
     history_frame,
     selection_frame,
     surrogate_frame,
-    table1_frame,
     verdict_frame,
 )
 from optipose.model.baseline import baseline_label
@@ -41,9 +38,9 @@ class SearchFolder:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
 
-    def start(self, part, objective, config, budget: str, seed: int, validation_seed: int, band=None) -> None:
-        """``config.toml``; ``band``: the objective of the check under a band, whose conditions it records."""
-        _write_search_config(self.folder, part, objective, config, budget, seed, validation_seed, band)
+    def start(self, part, objective, config, budget: str, seed: int, validation_seed: int) -> None:
+        """``config.toml``."""
+        _write_search_config(self.folder, part, objective, config, budget, seed, validation_seed)
 
     def load_cache(self, space_version: int) -> dict:
         return load_cache(self.folder, space_version)
@@ -70,9 +67,7 @@ class SearchFolder:
         write_csv(surrogate_frame(outcome), self.folder / "surrogate_scores.csv")
 
     def evaluation(self, name: str, result) -> None:
-        """``validation/<name>/``: one evaluation of the validation, as soon as it ends; under a band, one
-        evaluation folder per condition (``validation/<name>/noise-x3-draw-1/``) and the robust statistics
-        and Table 1 beside them."""
+        """``validation/<name>/``: one evaluation of the validation, as soon as it ends."""
         _write_evaluations(self.folder / "validation" / name, result)
 
     def validation(self, validation) -> None:
@@ -90,37 +85,16 @@ class SearchFolder:
         if verdicts.in_order():
             write_csv(verdict_frame(verdicts), self.folder / "verdict.csv")
 
-    def band_evaluation(self, name: str, result) -> None:
-        """``band/<name>/<condition>/``: one evaluation of the check under the band, as soon as it ends."""
-        _write_evaluations(self.folder / "band" / name, result)
-
-    def band(self, validation) -> None:
-        """``band/comparison.csv``: found vs. hand per k, axis and noise level under the band."""
-        write_csv(comparison_frame(validation), self.folder / "band" / "comparison.csv")
-
 
 def _write_evaluations(sub: Path, result) -> None:
-    """One evaluation into ``sub``, or under a band one folder per condition and the robust tables."""
+    """One evaluation into ``sub``."""
     sub.mkdir(parents=True, exist_ok=True)
-    if not hasattr(result, "results"):
-        write_evaluation(result, sub)
-        return
-    for condition, each in result.results:
-        (sub / condition.slug).mkdir(exist_ok=True)
-        write_evaluation(each, sub / condition.slug)
-    write_csv(result.stats, sub / "stats.csv")
-    write_csv(table1_frame(result.table), sub / "table1.csv")
+    write_evaluation(result, sub)
 
 
-def _write_search_config(
-    folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int, band=None
-) -> Path:
-    from dataclasses import asdict
-
+def _write_search_config(folder: Path, part, objective, config, budget: str, seed: int, validation_seed: int) -> Path:
     from optipose.search.config import search_table
 
-    file = config.validation.band_objective
-    extra = {} if band is None else {"band": {"file": file, "conditions": asdict(band.conditions)}}
     return write_config(
         folder,
         {
@@ -133,7 +107,6 @@ def _write_search_config(
             "objective": objective.to_dict(),
             "objective_file": objective.source_text,
             "versions": versions(),
-            **extra,
         },
     )
 
@@ -157,16 +130,6 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
         constraint=np.array(["" if isinstance(v, SensorInfo) else v.constraint for v in infos], dtype=str),
         A=np.array([_or_zeros(v, "A", (6, 6)) for v in infos]).reshape(len(infos), 6, 6),
         G=np.array([_or_zeros(v, "G", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
-        # the mounting term's per-turn matrices (n_phases + 1 with the nominal orientation; NaN: none)
-        A_turns=np.array([_or_nan(v, "A_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(
-            len(infos), n_phases + 1, 6, 6
-        ),
-        N_turns=np.array([_or_nan(v, "N_turns", (n_phases + 1, 6, 6)) for v in infos]).reshape(
-            len(infos), n_phases + 1, 6, 6
-        ),
-        # the noise bias term at each sensor's band top (NaN: none; noise_band 1)
-        G_noise=np.array([_or_nan(v, "G_noise", (n_phases, 6)) for v in infos]).reshape(len(infos), n_phases, 6),
-        noise_band=np.array([getattr(v, "noise_band", 1.0) for v in infos], dtype=float),
         space=space_version,
     )
     with atomic_path(folder / "cache.npz") as tmp, open(tmp, "wb") as file:  # a file: savez would add .npz to a name
@@ -176,11 +139,6 @@ def save_cache(folder: Path, cache, space_version: int) -> None:
 def _or_zeros(info, name: str, shape: tuple) -> np.ndarray:
     value = getattr(info, name, None)  # a Violation has neither
     return np.zeros(shape) if value is None else value
-
-
-def _or_nan(info, name: str, shape: tuple) -> np.ndarray:
-    value = getattr(info, name, None)
-    return np.full(shape, np.nan) if value is None else value
 
 
 def load_cache(folder: Path, space_version: int) -> dict:
@@ -197,9 +155,7 @@ def _cache_entries(data, space_version: int) -> dict:
     from optipose.search.problem import Violation
     from optipose.search.surrogate import SensorInfo
 
-    if (
-        "G" not in data or "N_turns" not in data or "G_noise" not in data
-    ):  # from before the voxel bias, the mounting or the noise bias term: start over
+    if "G" not in data:  # from before the voxel bias: start over
         return {}
     if (int(data["space"]) if "space" in data else 1) != space_version:  # its u keys name other poses: start over
         return {}
@@ -213,18 +169,10 @@ def _cache_entries(data, space_version: int) -> dict:
         data["violation"],
         data["A"],
         data["G"],
-        data["A_turns"],
-        data["N_turns"],
-        data["G_noise"],
-        data["noise_band"],
         constraint,
     )
-    for u, ok, H, (n_points, n_voxels), violation, A, G, A_turns, N_turns, G_noise, band, why in rows:
-        turns = (None, None) if np.isnan(N_turns).any() else (A_turns, N_turns)
-        noise = (None, 1.0) if np.isnan(G_noise).any() else (G_noise, float(band))
+    for u, ok, H, (n_points, n_voxels), violation, A, G, why in rows:
         out[tuple(np.round(u, 9))] = (
-            SensorInfo(H, int(n_points), int(n_voxels), A, G, *turns, *noise)
-            if ok
-            else Violation(str(why), float(violation))
+            SensorInfo(H, int(n_points), int(n_voxels), A, G) if ok else Violation(str(why), float(violation))
         )
     return out

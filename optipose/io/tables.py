@@ -15,9 +15,7 @@ __all__ = [
     "selection_frame",
     "history_frame",
     "surrogate_frame",
-    "robustness_frame",
-    "brackets_frame",
-    "bracket_sensors_frame",
+    "instances_frame",
     "verdict_frame",
     "VERDICT_COLUMNS",
 ]
@@ -43,21 +41,12 @@ def table1_frame(choices) -> pd.DataFrame:
 
 def comparison_frame(validation) -> pd.DataFrame:
     """Found vs. hand per k and axis (``comparison.csv``, degrees): the found rows in the order they were
-    evaluated, then the hand rows. Under a band the ``condition`` column names the statistic's condition:
-    ``band`` for the robust one (the aggregate over the band), then one row group per condition."""
-    rows = [r for k, c in validation.found.items() for r in _band_rows("found", k, c)]
-    rows += [r for k, c in validation.baseline.items() for r in _band_rows("hand", k, c)]
+    evaluated, then the hand rows."""
+    rows = [r for k, c in validation.found.items() for r in _choice_rows("found", k, c)]
+    rows += [r for k, c in validation.baseline.items() for r in _choice_rows("hand", k, c)]
     for row in rows:
         row["protocol"] = validation.protocol
     return pd.DataFrame(rows)
-
-
-def _band_rows(label: str, k: int, choice) -> list[dict]:
-    """A choice's rows, and when it carries its statistics per condition (``Choice.under``), theirs."""
-    if not choice.under:
-        return _choice_rows(label, k, choice)
-    rows = [r | {"condition": "band"} for r in _choice_rows(label, k, choice)]
-    return rows + [r | {"condition": name} for name, c in choice.under for r in _choice_rows(label, k, c)]
 
 
 def _choice_rows(label: str, k: int, choice) -> list[dict]:
@@ -142,95 +131,37 @@ def surrogate_frame(outcome) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def robustness_frame(results: dict, baseline: str = "hand", aggregate="worst") -> pd.DataFrame:
-    """Layouts under every condition (``robustness.csv``): per layout, k, condition and axis the layout's
-    robust choice of k sensors (k: its own size, at most the hand layout's), each axis's subset fixed as a
-    deployed cell fixes it, and the hand layout's robust choice of as many under the same condition; the
-    condition ``worst`` (or ``quantile <q>``) is the robust statistic. The hand layout's rows come first, for
-    every k a given layout is compared at (every k when none is given).
-
-    results : layout name → :class:`~optipose.evaluate.robust.RobustResult`, the baseline's under the name ``baseline``.
-    """
-    robust_label = "worst" if aggregate == "worst" else f"quantile {aggregate:g}"
-    baseline_result = results[baseline]
-    n_baseline = len(baseline_result.table)
-    given = {name: min(len(r.layout), n_baseline) for name, r in results.items() if name != baseline}
-    jobs = [(baseline, k) for k in sorted(set(given.values()) or range(1, n_baseline + 1))] + list(given.items())
-    rows = []
-    for name, k in jobs:
-        choice, reference = results[name].table[k - 1], baseline_result.table[k - 1]
-        pairs = [
-            (c.label, mine, theirs.score)
-            for (c, mine), (_, theirs) in zip(results[name].under(choice), baseline_result.under(reference))
+def instances_frame(rows) -> pd.DataFrame:
+    """A robustness check (``robustness.csv``): one row per (cell, instance, layout, k, axis) of
+    :class:`~optipose.evaluate.instances.InstanceRow` s, angles in degrees; ``ratio`` (hand / layout of the score of
+    the whole choice) and ``holds`` (ratio >= 1) repeated on each axis's row."""
+    deg = np.rad2deg
+    return pd.DataFrame(
+        [
+            {
+                "cell": r.cell,
+                "instance": r.instance,
+                "seed": r.seed,
+                "layout": r.layout,
+                "k": r.k,
+                "sensors": r.sensors,
+                "axis": r.axis,
+                "subset": r.subset,
+                "median_deg": float(deg(r.median)),
+                "p75_deg": float(deg(r.p75)),
+                "hand_sensors": r.hand_sensors,
+                "hand_median_deg": float(deg(r.hand_median)),
+                "hand_p75_deg": float(deg(r.hand_p75)),
+                "score_deg": float(deg(r.score)),
+                "hand_score_deg": float(deg(r.hand_score)),
+                "ratio": r.ratio,
+                "holds": r.holds,
+            }
+            for r in rows
         ]
-        for label, mine, baseline_score in pairs + [(robust_label, choice, reference.score)]:
-            extra = {"condition": label, "hand_score_deg": float(np.rad2deg(baseline_score))}
-            rows += [row | extra for row in _choice_rows(name, k, mine)]
-    return pd.DataFrame(rows)
+    )
 
 
-def brackets_frame(sensitivities: dict) -> pd.DataFrame:
-    """Per layout, k and axis: spread (rotations, degrees) and un-zeroed bias (see the module doc)."""
-    rows = []
-    for name, sens in sensitivities.items():
-        spread = {(s.k, s.axis): s for s in sens.spread}
-        for k in sorted({b.k for b in sens.bias}):
-            worst = sens.worst_bias(k)
-            for axis in dict.fromkeys(b.axis for b in sens.bias):
-                biases = [b for b in sens.bias if b.k == k and b.axis == axis]
-                scale = np.rad2deg(1.0) if axis in ("roll", "pitch", "yaw") else 1.0
-                row = {
-                    "layout": name,
-                    "k": k,
-                    "axis": axis,
-                    "subset": biases[0].subset or "unobservable",
-                    "unit": "deg" if scale != 1.0 else "m",
-                }
-                if (k, axis) in spread:
-                    s = spread[(k, axis)]
-                    row |= {
-                        "perfect_median_deg": scale * s.nominal_median,
-                        "perfect_p75_deg": scale * s.nominal_p75,
-                        "mounted_median_deg": scale * s.mounted_median,
-                        "mounted_p75_deg": scale * s.mounted_p75,
-                    }
-                row |= {f"bias_draw{b.draw}": scale * b.bias for b in biases}
-                row |= {"worst_abs_bias": scale * worst[axis], "perfect_bias": scale * biases[0].nominal}
-                row |= {
-                    "tolerance_mm": 1e3 * sens.translation,
-                    "tolerance_deg": float(np.rad2deg(sens.rotation)),
-                    "draws": len(sens.draws),
-                    "n_scans": sens.n_scans,
-                    "reduced_protocol": sens.reduced,
-                }
-                rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def bracket_sensors_frame(sensitivities: dict) -> pd.DataFrame:
-    """Per layout, k and sensor: the change (degrees) when that sensor's bracket alone is off, and its rank."""
-    rows = []
-    for name, sens in sensitivities.items():
-        for k in sorted({s.k for s in sens.sensors}):
-            for rank, s in enumerate(sens.ranking(k), start=1):
-                rows.append(
-                    {
-                        "layout": name,
-                        "k": k,
-                        "sensor": s.name,
-                        "sensor_index": s.sensor,
-                        "rank": rank,
-                        **{
-                            f"change_{axis}_deg": float(np.rad2deg(c))
-                            for axis, c in zip(("roll", "pitch", "yaw"), s.change)
-                        },
-                        "score_change_deg": float(np.rad2deg(s.score_change)),
-                    }
-                )
-    return pd.DataFrame(rows)
-
-
-# the interval columns of ``verdict.csv``: each the estimate, then ``_low`` and ``_high``
 VERDICT_COLUMNS = (
     "ratio",
     "median_ratio",

@@ -11,7 +11,6 @@ import logging
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
 from optipose.files import write_text
 from optipose.report.document import Block, Figure, Heading, Paragraph, render_html, render_markdown, write_figures
@@ -113,58 +112,10 @@ def _drawn(folder: Path | None, name: str) -> bytes | None:
 
 
 def _evaluations(sub: Path) -> tuple[object, str]:
-    """The evaluation saved in a validation folder (under a band: its first condition's), and a note."""
+    """The evaluation saved in a validation folder, and a note (none); None where there is none."""
     from optipose.io import load_result
 
-    if (sub / "config.toml").is_file():
-        return load_result(sub), ""
-    conditions = sorted(p for p in sub.iterdir() if (p / "config.toml").is_file())
-    if not conditions:
-        return None, ""
-    return load_result(
-        conditions[0]
-    ), f"condition {conditions[0].name} of the band ({len(conditions)} conditions in {sub})"
-
-
-def _band_check(result, label: str) -> list[Block]:
-    """The check under the band after a nominal search: what the band is, then per k the found layout and the
-    baseline at each of its noise levels (or, when the search stopped before it, that it is missing)."""
-    from optipose.report.robustness import band_blocks
-
-    if result.band_pending:
-        return [
-            Heading("Under the band of a real cell"),
-            Paragraph(
-                "The search stopped before its check under the band: the verdict above holds for the nominal cell only "
-                "(the preset's noise, every bracket exact); resume the search, or run optipose robustness with its layouts.",
-                "verdict mixed",
-            ),
-        ]
-    verdicts = result.band_verdicts()
-    if not verdicts:
-        return []
-    band = result.config.band
-    how = band.aggregate
-    over = "the worst" if how == "worst" else f"the {float(how):g} quantile"
-    what = f"sensor noise at {', '.join(f'x{s:g}' for s in band.noise_scales)} the preset's"
-    if band.brackets:
-        what += (
-            f", brackets off by up to {1e3 * band.mounting_translation:.2g} mm and {np.rad2deg(band.mounting_rotation):.2g}° "
-            f"({band.mounting_draws} draw{'s' if band.mounting_draws > 1 else ''} per level, each statistic {over} "
-            "over them), the cell zeroed on a master part"
-        )
-    blocks: list[Block] = [
-        Heading("Under the band of a real cell"),
-        Paragraph(
-            f"The search tuned its layouts at the preset's noise with every bracket where it was drawn. Checked again on the held-out seed "
-            f"under the band of objective '{band.file}': {what}. A found layout is bought only when it is no worse than the "
-            f"{label} one on every axis at every level too.",
-            "note",
-        ),
-    ]
-    for _, v in sorted(verdicts.items()):
-        blocks += band_blocks("found", v, label)
-    return blocks
+    return (load_result(sub), "") if (sub / "config.toml").is_file() else (None, "")
 
 
 def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Block]]:
@@ -172,7 +123,6 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
     from optipose.model.baseline import baseline_label
     from optipose.report.layouts import layout_section
     from optipose.report.provenance import cell_name, provenance_blocks
-    from optipose.report.robustness import band_blocks
     from optipose.report.scans import scan_blocks
     from optipose.report.search import search_blocks, surrogate_pairs
     from optipose.report.confidence import confident_blocks
@@ -195,17 +145,12 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
             if validation.protocol == "full"
             else "the REDUCED protocol (14 scans; --budget default for the full one)"
         )
-        band = result.band_verdicts()
         verdict = verdict_blocks(
-            result.verdicts(), validation.found, validation.baseline, label, band, result.unchecked
+            result.verdicts(), validation.found, validation.baseline, label, unchecked=result.unchecked
         )
-        if (
-            result.confident.by_k
-        ):  # the verdict on draws decides; the validation draw's own lines only where the band's check follows them
-            verdict = (
-                verdict[:1]
-                + confident_blocks(result.confident, cell_name(result.config), result.layouts, result.baseline)
-                + ([Heading("The validation draw alone, statistic by statistic")] + verdict[1:] if band else [])
+        if result.confident.by_k:  # the verdict on draws decides
+            verdict = verdict[:1] + confident_blocks(
+                result.confident, cell_name(result.config), result.layouts, result.baseline
             )
         blocks += verdict
         blocks.append(
@@ -230,9 +175,6 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
                 "Table 1: median / 75th percentile of |error| in millidegrees, and the sensor subset each axis uses",
             )
         )
-        for v in result.verdicts():
-            blocks += band_blocks(f"found k={v.k}", v, label)
-        blocks += _band_check(result, label)
     layouts = {f"found_k{k}": lay for k, lay in sorted(result.layouts.items())}
     if result.baseline is not None:
         layouts[label] = replace(result.baseline, name=label)
@@ -298,38 +240,16 @@ def _robustness(folder: Path, result, views: bool) -> tuple[str, list[Block]]:
     from optipose.model.baseline import baseline_label
     from optipose.report.layouts import layout_section
     from optipose.report.provenance import provenance_blocks
-    from optipose.report.robustness import band_blocks, bracket_blocks
-    from optipose.report.verdict import table1_side_by_side, verdict_css
-    from optipose.verdict.words import verdict_line
+    from optipose.report.robustness import holds_blocks, instance_blocks
 
     label = baseline_label(result.layouts.get("hand"))
-    title = f"{result.part}: layouts under every condition of the band (robustness, seed {result.seed})"
-    blocks: list[Block] = [Heading("Verdict")]
-    verdicts = result.verdicts()
-    for v in verdicts:
-        blocks.append(Paragraph(f"{v.layout} (worst over the band): {verdict_line(v, label)}", verdict_css(v)))
-    if not verdicts:
-        blocks.append(Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed"))
-    blocks.append(Heading("Per axis (the paper's Table 1), the robust statistic over the band"))
-    for v in verdicts:
-        blocks.append(
-            table1_side_by_side(
-                {v.k: v.found},
-                {v.k: v.reference},
-                label,
-                f"Table 1, {v.layout} vs. {label}: median / 75th percentile "
-                "(mdeg) of the worst condition, and the subset each axis uses",
-            )
-        )
-    if not verdicts:
-        baseline = {k: c for (n, k), c in result.choices.items() if n == "hand"}
-        blocks.append(
-            table1_side_by_side({}, baseline, label, "Table 1: median / 75th percentile (mdeg), robust over the band")
-        )
-    blocks.append(Heading("At every condition of the band"))
-    for v in verdicts:
-        blocks += band_blocks(v.layout, v, label)
-    blocks += bracket_blocks(result.brackets, result.bracket_sensors, label)
+    title = f"{result.part}: layouts in cell instances the search never saw (robustness, seed {result.seed})"
+    blocks: list[Block] = [Heading("Where the layouts hold")]
+    blocks += holds_blocks(result, label) or [
+        Paragraph(f"only the {label} layout was evaluated: nothing to compare", "verdict mixed")
+    ]
+    blocks.append(Heading("In every cell instance"))
+    blocks += instance_blocks(result, label)
     layouts = {
         (label if n == "hand" else n): replace(lay, name=label if n == "hand" else n)
         for n, lay in result.layouts.items()

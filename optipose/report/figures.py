@@ -146,7 +146,7 @@ def surrogate_vs_icp(pairs: list[tuple[str, int, float, float]]) -> bytes:
 
 
 def condition_bars(rows: list[tuple[str, float, float]], baseline: str, title: str) -> bytes:
-    """Found vs. baseline score (mdeg) at every condition of a band: rows of (condition, found, baseline) rad."""
+    """Found vs. baseline score (mdeg) in every cell instance: rows of (instance, found, baseline) rad."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(rows) + 3), 3.6))
     x = np.arange(len(rows))
@@ -154,7 +154,7 @@ def condition_bars(rows: list[tuple[str, float, float]], baseline: str, title: s
     base = np.array([r[2] for r in rows]) * 1e3 * 180 / np.pi
     ax.bar(x - 0.2, base, 0.4, color="0.65", label=baseline)
     ax.bar(x + 0.2, found, 0.4, color="C0", label="found")
-    labels = [r[0].replace(", ", ",\n") for r in rows]  # "noise x1, mounting draw 0" on two lines: no overlap
+    labels = [r[0].replace(", ", ",\n") for r in rows]  # "cobot, low ends" on two lines: no overlap
     ax.set_xticks(x, labels, fontsize=9, rotation=20 if len(rows) > 4 else 0)
     ax.set_ylabel("score (mdeg)")
     ax.set_title(title, fontsize=11)

@@ -101,9 +101,8 @@ def summary_table(frame) -> Table:
     """The table ``optipose study`` prints (a :func:`optipose.batch.summary.summary_frame`): per part and
     setting, trials complete of all (and failed, ``F``), score median and worst and each axis's median in
     mdeg over the seeds; for searches hand over found and how many found layouts were no worse on every
-    axis, and, checked under a band, how many stayed so there (``in band``)."""
+    axis."""
     searches = "ratio_median" in frame
-    banded = searches and "band_no_worse" in frame
     header = (
         "part",
         "task",
@@ -115,14 +114,13 @@ def summary_table(frame) -> Table:
         "pitch",
         "yaw",
         *(("hand/f", "no worse") if searches else ()),
-        *(("in band",) if banded else ()),
     )
     rows = []
     for r in frame.to_dict("records"):
         task = (
             r["task"]
             + (f" {r['budget']}" if r["budget"] else "")
-            + ("" if r["objective"] in ("paper", "robust") else f" {r['objective']}")
+            + ("" if r["objective"] == "paper" else f" {r['objective']}")
         )
         cells = [
             r["part"],
@@ -147,8 +145,6 @@ def summary_table(frame) -> Table:
                 "-" if ratio is None or math.isnan(ratio) else f"{ratio:.2f}",
                 no_worse if isinstance(no_worse, str) else "-",
             ]
-        if banded:
-            cells.append(r["band_no_worse"] if isinstance(r.get("band_no_worse"), str) else "-")
         rows.append(tuple(cells))
     return Table(
         header,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from optipose.report.document import Block, Heading, Paragraph, Table
 from optipose.verdict.compare import Verdict, bought
-from optipose.verdict.words import UNCHECKED, band_advice, mdeg_text, one_versus_many, unmeasured_line, verdict_line
+from optipose.verdict.words import UNCHECKED, mdeg_text, one_versus_many, unmeasured_line, verdict_line
 
 __all__ = ["verdict_css", "verdict_blocks", "verdict_table", "table1_rows", "table1_side_by_side", "table1_alone"]
 
@@ -24,14 +24,13 @@ def verdict_css(verdict: Verdict) -> str:
 
 
 def verdict_blocks(
-    verdicts: list[Verdict], found: dict, reference: dict, label: str, band: dict | None = None, unchecked: bool = False
+    verdicts: list[Verdict], found: dict, reference: dict, label: str, unchecked: bool = False
 ) -> list[Block]:
     """An axis a found layout does not measure, one line per k; one coloured line per k (the terminal's), then
     the headline: one found sensor vs. the baseline's largest.
 
-    found, reference : k → Choice; label : ``hand`` or ``conventional``; band : k → the verdict under the band
-    of the check after a nominal search (a found layout worse there is not bought); unchecked : the answer was
-    never checked under a band (a layout no worse in the ideal cell is not yet one to buy).
+    found, reference : k → Choice; label : ``hand`` or ``conventional``; unchecked : the search ran in the ideal
+    cell (a layout no worse there is not yet one to buy).
     """
     blocks: list[Block] = [Heading("Verdict")]
     unmeasured = (unmeasured_line(k, choice, reference.get(k), label) for k, choice in found.items())
@@ -43,17 +42,12 @@ def verdict_blocks(
             )
         )
         return blocks
-    band = band or {}
-    blocks.append(verdict_table(verdicts, label, band, unchecked))
+    blocks.append(verdict_table(verdicts, label, unchecked))
     if unchecked and any(v.no_worse for v in verdicts):
         blocks.append(Paragraph(UNCHECKED[0].upper() + UNCHECKED[1:] + ".", "verdict mixed"))
     for v in verdicts:
-        refused = v.no_worse and not bought(v, band.get(v.k))  # no worse nominally, worse under the band (or a tie)
+        refused = v.no_worse and not bought(v)  # a tie, or failed registrations
         blocks.append(Paragraph(verdict_line(v, label), "verdict mixed" if refused else verdict_css(v)))
-        if v.k in band:
-            blocks.append(Paragraph("under the band: " + verdict_line(band[v.k], label), verdict_css(band[v.k])))
-            if advice := band_advice(band[v.k], label, v.no_worse):
-                blocks.append(Paragraph(advice, "verdict mixed"))
     top = max(reference, default=0)
     if 1 in found and top > 1:
         beats = found[1].score < reference[top].score
@@ -67,12 +61,11 @@ def verdict_blocks(
     return blocks
 
 
-def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None, unchecked: bool = False) -> Table:
+def verdict_table(verdicts: list[Verdict], label: str, unchecked: bool = False) -> Table:
     """Per k: found and baseline sensors, baseline / found in sum, per axis whether found is no worse
-    (median and p75, at every condition of a band), and what to do (``band``: k → the verdict under the band
-    of the check after a nominal search; ``unchecked``: never checked under a band)."""
-    rows, band = [], band or {}
-    buy = "better in the ideal cell; check under the band before buying" if unchecked else "buy the found sensors"
+    (median and p75), and what to do (``unchecked``: the search ran in the ideal cell)."""
+    rows = []
+    buy = "better in the ideal cell; check it in a real cell before buying" if unchecked else "buy the found sensors"
     for v in verdicts:
         gaps = {g.axis for g in v.worse}
         decision = (
@@ -82,9 +75,6 @@ def verdict_table(verdicts: list[Verdict], label: str, band: dict | None = None,
         )
         if v.tie:
             decision = f"keep {label}: the found choice ties it"
-        elif v.no_worse and not bought(v, band.get(v.k)):
-            worse = ", ".join(dict.fromkeys(g.axis for g in band[v.k].worse))
-            decision = f"keep {label}: worse on {worse} under the band"
         rows.append(
             (
                 str(v.k),

@@ -1,8 +1,8 @@
 """The budgets: named presets of :class:`~optipose.search.config.SearchConfig`'s sections.
 
-A budget (``quick``, ``default``, ``thorough``: :data:`BUDGETS`) sets some fields of some sections; under a band
-of conditions (:data:`UNDER_A_BAND`) and in a real cell (:data:`IN_A_CELL`) a budget is adjusted by presets of
-its own, in that order; a user's ``[search]`` table goes last (:func:`config_from_budget`).
+A budget (``quick``, ``default``, ``thorough``: :data:`BUDGETS`) sets some fields of some sections; in a real cell
+(:data:`IN_A_CELL`) a budget is adjusted by a preset of its own; a user's ``[search]`` table goes last
+(:func:`config_from_budget`).
 
 A budget is work, not seconds: every stage ends by its counts (evaluations, candidates, draws), so a seed gives the
 same layouts, draws and verdict lines on any machine at any load. No budget sets a clock; a user may
@@ -14,13 +14,13 @@ from __future__ import annotations
 from optipose.errors import ConfigError
 from optipose.search.config import Preset, SearchConfig
 
-__all__ = ["BUDGETS", "UNDER_A_BAND", "IN_A_CELL", "config_from_budget"]
+__all__ = ["BUDGETS", "IN_A_CELL", "config_from_budget"]
 
 
 BUDGETS: dict[str, Preset] = {
     # quick: greedy only, so the layouts are nested and one evaluation validates k = 1, 2, 3 (the hand
     # layout's runs beside the search); a small screen finds basins DIRECT-L's 70 evaluations miss (docs/method.md,
-    # "Budgets"); no check under the band, so its verdicts say they hold in the ideal cell only
+    # "Budgets")
     "quick": Preset(
         surrogate=dict(
             global_evals=70,
@@ -37,7 +37,6 @@ BUDGETS: dict[str, Preset] = {
     "default": Preset(
         surrogate=dict(global_evals=400, local_evals=120, joint_evals=200, screen_samples=4096),
         selection=dict(candidates=3, polish_evals=90, confirm_candidates=3),
-        validation=dict(band_objective="robust"),
     ),
     "thorough": Preset(
         surrogate=dict(
@@ -50,31 +49,14 @@ BUDGETS: dict[str, Preset] = {
             screen_evals=60,
         ),
         selection=dict(candidates=6, polish_evals=200, confirm_candidates=6),
-        validation=dict(band_objective="robust"),
         verdict=dict(draws=30),
-    ),
-}
-
-
-# Under a band of conditions every ICP evaluation runs each condition of the band's ends (4 for
-# objectives/robust.toml, each more work than a nominal condition: bracket errors slow ICP): the default budget then
-# spends its ICP work on the selection and the validation over the band, not on a polish and a
-# confirmation; the selection's statistic already pools every condition's scans (docs/conditions.md, "The search
-# under the band").
-UNDER_A_BAND: dict[str, Preset] = {
-    # a sensor pose costs the band's surrogate several nominal ones (the noise and bracket terms): a quarter of
-    # the nominal screen
-    "default": Preset(
-        surrogate=dict(screen_samples=1024, anchor_evals=80),
-        selection=dict(polish_evals=0, confirm_candidates=0),
     ),
 }
 
 
 # In a real cell (an objective's cell other than the ideal one) an ICP evaluation costs several nominal ones
 # (the cell's sources move every point; the paper's pipeline removes outliers) and the verdict's draws, not a
-# confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, less surrogate search; no
-# check under the band, whose noise and brackets the cell's sources stand for. The verdict's draws after the
+# confirmation on one seed, say how sure a difference is: no ICP polish or confirmation, less surrogate search; the verdict's draws after the
 # validation's evaluate a share of the protocol's scans each: in a real cell the spread between cell instances rules
 # the intervals, so more draws of fewer scans decide sooner (benchmarks/README.md, "Whole commands", for what the
 # counts cost).
@@ -115,26 +97,24 @@ IN_A_CELL: dict[str, Preset] = {
             random_starts=4,
         ),
         selection=dict(candidates=1, polish_evals=0, confirm_candidates=0),
-        validation=dict(protocol="reduced", band_objective=""),
+        validation=dict(protocol="reduced"),
         verdict=dict(scans=3, draws=40),
     ),
     # thorough: the race at most 120 draws of 3 scans (360 scans a layout, thrice the default's)
-    "thorough": Preset(validation=dict(band_objective=""), verdict=dict(scans=3, draws=120)),
+    "thorough": Preset(verdict=dict(scans=3, draws=120)),
 }
 
 
 def config_from_budget(
-    budget: str, sensors: tuple[int, ...], overrides: Preset | None = None, band: bool = False, cell: bool = False
+    budget: str, sensors: tuple[int, ...], overrides: Preset | None = None, cell: bool = False
 ) -> SearchConfig:
     """The config of a named budget for these sensor counts, with ``overrides`` (a ``[search]`` table's
-    preset, :func:`optipose.search.config.search_preset`) on top; ``band``: the objective has a band of
-    conditions (:data:`UNDER_A_BAND` adjusts the budget first); ``cell``: it runs in a real cell
-    (:data:`IN_A_CELL`, after the band's)."""
+    preset, :func:`optipose.search.config.search_preset`) on top; ``cell``: it runs in a real cell
+    (:data:`IN_A_CELL` adjusts the budget first)."""
     if budget not in BUDGETS:
         raise ConfigError(f"unknown budget '{budget}' (use {', '.join(BUDGETS)})")
     presets = (
         BUDGETS[budget],
-        UNDER_A_BAND.get(budget) if band else None,
         IN_A_CELL.get(budget) if cell else None,
         overrides,
     )

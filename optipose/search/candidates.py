@@ -16,10 +16,10 @@ from optipose.model.collision import heads_clearance
 from optipose.search.driver import apart, optimize
 from optipose.search.problem import SurrogateProblem, Violation
 from optipose.search.records import PENALTY, Evaluation, Found, SearchOutcome
-from optipose.search.surrogate import SensorInfo, predicted_stats
+from optipose.search.surrogate import predicted_stats
 from optipose.search.study import Stop
 
-__all__ = ["candidates", "distinct", "anchored", "maxmin_anchored", "kept_exactly"]
+__all__ = ["candidates", "distinct", "anchored"]
 
 
 def candidates(
@@ -170,122 +170,6 @@ def anchored(
     return distinct([f for f in out if values[id(f)] < PENALTY], 0.02, key=lambda f: values[id(f)])[:n]
 
 
-def maxmin_anchored(
-    problem: SurrogateProblem,
-    baseline_poses: list[np.ndarray],
-    k: int,
-    n: int = 2,
-    evals: int = 30,
-    until: float = np.inf,
-    pool_size: int = 1024,
-) -> list[Found]:
-    """Hand-anchored layouts aimed at "no worse on every statistic at every noise level": k − 1 hand sensors
-    kept in their places (indices below k, as in :func:`anchored`) and the free place filled by the sensor
-    pose that maximises the *smallest* ratio hand / layout over each level's per-axis median and 75th
-    percentile (the surrogate's, under the objective's band, against the hand layout's best k sensors), the
-    ``n`` best distinct: those predicted no worse first, by their sum at the lowest noise level, then the
-    rest by their smallest ratio.
-
-    The free place's poses come from the surrogate's cache (every feasible pose the search scored, the best
-    ``pool_size`` distinct ones by their own score: no new scan); the best two are then moved by ``evals``
-    local evaluations of the smallest ratio. Where :func:`anchored` trades the axes in a weighted sum, this
-    asks each statistic to hold: on A the surrogate's no-worse triples that keep S2 and S3 came out no worse
-    on all 12 statistics under ICP too (``benchmarks/bench_frontier.py --icp``)."""
-    if not baseline_poses or k > len(baseline_poses):
-        return []
-    baseline_u = [problem.space.from_pose(T) for T in baseline_poses]
-    baseline = [problem.info(u) for u in baseline_u]
-    scales, mounting = problem.band["noise_scales"], problem.band["mounting"]
-
-    def per_level(infos) -> np.ndarray:  # (levels, 3 axes, median and p75) of each level's best subsets, deg
-        return predicted_stats(infos, noise_scales=scales, mounting=mounting).level_axis_stats
-
-    target = min(
-        (per_level([baseline[i] for i in c]) for c in itertools.combinations(range(len(baseline)), k)),
-        key=lambda t: t.max(axis=0).sum(),
-    )
-    feasible = [(key, info) for key, info in problem.cache.items() if isinstance(info, SensorInfo)]
-    feasible.sort(key=lambda t: per_level([t[1]]).max(axis=0).sum())  # each pose alone, its worst over the band
-    pool = distinct_sensors([np.array(key) for key, _ in feasible])[:pool_size]
-    floors = _gap_floors(problem, baseline_poses, k)
-
-    def rank(t) -> tuple:  # predicted no worse first, by the sum at the lowest level; then by the smallest ratio
-        (smallest, low_sum), _ = t
-        return (-min(smallest, 1.0), -low_sum if smallest >= 1.0 else -smallest)
-
-    best = []
-    for keep in itertools.combinations(range(k), k - 1):
-        free = next(i for i in range(k) if i not in keep)
-
-        def place(u6, free=free) -> np.ndarray:
-            return np.concatenate([u6 if i == free else baseline_u[i] for i in range(k)])
-
-        def ratios(u6, free=free) -> tuple[float, float] | None:
-            info = problem.sensor(u6)
-            if not isinstance(info, SensorInfo) or _gap_violation(problem, place(u6), [free], k, floors) > 0:
-                return None
-            stats = per_level([info if i == free else baseline[i] for i in range(k)])
-            return float(np.min(target / stats)), float(target[0].sum() / stats[0].sum())
-
-        scored = [(r, u6) for u6 in pool if time.monotonic() < until and (r := ratios(u6)) is not None]
-        for start in [
-            u6 for _, u6 in sorted(scored, key=lambda t: -t[0][0])[:2]
-        ]:  # the best two moved to the largest smallest ratio
-            seen = []
-
-            def value(x, grad=None, seen=seen, ratios=ratios) -> float:
-                if time.monotonic() > until:
-                    raise Stop("the selection's time is up")
-                r = ratios(np.asarray(x, dtype=float))
-                if r is not None:
-                    seen.append((r, np.array(x, dtype=float)))
-                return -r[0] if r is not None else 1.0
-
-            with contextlib.suppress(Stop):
-                optimize(value, problem.config.surrogate.local_algorithm, start, evals, seed=None, step=0.03)
-            scored += seen
-        if scored:
-            r, u6 = min(scored, key=rank)
-            best.append((r, place(u6), free))
-    out = []
-    for _, u, free in sorted(best, key=lambda t: rank(t[:2]))[:n]:
-        score = problem.score(u, constrained=False)
-        out.append(
-            Found(
-                k,
-                "hand-anchored, max-min",
-                u,
-                kept_exactly(problem, u, [free], baseline_poses),
-                score.value,
-                score.stats,
-            )
-        )
-    return out
-
-
-def kept_exactly(
-    problem: SurrogateProblem, u: np.ndarray, free: list[int], baseline_poses: list[np.ndarray]
-) -> list[np.ndarray]:
-    """The poses of a hand-anchored layout (6k,): the found sensors' from their numbers, and every other place
-    the hand sensor's pose itself. Through the [0, 1] numbers a pose comes back a few ulps off, and under
-    bracket errors ICP is chaotic at that level (docs/conditions.md, 'The search under the band'): a kept sensor would then measure
-    a little off the hand layout's own, and a tie would not be one."""
-    poses = problem.space.to_poses(u)
-    return [poses[i] if i in free else np.array(baseline_poses[i], dtype=float) for i in range(len(poses))]
-
-
-def _anchored_poses(
-    problem: SurrogateProblem, u: np.ndarray, free: list[int], baseline_poses: list[np.ndarray]
-) -> list[np.ndarray]:
-    """The poses :func:`anchored` gives its layouts: under a band the kept places hold the hand poses
-    themselves (:func:`kept_exactly`); a nominal search keeps the poses its numbers give, as its answers were
-    measured (nominal ICP on the thin part C moves a selection's statistic with those ulps, and
-    with it C's answer: docs/conditions.md, "The search under the band")."""
-    if problem.objective.conditions.trivial:
-        return problem.space.to_poses(u)
-    return kept_exactly(problem, u, free, baseline_poses)
-
-
 def _anchored_layout(
     problem: SurrogateProblem, u6s: list[np.ndarray], free: list[int], floors: dict, baseline_poses: list[np.ndarray]
 ) -> Found | None:
@@ -295,7 +179,7 @@ def _anchored_layout(
     if _gap_violation(problem, u, free, k, floors) > 0:
         return None
     score = problem.score(u, constrained=False)
-    return Found(k, "hand-anchored", u, _anchored_poses(problem, u, free, baseline_poses), score.value, score.stats)
+    return Found(k, "hand-anchored", u, problem.space.to_poses(u), score.value, score.stats)
 
 
 def _gap_floors(problem: SurrogateProblem, baseline_poses: list[np.ndarray], k: int) -> dict:
@@ -334,7 +218,7 @@ def _anchored_value(problem: SurrogateProblem, u: np.ndarray, kept: dict, k: int
         violation = 1.0 + 10.0 * min(gap, 0.1)
     if violation > 0:
         return PENALTY + violation
-    stats = predicted_stats([infos[i] for i in range(k)], *problem.weights, **problem.band)
+    stats = predicted_stats([infos[i] for i in range(k)], *problem.weights)
     return stats.score + problem.shortfall(k, stats)
 
 
@@ -368,12 +252,12 @@ def _refined(
     u = best["u"]
     infos = [kept[i] if i in kept else problem.sensor(u[6 * i : 6 * i + 6]) for i in range(k)]
     infos = [problem.info(u[6 * i : 6 * i + 6]) if isinstance(x, Violation) else x for i, x in enumerate(infos)]
-    stats = predicted_stats(infos, *problem.weights, **problem.band)
+    stats = predicted_stats(infos, *problem.weights)
     return Found(
         k,
         "hand-anchored, refined",
         u,
-        _anchored_poses(problem, u, [i for i in range(k) if i not in kept], baseline_poses),
+        problem.space.to_poses(u),
         stats.score,
         stats,
     )

@@ -2,7 +2,7 @@
 
 Every stage of :mod:`optipose.search` reads its settings from one frozen config, in sections: ``surrogate``
 (the NLopt search on the surrogate), ``constraints`` (what a layout must keep to), ``selection`` (the ICP
-selection, polish and confirmation), ``validation`` (the held-out seed's protocol and the check under a band)
+selection, polish and confirmation), ``validation`` (the held-out seed's protocol)
 and ``verdict`` (the verdict's own record, :class:`optipose.verdict.rules.VerdictConfig`). The budgets
 (:mod:`optipose.search.budgets`) are presets of these sections. A result folder saves the config
 (``config.toml``, table ``search``, one sub-table a section: :func:`search_table`) so ``--resume`` continues
@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields, replace
 
 from optipose.errors import ConfigError
+from optipose.evaluate.objective import BAND_RETIRED
 from optipose.model.collision import DEFAULT_MARGIN
 from optipose.verdict.rules import VerdictConfig
 
@@ -29,6 +30,7 @@ __all__ = [
     "FLAT_KEYS",
     "search_preset",
     "unknown_keys",
+    "saved_table",
     "search_table",
     "algorithm_code",
 ]
@@ -113,15 +115,10 @@ class SelectionConfig:
 
 @dataclass(frozen=True)
 class ValidationConfig:
-    """The validation on the held-out seed (:mod:`optipose.search.validate`) and the check under a band after it."""
+    """The validation on the held-out seed (:mod:`optipose.search.validate`)."""
 
     protocol: str = "full"  # the held-out seed's protocol: full (the objective's) | reduced (end angles only)
     scans: int = 0  # of that protocol's scans, this many, drawn by the held-out seed (0: all)
-    # after the validation, the found layouts and the hand one again on the held-out seed under the
-    # [conditions] of this objective (a shipped name or a TOML path; "": no check): a layout that wins only
-    # at the preset's noise with perfect brackets is not bought. Skipped when the search's own objective
-    # has a band (its validation is under it already)
-    band_objective: str = ""
 
     def __post_init__(self) -> None:
         if self.protocol not in ("full", "reduced"):
@@ -168,7 +165,6 @@ _RENAMED = {
     "select_time": ("selection", "time"),
     "validation": ("validation", "protocol"),
     "validation_scans": ("validation", "scans"),
-    "band": ("validation", "band_objective"),
     "verdict_draws": ("verdict", "draws"),
     "verdict_time": ("verdict", "time"),
     "answer_time": ("verdict", "answer_time"),
@@ -186,7 +182,7 @@ FLAT_KEYS: dict[str, tuple[str, str]] = {
 
 @dataclass(frozen=True)
 class Preset:
-    """Values set on top of a config: a budget, its adjustment under a band or in a real cell, a user's
+    """Values set on top of a config: a budget, its adjustment in a real cell, a user's
     ``[search]`` table. Per section, the fields it sets (the others are left as they are); ``sensors``
     when it sets the sensor counts."""
 
@@ -207,8 +203,27 @@ class Preset:
         return replace(config, **sections, **top)
 
 
+def saved_table(table: dict) -> dict:
+    """A result folder's ``[search]`` table as this version reads it: the band's key of a folder written before the
+    band was retired (``band = ""``, ``validation.band_objective = ""``: no check asked for) left out; a band that
+    was asked for stays, and :func:`unknown_keys` refuses it."""
+    out = {k: v for k, v in table.items() if not (k in ("band", "band_objective") and v == "")}
+    validation = out.get("validation")
+    if isinstance(validation, dict) and validation.get("band_objective") == "":
+        out["validation"] = {k: v for k, v in validation.items() if k != "band_objective"}
+    return out
+
+
 def unknown_keys(table: dict) -> list[str]:
-    """The keys of a ``[search]`` table that name no setting (a section's as ``section.key``), sorted."""
+    """The keys of a ``[search]`` table that name no setting (a section's as ``section.key``), sorted; the band's
+    key (``band_objective``, flat ``band``), retired, is one ConfigError saying what to use instead."""
+    validation = table.get("validation")
+    if (
+        "band" in table
+        or "band_objective" in table
+        or (isinstance(validation, dict) and "band_objective" in validation)
+    ):
+        raise ConfigError(f"search setting band_objective: {BAND_RETIRED}")
     unknown = []
     for key, value in table.items():
         if key in SECTIONS and isinstance(value, dict):  # a section (``validation`` is a flat key too)

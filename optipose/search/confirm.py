@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from optipose.verdict.compare import rank
-from optipose.evaluate.robust import make_evaluator
+from optipose.evaluate.evaluator import Evaluator
 from optipose.search.candidates import distinct
 from optipose.search.driver import apart
 from optipose.search.problem import SurrogateProblem
@@ -26,7 +26,7 @@ class Confirmer:
     """Full-protocol evaluations of the hand layout and of candidates, each run once."""
 
     def __init__(self, part, objective, seed: int, jobs: int):
-        self.part, self.evaluator = part, make_evaluator(part, objective, seed=seed, jobs=jobs, quiet=True)
+        self.part, self.evaluator = part, Evaluator(part, objective, seed=seed, jobs=jobs, quiet=True)
         self._baseline = None
         self._results: dict[bytes, object] = {}  # layout parameters -> its full-protocol evaluation
         self.chosen: dict[int, tuple] = {}  # k -> rank of the confirmed finalist

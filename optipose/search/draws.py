@@ -82,8 +82,7 @@ def confident_verdicts(
     first : the validation's evaluations by name (``found_k<k>`` of each nested group's largest k, ``hand``), the
     race's first draw where :func:`choice_draw_counts` (else not read);
     on_draw(i, name, result) : told of each further draw's evaluations as they end. Empty when the part has no
-    baseline, the validation has no hand choice, or the validation's objective is a band's (its evaluations are
-    not per-scan ones), or ``first`` lacks one the race needs."""
+    baseline, the validation has no hand choice, or ``first`` lacks one the race needs."""
     baseline_layout = baseline(part)
     side = sides(layouts, validation, baseline_layout)
     ks = sorted(side)
@@ -93,7 +92,7 @@ def confident_verdicts(
     objective = stage_objective(objective, "validation", config.validation.protocol)
     counted = choice_draw_counts(objective)
     missing = counted and not all(isinstance(first.get(n), EvaluationResult) for n in names)
-    if baseline_layout is None or not ks or not objective.conditions.trivial or missing:
+    if baseline_layout is None or not ks or missing:
         return Verdicts()
     rules = config.verdict.rules(int(seed), objective.statistic)
     label = baseline_label(baseline_layout)

@@ -5,22 +5,18 @@
 2. the NLopt search on the surrogate (:mod:`optipose.search.surrogate_search`: screen, greedy, joint), the
    history and cache flushed to the folder as it goes, the surrogate's best layouts written at its end;
 3. the ICP selection, polish and confirmation (:mod:`optipose.search.select`), after which the finalists
-   replace the surrogate's best; under a band of conditions they score the robust statistic over the
-   band's ends (:func:`optipose.search.objectives.search_objective`) and compare with the hand layout condition by condition;
-4. validation on a noise seed the search never saw (:mod:`optipose.search.validate`), under every
-   condition of the band: the numbers reported. A search whose objective has no band then checks the
-   found layouts and the hand one under the band of ``SearchConfig.validation.band_objective`` (the ``default`` and ``thorough`` budgets in the ideal cell:
-   ``objectives/robust.toml``'s noise levels and bracket tolerance), on the same held-out seed: a layout
-   that wins only in the simulation's ideal cell is not a layout to buy. Every budget validates on the objective's protocol
+   replace the surrogate's best;
+4. validation on a noise seed the search never saw (:mod:`optipose.search.validate`): the numbers reported.
+   Every budget validates on the objective's protocol
    (``[search.validation] protocol = "reduced"`` cuts it to 14 of the paper's 77 scans; the table says so). The
    hand layout's part of it starts with step 2, in ``jobs`` processes of its own (``jobs`` ≥ 2), and is waited
    for before step 3;
 5. the verdict with confidence (:mod:`optipose.search.draws`): the validation's evaluations are its first
    draw in the ideal cell (in a real cell the choices were made on them), and further draws of the cell on
-   seeds of their own are raced until every k is BUY, KEEP or TIE, before the check under the band.
+   seeds of their own are raced until every k is BUY, KEEP or TIE.
 
-:func:`run` calls one function per step (``_surrogate_search``, ``_selection``, ``_validation``, ``_verdict``,
-``_band_check``), all sharing one :class:`SearchContext`: what the search was given and what each step produced.
+:func:`run` calls one function per step (``_surrogate_search``, ``_selection``, ``_validation``, ``_verdict``),
+all sharing one :class:`SearchContext`: what the search was given and what each step produced.
 Every result goes to a :class:`ResultSink` the caller gives (``optipose.io.search.SearchFolder`` writes a
 result folder), so the search itself never touches the file system.
 """
@@ -35,10 +31,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Protocol
 
-from optipose.errors import OptiposeError, is_interrupt
+from optipose.errors import OptiposeError
 from optipose.model.layout import Layout, SensorPose
 from optipose.search.config import SearchConfig
-from optipose.search.objectives import stage_objective
 from optipose.search.problem import SurrogateProblem
 from optipose.search.records import Found, SearchOutcome, Validation
 from optipose.search.space import SPACE_VERSION
@@ -67,9 +62,7 @@ class NoFeasibleLayout(OptiposeError):
 class ResultSink(Protocol):
     """Where a search's results go as they appear (``optipose.io.search.SearchFolder``)."""
 
-    def start(
-        self, part, objective, config: SearchConfig, budget: str, seed: int, validation_seed: int, band=None
-    ) -> None: ...
+    def start(self, part, objective, config: SearchConfig, budget: str, seed: int, validation_seed: int) -> None: ...
 
     def load_cache(self, space_version: int) -> dict: ...
 
@@ -89,10 +82,6 @@ class ResultSink(Protocol):
 
     def verdict(self, verdicts: Verdicts) -> None: ...
 
-    def band_evaluation(self, name: str, result) -> None: ...
-
-    def band(self, validation: Validation) -> None: ...
-
 
 @dataclass
 class SearchReport:
@@ -101,8 +90,6 @@ class SearchReport:
     outcome: SearchOutcome
     layouts: dict[int, Layout] = field(default_factory=dict)
     validation: Validation | None = None
-    band: Validation | None = None  # the check under the band (validation.band_objective), when there was one
-    band_interrupted: bool = False  # Ctrl-C stopped the check under the band (the validation is complete)
     confident: Verdicts = field(default_factory=Verdicts)  # the verdicts with confidence (search/draws.py)
 
     @property
@@ -121,11 +108,9 @@ class SearchReport:
 class SearchContext:
     """One search as its stages share it: what it was given, and what each stage produced.
 
-    check_objective : the objective of the check under a band after the validation (``SearchConfig.validation``'s
-    ``band_objective``), None when there is none; started : ``time.monotonic()`` when the search started (a
-    user's clock, ``SearchConfig.time_limit`` and the verdict's ``answer_time``, counts from here); on_stage : told when a stage starts (or None); baseline_run,
-    check_run : the hand layout's validation and its check under the band, running beside the search (None in
-    one process); study : the live surrogate search; first : the validation's evaluations by name (the
+    started : ``time.monotonic()`` when the search started (a
+    user's clock, ``SearchConfig.time_limit`` and the verdict's ``answer_time``, counts from here); on_stage : told when a stage starts (or None); baseline_run :
+    the hand layout's validation, running beside the search (None in one process); study : the live surrogate search; first : the validation's evaluations by name (the
     verdict's first draw); report : what the stages found so far."""
 
     part: Part
@@ -135,10 +120,8 @@ class SearchContext:
     sink: ResultSink
     jobs: int
     started: float
-    check_objective: Objective | None = None
     on_stage: Callable[[str], None] | None = None
     baseline_run: BaselineRun | None = None
-    check_run: BaselineRun | None = None
     study: SurrogateStudy | None = None
     baseline: Layout | None = None
     first: dict = field(default_factory=dict)
@@ -189,17 +172,14 @@ def run(
             if not ctx.report.outcome.interrupted:
                 _validation(ctx)
                 _verdict(ctx)
-                _band_check(ctx)
             return ctx.report
 
 
 def _start(part, objective, config, seed, sink, budget, jobs, on_stage) -> SearchContext:
     """The search's context, its config written first; the clock starts here."""
     started = time.monotonic()  # a user's clock counts from here
-    # a bad name fails here, before any work
-    check = stage_objective(objective, "band", band=config.validation.band_objective)
-    sink.start(part, objective, config, budget, seed, validation_seed(seed), check)
-    ctx = SearchContext(part, objective, config, seed, sink, jobs, started, check, on_stage)
+    sink.start(part, objective, config, budget, seed, validation_seed(seed))
+    ctx = SearchContext(part, objective, config, seed, sink, jobs, started, on_stage)
     # at once: the surrogate's set-up and the start of the hand layout's processes are part of the stage
     ctx.stage("searching on the surrogate")
     return ctx
@@ -207,14 +187,10 @@ def _start(part, objective, config, seed, sink, budget, jobs, on_stage) -> Searc
 
 @contextmanager
 def _beside(ctx: SearchContext):
-    """The part's shared reference and the hand layout's processes (its validation, and its check under the
-    band at the lowest priority), for as long as the search runs."""
-    with (
-        _shared_reference(ctx.part, ctx.jobs) as folder,
-        _baseline_run(ctx, ctx.objective, folder) as baseline_run,
-        _baseline_run(ctx, ctx.check_objective, folder, last=True) as check_run,
-    ):
-        ctx.baseline_run, ctx.check_run = baseline_run, check_run
+    """The part's shared reference and the hand layout's processes (its validation), for as long as the search
+    runs."""
+    with _shared_reference(ctx.part, ctx.jobs) as folder, _baseline_run(ctx, ctx.objective, folder) as baseline_run:
+        ctx.baseline_run = baseline_run
         yield
 
 
@@ -235,30 +211,26 @@ def _shared_reference(part, jobs: int):
         shared.release(key)
 
 
-def _baseline_run(ctx: SearchContext, objective, folder: str | None, last: bool = False):
-    """The hand layout's validation (``objective``: the search's, or the band's for the check after it),
-    started beside the surrogate search when there are cores for both (``jobs`` ≥ 2), in ``jobs`` processes
-    mapping the reference in ``folder``; a do-nothing context otherwise, or without an objective. ``last``: at
-    the lowest priority, so that it takes only what nothing else wants (it is not waited for before the
-    selection, whose clock is wall time)."""
+def _baseline_run(ctx: SearchContext, objective, folder: str | None):
+    """The hand layout's validation in ``objective`` (the search's), started beside the surrogate search when
+    there are cores for both (``jobs`` ≥ 2), in ``jobs`` processes mapping the reference in ``folder``; a
+    do-nothing context otherwise."""
     from contextlib import nullcontext
 
     from optipose.search.validate import BaselineRun
 
-    if objective is None or ctx.jobs < 2:
+    if ctx.jobs < 2:
         return nullcontext()
-    protocol = ctx.config.validation.protocol
-    scans = _validation_scans(ctx, objective)
+    validation = ctx.config.validation
     return BaselineRun(
-        ctx.part, objective, ctx.seed, protocol, last=last, processes=ctx.jobs, reference_dir=folder, scans=scans
+        ctx.part,
+        objective,
+        ctx.seed,
+        validation.protocol,
+        processes=ctx.jobs,
+        reference_dir=folder,
+        scans=validation.scans,
     )
-
-
-def _validation_scans(ctx: SearchContext, objective) -> int:
-    """The validation's share of its protocol's scans (``validation.scans``, 0: all): the search's own objective
-    in one condition only; under a band, and in the check under one, every scan."""
-    trivial = objective is ctx.objective and objective.conditions.trivial
-    return ctx.config.validation.scans if trivial else 0
 
 
 def _surrogate_search(ctx: SearchContext) -> None:
@@ -309,7 +281,7 @@ def _selection(ctx: SearchContext) -> None:
 
 def _validation(ctx: SearchContext) -> None:
     """The found layouts and the hand one on the held-out seed; in a real cell, the baseline's choice where it did
-    better (under a band the verdict is the band's, not raced)."""
+    better."""
     from optipose.search.draws import choice_draw_counts
     from optipose.search.validate import baseline_where_better, validate
 
@@ -329,9 +301,9 @@ def _validation(ctx: SearchContext) -> None:
         protocol,
         evaluation,
         ctx.baseline_run,
-        _validation_scans(ctx, ctx.objective),
+        ctx.config.validation.scans,
     )
-    if report.validation.baseline and not choice_draw_counts(ctx.objective) and ctx.objective.conditions.trivial:
+    if report.validation.baseline and not choice_draw_counts(ctx.objective):
         answered, report.validation = baseline_where_better(report.layouts, report.validation, ctx.baseline)
         if answered is not report.layouts:  # some k answered with the hand layout's own sensors: their files
             report.layouts = answered
@@ -361,29 +333,6 @@ def _verdict(ctx: SearchContext) -> None:
         ctx.sink.verdict_draw,
     )
     ctx.sink.verdict(report.confident)
-
-
-def _band_check(ctx: SearchContext) -> None:
-    """The found layouts and the hand one under the band of ``validation.band_objective`` (no band, or nothing
-    to compare with: no check); a Ctrl-C here hands the validated search back, unchecked."""
-    report, check = ctx.report, ctx.check_objective
-    if check is None or not report.validation.baseline:
-        return
-    from optipose.evaluate.conditions import conditions
-    from optipose.search.validate import validate
-
-    ctx.stage(f"checking under the band ({len(conditions(check.conditions))} conditions, held-out seed)")
-    protocol = ctx.config.validation.protocol
-    try:
-        report.band = validate(
-            ctx.part, check, report.layouts, ctx.seed, ctx.jobs, protocol, ctx.sink.band_evaluation, ctx.check_run
-        )
-    except (KeyboardInterrupt, SystemError) as exc:  # the validation is done and saved: hand it back, unchecked
-        if not is_interrupt(exc):
-            raise
-        report.band_interrupted = True
-        return
-    ctx.sink.band(report.band)
 
 
 def _study(ctx: SearchContext, resume: bool, on_eval) -> SurrogateStudy:

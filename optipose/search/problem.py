@@ -55,8 +55,8 @@ class SurrogateProblem:
     config : the search's settings (constraints, the hand-margin penalty).
     surrogate : shared with another problem of the same part and objective (default: a new one).
     cache : shared per-sensor cache (u key → :class:`SensorInfo` or :class:`Violation`), e.g. a resumed one.
-    targets : k → per-axis surrogate scores (deg) of the best hand-placed k-subset, for the shortfall: (3,),
-        or (levels, 3) under a band, each noise level's (``level_axis_score``).
+    targets : k → per-axis surrogate scores (deg) of the best hand-placed k-subset, for the shortfall: (3,)
+        or (1, 3) (``level_axis_score``).
     subsets : shared memo of sensor subsets' predicted statistics (:func:`predicted_stats`), e.g. another
         problem's of the same part and objective.
     """
@@ -81,8 +81,6 @@ class SurrogateProblem:
             part,
             voxel=objective.registration.voxel_size,
             turns=protocol_turns(objective),
-            noise_band=max(objective.conditions.noise_scales),
-            mounting=objective.conditions.mounted,
             cell=cell,
         )
         self.space = PoseSpace.around(
@@ -108,12 +106,6 @@ class SurrogateProblem:
             {} if subsets is None else subsets
         )  # sensor subsets' predicted statistics (predicted_stats' memo)
         self._targets = dict(targets or {})
-        # the objective's band (docs/conditions.md): every predicted statistic is the worst over it, brackets off by the tolerance
-        band = objective.conditions
-        self.band = dict(
-            noise_scales=band.noise_scales,
-            mounting=(band.mounting_translation, band.mounting_rotation) if band.mounted else None,
-        )
 
     def with_targets(self, targets: dict[int, np.ndarray]) -> "SurrogateProblem":
         """The same problem (surrogate, cache) measured against these per-axis targets."""
@@ -192,9 +184,7 @@ class SurrogateProblem:
         the shortfall: it is the baseline.
         """
         if not constrained:
-            stats = predicted_stats(
-                [self.info(u[6 * i : 6 * i + 6]) for i in range(len(u) // 6)], *self.weights, **self.band
-            )
+            stats = predicted_stats([self.info(u[6 * i : 6 * i + 6]) for i in range(len(u) // 6)], *self.weights)
             return LayoutScore(stats.score, stats)
         k = len(u) // 6
         keys = [_key(u[6 * i : 6 * i + 6]) for i in range(k)]  # the cache's, and the subsets' memo's
@@ -207,7 +197,7 @@ class SurrogateProblem:
             constraint = constraint or ("head_gap" if violation > before else "")
         if violation > 0:
             return LayoutScore(float("nan"), None, violation, constraint)
-        stats = predicted_stats(parts, *self.weights, **self.band, memo=self._subsets, keys=keys)
+        stats = predicted_stats(parts, *self.weights, memo=self._subsets, keys=keys)
         return LayoutScore(stats.score + self.shortfall(k, stats), stats)
 
     def _head_gaps(self, u: np.ndarray, violation: float) -> float:
@@ -230,9 +220,7 @@ class SurrogateProblem:
         return violation
 
     def shortfall(self, k: int, stats: Prediction) -> float:
-        """The per-axis penalty (deg) for axes predicted worse than the margin times the hand layout's, noise
-        level by noise level under a band (the worst over the band is the top level's on nearly every axis,
-        so it cannot see an axis lost at the preset's noise: the comparison with the hand layout can)."""
+        """The per-axis penalty (deg) for axes predicted worse than the margin times the hand layout's."""
         target = self._targets.get(k, self._targets.get(max(self._targets, default=0)))
         if target is None or self.config.surrogate.hand_margin <= 0:
             return 0.0

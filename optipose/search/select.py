@@ -19,11 +19,7 @@ every candidate and the polish are measured against is the hand layout on the fu
 protocol with the held-out seed then reports the finalist (:mod:`optipose.search.validate`).
 
 The objective given here is the search's; the selection and the polish score with its reduced protocol,
-the confirmation with its full one (:func:`optipose.search.objectives.stage_objective`). Under a band of
-conditions both take the band's ends: every evaluation runs each of its conditions
-(:func:`optipose.evaluate.robust.make_evaluator`), scores the worst over them, and is compared with the
-hand layout noise level by noise level; the polish's evaluations are divided by the number of conditions,
-so it costs about what it does without a band.
+the confirmation with its full one (:func:`optipose.search.objectives.stage_objective`).
 """
 
 from __future__ import annotations
@@ -35,9 +31,8 @@ import time
 import numpy as np
 
 from optipose.verdict.compare import excess, rank
-from optipose.evaluate.conditions import conditions
-from optipose.evaluate.robust import make_evaluator
-from optipose.search.candidates import anchored, candidates, maxmin_anchored
+from optipose.evaluate.evaluator import Evaluator
+from optipose.search.candidates import anchored, candidates
 from optipose.search.confirm import Confirmer
 from optipose.search.objectives import stage_objective
 from optipose.search.polish import baseline_start, polish
@@ -70,14 +65,13 @@ def select_finalists(
     """
     end = time.monotonic() + max_time
     config = study.problem.config
-    band = not objective.conditions.trivial
     finalists, records = {}, []
     confirmer = (
         Confirmer(part, stage_objective(objective, "confirmation"), selection_seed(seed), jobs)
         if config.selection.confirm_candidates > 0
         else None
     )
-    with make_evaluator(
+    with Evaluator(
         part, stage_objective(objective, "selection"), seed=selection_seed(seed), jobs=jobs, quiet=True
     ) as evaluator:
         baseline_result = evaluator(baseline(part)) if baseline(part) is not None else None
@@ -92,7 +86,7 @@ def select_finalists(
             )
             if not pool:
                 continue
-            key, best, choice = min(pool, key=lambda t: _order(t, reference, band))
+            key, best, choice = min(pool, key=lambda t: t[0])  # no worse on every axis first, then the lower sum
             polished = (
                 reference is not None and (key[0] or key[1] > reference.score / 2) and config.selection.polish_evals > 0
             )
@@ -115,15 +109,6 @@ def select_finalists(
     return finalists, records
 
 
-def _order(entry, reference, band: bool) -> tuple:
-    """The selection's order of a pool entry (rank, layout, choice): no worse than the hand layout on every
-    axis first; under a band then the least excess over it (a layout is bought only when it is no worse at
-    every level, so there the lowest sum that loses an axis is the wrong pick: on A the greedy triple, better
-    in sum on 14 scans, lost pitch under the band); then the lower score."""
-    (worse, score), _, choice = entry
-    return (worse, excess(choice, reference) if band and worse and reference is not None else 0.0, score)
-
-
 def _reference(k: int, baseline_result, confirmer: Confirmer | None, records: list[IcpEvaluation], on_stage):
     """The bar of a k: the hand layout's choice, on the full protocol when confirmation is on (on 14 scans it
     is itself a noisy draw, and a polish aimed at a lucky low chases noise instead of the axis)."""
@@ -143,19 +128,14 @@ def _screen_candidates(
     part, study, outcome, k, per_k, finalists, evaluator, reference, records, deadline, on_stage
 ) -> Pool:
     """Every candidate of k on the reduced protocol, until the time is up (the best hand-anchored one and the
-    surrogate's best at least): first, under a band, k − 1 hand sensors with the sensor that makes each statistic
-    hold best (:func:`optipose.search.candidates.maxmin_anchored`), then the hand layout's used sensors with
-    found ones in the other places (:func:`optipose.search.candidates.anchored`)."""
+    surrogate's best at least): first the hand layout's used sensors with found ones in the other places
+    (:func:`optipose.search.candidates.anchored`)."""
     pool: Pool = []
-    first, maxmin = [], []
+    first = []
     if reference is not None:
         used = reference.used
         cfg = study.problem.config
-        if not study.problem.objective.conditions.trivial:  # under a band: each statistic asked to hold, first
-            maxmin = maxmin_anchored(
-                study.problem, baseline(part).poses, k, until=deadline
-            )  # the clock only as a safety net
-        first = maxmin + anchored(
+        first = anchored(
             study.problem,
             baseline(part).poses,
             used,
@@ -167,7 +147,7 @@ def _screen_candidates(
     rest = candidates(study.problem, study.history, outcome, k, per_k, finalists)
     # whatever the clock says, the best hand-anchored layout and the surrogate's own best are evaluated: a
     # selection cut after the first of them would make the answer the machine's load, not the search's
-    required = {0, len(maxmin), len(first)}
+    required = {0, len(first)}
     for n, cand in enumerate(first + rest):
         if time.monotonic() > deadline and pool and n not in required:
             if f"selection:k={k}" not in study.cut:  # what the user's clock cut, which the answer says
@@ -192,10 +172,7 @@ def _polish(study, part, evaluator, pool: Pool, best: Found, reference, records,
     starts = [best] + nearest(pool, reference, best)
     if k == 1:  # a reference means the part has a hand layout
         starts += baseline_start(study.problem, baseline(part), reference)
-    # under a band each evaluation runs every condition: the polish gets as many conditions' worth of work
-    evals = (config.selection.polish_evals if k == 1 else config.selection.polish_evals // 2) // len(
-        conditions(evaluator.objective.conditions)
-    )
+    evals = config.selection.polish_evals if k == 1 else config.selection.polish_evals // 2
     starts = starts[: evals // (6 * k + 2)]  # COBYLA needs 6k + 1 evaluations before its first step
     for start in starts:
         found, choice, polish_records = polish(

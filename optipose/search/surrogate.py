@@ -38,15 +38,8 @@ What the surrogate models, and why:
 * **the noise's own bias.** A voxel's point is the equal-weight centroid of the raw points that fall in it,
   and the noise along each ray decides which do: where a face cuts a voxel obliquely the points pushed in
   and out do not balance, a bias that grows as σ² and that the information matrix cannot see (a grazing
-  view of few voxels suffers most; ``benchmarks/bench_noise_voxels.py``). Under a band the surrogate
-  (``noise_band``, the band's top scale) voxelises each turn twice more with every raw point moved by +ε
-  and by −ε along its ray (one draw, the same for both): the mean less the noise-free ΣJᵀr keeps what is
-  even in the noise and cancels what is odd, and each level s adds (s / top)² of it. One draw is itself
-  noisy, and ICP's re-matching is not in it; docs/conditions.md, "The surrogate under the band", has its ranking.
-* **the brackets.** Under an objective whose band has a mounting tolerance, a sensor's true pose is off
-  its drawing and the cell is zeroed on a master part; the change with orientation of the compromise
-  between sensors whose clouds disagree is linearised in the bracket errors at the same turns and added as
-  a variance (:mod:`optipose.search.mounting`, which says what it leaves out).
+  view of few voxels suffers most; ``benchmarks/bench_noise_voxels.py``). At the preset's noise it is small
+  beside the voxel bias, and the surrogate leaves it out.
 * **the cell.** Under an objective's real cell (``Objective.cell``), its error sources (calibration, the
   robot's path, the part as made, the material) are propagated to the estimate the same way and added as a
   variance and a bias (:mod:`optipose.search.cell_terms`, which says what it leaves out); the ideal cell adds nothing.
@@ -65,7 +58,6 @@ from optipose.model.motion import ScanMotion
 from optipose.scan.pose import PartPose
 from optipose.scan.scanner import Scanner
 from optipose.search.cell_terms import CellMaps, CellModel, sensor_maps, subset_terms
-from optipose.search.mounting import mounting_maps, mounting_variance
 from optipose.search.prediction import (
     MEDIAN_PER_SIGMA,
     P75_PER_SIGMA,
@@ -118,13 +110,6 @@ class SensorInfo:
     n_voxels: int
     A: np.ndarray | None = None  # (6, 6) unweighted point-to-plane normal matrix ΣJᵀJ of the voxel centroids
     G: np.ndarray | None = None  # (turns, 6) ΣJᵀr of the voxel centroids' residuals, per turn
-    # the bracket mounting term (:mod:`optipose.search.mounting`), in O at each turn, index 0 the nominal orientation
-    A_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀJ of the voxel centroids
-    N_turns: np.ndarray | None = None  # (turns + 1, 6, 6) ΣJᵀr per unit bracket error (r rad, t m; sensor frame)
-    # the noise's own bias (the noise bias term, see the module doc): per turn, what the sensor noise at the
-    # surrogate's ``noise_band`` adds to G through the voxels' membership (turns, 6); None: no such term
-    G_noise: np.ndarray | None = None
-    noise_band: float = 1.0
     cell: CellMaps | None = None  # the cell's error sources (:mod:`optipose.search.cell_terms`); None: the ideal cell
 
 
@@ -138,8 +123,6 @@ class Surrogate:
     columns : laser columns per profile in the reduced scan; ``step_factor`` : profile step multiplier.
     threads : the scanner's threads for one scan (default one: a reduced scan is a few ten thousand rays, too
         few to share; the search scores several poses at once instead, :meth:`optipose.search.problem.SurrogateProblem.prefetch`).
-    mounting : whether to compute the bracket term's matrices (``A_turns``, ``N_turns``: one more turn per
-        pose and a map per turn); an objective whose brackets are exact never reads them.
     cell : a :class:`optipose.cell.scans.CellSetup` whose sources the layouts are scored under (the cell
         term, :mod:`optipose.search.cell_terms`); None or an ideal one: none, today's surrogate bit for bit.
     """
@@ -153,8 +136,6 @@ class Surrogate:
         threads: int | None = 1,
         extra_variance: float = 0.0,
         turns: np.ndarray | None = None,
-        noise_band: float = 1.0,
-        mounting: bool = True,
         cell=None,
     ):
         from optipose.model.sensor import load_sensor
@@ -182,8 +163,6 @@ class Surrogate:
         shifts = np.random.default_rng(2022_1536).random((len(turns), 3)) * voxel
         self.turns = turns
         self.motions = [part_motion(rpy, self.centre, shift) for rpy, shift in zip(turns, shifts)]
-        self.noise_band = float(noise_band)  # the highest noise scale the objective's band asks for
-        self.mounting = bool(mounting)
         self.cell = None
         if cell is not None and not cell.ideal and len(self.motions):
             self.cell = CellModel(
@@ -214,45 +193,27 @@ class Surrogate:
         # the number of points a full-fidelity scan puts there; its tangential spread does not matter
         var = self.full_sensor.noise_sigma**2 / inten / (counts * self.scale) + self.extra_variance
         J = np.hstack([np.cross(p, n), n]) / np.sqrt(var)[:, None]
-        A, G, A_turns, N_turns, turned = self._bias(scan.points, T_O_S)
-        noisy = self._noise_bias(scan, T_O_S, G) if G is not None and self.noise_band > 1.0 else None
+        A, G, turned = self._bias(scan.points)
         cell = None if self.cell is None else sensor_maps(self.cell, turned, T_O_S, float(np.mean(counts)) * self.scale)
-        return SensorInfo(
-            J.T @ J,
-            int(round(len(scan) * self.scale)),
-            len(first),
-            A,
-            G,
-            A_turns,
-            N_turns,
-            noisy,
-            self.noise_band,
-            cell,
-        )
+        return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G, cell=cell)
 
-    def _bias(self, points: np.ndarray, T_O_S: np.ndarray) -> tuple:
-        """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and
-        per turn and at the nominal orientation, the mounting term's normal matrices and maps; and, for the
+    def _bias(self, points: np.ndarray) -> tuple:
+        """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and, for the
         cell term, the centroids, normals, faces and turn at the nominal orientation and each turn."""
         if not len(self.motions):
-            return None, None, None, None, []
+            return None, None, []
         self.ready()
-        A, G = np.zeros((6, 6)), np.zeros((len(self.motions), 6))
-        A_turns, N_turns, turned = None, None, []
-        if self.mounting:
-            A_turns, N_turns = np.zeros((len(self.motions) + 1, 6, 6)), np.zeros((len(self.motions) + 1, 6, 6))
+        A, G, turned = np.zeros((6, 6)), np.zeros((len(self.motions), 6)), []
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
-            if m == 0 and not self.mounting and self.cell is None:
+            if m == 0 and self.cell is None:
                 continue
             v, n, r, J, face = self._turned(points, T)
             if self.cell is not None:
                 turned.append((v, n, face, T[:3, :3]))
-            if self.mounting:
-                A_turns[m], N_turns[m] = mounting_maps(v, n, T[:3, :3], self.centre, T_O_S)
             if m > 0:
                 G[m - 1] = J.T @ r
                 A += J.T @ J / len(self.motions)
-        return A, G, A_turns, N_turns, turned
+        return A, G, turned
 
     def _turned(self, points: np.ndarray, T: np.ndarray) -> tuple:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
@@ -264,33 +225,6 @@ class Surrogate:
         v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
         q, n, face = self._reference.nearest(v)
         return v, n, np.einsum("ij,ij->i", v - q, n), np.hstack([np.cross(v - self.centre, n), n]), face
-
-    def _noise_bias(self, scan, T_O_S: np.ndarray, G: np.ndarray) -> np.ndarray:
-        """Per turn, what the sensor noise at ``noise_band`` adds to ΣJᵀr through the voxels (turns, 6).
-
-        Each raw point moves along its ray by ε (σ/√intensity times the band's top scale), once by +ε and
-        once by −ε with the same draws; the mean of the two runs' ΣJᵀr less the noise-free one keeps what is
-        even in the noise (the voxels' membership, a bias ∝ σ²) and cancels what is odd (the noise itself,
-        which the information matrix already accounts for)."""
-        s = self.full_sensor
-        apex_z = s.apex_z
-        shifts = self.motion.offsets()
-        if np.isfinite(apex_z):  # rays from the fan's apex, which the part passes along +x_O
-            apex = T_O_S[:3, :3] @ np.array([0.0, 0.0, apex_z]) + T_O_S[:3, 3]
-            u = scan.points - apex + shifts[scan.profile][:, None] * np.array([1.0, 0.0, 0.0])
-            u /= np.linalg.norm(u, axis=1, keepdims=True)
-        else:
-            u = np.broadcast_to(T_O_S[:3, 2], scan.points.shape)
-        inten = np.clip(scan.intensity.astype(float), s.detection_threshold, 1.0)
-        rng = np.random.default_rng(2022_1536)  # fixed, so a pose always scores the same
-        eps = rng.standard_normal(len(scan)) * (s.noise_sigma * self.noise_band / np.sqrt(inten))
-        out = np.zeros_like(G)
-        for sign in (1.0, -1.0):
-            points = scan.points + sign * eps[:, None] * u
-            for m, T in enumerate(self.motions):
-                _, _, r, J, _ = self._turned(points, T)
-                out[m] += 0.5 * (J.T @ r)
-        return out - G
 
 
 def _voxels(points: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -324,23 +258,15 @@ def predicted_stats(
     weights=(1.0, 1.0, 1.0),
     median_weight=1.0,
     p75_weight=1.0,
-    noise_scales: tuple[float, ...] = (1.0,),
-    mounting: tuple[float, float] | None = None,
     memo: dict | None = None,
     keys: list | None = None,
 ) -> Prediction:
     """The surrogate's Table 1 for a layout (:class:`Prediction`): every non-empty subset's predicted
     per-axis median and 75th percentile (degrees), each axis's best subset, its per-axis score and the
-    weighted score of the per-axis best, and the same per noise level.
+    weighted score of the per-axis best.
 
-    noise_scales : the sensor noise σ times each of these; each statistic is the worst over them. The
-    information matrix scales with 1/σ² and the voxel bias not at all, so a band costs one more 6×6 inverse
-    per level, no scan.
-    mounting : (translation m, rotation rad), the brackets' tolerance (± per axis), or None: the zeroed
-    cell's error from bracket errors (:mod:`optipose.search.mounting`) adds its variance, the same at every
-    noise level, to the noise's at each turn. It needs the turns (``A_turns``); without them it is left out.
     The cell's error sources (:mod:`optipose.search.cell_terms`), when the sensors carry them (``cell``), add
-    their variance the same way and their bias to the voxel bias's.
+    their variance to the noise's at each turn and their bias to the voxel bias's.
     memo, keys : a dict kept between calls and one key per sensor (its pose's): a subset's statistics depend
     only on its sensors, in order, so a subset met before (a screen adds one new sensor to the same placed
     ones thousands of times) is looked up instead of computed again — the same numbers, bit for bit.
@@ -349,10 +275,10 @@ def predicted_stats(
     subsets = [c for r in range(1, k + 1) for c in itertools.combinations(range(k), r)]
     cells = [i.cell for i in infos if i.cell is not None]
     instances = len(cells[0].magnitudes) if cells else 1  # a cell of ranges: its magnitude instances
-    # each level's and magnitude instance's own median and p75 (rad)
-    levels = np.zeros((len(noise_scales), instances, len(subsets), 2, 3))
+    # each magnitude instance's own median and p75 (rad), at the preset's noise (one level)
+    levels = np.zeros((1, instances, len(subsets), 2, 3))
     for s, c in enumerate(subsets):
-        key = None if memo is None else (tuple(keys[i] for i in c), tuple(noise_scales), mounting)
+        key = None if memo is None else tuple(keys[i] for i in c)
         if key is not None and key in memo:
             levels[:, :, s] = memo[key]
             continue
@@ -360,24 +286,15 @@ def predicted_stats(
         have_bias = all(infos[i].G is not None for i in c)
         A = sum(infos[i].A for i in c) if have_bias else None
         delta = bias_rotation(A, sum(infos[i].G for i in c)) if have_bias else None
-        noisy = have_bias and all(infos[i].G_noise is not None for i in c)
-        mount = None
-        if mounting is not None and delta is not None and all(infos[i].A_turns is not None for i in c):
-            mount = mounting_variance([infos[i].A_turns for i in c], [infos[i].N_turns for i in c], *mounting)
-        cell_var, cell_bias = 0.0, 0.0
+        mount, cell_bias = None, 0.0
         if delta is not None and all(infos[i].cell is not None for i in c):
-            cell_var, cell_bias = subset_terms([infos[i].cell for i in c])
-            mount = cell_var if mount is None else mount + cell_var
-        for n, scale in enumerate(noise_scales):
-            sigma = rotation_sigma(H if scale == 1.0 else H / scale**2)
-            d = delta
-            if noisy:  # the noise's own bias grows as σ²: measured at each sensor's band top, scaled to this level
-                d = bias_rotation(A, sum(infos[i].G + (scale / infos[i].noise_band) ** 2 * infos[i].G_noise for i in c))
-            dd = d if d is None else d + cell_bias
-            if mount is not None and np.ndim(mount) == 3:  # per magnitude instance, at once
-                levels[n, :, s] = np.stack(instance_stats(np.sqrt(sigma**2 + mount), dd), axis=1)
-            else:
-                levels[n, :, s] = axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), dd)
+            mount, cell_bias = subset_terms([infos[i].cell for i in c])
+        sigma = rotation_sigma(H)
+        dd = delta if delta is None else delta + cell_bias
+        if mount is not None and np.ndim(mount) == 3:  # per magnitude instance, at once
+            levels[0, :, s] = np.stack(instance_stats(np.sqrt(sigma**2 + mount), dd), axis=1)
+        else:
+            levels[0, :, s] = axis_stats(sigma if mount is None else np.sqrt(sigma**2 + mount), dd)
         if key is not None:
             memo[key] = levels[:, :, s].copy()
     if instances > 1:

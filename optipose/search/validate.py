@@ -1,8 +1,6 @@
 """Stage: validation. The found layouts and the hand-placed one on the objective's protocol (``quick``: the
 reduced one) with a noise seed the search never saw (:func:`optipose.seeds.validation_seed`); these are
-the numbers reported. Under a band of conditions every layout is evaluated at each of them (the bracket
-errors drawn from the held-out seed too), and each choice carries its statistics per noise level (the
-worst over that level's bracket draws: :func:`optipose.evaluate.robust.by_level`).
+the numbers reported.
 
 The hand layout's evaluation does not depend on what the search finds: :class:`BaselineRun` starts it in
 processes of its own at a low priority when the search starts, beside the surrogate search, and
@@ -16,9 +14,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from optipose.evaluate.conditions import by_draw, conditions
+from optipose.evaluate.assignment import choice_of
 from optipose.evaluate.evaluator import Evaluator, log_failures
-from optipose.evaluate.robust import choice_of, make_evaluator, robust_result
 from optipose.errors import WorkerError
 from optipose.model.layout import Layout
 from optipose.search.objectives import stage_objective
@@ -30,7 +27,6 @@ __all__ = ["validate", "BaselineRun", "nested_groups", "indices_in", "baseline_w
 
 log = logging.getLogger(__name__)
 _NICE = 10  # the hand layout's evaluation takes the cores the search leaves idle, and yields where it wants them
-_LAST = 19  # ... and its check under the band, which runs on through the selection, yields to everything
 
 
 class BaselineRun:
@@ -39,11 +35,8 @@ class BaselineRun:
     thread each) at a low priority, so it takes the cores the search leaves idle.
 
     ``result()`` waits for it: ``None`` when the part has no baseline, or the evaluation failed or was
-    stopped (the validation then evaluates the hand layout itself); ``close()`` stops it. ``last``: at the
-    lowest priority (the hand layout under the band of the check after a nominal search, which runs on
-    through the selection and yields to it). ``processes``: its work is shared out over up to this many
-    processes — its bracket draws where there are enough of them (each draw's noise levels scanned together),
-    else its scans (:func:`_shares`) — so that once the search and the found layouts' validation are done the
+    stopped (the validation then evaluates the hand layout itself); ``close()`` stops it. ``processes``: its
+    scans are shared out over up to this many processes, so that once the search and the found layouts' validation are done the
     hand layout's takes every core, not one. ``reference_dir``: the CAD-surface reference the search holds on
     this machine (:mod:`optipose.parallel.shared`), mapped by the processes instead of built by each.
     """
@@ -54,7 +47,6 @@ class BaselineRun:
         objective,
         seed: int,
         protocol: str = "full",
-        last: bool = False,
         processes: int = 1,
         reference_dir: str | None = None,
         scans: int = 0,
@@ -69,16 +61,16 @@ class BaselineRun:
         if layout is None or multiprocessing.current_process().daemon:  # a daemonic worker (Dask) may not start one
             return
         objective = stage_objective(objective, "validation", protocol)
-        self._objective, self._conditions = objective, conditions(objective.conditions)
+        self._objective = objective
         self._part, self._seed, self._layout, self._scans = part, validation_seed(seed), layout, scans
-        self._shares = _shares(self._conditions, processes)
+        n = max(1, processes)
         try:
             the_part = pickle.dumps(
                 part, protocol=pickle.HIGHEST_PROTOCOL
             )  # once, not once a process: a dense mesh takes seconds
-            for under, scans in self._shares:
-                args = (the_part, objective, self._seed, layout, under, scans, reference_dir, self._scans)
-                self._calls.append(Background(_evaluate, *args, nice=_LAST if last else _NICE))
+            for first in range(n):
+                args = (the_part, objective, self._seed, layout, (first, n), reference_dir, self._scans)
+                self._calls.append(Background(_evaluate, *args, nice=_NICE))
         except (OSError, pickle.PicklingError, AttributeError, TypeError) as exc:  # the validation evaluates it instead
             self.close()
             log.warning("could not start the hand layout's evaluation beside the search (%s)", exc)
@@ -88,21 +80,11 @@ class BaselineRun:
         if not self._calls:
             return
         try:
-            raws: dict = {}
-            for (under, _), call in zip(self._shares, self._calls):
-                for condition, raw in zip(under, call.result()):
-                    raws.setdefault(condition, []).append(raw)
+            raws = [call.result() for call in self._calls]
             with Evaluator(self._part, self._objective, seed=self._seed, quiet=True, scans=self._scans) as evaluator:
-                each = [evaluator.result(self._layout, raws[c]) for c in self._conditions]
-            self._result = (
-                each[0]
-                if self._objective.conditions.trivial
-                else robust_result(list(zip(self._conditions, each)), self._objective)
-            )
-            for (
-                result
-            ) in each:  # it ran quiet in its own process: say here what the validation's own evaluation would have said
-                log_failures(result.per_scan, what="hand layout: ")
+                self._result = evaluator.result(self._layout, raws)
+            # it ran quiet in its own process: say here what the validation's own evaluation would have said
+            log_failures(self._result.per_scan, what="hand layout: ")
         except WorkerError as exc:  # the validation evaluates the hand layout itself instead
             log.warning("the hand layout's evaluation beside the search failed (%s); evaluating it again", exc)
         finally:
@@ -125,36 +107,23 @@ class BaselineRun:
         self.close()
 
 
-def _shares(conditions: list, processes: int) -> list[tuple[list, tuple[int, int]]]:
-    """The hand layout's evaluation shared out over up to ``processes`` processes: per process, its
-    conditions and its scans (first, every; see :meth:`optipose.evaluate.evaluator.Evaluator.raw`). Its
-    bracket draws when there are as many as processes, each draw's noise levels together; else every
-    process evaluates every condition on every ``processes``-th scan."""
-    draws = by_draw(conditions)
-    n = max(1, processes)
-    if len(draws) >= n:
-        return [([c for group in draws[i::n] for c in group], (0, 1)) for i in range(n)]
-    return [(list(conditions), (i, n)) for i in range(n)]
-
-
 def _evaluate(
     part: bytes,
     objective,
     seed: int,
     layout,
-    under: list,
     scans: tuple[int, int],
     reference_dir: str | None,
     share: int = 0,
-) -> list:
-    """The hand layout's raw evaluation under some conditions, on some of its scans (``scans``: first,
-    every, of the ``share`` the seed draws, 0: all), in a process of its own; ``part`` pickled."""
+) -> tuple:
+    """The hand layout's raw evaluation on some of its scans (``scans``: first, every, of the ``share`` the seed
+    draws, 0: all), in a process of its own; ``part`` pickled."""
     import pickle
 
     with Evaluator(
         pickle.loads(part), objective, seed=seed, jobs=1, quiet=True, reference_dir=reference_dir, scans=share
     ) as evaluator:
-        return evaluator.raw(layout, under, scans)
+        return evaluator.raw(layout, scans)
 
 
 def validate(
@@ -174,15 +143,12 @@ def validate(
     be saved before the next one starts.
     baseline_run : a :class:`BaselineRun` of the same part, objective, seed and protocol, whose result stands for
     the hand layout's evaluation (the hand layout is evaluated here when it has none).
-
-    The same function checks the found layouts under a band after a nominal search's validation
-    (:func:`optipose.search.objectives.band_objective`): ``objective`` is then the band's.
     """
     vseed = validation_seed(seed)
     objective = stage_objective(objective, "validation", protocol)
     done = on_evaluation or (lambda name, result: None)
     found, baseline_choices = {}, {}
-    with make_evaluator(part, objective, seed=vseed, jobs=jobs, scans=scans) as evaluator:
+    with Evaluator(part, objective, seed=vseed, jobs=jobs, scans=scans) as evaluator:
         for members in nested_groups(layouts):
             big = layouts[max(members)]
             result = evaluator(big)

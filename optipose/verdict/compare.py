@@ -2,10 +2,7 @@
 
 The user's question is whether to keep the sensors they have or buy the found ones. A found choice of k
 sensors wins outright when every axis's median and 75th percentile is at most the reference's; how far
-it misses is the summed excess. Under a band of conditions (choices that carry ``under``, from
-:mod:`optipose.evaluate.robust`: each noise level, its bracket draws aggregated) both tests hold level by
-level: no worse on any axis at *every* level, the excess summed over them; the score compared is the
-robust one. The search ranks and polishes with these, the CLI prints a
+it misses is the summed excess. The search ranks and polishes with these, the CLI prints a
 :class:`Verdict` per k, and :func:`optipose.io.load_result` gives a saved search's verdicts back;
 :mod:`optipose.verdict.words` says them in lines (:func:`~optipose.verdict.words.verdict_line`).
 
@@ -34,33 +31,20 @@ def _stat(axis: AxisChoice, statistic: str) -> float:
 
 
 def dominates(choice: Choice, reference: Choice) -> bool:
-    """Every axis's median and 75th percentile at most the reference's (at every condition of a band)."""
-    return all(
-        _stat(a, s) <= _stat(b, s)
-        for c, r in _pairs(choice, reference)
-        for a, b in zip(c.axes, r.axes)
-        for s in _STATISTICS
-    )
+    """Every axis's median and 75th percentile at most the reference's."""
+    return all(_stat(a, s) <= _stat(b, s) for a, b in zip(choice.axes, reference.axes) for s in _STATISTICS)
 
 
 def excess(choice: Choice, reference: Choice, margin: float = 1.0) -> float:
     """How far (rad, summed) the choice's per-axis medians and 75th percentiles exceed margin × the
-    reference's (summed over the conditions of a band)."""
+    reference's."""
     return float(
         sum(
             max(0.0, _stat(a, s) - margin * _stat(b, s))
-            for c, r in _pairs(choice, reference)
-            for a, b in zip(c.axes, r.axes)
+            for a, b in zip(choice.axes, reference.axes)
             for s in _STATISTICS
         )
     )
-
-
-def _pairs(choice: Choice, reference: Choice) -> list[tuple[Choice, Choice]]:
-    """The choices to compare: condition by condition when both were evaluated under the same band."""
-    if choice.under and len(choice.under) == len(reference.under):
-        return [(c, r) for (_, c), (_, r) in zip(choice.under, reference.under)]
-    return [(choice, reference)]
 
 
 def rank(choice: Choice, reference: Choice | None) -> tuple[bool, float]:
@@ -83,13 +67,12 @@ class AxisGap:
     statistic: str  # median | p75
     found: float
     reference: float
-    condition: str = ""  # under a band, the condition's label
 
 
 @dataclass(frozen=True)
 class Verdict:
-    """Found vs. the reference for one k: the ratio in sum, the axes where found is worse, under a band the
-    levels; :func:`bought` says what to do."""
+    """Found vs. the reference for one k: the ratio in sum, the axes where found is worse; :func:`bought` says
+    what to do."""
 
     k: int
     found: Choice
@@ -104,29 +87,12 @@ class Verdict:
     @property
     def worse(self) -> tuple[AxisGap, ...]:
         """Every axis statistic on which the found choice is worse (what :func:`dominates` tests)."""
-        pairs = _pairs(self.found, self.reference)
-        labels = [label for label, _ in self.found.under] if len(pairs) > 1 else [""]
         return tuple(
-            AxisGap(f.axis, stat, _stat(f, stat), _stat(r, stat), label)
-            for label, (c, ref) in zip(labels, pairs)
-            for f, r in zip(c.axes, ref.axes)
+            AxisGap(f.axis, stat, _stat(f, stat), _stat(r, stat))
+            for f, r in zip(self.found.axes, self.reference.axes)
             for stat in _STATISTICS
             if _stat(f, stat) > _stat(r, stat)
         )
-
-    def levels(self) -> list[tuple[str, float, bool]]:
-        """Under a band, per noise level: its label, reference score over found score, and whether found is
-        no worse on every axis there; else []."""
-        if len(self.found.under) != len(self.reference.under):
-            return []
-        return [
-            (label, float(r.score / c.score), dominates(c, r))
-            for (label, c), (_, r) in zip(self.found.under, self.reference.under)
-        ]
-
-    def ratios(self) -> list[tuple[str, float]]:
-        """Under a band, (level label, reference score over found score) per noise level; else []."""
-        return [(label, ratio) for label, ratio, _ in self.levels()]
 
     @property
     def no_worse(self) -> bool:
@@ -135,7 +101,7 @@ class Verdict:
 
     @property
     def tie(self) -> bool:
-        """Every axis statistic equal to the reference's (at every condition): replacing it gains nothing, as
+        """Every axis statistic equal to the reference's: replacing it gains nothing, as
         when the choice measures every axis on hand sensors a found layout keeps in their places."""
         return self.no_worse and dominates(self.reference, self.found)
 
@@ -146,9 +112,7 @@ class Verdict:
         return tuple(tuple(a.axis for a in c.axes if a.reason == FAILED) for c in (self.found, self.reference))
 
 
-def bought(verdict: Verdict, band: Verdict | None = None) -> bool:
+def bought(verdict: Verdict) -> bool:
     """Whether to buy the found layout of ``verdict``: no worse than the reference on every axis and better on
-    some (a tie gains nothing), and, when the search checked it under a band afterwards (``band``: the same
-    k's verdict there), no worse at every level too; never when the found choice's registrations failed on
-    some axis."""
-    return verdict.no_worse and not verdict.tie and not verdict.failed[0] and (band is None or band.no_worse)
+    some (a tie gains nothing); never when the found choice's registrations failed on some axis."""
+    return verdict.no_worse and not verdict.tie and not verdict.failed[0]

@@ -4,7 +4,7 @@ they show, written here once.
 Numbers: angles in millidegrees (:func:`mdeg`, :func:`mdeg_text`, :func:`mdeg_compact`, :func:`interval_cell`),
 ratios with their interval (:func:`ratio_cell`), a pose as XYZ + RPY (:func:`xyz_rpy_text`). Lines: the verdict
 with confidence (:func:`confident_line`, :func:`fewer_line`, :func:`axis_lines`, :func:`mount_line`), the
-validation draw's verdict (:func:`verdict_line`, :func:`failed_line`, :func:`band_advice`,
+validation draw's verdict (:func:`verdict_line`, :func:`failed_line`,
 :func:`verdict_headline`), an axis no found layout measures (:func:`unmeasured_line`), one found sensor against
 the baseline's largest choice (:func:`one_versus_many`), and what a verdict holds in (:data:`IDEAL_CELL`,
 :data:`UNCHECKED`). The records they read are :mod:`optipose.verdict.confidence`'s and
@@ -14,14 +14,13 @@ the baseline's largest choice (:func:`one_versus_many`), and what a verdict hold
 from __future__ import annotations
 
 import math
-import re
 
 import numpy as np
 
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, Choice, not_measured
 from optipose.model.layout import kept_sensors
 from optipose.transforms import xyz_rpy
-from optipose.verdict.compare import Verdict, bought
+from optipose.verdict.compare import Verdict
 from optipose.verdict.confidence import ConfidentVerdict, Decision, Interval
 from optipose.verdict.ruling import FIELDS
 
@@ -38,13 +37,13 @@ __all__ = [
     "confident_line",
     "open_line",
     "ruling_line",
+    "cell_advice",
     "clock_line",
     "fewer_line",
     "axis_lines",
     "mount_line",
     "verdict_line",
     "failed_line",
-    "band_advice",
     "verdict_headline",
     "unmeasured_line",
     "one_versus_many",
@@ -56,10 +55,10 @@ IDEAL_CELL = (
     "with a cell file of yours, for the errors of a real cell before buying"
 )
 
-# what a nominal search's verdict says when it never checked its answer under a band (``--budget quick``)
+# what the validation draw's verdict of a search in the ideal cell says: better there is not yet a reason to buy
 UNCHECKED = (
-    "checked in the ideal cell only (the preset's noise, every bracket exact), not under the band of a real "
-    "cell: run --budget default before buying"
+    "checked in the ideal cell only (the CAD part, an exact robot and calibration), not in a real cell: check it "
+    "in the cell you own (optipose robustness --layout ... --cell NAME) before buying"
 )
 
 
@@ -226,6 +225,14 @@ def ruling_line(v: ConfidentVerdict) -> str:
     return f"  k={v.k} {head} (the draws' ratio crosses 1 there; {100 * r.share:.0f} % of their spread)"
 
 
+def cell_advice(name: str) -> str:
+    """What a search run in its objective's cell of points (no ``--cell`` named) says under its answer."""
+    return (
+        f"answered in the objective's cell, {name} (one cell's points); for yours name its kind: --cell cobot, "
+        "industrial-arm or linear-axis, or --cell common for any of them (optipose cells)"
+    )
+
+
 def clock_line(cut: tuple[str, ...], seconds: float) -> str:
     """What a user's clock (``--max-time``) ended before its counts, and how to get the seed's own answer; "" when
     it ended nothing."""
@@ -306,14 +313,11 @@ def verdict_line(v: Verdict, reference: str = "hand") -> str:
     ratio, name, ref = v.ratio, v.found.name, v.reference.name
     gaps = sorted(v.worse, key=lambda g: g.reference / g.found)  # the widest first
     worse = [
-        f"{g.axis} {g.statistic} {_mdeg_or_unmeasured(g.found)} vs {_mdeg_or_unmeasured(g.reference)}"
-        + (f" ({g.condition})" if g.condition else "")
-        for g in gaps[:3]
+        f"{g.axis} {g.statistic} {_mdeg_or_unmeasured(g.found)} vs {_mdeg_or_unmeasured(g.reference)}" for g in gaps[:3]
     ]
     if len(gaps) > 3:
         worse.append(f"{len(gaps) - 3} more")
-    robust = " at the worst over the band" if v.ratios() else ""
-    than = f"x {'better' if ratio >= 1 else 'worse'} in sum{robust} than {reference} {ref}"
+    than = f"x {'better' if ratio >= 1 else 'worse'} in sum than {reference} {ref}"
     head = f"k={v.k}: found {name} {ratio if ratio >= 1 else 1 / ratio:.2f}{than}"
     if v.tie:
         return f"k={v.k}: found {name} ties {reference} {ref} on every axis: keep {ref}"
@@ -340,50 +344,10 @@ def failed_line(v: Verdict, reference: str = "hand") -> str:
     )
 
 
-def band_advice(v: Verdict, reference: str = "hand", nominal_no_worse: bool = False) -> str:
-    """Under a band, for a found layout the nominal validation found no worse on every axis (``nominal_no_worse``)
-    but the band does not: what it needs to be the better buy, in one line —
-
-    - no worse at the lowest noise level(s) but not at some higher one: a bet on the sensor's noise on this part;
-    - worse at the preset's noise (×1) once the brackets are off, though no worse with every bracket exact: its
-      win rests on the brackets.
-
-    "" otherwise (no band, no worse everywhere, or not no worse in the nominal cell either). The noise scale is
-    read from the level's label (``evaluate.robust.by_level``: ``noise x<scale>…``)."""
-    levels = [
-        (float(m.group(1)), label.split(",")[0], ratio, ok, "bracket" in label)
-        for label, ratio, ok in v.levels()
-        if (m := re.match(r"noise x([0-9.]+)", label))
-    ]
-    levels.sort()
-    if not nominal_no_worse or not levels or all(level[3] for level in levels):
-        return ""
-    head = f"k={v.k}: found {v.found.name}"
-    if not levels[0][3]:
-        scale, name, ratio, _, brackets = levels[0]
-        if not (scale == 1.0 and brackets):
-            return ""
-        return (
-            f"{head} is worse on some axis than {reference} {v.reference.name} at {name} ({ratio:.2f}x in sum) once the "
-            f"brackets are off by the tolerance, though no worse with them exact: its win rests on brackets more precise "
-            f"than the band's (optipose robustness --layout ... ranks which to make precise)"
-        )
-    n = next(i for i, level in enumerate(levels) if not level[3])
-    held = ", ".join(f"{name} ({ratio:.2f}x better in sum)" for _, name, ratio, _, _ in levels[:n])
-    lost = ", ".join(f"{name} ({ratio:.2f}x in sum)" for _, name, ratio, ok, _ in levels[n:] if not ok)
-    return (
-        f"{head} is no worse than {reference} {v.reference.name} on every axis at {held}, "
-        f"worse on some axis at {lost}: it is the better buy only if the sensor's noise on this part, measured on the bench, "
-        f"is {'no more than' if levels[n - 1][0] == 1 else f'at most {levels[n - 1][0]:g}x'} the preset's"
-    )
-
-
-def verdict_headline(v: Verdict, label: str = "hand", band: Verdict | None = None, checked: bool = True) -> str:
+def verdict_headline(v: Verdict, label: str = "hand", checked: bool = True) -> str:
     """The verdict for one k in one short line (under 80 characters for the hand layout and names up to 6): buy
-    or keep. ``band``: the same k's verdict under the band of the check after the validation; a found layout no
-    worse at the preset's noise but worse somewhere in the band is not bought
-    (:func:`optipose.verdict.compare.bought`). ``checked=False``: the answer was never checked under a band (a
-    nominal search without the check), so a layout no worse in the ideal cell is better there, not yet bought.
+    or keep (:func:`optipose.verdict.compare.bought`). ``checked=False``: the search ran in the ideal cell, so a
+    layout no worse there is better there, not yet bought.
     Where registrations failed on some axis of either layout: no verdict, and whose."""
     ratio, found, ref = v.ratio, v.found.name, v.reference.name
     mine, theirs = v.failed  # registrations failed on some axis: nothing to rank (failed_line says more)
@@ -392,8 +356,6 @@ def verdict_headline(v: Verdict, label: str = "hand", band: Verdict | None = Non
         return f"k={v.k}: NO VERDICT: registrations of {who} failed ({', '.join(mine or theirs)})"
     if v.tie:
         return f"k={v.k}: KEEP {label} {ref}: found {found} ties it on every axis"
-    if v.no_worse and not bought(v, band):
-        return f"k={v.k}: KEEP {label} {ref}: {found} {ratio:.2f}x better, but worse under the band"
     if v.no_worse and not checked:
         return f"k={v.k}: found {found} {ratio:.2f}x better, no axis worse, in the ideal cell"
     if v.no_worse:
