@@ -15,7 +15,20 @@ from rich.console import Console
 
 from cli_checks import assert_one_line_error, run
 
-COMMANDS = ["scan", "parts", "show", "counts", "cells", "evaluate", "search", "robustness", "batch", "study", "report"]
+COMMANDS = [
+    "scan",
+    "parts",
+    "show",
+    "counts",
+    "cells",
+    "evaluate",
+    "search",
+    "calibrate",
+    "robustness",
+    "batch",
+    "study",
+    "report",
+]
 
 
 def _help(*command: str, columns: int = 80) -> subprocess.CompletedProcess:

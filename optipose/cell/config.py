@@ -43,7 +43,7 @@ from optipose.cell.ranges import draws, magnitude, middle
 from optipose.cell.robot import CalibrationErrors, RobotErrors
 from optipose.errors import ConfigError, read_toml, shipped_toml
 
-__all__ = ["Cell", "CELLS_DIR", "load_cell", "cell_names", "load_process", "process_names", "IDEAL"]
+__all__ = ["Cell", "CELLS_DIR", "load_cell", "cell_names", "load_process", "process_names", "IDEAL", "file_key"]
 
 CELLS_DIR = Path(__file__).resolve().parents[2] / "cells"
 _PROCESSES = Path(__file__).resolve().parents[1] / "data" / "processes.toml"
@@ -76,6 +76,17 @@ _PROCESS = {
     "layer_height_mm": ("layer_height", _MM, _LENGTH),
     "layer_amplitude_mm": ("layer_amplitude", _MM, _LENGTH),
 }
+
+
+def file_key(name: str) -> tuple[str, str, float]:
+    """Where a magnitude's field (``robot.path``, ``calibration.frame_rotation``, ``process_scale``) is in a cell file:
+    its table, its key and the key's unit in SI (``("robot", "path_mm", 1e-3)``)."""
+    if name == "process_scale":
+        return "part", "process_scale", 1.0
+    table, attr = name.split(".")
+    keys = {"robot": _ROBOT, "calibration": _CALIBRATION}[table]
+    key = next(k for k, (a, _, _) in keys.items() if a == attr)
+    return table, key, keys[key][1]
 
 
 @dataclass(frozen=True)

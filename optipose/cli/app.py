@@ -1,7 +1,7 @@
 """The ``optipose`` Typer app: ``--verbose``, ``--version``, every command's registration and :func:`main`.
 
 Each command lives in its own module (:mod:`~optipose.cli.scan`, :mod:`~optipose.cli.parts`,
-:mod:`~optipose.cli.evaluate`, :mod:`~optipose.cli.search`, :mod:`~optipose.cli.robustness`,
+:mod:`~optipose.cli.evaluate`, :mod:`~optipose.cli.search`, :mod:`~optipose.cli.calibrate`, :mod:`~optipose.cli.robustness`,
 :mod:`~optipose.cli.batch`, :mod:`~optipose.cli.report`) and shares its options through
 :mod:`optipose.cli.options`; those modules never import this one. At import time they need only typer,
 so ``optipose --help`` is instant; the library is imported when a command runs. Every command turns an
@@ -18,7 +18,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from optipose.cli import batch, cells, evaluate, parts, report, robustness, scan, search
+from optipose.cli import batch, calibrate, cells, evaluate, parts, report, robustness, scan, search
 from optipose.cli.options import EXIT_INTERRUPTED, EXIT_USER_ERROR
 
 # rich_markup_mode=None: click's plain help, which re-wraps every paragraph to the terminal and never cuts
@@ -83,6 +83,7 @@ for _command in (
     cells.cells,
     evaluate.evaluate,
     search.search,
+    calibrate.calibrate,
     robustness.robustness,
     batch.batch,
     batch.study,

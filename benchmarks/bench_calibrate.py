@@ -1,0 +1,275 @@
+"""Calibration against the paper (docs/calibration.md): calibrated on part A's real figures alone, how many of parts B's
+and C's 24 real figures the calibrated cell's predicted intervals cover, and how wide they are.
+
+    .venv/bin/python benchmarks/bench_calibrate.py paper [--cell cobot] [--icp 4] [--seeds 10] [--jobs 2] [--out DIR]
+    .venv/bin/python benchmarks/bench_calibrate.py roundtrip [--part part_a] [--cell cobot] [--hidden 8] [--icp 4] [--jobs 2]
+
+Calibrates ``--cell`` on part A's rows of docs/figures/paper_table1.csv (``optipose calibrate``'s library call, timed),
+writes the cell to DIR/part_a-calibrated.toml, then predicts B's and C's figures of the paper's subsets, each as the
+central 90 % across the calibrated cell's instances (5 % and 95 %):
+
+* ``surrogate``: the emulator of B's and C's hand layouts at 2000 instances of the calibrated cell (its ranges drawn as
+  an evaluation draws them, per seed), without a correction to ICP (A's correction is per subset of A's layout);
+* ``predictive``: the same times A's mean ICP / emulator ratio over its figures, and times exp(ε) with ε the noise the
+  calibration gave A's figures (the correction's pooled spread: one ICP instance about the emulator; the finite
+  scans'): the posterior predictive of a figure of one real cell;
+* ``ICP`` (``--seeds N`` > 0): the hand layouts evaluated by ICP in the calibrated cell at seeds 0 … N − 1 (one
+  instance each), each figure's 5 % and 95 % over them;
+
+and the same intervals under the uncalibrated prior for comparison. Covered: the real figure within [5 %, 95 %];
+width: 95 % / 5 %. Tables to stdout and DIR/paper.txt.
+
+``roundtrip``: ``--hidden`` cells drawn across the prior's ranges (every range at its low end, at its high end, and
+instances between), each the hand layout's Table 1 by ICP (a seed of its own), calibrated on it with one emulator and
+one set of ICP runs for all; each hidden magnitude against the calibrated file's range, and the hand layout's medians
+by ICP in the calibrated cell (a seed the fit never saw) against the hidden cell's. To DIR/roundtrip-PART.txt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench_cell import PAPER
+
+FIGURES = Path(__file__).resolve().parents[1] / "docs" / "figures" / "paper_table1.csv"
+AXES = ("roll", "pitch", "yaw")
+
+
+def _rows(part: str) -> list[tuple[str, str, int, float]]:
+    """(subset, axis, stat index, real figure in degrees) of a part's paper rows."""
+    out = []
+    for (p, _, axis, subset), (_, _, median, p75) in PAPER.items():
+        if p == part:
+            out += [(subset, axis, 0, median), (subset, axis, 1, p75)]
+    return out
+
+
+def _instances(cell, emulator, n: int) -> np.ndarray:
+    from optipose.calibrate.emulator import field_value
+
+    return np.array([[field_value(cell.instance(s), k) for k in emulator.keys] for s in range(n)])
+
+
+def surrogate_intervals(
+    part_name: str, cell, objective, n: int = 2000, shift: float = 0.0, spread: float = 0.0
+) -> np.ndarray:
+    """(figures, 2) degrees: 5 % and 95 % of each of the part's paper figures over ``n`` instances of ``cell``, each
+    times exp(shift + ε), ε ~ N(0, spread² + the figure's finite-scan variance) when ``spread`` > 0 (the predictive)."""
+    from optipose.calibrate.summaries import PAPER_SCANS, Figure, Summaries
+
+    from optipose.calibrate.emulator import Emulator
+    from optipose.model.part import load_part
+
+    part = load_part(part_name)
+    emulator = Emulator(part, part.layouts["hand"], objective.in_cell(cell))
+    stats = emulator.stats(_instances(cell, emulator, n))
+    rows = _rows(part_name)
+    logs = np.column_stack([np.log(stats[sub][:, s, AXES.index(ax)]) for sub, ax, s, _ in rows]) + shift
+    if spread > 0:
+        figures = [Figure(sub, ax, ("median", "p75")[s], 1.0, PAPER_SCANS) for sub, ax, s, _ in rows]
+        cov = Summaries(part_name, tuple(figures), "").noise() + np.eye(len(rows)) * spread**2
+        logs = logs + np.random.default_rng(0).multivariate_normal(np.zeros(len(rows)), cov, size=n)
+    return np.rad2deg(np.exp(np.percentile(logs, [5, 95], axis=0).T))
+
+
+def icp_intervals(part_name: str, cell, objective, seeds: int, jobs: int) -> np.ndarray:
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.model.part import load_part
+
+    part = load_part(part_name)
+    values = []
+    for seed in range(seeds):
+        with Evaluator(part, objective.in_cell(cell), seed=seed, jobs=jobs, quiet=True) as evaluator:
+            stats = evaluator(part.layouts["hand"]).stats
+        row = []
+        for sub, ax, s, _ in _rows(part_name):
+            hit = stats[(stats["subset"] == sub) & (stats["axis"] == ax)]
+            row.append(np.rad2deg(float(hit[["median", "p75"][s]].iloc[0])))
+        values.append(row)
+        print(f"  ICP {part_name} seed {seed} done", flush=True)
+    return np.percentile(np.array(values), [5, 95], axis=0).T
+
+
+def score(intervals: np.ndarray, real: np.ndarray) -> tuple[int, float, float]:
+    """Covered figures, the median and the largest width (high / low)."""
+    covered = int(np.sum((real >= intervals[:, 0]) & (real <= intervals[:, 1])))
+    width = intervals[:, 1] / intervals[:, 0]
+    return covered, float(np.median(width)), float(width.max())
+
+
+def paper(args) -> None:
+    from optipose.calibrate.calibration import calibrate
+    from optipose.calibrate.cellfile import write_cell
+    from optipose.calibrate.summaries import read_figures
+    from optipose.cell.config import load_cell
+    from optipose.evaluate.objective import load_objective
+    from optipose.model.part import load_part
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = []
+
+    def say(text: str = "") -> None:
+        print(text, flush=True)
+        lines.append(text)
+
+    objective = load_objective(args.objective).in_cell(args.cell)
+    part = load_part("part_a")
+    start = time.perf_counter()
+    result = calibrate(
+        part, part.layouts["hand"], objective, read_figures(FIGURES, "part_a"), icp=args.icp, jobs=args.jobs, seed=0
+    )
+    path = write_cell(result, out / "part_a-calibrated.toml")
+    say(f"calibrated '{args.cell}' on part A's 10 real figures: {time.perf_counter() - start:.0f} s wall")
+    say(
+        f"  of it ICP ({args.icp} instances): {result.correction.seconds:.0f} s; effective samples {result.posterior.ess:.0f}"
+    )
+    say(f"  out of the ranges: {'; '.join(result.out) or 'none'}")
+    for key in result.keys:
+        say(f"  {key}: {result.posterior.interval(key)}")
+    say(f"  A's ICP / emulator log-ratio per figure: {np.round(result.correction.log_ratio, 2).tolist()}")
+    shift = float(result.correction.log_ratio.mean())
+    spread = float(np.sqrt(np.mean(np.diag(result.correction.cov))))
+    say(f"  A's mean log-ratio {shift:.2f} (x{np.exp(shift):.2f}), the correction's spread {spread:.2f} (log)")
+    calibrated, prior = load_cell(path), load_cell(args.cell)
+    say()
+    say(
+        "part  subset axis  stat    real    "
+        + "  ".join(f"{n:>17s}" for n in ("prior surrogate", "surrogate", "predictive", "ICP"))
+    )
+    totals = {}
+    for name in ("part_b", "part_c"):
+        rows = _rows(name)
+        real = np.array([r[3] for r in rows])
+        found = {
+            "prior surrogate": surrogate_intervals(name, prior, objective),
+            "surrogate": surrogate_intervals(name, calibrated, objective),
+        }
+        found["predictive"] = surrogate_intervals(name, calibrated, objective, shift=shift, spread=spread)
+        if args.seeds:
+            found["ICP"] = icp_intervals(name, calibrated, objective, args.seeds, args.jobs)
+        for i, (sub, ax, s, value) in enumerate(rows):
+            cells = [
+                f"{found[k][i, 0]:7.4f}-{found[k][i, 1]:7.4f}{'*' if found[k][i, 0] <= value <= found[k][i, 1] else ' '}"
+                for k in found
+            ]
+            say(f"{name[-1].upper():5s} {sub:6s} {ax:5s} {['median', 'p75'][s]:6s} {value:7.3f} " + " ".join(cells))
+        for k, v in found.items():
+            totals.setdefault(k, []).append((v, real))
+    say()
+    for k, parts in totals.items():
+        intervals = np.vstack([v for v, _ in parts])
+        real = np.concatenate([r for _, r in parts])
+        covered, median, most = score(intervals, real)
+        say(f"{k:16s}: covers {covered} of {len(real)}; width median {median:.2f}x, largest {most:.2f}x")
+    (out / "paper.txt").write_text("\n".join(lines) + "\n")
+
+
+def roundtrip(args) -> None:
+    """Hidden cells across the prior's ranges (both ends, and instances between), each the hand layout's figures by
+    ICP; calibrated on them (one emulator and one set of ICP runs for all); each hidden magnitude against its
+    posterior's 5-95 %, and the calibrated cell's ICP medians (a seed the fit never saw) against the hidden cell's."""
+    from optipose.calibrate.calibration import calibrate, icp_runs
+    from optipose.calibrate.cellfile import narrowed, write_cell
+    from optipose.calibrate.emulator import Emulator, field_value
+    from optipose.calibrate.summaries import from_evaluation
+    from optipose.cell.config import load_cell
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.evaluate.objective import load_objective
+    from optipose.model.part import load_part
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = []
+
+    def say(text: str = "") -> None:
+        print(text, flush=True)
+        lines.append(text)
+
+    part, prior = load_part(args.part), load_cell(args.cell)
+    layout, objective = part.layouts["hand"], load_objective(args.objective).in_cell(prior)
+
+    def table1(cell, seed: int):
+        with Evaluator(part, objective.in_cell(cell), seed=seed, jobs=args.jobs, quiet=True) as evaluator:
+            return evaluator(layout)
+
+    start = time.perf_counter()
+    emulator = Emulator(part, layout, objective)
+    runs = icp_runs(part, layout, objective, emulator, args.icp, 0, args.jobs)
+    say(f"{args.part} in '{args.cell}': emulator and {args.icp} ICP runs {time.perf_counter() - start:.0f} s")
+    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
+    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
+    inside, total, close, medians, same, t1, t1_all = 0, 0, 0, 0, 0, 0, 0
+    for i, (name, cell) in enumerate(hidden):
+        measured = table1(cell, 100 + i)
+        result = calibrate(
+            part, layout, objective, from_evaluation(measured, f"scans {name}"), emulator=emulator, runs=runs, seed=i
+        )
+        path = write_cell(result, out / f"roundtrip-{i}.toml")
+        keys = []
+        for key in result.keys:
+            lo, hi, _ = narrowed(result, key)  # the cell file's range
+            value = field_value(cell, key)
+            hit = lo * 0.999 <= value <= hi * 1.001
+            inside, total = inside + hit, total + 1
+            keys.append(f"{key.split('.')[-1]} {'in' if hit else 'OUT'}")
+        check = table1(load_cell(path), 200 + i).stats
+        again = table1(cell, 300 + i).stats  # the hidden cell itself, another instance: what no calibration beats
+        ratios, floor = _ratios(measured.stats, check), _ratios(measured.stats, again)
+        chosen = [(a.name, axis) for a, axis in zip(measured.table[-1].axes, AXES) if a.name]
+        table = _ratios(measured.stats, check, chosen)
+        close, medians = close + int(np.sum(ratios <= 1.5)), medians + len(ratios)
+        same = same + int(np.sum(floor <= 1.5))
+        t1, t1_all = t1 + int(np.sum(table <= 1.5)), t1_all + len(table)
+        say(
+            f"{name:13s} out: {len(result.out)}; medians within 1.5x: calibrated {int(np.sum(ratios <= 1.5))} of "
+            f"{len(ratios)} (worst {ratios.max():.2f}x), the hidden cell again {int(np.sum(floor <= 1.5))}; Table 1 "
+            f"k=3 {int(np.sum(table <= 1.5))} of {len(table)}; " + ", ".join(keys)
+        )
+    say(f"hidden magnitudes within the posterior's 5-95 %: {inside} of {total}")
+    say(f"calibrated cell's ICP medians within 1.5x of the hidden cell's: {close} of {medians}")
+    say(f"... Table 1's k = 3 subsets only: {t1} of {t1_all}")
+    say(f"the hidden cell's own ICP medians at another seed within 1.5x: {same} of {medians}")
+    say(f"wall {time.perf_counter() - start:.0f} s")
+    (out / f"roundtrip-{args.part}.txt").write_text("\n".join(lines) + "\n")
+
+
+def _ratios(stats, other, only=None) -> np.ndarray:
+    """max(a / b, b / a) of two evaluations' medians per (subset, axis) (``only``: those (subset, axis) pairs)."""
+    out = []
+    for row in stats.itertuples(index=False):
+        if only is not None and (row.subset, row.axis) not in only:
+            continue
+        b = other[(other["subset"] == row.subset) & (other["axis"] == row.axis)]["median"].iloc[0]
+        out.append(max(b / row.median, row.median / b))
+    return np.array(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="what", required=True)
+    p = sub.add_parser("paper")
+    p.add_argument("--cell", default="cobot")
+    p.add_argument("--objective", default="paper")
+    p.add_argument("--icp", type=int, default=4)
+    p.add_argument("--seeds", type=int, default=0)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--out", default="benchmarks/results/calibrate")
+    r = sub.add_parser("roundtrip")
+    r.add_argument("--part", default="part_a")
+    r.add_argument("--cell", default="cobot")
+    r.add_argument("--objective", default="paper")
+    r.add_argument("--hidden", type=int, default=8)
+    r.add_argument("--icp", type=int, default=4)
+    r.add_argument("--jobs", type=int, default=2)
+    r.add_argument("--out", default="benchmarks/results/calibrate")
+    args = parser.parse_args()
+    {"paper": paper, "roundtrip": roundtrip}[args.what](args)
+
+
+if __name__ == "__main__":
+    main()
