@@ -102,7 +102,9 @@ def allowed(path: str) -> bool:
     if path == "CHANGELOG.md" or path == "uv.lock" or path.startswith(("benchmarks/results/", "tests/data/")):
         return True
     return (
-        path.startswith(("results/reference/", "results/verdict-study/", "results/verdict-quick/", "results/ranges-study/"))
+        path.startswith(
+            ("results/reference/", "results/verdict-study/", "results/verdict-quick/", "results/ranges-study/")
+        )
         and Path(path).name != "README.md"
     )
 
