@@ -39,6 +39,14 @@ FIGURES = Path(__file__).resolve().parents[1] / "docs" / "figures" / "paper_tabl
 AXES = ("roll", "pitch", "yaw")
 
 
+class _Lines(list):
+    """A mode's printed lines, each printed as it comes and kept for its result file."""
+
+    def __call__(self, text: str = "") -> None:
+        print(text, flush=True)
+        self.append(text)
+
+
 def _rows(part: str) -> list[tuple[str, str, int, float]]:
     """(subset, axis, stat index, real figure in degrees) of a part's paper rows."""
     out = []
@@ -111,11 +119,7 @@ def paper(args) -> None:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    lines = []
-
-    def say(text: str = "") -> None:
-        print(text, flush=True)
-        lines.append(text)
+    say = _Lines()
 
     objective = load_objective(args.objective).in_cell(args.cell)
     part = load_part("part_a")
@@ -166,7 +170,7 @@ def paper(args) -> None:
         real = np.concatenate([r for _, r in parts])
         covered, median, most = score(intervals, real)
         say(f"{k:16s}: covers {covered} of {len(real)}; width median {median:.2f}x, largest {most:.2f}x")
-    (out / "paper.txt").write_text("\n".join(lines) + "\n")
+    (out / "paper.txt").write_text("\n".join(say) + "\n")
 
 
 def roundtrip(args) -> None:
@@ -184,11 +188,7 @@ def roundtrip(args) -> None:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    lines = []
-
-    def say(text: str = "") -> None:
-        print(text, flush=True)
-        lines.append(text)
+    say = _Lines()
 
     part, prior = load_part(args.part), load_cell(args.cell)
     layout, objective = part.layouts["hand"], load_objective(args.objective).in_cell(prior)
@@ -235,7 +235,7 @@ def roundtrip(args) -> None:
     say(f"... Table 1's k = 3 subsets only: {t1} of {t1_all}")
     say(f"the hidden cell's own ICP medians at another seed within 1.5x: {same} of {medians}")
     say(f"wall {time.perf_counter() - start:.0f} s")
-    (out / f"roundtrip-{args.part}.txt").write_text("\n".join(lines) + "\n")
+    (out / f"roundtrip-{args.part}.txt").write_text("\n".join(say) + "\n")
 
 
 def _ratios(stats, other, only=None) -> np.ndarray:

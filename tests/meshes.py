@@ -39,3 +39,15 @@ def distance_to_every_face(triangles: np.ndarray, point: np.ndarray) -> np.ndarr
 
     edges = np.minimum(np.minimum(to_segment(a, b), to_segment(b, c)), to_segment(c, a))
     return np.where(inside, np.abs(h), edges)
+
+
+# part B's hand S1 and S2 as a layout file, as its part file gives them (the small two-sensor case of the scan
+# folder and calibration tests)
+TWO_SENSORS = """[[sensors]]
+name = "S1"
+T_O_S = [[0.0, 1.0, 0.0, 0.030], [0.7071, 0.0, 0.7071, -0.023], [0.7071, 0.0, -0.7071, 0.015], [0.0, 0.0, 0.0, 1.0]]
+
+[[sensors]]
+name = "S2"
+T_O_S = [[0.0, 1.0, 0.0, 0.030], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0175], [0.0, 0.0, 0.0, 1.0]]
+"""

@@ -22,15 +22,9 @@ from optipose.evaluate.objective import load_objective
 from optipose.model.part import load_part
 from optipose.search.surrogate import predicted_stats
 
-ROOT = Path(__file__).resolve().parents[1]
-TWO_SENSORS = """[[sensors]]
-name = "S1"
-T_O_S = [[0.0, 1.0, 0.0, 0.030], [0.7071, 0.0, 0.7071, -0.023], [0.7071, 0.0, -0.7071, 0.015], [0.0, 0.0, 0.0, 1.0]]
+from meshes import TWO_SENSORS
 
-[[sensors]]
-name = "S2"
-T_O_S = [[0.0, 1.0, 0.0, 0.030], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0175], [0.0, 0.0, 0.0, 1.0]]
-"""
+ROOT = Path(__file__).resolve().parents[1]
 # cobot with two of its ranges left and the rest at points: the small case
 SMALL = {
     "name": "small",

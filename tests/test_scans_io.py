@@ -18,17 +18,10 @@ from optipose.scan.folder import MANIFEST, ProfileWriter, part_fingerprint
 from optipose.scan.profiles import EMPTY, profiles_to_points, read_profiles
 from optipose.scan.scanner import Scanner
 
+from meshes import TWO_SENSORS
+
 ROOT = Path(__file__).resolve().parents[1]
 MM = 1e-3
-# part B's hand S1 and S2, as its part file gives them
-TWO_SENSORS = """[[sensors]]
-name = "S1"
-T_O_S = [[0.0, 1.0, 0.0, 0.030], [0.7071, 0.0, 0.7071, -0.023], [0.7071, 0.0, -0.7071, 0.015], [0.0, 0.0, 0.0, 1.0]]
-
-[[sensors]]
-name = "S2"
-T_O_S = [[0.0, 1.0, 0.0, 0.030], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0175], [0.0, 0.0, 0.0, 1.0]]
-"""
 
 
 @pytest.fixture(scope="module")
