@@ -33,6 +33,9 @@ decision:
   share reaches above ``failures``;
 - TIE: the score's and every axis's test's intervals lie within [1 / (1 + tolerance), 1 + tolerance], and no
   failed share reaches above ``failures`` (found failing less is no reason to move a bracket on its own);
+- KEEP too when none of these holds but the score's interval lies below 1 + tolerance: found can gain no more
+  than a TIE allows, so no draw can make it a BUY (a futility stop; its risk is one side of the interval, as a
+  KEEP's);
 - UNDECIDED: none of these, with how many more draws would settle it (the interval's width ∝ 1/√draws).
 
 Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is one-sided at 97.5 %.
@@ -280,7 +283,9 @@ def compare_draws(
     axes = tuple(AxisRatio(axis, iv[1 + j], iv[4 + j], iv[7 + j], failed[j]) for j, axis in enumerate(AXES))
     found = tuple(AxisError(axis, iv[10 + j], iv[13 + j]) for j, axis in enumerate(AXES))
     baseline = tuple(AxisError(axis, iv[16 + j], iv[19 + j]) for j, axis in enumerate(AXES))
-    decision, more = _decide(iv[0], axes, rules.tolerance, rules.failures, len(draws))
+    # one found sensor against more hand ones asks whether it matches them, not whether it is worth buying
+    futility = baseline_k in (0, k)
+    decision, more = _decide(iv[0], axes, rules.tolerance, rules.failures, len(draws), futility)
     return ConfidentVerdict(
         k=k,
         decision=decision,
@@ -306,9 +311,10 @@ def compare_draws(
 
 
 def _decide(
-    score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, failures: float, n: int
+    score: Interval, axes: tuple[AxisRatio, ...], tolerance: float, failures: float, n: int, futility: bool = True
 ) -> tuple[Decision, int | None]:
-    """The decision from the intervals (module docstring) and, when UNDECIDED, the draws to add."""
+    """The decision from the intervals (module docstring) and, when UNDECIDED, the draws to add; ``futility``:
+    a score that cannot gain more than the tolerance is a KEEP (not where fewer sensors are to match more)."""
     floor, ceiling = 1.0 / (1.0 + tolerance), 1.0 + tolerance
     if score.high < 1.0 or any(a.ratio.high < floor or a.failed.low > failures for a in axes):
         return Decision.KEEP, None
@@ -316,7 +322,9 @@ def _decide(
         return Decision.BUY, None
     if score.within(floor, ceiling) and all(a.ratio.within(floor, ceiling) and a.failed.high <= failures for a in axes):
         return Decision.TIE, None
-    return Decision.UNDECIDED, _more_draws(score, axes, math.log(ceiling), failures, n)
+    if futility and score.high < ceiling:  # found gains less than a TIE allows, and may be worse: nothing to buy
+        return Decision.KEEP, None
+    return Decision.UNDECIDED, _more_draws(score, axes, math.log(ceiling), failures, n, futility)
 
 
 def _needed(interval: Interval, bound: float, above: bool, n: int, log: bool = True) -> float:
@@ -335,7 +343,9 @@ def _needed(interval: Interval, bound: float, above: bool, n: int, log: bool = T
     return n * (half / gap) ** 2 if half > 0 else float(n)
 
 
-def _more_draws(score: Interval, axes: tuple[AxisRatio, ...], tol: float, failures: float, n: int) -> int | None:
+def _more_draws(
+    score: Interval, axes: tuple[AxisRatio, ...], tol: float, failures: float, n: int, futility: bool = True
+) -> int | None:
     """The fewest draws to add for some decision to be reached at the present estimates (None: none would)."""
     ratios, failed = [a.ratio for a in axes], [a.failed for a in axes]
     buy = max(
@@ -345,6 +355,7 @@ def _more_draws(score: Interval, axes: tuple[AxisRatio, ...], tol: float, failur
     )
     keep = min(
         [_needed(score, 0.0, False, n)]
+        + [_needed(score, tol, False, n) if futility else math.inf]
         + [_needed(a, -tol, False, n) for a in ratios]
         + [_needed(f, failures, True, n, log=False) for f in failed]
     )

@@ -136,6 +136,8 @@ def confident_line(v: ConfidentVerdict) -> str:
         why = (f", worse on {'/'.join(worse)}" if worse else "") + "".join(
             f", fails {100 * a.failed.estimate:.1f} % more {a.axis}" for a in fails[:1]
         )
+        if not why and v.score.high >= 1.0:  # the futility stop: found cannot gain more than a TIE allows
+            why = f", gains under {100 * v.tolerance:.0f} %"
         # the reasons before the ratio where both do not fit
         texts = [
             f"{head} {ref}; {v.found_name} {ratio}{why}",
