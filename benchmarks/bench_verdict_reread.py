@@ -1,12 +1,16 @@
-"""The draws searches stored, raced again at another confidence: would a laxer reading of "95 %" answer more?
+"""The draws searches stored, raced again at another confidence or spending: would a laxer reading of "95 %", or
+looks that spend more early, answer more or sooner?
 
 Each BUY or KEEP test reads one side of a two-sided interval, so at the shipped 95 % it is one-sided at 97.5 %
 (:mod:`optipose.verdict.confidence`). Read one-sided at 95 % (the two-sided 90 % interval), each look decides
 sooner. Per search folder given, its verdict's draws (``verdict/draw-*``) are raced again in their order, with
 the choices the search made, by :func:`optipose.verdict.racing.race_many` (first look at three, looks planned
-for every stored draw, no clock) at each ``--confidence``: the decision per k and the draw it came at.
+for every stored draw, no clock) at each ``--confidence``: the decision per k and the draw it came at. With
+``--rho``, at the shipped confidence and each spending ρ (:func:`optipose.verdict.racing.spent`), the looks planned
+for the budget's draws (``--draws``) as the search plans them, up to the draws stored.
 
     .venv/bin/python benchmarks/bench_verdict_reread.py FOLDER [FOLDER ...] [--confidence 0.95,0.90]
+    .venv/bin/python benchmarks/bench_verdict_reread.py FOLDER [FOLDER ...] --rho 3,2 [--draws 40]
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from pathlib import Path
 from optipose.verdict.confidence import Decision, paired_draw
 from optipose.verdict.rules import Rules
 from optipose.evaluate.objective import objective_from_table
-from optipose.verdict.racing import race_many
+from optipose.verdict.racing import SPENDING, race_many
 from optipose.io.load import load_result
 from optipose.search.draws import sides
 
@@ -42,45 +46,54 @@ def stored_draws(folder: Path, result) -> list[dict]:
     return draws
 
 
-def reraced(result, draws: list[dict], confidence: float) -> dict:
-    """The draws raced again at ``confidence``, as the search raced them but without its clock."""
+def reraced(result, draws: list[dict], confidence: float, rho: float = SPENDING, plan: int = 0) -> dict:
+    """The draws raced again at ``confidence`` and spending ``rho``, as the search raced them but without its clock;
+    ``plan``: the looks planned for that many draws (0: the draws stored). A race that would need a draw beyond
+    those stored ends at the last stored one."""
     statistic = objective_from_table(tomllib.loads(result.config.objective_file)).statistic
 
     def next_draws(i: int, keys) -> dict:
         return {k: p for k, p in draws[i].items() if keys is None or k in keys} if i < len(draws) else {}
 
     rules = Rules(confidence=confidence, seed=int(result.config.seed), statistic=statistic)
-    return race_many(next_draws, rules, min_draws=3, max_draws=len(draws))
+    try:
+        return race_many(next_draws, rules, min_draws=3, max_draws=plan or len(draws), rho=rho)
+    except ValueError:  # the stored draws ended before the race: its verdicts at the last of them
+        return race_many(next_draws, rules, min_draws=3, max_draws=len(draws), rho=rho)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folders", nargs="+", type=Path)
     ap.add_argument("--confidence", default="0.95,0.90")
+    ap.add_argument("--rho", default="", help="spendings to compare at 95 %%, e.g. 3,2 (instead of --confidence)")
+    ap.add_argument("--draws", type=int, default=40, help="with --rho: the budget's draws the looks are planned for")
     args = ap.parse_args()
-    levels = [float(c) for c in args.confidence.split(",")]
-    print(
-        "| folder | draws | "
-        + " | ".join(f"two-sided {100 * c:.0f} % (one-sided {100 * (1 + c) / 2:.1f} %)" for c in levels)
-        + " |"
-    )
+    if args.rho:
+        runs = [(0.95, float(r), args.draws) for r in args.rho.split(",")]
+        heads = [f"ρ = {rho:g}" for _, rho, _ in runs]
+    else:
+        runs = [(float(c), SPENDING, 0) for c in args.confidence.split(",")]
+        heads = [f"two-sided {100 * c:.0f} % (one-sided {100 * (1 + c) / 2:.1f} %)" for c, _, _ in runs]
+    levels = [c for c, _, _ in runs]
+    print("| folder | draws | " + " | ".join(heads) + " |")
     print("| --- | ---: |" + " --- |" * len(levels))
     answered = [0] * len(levels)
     for folder in args.folders:
         result = load_result(folder)
         draws, cells = stored_draws(folder, result), []
-        for j, c in enumerate(levels):
-            verdicts = reraced(result, draws, c)
+        for j, (c, rho, plan) in enumerate(runs):
+            verdicts = reraced(result, draws, c, rho, plan)
             answered[j] += any(v.decision != Decision.UNDECIDED for v in verdicts.values())
             cells.append(
                 ", ".join(
                     f"k={k} {v.decision} ({v.n_draws})" for k, v in sorted(verdicts.items(), key=lambda kv: str(kv[0]))
                 )
             )
-        print(f"| {folder.name} | {len(draws)} | " + " | ".join(cells) + " |")
+        print(f"| {folder} | {len(draws)} | " + " | ".join(cells) + " |")
     print(
         "answered some k: "
-        + ", ".join(f"{n} of {len(args.folders)} at {100 * c:.0f} %" for n, c in zip(answered, levels))
+        + ", ".join(f"{n} of {len(args.folders)} at {h}" for n, h in zip(answered, heads))
     )
 
 

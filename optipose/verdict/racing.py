@@ -19,9 +19,10 @@ from optipose.verdict.rules import Rules
 __all__ = ["SPENDING", "looks", "race", "race_many", "spent"]
 
 # the error rate spent by a share t of the planned draws, α·t^ρ (Kim & DeMets 1987, Biometrika 74:149; Jennison &
-# Turnbull 2000, §7.2): at ρ = 3, close to O'Brien & Fleming's, the early looks spend little, so that a large gap
-# still stops the race early and the last look, where a close one is decided, keeps most of the 5 %
-SPENDING = 3.0
+# Turnbull 2000, §7.2): ρ = 3 is close to O'Brien & Fleming's boundaries, ρ = 1 to Pocock's. At 2 a middle look
+# spends enough for a layout that cannot gain the tolerance to be turned away there (the futility stop) while the
+# last look, where a close gap is decided, still keeps most of the 5 % (docs/method.md, "The verdict with confidence")
+SPENDING = 2.0
 
 
 def looks(min_draws: int, max_draws: int) -> tuple[int, ...]:
@@ -59,6 +60,7 @@ def race(
     seconds: float = math.inf,
     clock: Callable[[], float] = time.monotonic,
     draws: Sequence[PairedDraw] = (),
+    rho: float = SPENDING,
     **names,
 ) -> ConfidentVerdict:
     """Add draws (``next_draw(i)``: the paired draw at position i, the ``draws`` given first) until the
@@ -77,6 +79,7 @@ def race(
         clock=clock,
         draws={0: list(draws)} if draws else None,
         names={0: names},
+        rho=rho,
     )
     return verdicts[0]
 
@@ -92,13 +95,15 @@ def race_many(
     draws: dict | None = None,
     names: dict | None = None,
     passengers: frozenset = frozenset(),
+    rho: float = SPENDING,
 ) -> dict:
     """:func:`race` for comparisons that share their draws: ``next_draws(i, keys)`` gives key → the paired draw at
     position i for at least the ``keys`` not yet decided (None before any draw: every key; a decided key's
     layouts need not be evaluated again), ``draws`` the draws in hand per key, ``names`` per key what
     :func:`compare_draws` takes. Draws are added until every key is decided (keeping the verdict of the look
     that decided it), or the draws or the ``seconds`` end. ``passengers``: keys that ride along without
-    holding the race, compared at the look it ends on. Returns key → :class:`ConfidentVerdict`."""
+    holding the race, compared at the look it ends on; ``rho``: the looks' spending (:func:`spent`). Returns key →
+    :class:`ConfidentVerdict`."""
     taken = {key: list(v) for key, v in (draws or {}).items()}
     names = names or {}
     done: dict = {}
@@ -114,7 +119,7 @@ def race_many(
         last = n >= max_draws or out_of_time or bool(plan) and n >= plan[-1]
         if n and (n in plan or last):
             # each look spends its share of the error rate; the last spends what the plan's unmade looks leave
-            share = (1.0 if last else spent(n, plan)) - used
+            share = (1.0 if last else spent(n, plan, rho)) - used
             each = replace(rules, confidence=1.0 - (1.0 - rules.confidence) * share)
             used += share
             for key in taken.keys() - done.keys() - passengers:
