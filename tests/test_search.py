@@ -737,3 +737,35 @@ def test_a_stop_raised_in_the_objective_comes_out_of_nlopt_as_itself(algorithm):
     with pytest.raises(Share, match="share"):
         optimize(objective, algorithm, np.full(4, 0.5), 200, seed=1)
     assert len(calls) == 7  # not called again once it raised
+
+
+def test_a_nested_candidate_that_is_already_a_candidate_is_not_evaluated_twice():
+    """The k−1 finalist plus one sensor can be a layout already in (the subset of a larger layout, its sensors in
+    the same order): it is one ICP evaluation, not two. A nested layout that differs is still added."""
+    from types import SimpleNamespace
+
+    from optipose.search.candidates import candidates
+    from optipose.search.records import Found, SearchOutcome
+
+    a, b, c = np.full(6, 0.1), np.full(6, 0.5), np.full(6, 0.9)
+    # the surrogate of this toy: a layout scores the sum of its numbers, so the pair (a, b) beats (a, c); two
+    # sensors in one place collide
+    problem = SimpleNamespace(
+        score=lambda u: SimpleNamespace(
+            feasible=len({tuple(s) for s in np.reshape(u, (-1, 6))}) == len(u) // 6,
+            value=float(np.sum(u)),
+            stats={"toy": 1},
+        ),
+        space=SimpleNamespace(to_poses=lambda u: [np.eye(4)] * (len(u) // 6)),
+    )
+    found = lambda k, strategy, *sensors: Found(
+        k, strategy, np.concatenate(sensors), [], float(np.sum(sensors)), {"t": 1}
+    )  # noqa: E731
+    triple = found(3, "greedy", a, b, c)
+    outcome = SearchOutcome({3: triple}, {3: triple}, {}, {}, [])
+    pairs = candidates(problem, [], outcome, 2, 1, {1: found(1, "greedy", a)})
+    layouts = [tuple(p.u) for p in pairs]
+    assert len(layouts) == len(set(layouts)) and tuple(np.concatenate([a, b])) in layouts
+    assert "k=1 finalist + 1" not in [p.strategy for p in pairs]  # (a, b): the triple's best pair, already in
+    pairs = candidates(problem, [], outcome, 2, 1, {1: found(1, "greedy", c)})
+    assert "k=1 finalist + 1" in [p.strategy for p in pairs]  # (c, a): no candidate yet

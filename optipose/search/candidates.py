@@ -38,7 +38,8 @@ def candidates(
     found += _sub_layouts(problem, outcome, k, found)
     if k - 1 in finalists:
         nested = _extended(problem, finalists[k - 1], found)
-        found += [nested] if nested is not None else []
+        # the same layout as a candidate already in (a subset's sensors, in their order) would be evaluated twice
+        found += [nested] if nested is not None and apart(nested.u, [f.u for f in found], 1e-12) else []
     return found
 
 
