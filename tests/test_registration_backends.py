@@ -374,3 +374,125 @@ def test_the_surface_search_answers_what_every_face_does(name, off_mm):
         own = np.array([distance_to_every_face(mesh.triangles[[f]], p)[0] for p, f in zip(points, ids)])
         np.testing.assert_allclose(own, d, rtol=0, atol=1e-12)  # the face named is one that near
         np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-12)
+
+
+# -- the trust region of a point-to-plane step ---------------------------------------------------------------
+def _gauss_newton(AtA, Atb, seen=None):
+    """The undamped step (rotation vector, shift) as the solver takes it before any trust region."""
+    if seen is None:
+        return np.linalg.lstsq(AtA, Atb, rcond=1e-12)[0]
+    return seen @ np.linalg.lstsq(seen.T @ AtA @ seen, seen.T @ Atb, rcond=1e-12)[0]
+
+
+def test_a_step_within_the_trust_region_is_the_gauss_newton_step_bit_for_bit():
+    """Every step of an ICP that moves as the protocols do (a few degrees, a fraction of the correspondence
+    distance) is the Gauss-Newton step as it was solved before the trust region, to the last bit."""
+    from scipy.spatial.transform import Rotation
+
+    from optipose.registration.fast import MAX_TURN, _solve_point_to_plane
+
+    rng = np.random.default_rng(11)
+    seen = np.linalg.qr(rng.normal(size=(6, 5)))[0]  # one motion not stepped along
+    for i in range(200):
+        J = rng.normal(size=(300, 6)) * [0.01, 0.01, 0.01, 1, 1, 1]  # rows (p − c) × n, n for a cloud ~1 cm across
+        AtA = J.T @ J
+        x = rng.normal(size=6) * [0.01, 0.01, 0.01, 1e-3, 1e-3, 1e-3]  # ~1° and ~1 mm
+        Atb, c = AtA @ x, rng.normal(size=3) * 0.02
+        for s in (None, seen):
+            step = _gauss_newton(AtA, Atb, s)
+            assert np.linalg.norm(step[:3]) <= MAX_TURN and np.linalg.norm(step[3:]) <= 5e-3
+            R = Rotation.from_rotvec(step[:3]).as_matrix()
+            expected = np.eye(4)
+            expected[:3, :3], expected[:3, 3] = R, c + step[3:] - R @ c
+            np.testing.assert_array_equal(_solve_point_to_plane(AtA, Atb, c, s, reach=5e-3), expected)
+
+
+def test_a_step_beyond_the_trust_region_holds_its_weakest_motion():
+    """A motion seen ten orders below the rest whose share of Aᵀb asks for a turn of radians: the step holds it
+    and gives the other five their Gauss-Newton step; a shift beyond the reach along a weak motion is held too."""
+    from scipy.spatial.transform import Rotation
+
+    from optipose.registration.fast import MAX_TURN, _damped, _solve_point_to_plane
+
+    information = np.diag([3e-2, 2e-2, 1e-8, 300.0, 20.0, 1.0])  # the turn about z barely seen
+    wanted = np.array([0.01, -0.02, 0.0, 1e-4, -2e-4, 3e-4])
+    Atb = information @ wanted + [0, 0, 3e-8, 0, 0, 0]  # what the linearisation leaves out, on the weak motion
+    assert np.linalg.norm(_gauss_newton(information, Atb)[:3]) > 1.0 > MAX_TURN  # 3 rad about z
+    np.testing.assert_allclose(_damped(information, Atb, None, 5e-3), wanted, rtol=1e-12, atol=1e-18)
+    T = _solve_point_to_plane(information, Atb, np.zeros(3), None, 5e-3)
+    np.testing.assert_allclose(T[:3, :3], Rotation.from_rotvec(wanted[:3]).as_matrix(), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(T[:3, 3], wanted[3:], rtol=1e-12, atol=0)
+
+    shifting = np.diag([3e-2, 2e-2, 1e-3, 300.0, 20.0, 1e-6])  # now the shift along z barely seen
+    Atb = shifting @ wanted + [0, 0, 0, 0, 0, 1e-6]  # asking for a metre
+    assert _gauss_newton(shifting, Atb)[5] > 0.5
+    np.testing.assert_allclose(_damped(shifting, Atb, None, 5e-3), [*wanted[:5], 0.0], rtol=1e-12, atol=1e-18)
+
+
+@pytest.fixture(scope="module")
+def bar() -> trimesh.Trimesh:
+    """The step block drawn out to a 120 mm bar: the 20 mm high half on x < 60 mm, the 10 mm base beyond."""
+    profile = np.array([[0, 0], [120, 0], [120, 10], [60, 10], [60, 20], [0, 20]]) * 1e-3
+    vertices = np.array([[x, y, z] for y in (0.0, 0.030) for x, z in profile])
+    caps = [(0, 1, 2), (0, 2, 3), (0, 3, 5), (3, 4, 5)]
+    faces = caps + [(a + 6, c + 6, b + 6) for a, b, c in caps]
+    for i in range(6):
+        j = (i + 1) % 6
+        faces += [(i, j + 6, j), (i, i + 6, j + 6)]
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    return mesh
+
+
+def _band(step_face: bool) -> np.ndarray:
+    """One line of a profile along the bar's top, down its step face (if ``step_face``) and along the base, every
+    0.5 mm, at y = 15 mm."""
+    s = np.arange(0.0, 59.0 + 10.0 + 59.0, 0.5) * 1e-3
+    x = np.where(s < 59e-3, 1e-3 + s, np.where(s < 69e-3, 60e-3, 60e-3 + (s - 69e-3)))
+    z = np.where(s < 59e-3, 20e-3, np.where(s < 69e-3, 20e-3 - (s - 59e-3), 10e-3))
+    keep = step_face | (np.abs(x - 60e-3) > 1e-9)
+    return np.column_stack([x, np.full_like(x, 15e-3), z])[keep]
+
+
+@pytest.mark.parametrize("name", ["fast", "plain"])
+def test_a_band_whose_gauss_newton_step_throws_it_off_the_part_registers(monkeypatch, bar, name):
+    """Two lines 0.5 mm apart along a 120 mm bar, the step face in one line's shadow: the bar's yaw (the band's
+    turn within its faces) is seen by that line's 20 points on the step face alone, 0.25 mm off the band's
+    middle. Turned by 2° in roll and pitch about a centre 50 mm below, the points near the step's edges match
+    the face beside theirs, and the first Gauss-Newton step puts that into the yaw: a turn of over 90°, after
+    which the ICP ends far from the part's pose (no matches left, or a wrong one). With the trust region it
+    holds the yaw until the rest is settled, and recovers the turn."""
+    from optipose.registration import fast as icp
+    from optipose.registration.normal_equations import normal_equations
+
+    surface = SurfaceReference(bar.vertices, bar.faces)
+    band = np.vstack([_band(True) - [0, 0.25e-3, 0], _band(False) + [0, 0.25e-3, 0]])
+    rpy = np.deg2rad([2.0, 2.0, 0.0])
+    scan = transform_points(part_motion(rpy, np.array([0.060, 0.015, -0.050])), band)
+    cfg = _config(name, "point_to_plane", max_iterations=100)
+    start = Matches(*surface.closest(scan))
+    _, _, AtA, Atb, _ = normal_equations(scan, start.q, start.n, cfg.max_correspondence_distance**2)
+    assert np.rad2deg(np.linalg.norm(_gauss_newton(AtA, Atb)[:3])) > 90.0
+
+    reg = get_backend(name).register(scan, surface, cfg, start)
+    assert reg.ok, reg.failure
+    error = np.rad2deg(matrix_to_rpy(invert_T(reg.T_target_source)[:3, :3]) - rpy)
+    assert np.all(np.abs(error) < [0.01, 0.01, 0.05]), error  # roll, pitch; the yaw seen by 20 points
+
+    with monkeypatch.context() as m:  # the same ICP without the trust region
+        m.setattr(icp, "_within", lambda x, reach: True)
+        wild = get_backend(name).register(scan, surface, cfg, start)
+    off = np.rad2deg(matrix_to_rpy(invert_T(wild.T_target_source)[:3, :3]) - rpy)
+    assert not wild.ok or np.abs(off).max() > 10.0
+
+
+def test_the_trust_regions_steps_agree_between_the_compiled_and_plain_icp(bar):
+    """The band above through both back-ends: the same iterations to the same pose (summation order only)."""
+    surface = SurfaceReference(bar.vertices, bar.faces)
+    band = np.vstack([_band(True) - [0, 0.25e-3, 0], _band(False) + [0, 0.25e-3, 0]])
+    scan = transform_points(part_motion(np.deg2rad([2.0, 2.0, 0.0]), np.array([0.060, 0.015, -0.050])), band)
+    cfg = _config("fast", "point_to_plane", max_iterations=100)
+    start = Matches(*surface.closest(scan))
+    fast, plain = register(scan, surface, cfg, start), get_backend("plain").register(scan, surface, cfg, start)
+    assert fast.ok and plain.ok and fast.iterations == plain.iterations
+    np.testing.assert_allclose(fast.T_target_source, plain.T_target_source, rtol=0, atol=1e-10)
