@@ -91,10 +91,7 @@ def main() -> None:
                 )
             )
         print(f"| {folder} | {len(draws)} | " + " | ".join(cells) + " |")
-    print(
-        "answered some k: "
-        + ", ".join(f"{n} of {len(args.folders)} at {h}" for n, h in zip(answered, heads))
-    )
+    print("answered some k: " + ", ".join(f"{n} of {len(args.folders)} at {h}" for n, h in zip(answered, heads)))
 
 
 if __name__ == "__main__":

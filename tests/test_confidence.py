@@ -204,7 +204,9 @@ def test_racing_an_equal_layout_stops_early_as_keep_it_cannot_gain_the_tolerance
     equal = race(lambda i: _draws(rng, 1, ratio=1.0, start=i)[0], FAST, min_draws=3, max_draws=8)
     assert equal.decision == Decision.KEEP and equal.n_draws == 3
     assert equal.score.low < 1.0 < equal.score.high < 1.1
-    assert confident_line(equal).startswith("k=0: KEEP hand hand; found") and "gains under 10 %" in confident_line(equal)
+    assert confident_line(equal).startswith("k=0: KEEP hand hand; found") and "gains under 10 %" in confident_line(
+        equal
+    )
     turned = 0
     for seed in range(100):
         rng = np.random.default_rng(seed)
@@ -317,9 +319,9 @@ def test_the_looks_spend_little_early_and_most_at_the_last():
     shares = np.diff([0.0] + [racing.spent(n, plan) for n in plan])
     assert plan == (3, 5, 8, 9) and shares.sum() == pytest.approx(1.0)
     assert np.all(np.diff(shares[:-1]) > 0) and shares[0] < 0.15  # growing; the first look's share 1/9
-    assert racing.spent(8, plan) == pytest.approx((8 / 9) ** racing.SPENDING) and racing.spent(9, plan) == 1.0 == racing.spent(
-        12, plan
-    )
+    assert racing.spent(8, plan) == pytest.approx((8 / 9) ** racing.SPENDING) and racing.spent(
+        9, plan
+    ) == 1.0 == racing.spent(12, plan)
 
 
 def test_the_looks():
