@@ -402,3 +402,48 @@ def test_a_zero_area_face_on_an_edge_never_answers_for_its_neighbours():
     assert not np.any(ids == 0)
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0)
     np.testing.assert_allclose(q, np.clip(points, lo, hi), atol=1e-12)
+
+
+def test_an_evaluator_runs_no_registration_twice_and_answers_as_a_fresh_one(monkeypatch):
+    """In the paper's cell a sensor's scan depends on the seed, the scan and the sensors up to it alone: an evaluator
+    that registered [S1, S2] gives [S1, S2, S3] the same tables as a fresh one while registering only the subsets with
+    S3; [S1, S3] (S1 kept in its place) registers the two with S3; [S1] runs nothing."""
+    import optipose.evaluate.evaluator as evaluator_module
+    from optipose.model.part import load_part
+
+    part = load_part("part_b")
+    objective = objective_from_table(
+        {"protocol": {"sequences": ["RP", "PY"], "start_deg": -2.0, "stop_deg": 2.0, "step_deg": 4.0}}
+    ).in_cell("ur10e")
+    hand = part.layouts["hand"]
+    s1, s2, s3 = hand.sensors
+    layouts = {
+        "S1S2": Layout((s1, s2), "a"),
+        "S1S2S3": hand,
+        "S1S3": Layout((s1, s3), "b"),
+        "S1": Layout((s1,), "c"),
+    }
+    with Evaluator(part, objective, seed=7) as fresh:
+        assert fresh._memo is not None
+        fresh._memo = None  # remembers nothing: every subset of every layout registered
+        alone = {name: fresh(layout) for name, layout in layouts.items()}
+    runs = []
+    real = evaluator_module.run_chunk
+
+    def counting(setup, layout, tasks, subsets=None, read=None):
+        runs.append((len(layout), tuple(subsets) if subsets is not None else None))
+        return real(setup, layout, tasks, subsets=subsets, read=read)
+
+    monkeypatch.setattr(evaluator_module, "run_chunk", counting)
+    with Evaluator(part, objective, seed=7) as ev:
+        for name, layout in layouts.items():
+            result = ev(layout)
+            pd.testing.assert_frame_equal(result.per_scan, alone[name].per_scan)
+            pd.testing.assert_frame_equal(result.points, alone[name].points)
+            pd.testing.assert_frame_equal(result.stats, alone[name].stats)
+            assert result.table == alone[name].table
+    assert runs == [
+        (2, ((0,), (1,), (0, 1))),
+        (3, ((2,), (0, 2), (1, 2), (0, 1, 2))),
+        (2, ((1,), (0, 1))),
+    ]
