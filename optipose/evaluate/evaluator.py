@@ -10,12 +10,7 @@ and the first closest-point search at identity is done once per sensor and share
 the result does not depend on the executor or its number of workers.
 
 For the search, :class:`Evaluator` keeps the part, objective and workers' state between calls:
-``Evaluator(part, objective)(layout) -> EvaluationResult``. It also keeps what its registrations gave: sensor j's
-scan depends on the seed, the scan and the sensors 0 … j alone (their poses and models: each draw of the cell and the
-noise is keyed by its sensor's place or drawn in the sensors' order, never by how many follow), so a subset whose
-sensors and those before them are those of a layout evaluated before has the same registration, and is not run
-again (:meth:`Evaluator.raw`): a search's candidates share their first sensors (a greedy layout and its extension,
-the hand sensors a candidate keeps in their places).
+``Evaluator(part, objective)(layout) -> EvaluationResult``.
 """
 
 from __future__ import annotations
@@ -31,7 +26,7 @@ import pandas as pd
 
 from optipose.parallel import shared
 from optipose.cell.scans import CellSetup
-from optipose.evaluate.assignment import Choice, all_subsets, best_choices, subset_name
+from optipose.evaluate.assignment import Choice, best_choices
 from optipose.parallel.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
@@ -158,11 +153,6 @@ class Evaluator:
             column_stride=self.objective.scan.column_stride,
             cell=None if self.objective.cell.ideal else CellSetup.of(self.objective.cell, part),
         )
-        # the rows of the registrations made so far, by (scan, the sensors up to the subset's last, the subset), and the
-        # point counts by (scan, the sensors up to it); None where a subset's registration depends on more than its
-        # own sensors and those before them (a combined start, a reference scanned from the whole layout)
-        reg = self.objective.registration
-        self._memo: dict | None = {} if reg.subset_start == "identity" and reg.reference != "nominal-scan" else None
         self._shared = None
         if self.objective.registration.reference != "cad-sample" and (reference_dir is not None or self.jobs > 1):
             if reference_dir is None:  # with workers in other processes, the CAD-surface reference is built here once
@@ -208,66 +198,10 @@ class Evaluator:
         first, every = share
         tasks = self.tasks()[first::every]
         t0 = time.perf_counter()
-        if self._memo is None:
-            outputs = self.executor.map(
-                functools.partial(run_chunk, self.setup, layout, subsets=subsets), _chunks(tasks, self.jobs)
-            )
-            return outputs, time.perf_counter() - t0
-        return self._remembered(layout, tasks, subsets), time.perf_counter() - t0
-
-    def _remembered(self, layout: Layout, tasks: list[tuple], subsets) -> list[tuple]:
-        """The workers' outputs for ``subsets`` (None: every one) of ``layout`` at ``tasks``: the registrations this
-        evaluator made before (the same sensors up to the subset's last, at every task) from its memo, the others
-        run (the sensors scanned again, which their noise keys make the same scans) and remembered."""
-        n, names = len(layout), layout.names
-        every = all_subsets(n)
-        wanted = every if subsets is None else sorted(set(subsets), key=every.index)
-        prefix = [
-            (np.asarray(layout.poses[: j + 1]).tobytes(), tuple(str(s.sensor) for s in layout.sensors[: j + 1]))
-            for j in range(n)
-        ]
-        scans = [task[0] for task in tasks]
-        memo = self._memo
-        known = [s for s in wanted if all((i, prefix[s[-1]], s) in memo for i in scans)]
-        counted = all((i, prefix[-1]) in memo for i in scans)
-        run = [s for s in wanted if s not in known]
-        outputs = []
-        if run or not counted:
-            outputs = list(
-                self.executor.map(
-                    functools.partial(run_chunk, self.setup, layout, subsets=run or wanted[:1]),
-                    _chunks(tasks, self.jobs),
-                )
-            )
-            for rows, point_rows, _ in outputs:
-                for row in rows:
-                    s = every[row["subset_index"]]
-                    memo[(row["scan"], prefix[s[-1]], s)] = {
-                        k: v for k, v in row.items() if k not in ("subset_index", "subset")
-                    }
-                for row in point_rows:
-                    memo[(row["scan"], prefix[row["sensor_index"]])] = {k: v for k, v in row.items() if k != "sensor"}
-            if not run:  # the scans were wanted for their point counts alone: not their registration
-                outputs = [([], point_rows, timing) for _, point_rows, timing in outputs]
-        rows = [
-            {"scan": i, "label": memo[(i, prefix[s[-1]], s)]["label"], "subset_index": every.index(s)}
-            | {"subset": subset_name(s, names)}
-            | {k: v for k, v in memo[(i, prefix[s[-1]], s)].items() if k not in ("scan", "label")}
-            for i in scans
-            for s in known
-        ]
-        point_rows = (
-            []
-            if outputs
-            else [
-                {"scan": i, "label": m["label"], "sensor_index": j, "sensor": names[j]}
-                | {k: v for k, v in m.items() if k not in ("scan", "label", "sensor_index")}
-                for i in scans
-                for j in range(n)
-                for m in [memo[(i, prefix[j])]]
-            ]
+        outputs = self.executor.map(
+            functools.partial(run_chunk, self.setup, layout, subsets=subsets), _chunks(tasks, self.jobs)
         )
-        return [*outputs, (rows, point_rows, {"scan": 0.0, "register": 0.0})]
+        return outputs, time.perf_counter() - t0
 
     def record(self, layout: Layout | list[np.ndarray], write) -> list[list]:
         """Scan ``layout`` at every orientation of the protocol as :meth:`__call__` scans it (the cell's sources,
