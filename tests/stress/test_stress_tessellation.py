@@ -26,8 +26,8 @@ from optipose.model.part import load_part
 
 TOLERANCE = 0.01  # relative, per statistic of Table 1
 REGISTRATION = (
-    "in the real cell A's and C's centroid splits move one median by 3.8 % and 1.4 %: the cell moves their points"
-    " alike (tests/test_cell_tessellation.py), the registration of clouds off the CAD does not (docs/cell.md)"
+    "in the real cell A's centroid split moves one median by more than 1 %: the cell moves its points alike"
+    " (tests/test_cell_tessellation.py), the registration of clouds off the CAD does not (docs/cell.md)"
 )
 
 
@@ -63,7 +63,7 @@ def test_part_b_split_at_its_centroids_gives_the_same_table_on_a_short_protocol(
 @pytest.mark.parametrize("split", [centroid_split, midpoint_split], ids=["centroid", "midpoint"])
 def test_a_retessellated_part_gives_the_same_table(name, split, cell, request):
     """The paper's whole protocol (77 orientations) on the shipped mesh and on the re-tessellated one."""
-    if cell != "ideal" and name in ("part_a", "part_c"):
+    if cell != "ideal" and name == "part_a" and split is centroid_split:
         request.applymarker(pytest.mark.xfail(reason=REGISTRATION, strict=False))
     part = load_part(name)
     shipped = _evaluate(part, part.mesh, load_objective("paper").in_cell(cell), 2)
