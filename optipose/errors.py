@@ -83,6 +83,26 @@ def note_interrupts() -> None:
 
     handler.notes_interrupts = True
     signal.signal(signal.SIGINT, handler)
+    _quiet_threads_after_interrupts()
+
+
+def _quiet_threads_after_interrupts() -> None:
+    """Once a Ctrl-C was noted, a thread that dies while the interrupt unwinds (a pool's manager or queue feeder
+    finding its workers' pipes closed) prints no traceback: the user asked to stop, and the one line saying what
+    was kept and how to resume is the answer. Before any Ctrl-C a thread's error is printed as Python prints it."""
+    import threading
+
+    previous = threading.excepthook
+    if getattr(previous, "quiet_after_interrupts", False):
+        return
+
+    def hook(args):
+        if _INTERRUPTS:
+            return
+        previous(args)
+
+    hook.quiet_after_interrupts = True
+    threading.excepthook = hook
 
 
 def interrupted() -> bool:

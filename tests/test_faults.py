@@ -503,3 +503,34 @@ def test_a_mesh_that_is_not_a_solid_is_warned_in_one_line(tmp_path, caplog):
         "not a closed solid" in line and "export the part as a closed solid" in line for line in lines
     )
     assert "faces not consistently oriented" in lines[0] and "open: some edges have one face" in lines[1]
+
+
+def test_after_a_ctrl_c_a_dying_helper_thread_prints_no_traceback(monkeypatch, capsys):
+    """A pool's thread that dies while a Ctrl-C unwinds (its workers' pipes closed) adds no traceback to the one
+    line an interrupted command prints; before any Ctrl-C a thread's error is printed as Python prints it."""
+    import signal
+    import threading
+
+    from optipose import errors
+
+    monkeypatch.setattr(threading, "excepthook", threading.__excepthook__)
+    monkeypatch.setattr(errors, "_INTERRUPTS", [])
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        errors.note_interrupts()
+
+        def die():
+            raise BrokenPipeError("the worker's pipe is closed")
+
+        def run() -> str:
+            t = threading.Thread(target=die, name="QueueManagerThread")
+            t.start()
+            t.join()
+            return capsys.readouterr().err
+
+        before = run()
+        assert "Traceback" in before and "QueueManagerThread" in before
+        errors._INTERRUPTS.append(signal.SIGINT)
+        assert run() == ""
+    finally:
+        signal.signal(signal.SIGINT, previous)
