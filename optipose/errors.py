@@ -71,6 +71,7 @@ def note_interrupts() -> None:
     SIGINT stays ignored."""
     import signal
 
+    _quiet_threads_after_interrupts()
     previous = signal.getsignal(signal.SIGINT)
     if previous in (signal.SIG_IGN, None) or getattr(previous, "notes_interrupts", False):
         return
@@ -83,7 +84,6 @@ def note_interrupts() -> None:
 
     handler.notes_interrupts = True
     signal.signal(signal.SIGINT, handler)
-    _quiet_threads_after_interrupts()
 
 
 def _quiet_threads_after_interrupts() -> None:
