@@ -49,7 +49,7 @@ def stored_draws(folder: Path, result) -> list[dict]:
 def reraced(result, draws: list[dict], confidence: float, rho: float = SPENDING, plan: int = 0) -> dict:
     """The draws raced again at ``confidence`` and spending ``rho``, as the search raced them but without its clock;
     ``plan``: the looks planned for that many draws (0: the draws stored). A race that would need a draw beyond
-    those stored ends at the last stored one."""
+    those stored is raced again with its looks planned for the draws stored."""
     statistic = objective_from_table(tomllib.loads(result.config.objective_file)).statistic
 
     def next_draws(i: int, keys) -> dict:
@@ -75,10 +75,9 @@ def main() -> None:
     else:
         runs = [(float(c), SPENDING, 0) for c in args.confidence.split(",")]
         heads = [f"two-sided {100 * c:.0f} % (one-sided {100 * (1 + c) / 2:.1f} %)" for c, _, _ in runs]
-    levels = [c for c, _, _ in runs]
     print("| folder | draws | " + " | ".join(heads) + " |")
-    print("| --- | ---: |" + " --- |" * len(levels))
-    answered = [0] * len(levels)
+    print("| --- | ---: |" + " --- |" * len(runs))
+    answered = [0] * len(runs)
     for folder in args.folders:
         result = load_result(folder)
         draws, cells = stored_draws(folder, result), []
