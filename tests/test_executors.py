@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from optipose.errors import ConfigError
-from optipose.evaluate.evaluator import Evaluator
+from optipose.evaluate.evaluator import Evaluator, evaluate_many
 from optipose.parallel.executors import (
     EXECUTORS,
     DaskExecutor,
@@ -108,6 +108,28 @@ def test_serial_and_two_loky_workers_give_identical_tables(plate, objective, ser
     pd.testing.assert_frame_equal(parallel.per_scan, serial.per_scan, check_exact=True)
     pd.testing.assert_frame_equal(parallel.points, serial.points, check_exact=True)
     pd.testing.assert_frame_equal(again.per_scan, serial.per_scan, check_exact=True)
+
+
+def test_several_evaluators_and_layouts_in_one_map_give_each_its_own_evaluation(plate, objective, serial):
+    """A verdict's draws: two seeds, two layouts, one with a subset of its sensors, all in one map of the
+    workers, each result the one its own call gives."""
+    executor = JoblibExecutor(2)
+    with (
+        Evaluator(plate, objective, seed=2, executor=executor) as two,
+        Evaluator(plate, objective, seed=3, executor=executor) as three,
+    ):
+        items = [(two, _layout(None, None), None), (three, _layout(None, None), [(1,)]), (two, _layout(None), None)]
+        together = evaluate_many(items)
+        alone = [evaluator(layout, subsets=subsets) for evaluator, layout, subsets in items]
+    executor.close()
+    pd.testing.assert_frame_equal(together[0].per_scan, serial.per_scan, check_exact=True)
+    for one, other in zip(together, alone):
+        pd.testing.assert_frame_equal(one.per_scan, other.per_scan, check_exact=True)
+        pd.testing.assert_frame_equal(one.points, other.points, check_exact=True)
+        assert one.seed == other.seed and one.layout.names == other.layout.names
+    assert set(together[1].per_scan["subset"]) == {"S2"}  # the seed-3 draw registered only the subset asked for
+    s2 = together[0].per_scan[together[0].per_scan["subset"] == "S2"]
+    assert not np.array_equal(s2["roll_est"].to_numpy(), together[1].per_scan["roll_est"].to_numpy())  # another draw
 
 
 def test_two_dask_workers_give_identical_tables(plate, objective, serial):

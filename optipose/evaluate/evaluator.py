@@ -31,11 +31,11 @@ from optipose.parallel.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
-from optipose.evaluate.worker import WorkerSetup, record_chunk, run_chunk
+from optipose.evaluate.worker import WorkerSetup, record_chunk, run_chunk, run_item
 from optipose.model.layout import Layout, SensorPose
 from optipose.scan.scanner import registered_motion
 
-__all__ = ["Evaluator", "EvaluationResult", "evaluate", "log_failures"]
+__all__ = ["Evaluator", "EvaluationResult", "evaluate", "evaluate_many", "log_failures"]
 
 log = logging.getLogger(__name__)
 
@@ -184,17 +184,17 @@ class Evaluator:
         (a verdict's draw, which needs only the subsets its choices use)."""
         return self.result(layout, [self.raw(layout, subsets=subsets)])
 
+    def many(self, items: list[tuple]) -> list[EvaluationResult]:
+        """``[self(layout, subsets) for layout, subsets in items]``: :func:`evaluate_many` of this evaluator."""
+        return evaluate_many([(self, layout, subsets) for layout, subsets in items])
+
     def raw(self, layout: Layout | list[np.ndarray], share: tuple[int, int] = (0, 1), subsets=None) -> tuple:
         """What ``self(layout)`` makes its result of: the workers' outputs and the wall time (s), of the
         orientations ``share[0]``, ``share[0] + share[1]``, … only. The shares of several calls (other
         processes') make one result together (:meth:`result`), the one ``self(layout)`` gives: each scan's
         noise comes from the seed and its index."""
         layout = _as_layout(layout)
-        if subsets is not None:
-            n = len(layout)
-            subsets = [tuple(sorted(set(map(int, s)))) for s in subsets]
-            if not subsets or not all(s and 0 <= s[0] and s[-1] < n for s in subsets):
-                raise ValueError(f"subsets: non-empty tuples of sensor indices 0..{n - 1}, got {subsets}")
+        subsets = _checked(layout, subsets)
         first, every = share
         tasks = self.tasks()[first::every]
         t0 = time.perf_counter()
@@ -247,6 +247,46 @@ class Evaluator:
         return EvaluationResult(
             self.part.name, layout, self.objective, self.seed, per_scan, points, stats, table, timings
         )
+
+
+def evaluate_many(items: list[tuple]) -> list[EvaluationResult]:
+    """``[evaluator(layout, subsets) for evaluator, layout, subsets in items]``, the same results, in one map of the
+    first evaluator's executor (the evaluators must share it): every layout's orientations, of every evaluator (a
+    draw of the verdict each), share the workers, where a few scans of one layout at a time would leave one idle."""
+    work = []
+    for evaluator, layout, subsets in items:
+        layout = _as_layout(layout)
+        work.append(
+            (
+                evaluator,
+                layout,
+                [
+                    (evaluator.setup, layout, _checked(layout, subsets), c)
+                    for c in _chunks(evaluator.tasks(), evaluator.jobs)
+                ],
+            )
+        )
+    if not work:
+        return []
+    t0 = time.perf_counter()
+    outputs = work[0][0].executor.map(run_item, [item for _, _, chunks in work for item in chunks])
+    wall = time.perf_counter() - t0
+    results, at = [], 0
+    for evaluator, layout, chunks in work:
+        results.append(evaluator.result(layout, [(list(outputs[at : at + len(chunks)]), wall)]))
+        at += len(chunks)
+    return results
+
+
+def _checked(layout: Layout, subsets) -> list[tuple] | None:
+    """``subsets`` as sorted index tuples of ``layout``'s sensors (None: every subset); a bad one is refused."""
+    if subsets is None:
+        return None
+    n = len(layout)
+    subsets = [tuple(sorted(set(map(int, s)))) for s in subsets]
+    if not subsets or not all(s and 0 <= s[0] and s[-1] < n for s in subsets):
+        raise ValueError(f"subsets: non-empty tuples of sensor indices 0..{n - 1}, got {subsets}")
+    return subsets
 
 
 def _as_layout(layout: Layout | list[np.ndarray]) -> Layout:

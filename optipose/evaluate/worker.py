@@ -35,7 +35,7 @@ from optipose.scan.pose import PartPose
 from optipose.seeds import group_seed, nominal_reference_seed, zeroing_seed
 from optipose.transforms import invert_T
 
-__all__ = ["WorkerSetup", "run_chunk", "record_chunk", "sensor_groups", "worker_for"]
+__all__ = ["WorkerSetup", "run_chunk", "run_item", "record_chunk", "sensor_groups", "worker_for"]
 
 log = logging.getLogger(__name__)
 
@@ -291,6 +291,13 @@ def run_chunk(
         timing["scan"] += t1 - t0
         timing["register"] += time.perf_counter() - t1
     return rows, point_rows, timing
+
+
+def run_item(item: tuple) -> tuple[list[dict], list[dict], dict]:
+    """:func:`run_chunk` of ``item``: (setup, layout, subsets, tasks), one of several layouts' or evaluators'
+    chunks in one map (:func:`optipose.evaluate.evaluator.evaluate_many`)."""
+    setup, layout, subsets, tasks = item
+    return run_chunk(setup, layout, tasks, subsets=subsets)
 
 
 def record_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple], write) -> list:

@@ -31,7 +31,7 @@ import time
 from dataclasses import replace
 
 from optipose.cell.ranges import draws as cell_draws
-from optipose.evaluate.evaluator import EvaluationResult, Evaluator
+from optipose.evaluate.evaluator import EvaluationResult, Evaluator, evaluate_many
 from optipose.model.baseline import baseline, baseline_label
 from optipose.model.layout import Layout, is_part_of
 from optipose.parallel.executors import make_executor
@@ -154,20 +154,43 @@ def confident_verdicts(
     used = {"hand": _used(validation.baseline[h] for _, h in compared)}
     used |= {name: _used(s.choice for s in side.values() if s.evaluation == name) for name in evaluated}
 
-    def next_draws(n: int, keys) -> dict:
-        t0, i = time.perf_counter(), n + (not counted)  # draw i's seed and folder: 0 is the validation's
+    ahead: dict[int, dict] = {}  # draws evaluated before the race asked for them (up to its next look)
+
+    def evaluate(first_draw: int, count: int, keys) -> None:
+        """Draws ``first_draw`` … ``first_draw + count - 1`` of the layouts the ``keys`` still need, in one map of
+        the workers (a draw's few scans of one layout would leave a worker idle), into ``ahead``."""
+        t0 = time.perf_counter()
         # a decided k's layout is not evaluated again
-        wanted = [
+        wanted = ["hand"] + [
             name for name in evaluated if keys is None or any(side[f].evaluation == name for f, h in keys if f == h)
         ]
-        with Evaluator(
-            part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict.scans
-        ) as evaluator:
-            results = {"hand": evaluator(baseline_layout, subsets=used["hand"])}
-            results |= {name: evaluator(evaluated[name], subsets=used[name]) for name in wanted}
+        layouts = {"hand": baseline_layout} | evaluated
+        draws = range(first_draw, first_draw + count)
+        evaluators = [
+            Evaluator(
+                part, objective, seed=verdict_seed(seed, i), quiet=True, executor=executor, scans=config.verdict.scans
+            )
+            for i in draws
+        ]
+        try:
+            results = iter(evaluate_many([(ev, layouts[name], used[name]) for ev in evaluators for name in wanted]))
+            for i in draws:
+                ahead[i] = {name: next(results) for name in wanted}
+        finally:
+            for ev in evaluators:
+                ev.close()
+        log.info("verdict draws %d-%d in %.1f s", draws[0], draws[-1], time.perf_counter() - t0)
+
+    def next_draws(n: int, keys) -> dict:
+        i = n + (not counted)  # draw i's seed and folder: 0 is the validation's
+        if i not in ahead:
+            # the race looks first at its first look's draws (every draw, when every k is kept): no draw before it
+            # can change what the race asks for, so they are evaluated together; later draws one at a time
+            upto = (most if every_kept else first_look(objective)) if math.isinf(seconds) else 0
+            evaluate(i, max(1, upto - n), keys)
+        results = ahead.pop(i)
         for name, result in results.items():
             done(i, name, result)
-        log.info("verdict draw %d in %.1f s", i, time.perf_counter() - t0)
         return pairs(results)
 
     # a k answered with the baseline's own choice is an exact TIE from the first draw: it rides along without
@@ -176,8 +199,8 @@ def confident_verdicts(
     every_kept = kept == set(ks)
     riders = fewer | (frozenset((k, k) for k in kept) if not every_kept else frozenset())
     most = min(config.verdict.draws, KEPT_DRAWS) if every_kept else config.verdict.draws
+    seconds = config.verdict.time if config.verdict.time > 0 else math.inf
     try:
-        seconds = config.verdict.time if config.verdict.time > 0 else math.inf
         raced = race_many(
             next_draws,
             rules,
