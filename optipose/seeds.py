@@ -19,6 +19,7 @@ __all__ = [
     "zeroing_seed",
     "verdict_seed",
     "held_out_seed",
+    "kind_seed",
 ]
 
 _SELECTION = 0x5E1EC7
@@ -28,6 +29,7 @@ _SENSOR_MODEL = 0x5E4500  # plus the group's index
 _MOUNTING = 0xB4AC7E7
 _VERDICT = 0x7E4D1C7
 _HELD_OUT = 0x4E1D0  # plus the instance's index: the robustness check's cell instances
+_KIND = 0x6B1D0  # plus the kind's index: a BUY raced again in the common kinds of cell
 
 
 def derived_seed(seed: int, tag: int) -> int:
@@ -77,3 +79,9 @@ def held_out_seed(seed: int, i: int) -> int:
     """The seed of held-out cell instance ``i`` of ``optipose robustness`` run with ``seed``: none of a search's
     own seeds (its selection, validation and verdict draws derive from other tags)."""
     return derived_seed(seed, _HELD_OUT + int(i))
+
+
+def kind_seed(seed: int, i: int) -> int:
+    """The seed of the race of a search's BUYs in common kind of cell ``i`` (a user who named no cell,
+    :mod:`optipose.search.kinds`): its draws are none of the search's own (their verdict seeds derive from it)."""
+    return derived_seed(seed, _KIND + int(i))

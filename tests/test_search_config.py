@@ -57,6 +57,8 @@ FLAT_DEFAULTS = dict(
     verdict_tolerance=0.10,
     verdict_failures=0.01,
     verdict_confidence=0.95,
+    verdict_kinds="",  # since the sections: the common kinds of cell a BUY is raced again in (none by default)
+    verdict_kinds_draws=12,
 )
 FLAT_BUDGETS = {
     "quick": dict(

@@ -118,6 +118,7 @@ def search_command(
     from optipose.io.folders import RESULTS_DIR, make_result_dir
     from optipose.model.part import load_part
     from optipose.search.budgets import config_from_budget
+    from optipose.search.kinds import COMMON_KINDS
 
     console = make_console(stderr=True)
     jobs = jobs or os.cpu_count() or 1
@@ -130,11 +131,14 @@ def search_command(
             units = saved_units or units
     else:
         the_objective = load_objective(objective).in_cell(cell)
+        # a user who named no cell gets the objective's, one cell's points: its BUYs are raced again in the common kinds
+        unnamed = cell is None and not the_objective.cell.ideal and not the_objective.cell.ranges
         search_config = config_from_budget(
             budget,
             _parse_sensors(sensors),
             _overrides(config),
             cell=not the_objective.cell.ideal,
+            kinds=COMMON_KINDS if unnamed else (),
         )
     if max_time:  # the user's clock on the whole search (a resumed search takes it anew)
         search_config = replace(search_config, time_limit=max_time)
@@ -163,8 +167,11 @@ def search_command(
         Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal, time_limit=search_config.time_limit
     )
     if cell is None and searched.validated and not the_objective.cell.ideal and not the_objective.cell.ranges:
-        from optipose.verdict.words import cell_advice
+        from optipose.verdict.words import cell_advice, kinds_line
 
+        for k in sorted(searched.confident.by_k):
+            if kinds_line(k, searched.kinds):
+                Console().print(kinds_line(k, searched.kinds), highlight=False)
         Console().print(cell_advice(the_objective.cell.name), style="yellow", highlight=False)
     ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:

@@ -90,6 +90,7 @@ def load_search(folder: Path, config: RunConfig | None = None):
         baseline,
         validation(folder / "comparison.csv"),
         read_verdicts(folder / "verdict.csv"),
+        read_kinds(folder / "kinds.csv"),
     )
 
 
@@ -98,67 +99,79 @@ def read_verdicts(path: Path) -> Verdicts:
     comparison of fewer found sensors with more hand ones (a row whose ``hand_k`` exceeds its ``k``)."""
     if not path.is_file():
         return Verdicts()
-    by_k, fewer = {}, None
+    with reading(path):
+        return _verdicts_of(pd.read_csv(path, keep_default_na=False, na_values=[""]))
+
+
+def read_kinds(path: Path) -> dict[str, Verdicts]:
+    """Cell → the :class:`~optipose.verdict.confidence.Verdicts` of ``kinds.csv``: a search's BUYs raced again in the
+    common kinds of cell (none without one)."""
+    if not path.is_file():
+        return {}
     with reading(path):
         rows = pd.read_csv(path, keep_default_na=False, na_values=[""])
-        if "hand_k" not in rows:
-            rows["hand_k"] = rows["k"]
-        for name, value in (
-            ("failed", np.nan),
-            ("failed_low", np.nan),
-            ("failed_high", np.nan),
-            ("failures", np.nan),
-            ("kept", False),
-            ("ended", ""),
-            ("ruling", ""),
-        ):
-            if (
-                name not in rows
-            ):  # a folder from before the failures' rule (NaN: not applied) and the hand choice's answer
-                rows[name] = value
-        for (k, baseline_k), group in rows.groupby(["k", "hand_k"], sort=True):
-            score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
+        return {str(cell): _verdicts_of(group.drop(columns="cell")) for cell, group in rows.groupby("cell", sort=False)}
 
-            def iv(row, name):
-                return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
 
-            more = int(score["more_draws"])
-            against_more = int(baseline_k) != int(k)
-            verdict = ConfidentVerdict(
-                k=int(k),
-                decision=Decision(str(score["decision"])),
-                found_name=str(score["found"]),
-                baseline_name=str(score["hand"]),
-                score=iv(score, "ratio"),
-                axes=tuple(
-                    AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio"), iv(r, "failed"))
-                    for _, r in axes.iterrows()
-                ),
-                found=tuple(
-                    AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()
-                ),
-                baseline=tuple(
-                    AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()
-                ),
-                found_score_deg=iv(score, "found_median_deg"),
-                baseline_score_deg=iv(score, "hand_median_deg"),
-                n_draws=int(score["draws"]),
-                n_scans=int(score["scans"]),
-                tolerance=float(score["tolerance"]),
-                confidence=float(score["confidence"]),
-                more_draws=None if more < 0 else more,
-                seconds_per_draw=float(score["seconds_per_draw"]),
-                reference=str(score["reference"]),
-                baseline_k=int(baseline_k) if against_more else 0,
-                failures=float(score["failures"]),
-                kept=str(score["kept"]) == "True",
-                ended=score["ended"] if isinstance(score["ended"], str) else "",  # "" reads back as NaN
-                ruling=_ruling(score),
-            )
-            if against_more:
-                fewer = verdict
-            else:
-                by_k[int(k)] = verdict
+def _verdicts_of(rows: pd.DataFrame) -> Verdicts:
+    """The verdicts of ``verdict.csv``'s rows (:func:`read_verdicts`)."""
+    by_k, fewer = {}, None
+    if "hand_k" not in rows:
+        rows["hand_k"] = rows["k"]
+    for name, value in (
+        ("failed", np.nan),
+        ("failed_low", np.nan),
+        ("failed_high", np.nan),
+        ("failures", np.nan),
+        ("kept", False),
+        ("ended", ""),
+        ("ruling", ""),
+    ):
+        if name not in rows:  # a folder from before the failures' rule (NaN: not applied) and the hand choice's answer
+            rows[name] = value
+    for (k, baseline_k), group in rows.groupby(["k", "hand_k"], sort=True):
+        score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
+
+        def iv(row, name):
+            return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
+
+        more = int(score["more_draws"])
+        against_more = int(baseline_k) != int(k)
+        verdict = ConfidentVerdict(
+            k=int(k),
+            decision=Decision(str(score["decision"])),
+            found_name=str(score["found"]),
+            baseline_name=str(score["hand"]),
+            score=iv(score, "ratio"),
+            axes=tuple(
+                AxisRatio(r.axis, iv(r, "ratio"), iv(r, "median_ratio"), iv(r, "p75_ratio"), iv(r, "failed"))
+                for _, r in axes.iterrows()
+            ),
+            found=tuple(
+                AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()
+            ),
+            baseline=tuple(
+                AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()
+            ),
+            found_score_deg=iv(score, "found_median_deg"),
+            baseline_score_deg=iv(score, "hand_median_deg"),
+            n_draws=int(score["draws"]),
+            n_scans=int(score["scans"]),
+            tolerance=float(score["tolerance"]),
+            confidence=float(score["confidence"]),
+            more_draws=None if more < 0 else more,
+            seconds_per_draw=float(score["seconds_per_draw"]),
+            reference=str(score["reference"]),
+            baseline_k=int(baseline_k) if against_more else 0,
+            failures=float(score["failures"]),
+            kept=str(score["kept"]) == "True",
+            ended=score["ended"] if isinstance(score["ended"], str) else "",  # "" reads back as NaN
+            ruling=_ruling(score),
+        )
+        if against_more:
+            fewer = verdict
+        else:
+            by_k[int(k)] = verdict
     return Verdicts(by_k, fewer)
 
 

@@ -35,6 +35,7 @@ class SearchResult:
     else the conventional placement;
     validation : found vs. hand on the held-out seed (None when the search was interrupted before it);
     confident : the verdicts with confidence (``verdict.csv``; none for a search without one).
+    kinds : cell → its BUYs raced again in a common kind of cell (``kinds.csv``; a search in a cell the user did not name).
     """
 
     folder: Path | None
@@ -46,6 +47,7 @@ class SearchResult:
     baseline: Layout | None = field(default=None, repr=False)
     validation: Validation | None = None
     confident: Verdicts = field(default_factory=Verdicts)
+    kinds: dict[str, Verdicts] = field(default_factory=dict)
 
     def verdicts(self) -> list[Verdict]:
         """Found vs. hand per k (empty when there is no hand layout or no validation)."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from optipose.io.evaluation import write_evaluation
 from optipose.files import atomic_path, reading
@@ -84,6 +85,14 @@ class SearchFolder:
         choice), its intervals per axis; nothing without verdicts."""
         if verdicts.in_order():
             write_csv(verdict_frame(verdicts), self.folder / "verdict.csv")
+
+    def kinds(self, kinds: dict) -> None:
+        """``kinds.csv``: the BUYs raced again in each common kind of cell (``verdict.csv``'s rows with the cell's
+        name first); nothing when none was raced."""
+        frames = [verdict_frame(v).assign(cell=name) for name, v in kinds.items() if v.in_order()]
+        if frames:
+            table = pd.concat(frames, ignore_index=True)
+            write_csv(table[["cell", *(c for c in table.columns if c != "cell")]], self.folder / "kinds.csv")
 
 
 def _write_evaluations(sub: Path, result) -> None:

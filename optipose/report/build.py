@@ -150,7 +150,7 @@ def _search(folder: Path, result, views: bool, ready=None) -> tuple[str, list[Bl
         )
         if result.confident.by_k:  # the verdict on draws decides
             verdict = verdict[:1] + confident_blocks(
-                result.confident, cell_name(result.config), result.layouts, result.baseline
+                result.confident, cell_name(result.config), result.layouts, result.baseline, result.kinds
             )
         blocks += verdict
         blocks.append(

@@ -16,6 +16,7 @@ from optipose.verdict.words import (
     confident_line,
     fewer_line,
     interval_cell,
+    kinds_line,
     mount_line,
     open_line,
     ruling_line,
@@ -33,11 +34,12 @@ def confident_css(decision: Decision) -> str:
 
 
 def confident_blocks(
-    verdicts: Verdicts, cell: str = "ideal", layouts: dict | None = None, baseline=None
+    verdicts: Verdicts, cell: str = "ideal", layouts: dict | None = None, baseline=None, kinds: dict | None = None
 ) -> list[Block]:
     """The verdict's lines, what a BUY mounts and keeps (:func:`mount_line`), its table and its picture (empty
     without verdicts). ``cell``: the cell's name, which the caption says the errors are predicted in;
-    ``layouts``: k → the found layout, ``baseline``: the baseline's."""
+    ``layouts``: k → the found layout, ``baseline``: the baseline's; ``kinds``: cell → the BUYs raced again in
+    that common kind of cell (:func:`kinds_line`)."""
     if not verdicts.by_k:
         return []
     ordered = list(verdicts.by_k.values())
@@ -45,6 +47,10 @@ def confident_blocks(
     blocks: list[Block] = [Paragraph(confident_line(v), confident_css(v.decision)) for v in ordered]
     blocks += [Paragraph(line.strip(), "verdict info") for v in ordered if (line := open_line(v))]
     blocks += [Paragraph(line.strip(), "verdict info") for v in ordered if (line := ruling_line(v))]
+    for v in ordered:  # a BUY raced again in the common kinds of cell: good where it holds in every one
+        if line := kinds_line(v.k, kinds or {}):
+            held = all(vs.by_k[v.k].decision == Decision.BUY for vs in kinds.values() if v.k in vs.by_k)
+            blocks.append(Paragraph(line.strip(), "verdict good" if held else "verdict mixed"))
     blocks += [
         Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), baseline))
     ]

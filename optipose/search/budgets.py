@@ -106,16 +106,18 @@ IN_A_CELL: dict[str, Preset] = {
 
 
 def config_from_budget(
-    budget: str, sensors: tuple[int, ...], overrides: Preset | None = None, cell: bool = False
+    budget: str, sensors: tuple[int, ...], overrides: Preset | None = None, cell: bool = False, kinds: tuple = ()
 ) -> SearchConfig:
     """The config of a named budget for these sensor counts, with ``overrides`` (a ``[search]`` table's
     preset, :func:`optipose.search.config.search_preset`) on top; ``cell``: it runs in a real cell
-    (:data:`IN_A_CELL` adjusts the budget first)."""
+    (:data:`IN_A_CELL` adjusts the budget first); ``kinds``: the cells its BUYs are raced again in (a cell the user
+    did not name: :mod:`optipose.search.kinds`), before the overrides."""
     if budget not in BUDGETS:
         raise ConfigError(f"unknown budget '{budget}' (use {', '.join(BUDGETS)})")
     presets = (
         BUDGETS[budget],
         IN_A_CELL.get(budget) if cell else None,
+        Preset(verdict={"kinds": ",".join(kinds)}) if kinds else None,
         overrides,
     )
     config = SearchConfig(sensors=sensors)

@@ -172,6 +172,8 @@ _RENAMED = {
     "verdict_tolerance": ("verdict", "tolerance"),
     "verdict_failures": ("verdict", "failures"),
     "verdict_confidence": ("verdict", "confidence"),
+    "verdict_kinds": ("verdict", "kinds"),
+    "verdict_kinds_draws": ("verdict", "kinds_draws"),
 }
 FLAT_KEYS: dict[str, tuple[str, str]] = {
     **{f.name: (name, f.name) for name in ("surrogate", "constraints") for f in fields(SECTIONS[name])},

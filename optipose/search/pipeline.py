@@ -82,6 +82,8 @@ class ResultSink(Protocol):
 
     def verdict(self, verdicts: Verdicts) -> None: ...
 
+    def kinds(self, kinds: dict[str, Verdicts]) -> None: ...
+
 
 @dataclass
 class SearchReport:
@@ -91,6 +93,7 @@ class SearchReport:
     layouts: dict[int, Layout] = field(default_factory=dict)
     validation: Validation | None = None
     confident: Verdicts = field(default_factory=Verdicts)  # the verdicts with confidence (search/draws.py)
+    kinds: dict[str, Verdicts] = field(default_factory=dict)  # the BUYs raced again per common kind (search/kinds.py)
 
     @property
     def validated(self) -> bool:
@@ -172,6 +175,7 @@ def run(
             if not ctx.report.outcome.interrupted:
                 _validation(ctx)
                 _verdict(ctx)
+                _kinds(ctx)
             return ctx.report
 
 
@@ -333,6 +337,22 @@ def _verdict(ctx: SearchContext) -> None:
         ctx.sink.verdict_draw,
     )
     ctx.sink.verdict(report.confident)
+
+
+def _kinds(ctx: SearchContext) -> None:
+    """The BUYs raced again in the common kinds of cell, where the user named none (``verdict.kinds``)."""
+    from optipose.search.kinds import across_kinds, buys, kinds_of
+
+    report, verdict = ctx.report, ctx.config.verdict
+    kinds = kinds_of(ctx.config)
+    if not kinds or not buys(report.confident):
+        return
+    ctx.stage(f"the BUYs in {', '.join(kinds)} (up to {verdict.kinds_draws} draws each)")
+    raced = replace(ctx.config, verdict=replace(verdict, time=ctx.seconds(verdict.time, verdict.answer_time)))
+    report.kinds = across_kinds(
+        ctx.part, ctx.objective, report.layouts, report.validation, report.confident, ctx.seed, raced, ctx.jobs
+    )
+    ctx.sink.kinds(report.kinds)
 
 
 def _study(ctx: SearchContext, resume: bool, on_eval) -> SurrogateStudy:

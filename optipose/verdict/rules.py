@@ -47,8 +47,14 @@ class VerdictConfig:
     tolerance: float = Rules.tolerance
     failures: float = Rules.failures
     confidence: float = Rules.confidence
+    # the cells each BUY is raced again in, on draws of their own, when the search's cell is one the user did not
+    # name (comma-separated cell names; empty: none): its answer then says whether it holds in them
+    kinds: str = ""
+    kinds_draws: int = 12  # a BUY's draws at most in each of them
 
     def __post_init__(self) -> None:
+        if self.kinds_draws < 1:
+            raise ConfigError(f"search verdict: kinds_draws >= 1, not {self.kinds_draws}")
         if (
             self.scans < 0
             or self.draws < 1

@@ -38,6 +38,7 @@ __all__ = [
     "open_line",
     "ruling_line",
     "cell_advice",
+    "kinds_line",
     "clock_line",
     "fewer_line",
     "axis_lines",
@@ -232,6 +233,29 @@ def cell_advice(name: str) -> str:
     return (
         f"answered in the objective's cell, {name} (one cell's points); for yours name its kind: --cell cobot, "
         "industrial-arm or linear-axis, or --cell common for any of them (optipose cells)"
+    )
+
+
+def kinds_line(k: int, kinds: dict) -> str:
+    """What a search's BUY at ``k`` (in a cell the user did not name) does in the common kinds of cell it was raced
+    again in: ``kinds`` cell → :class:`~optipose.verdict.confidence.Verdicts` (:mod:`optipose.search.kinds`); "" for
+    a k not raced there."""
+    raced = {name: v.by_k[k] for name, v in kinds.items() if k in v.by_k}
+    if not raced:
+        return ""
+    held = {name: v for name, v in raced.items() if v.decision == Decision.BUY}
+
+    most = max(v.n_draws for v in raced.values())
+    if len(held) == len(raced):
+        each = ", ".join(f"{name} {ratio_cell(v.score)}" for name, v in raced.items())
+        return f"  k={k} the BUY holds in every common kind of cell: {each} (at most {most} draws each)"
+    holds = ", ".join(f"{name} {ratio_cell(v.score)}" for name, v in held.items())
+    not_in = ", ".join(
+        f"{name} ({v.decision.value} {ratio_cell(v.score)})" for name, v in raced.items() if name not in held
+    )
+    return (
+        f"  k={k} the BUY depends on your cell: {f'holds in {holds}; ' if holds else ''}not in {not_in} (at most "
+        f"{most} draws each): name yours with --cell NAME"
     )
 
 

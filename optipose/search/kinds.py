@@ -1,0 +1,61 @@
+"""Stage: a search's BUYs raced again in the common kinds of cell, for a user who named none.
+
+A search runs in its objective's cell (the paper's, ``ur10e``: one cell's points, fitted on part A) unless the user
+names theirs. A BUY there is better in that cell; whether it is in the user's depends on magnitudes the user did not
+give (docs/results.md, "The answer across a cell's ranges": a BUY of part A's single sensor in one cell was a KEEP
+on a linear axis). So where the user named no cell, each BUY is raced again, with the choices of subsets the search
+made, in each cell of ``SearchConfig.verdict.kinds`` (the presets of the common kinds: a cobot, an industrial arm, a
+precision linear axis; each magnitude a range, each instance drawing its own), on draws of its own
+(:func:`optipose.seeds.kind_seed`: none the search, its validation or its verdict saw), at most
+``SearchConfig.verdict.kinds_draws`` of them (:func:`optipose.search.draws.confident_verdicts`, the same race). The
+answer then says, per BUY, that it holds in every kind, or on which it depends
+(:func:`optipose.verdict.words.kinds_line`). Nothing is raced for a TIE or a KEEP: there is nothing to buy, and the
+line under the answer names the kinds a user may name (:func:`optipose.verdict.words.cell_advice`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from optipose.search.draws import confident_verdicts
+from optipose.seeds import kind_seed
+from optipose.verdict.confidence import Decision, Verdicts
+
+__all__ = ["COMMON_KINDS", "kinds_of", "buys", "across_kinds"]
+
+COMMON_KINDS = ("cobot", "industrial-arm", "linear-axis")  # cells/*.toml: the presets of the common kinds
+
+
+def kinds_of(config) -> list[str]:
+    """The cells a search config races its BUYs again in (``verdict.kinds``, comma-separated)."""
+    return [name.strip() for name in config.verdict.kinds.split(",") if name.strip()]
+
+
+def buys(verdicts: Verdicts) -> list[int]:
+    """The k a search's verdicts BUY at."""
+    return sorted(k for k, v in verdicts.by_k.items() if v.decision == Decision.BUY)
+
+
+def across_kinds(
+    part, objective, layouts, validation, verdicts: Verdicts, seed: int, config, jobs: int = 1, on_kind=None
+) -> dict[str, Verdicts]:
+    """Kind (a cell name) → the verdicts of the search's BUYs raced again in it, with their choices of subsets;
+    empty when nothing was bought or no kinds are asked for. ``on_kind(name)`` is told as each kind starts."""
+    ks, kinds = buys(verdicts), kinds_of(config)
+    if not ks or not kinds:
+        return {}
+    bought = replace(
+        validation,
+        found={k: validation.found[k] for k in ks},
+        baseline={k: validation.baseline[k] for k in ks},
+    )
+    raced = replace(config, verdict=replace(config.verdict, draws=config.verdict.kinds_draws))
+    out = {}
+    for i, name in enumerate(kinds):
+        if on_kind:
+            on_kind(name)
+        # the race never reads the validation's evaluations in a real cell: its draws are all of the kind's own
+        out[name] = confident_verdicts(
+            part, objective.in_cell(name), layouts, bought, {}, kind_seed(seed, i), raced, jobs
+        )
+    return out
