@@ -319,6 +319,14 @@ def test_where_the_hand_choice_beat_the_found_layout_on_the_validation_draw_the_
     assert [np.array_equal(T, hand.poses[i]) for i, T in zip((1, 2), answered[2].poses)] == [True, True]
     assert v.found[2].sensors == (0, 1) and [a.subset for a in v.found[2].axes] == [(1,), (0, 1), (0, 1)]
     assert (v.found[2].name, v.found[2].score) == ("S2S3", 2e-3) and v.baseline == validation.baseline
+    # a found triple that ties the hand's to rounding (the same sensors in another layout: the last bits of a sum) did
+    # not beat it, and is answered with it; one better by more than rounding did
+    tied = replace(found_triple, score=triple.score * (1 - 1e-15))
+    answered, _ = baseline_where_better(layouts, Validation("reduced", 1, {3: tied}, {3: triple}), hand)
+    assert answered[3] is not layouts[3] and answered[3].names == ["S1", "S2", "S3"]
+    better = replace(found_triple, score=triple.score * (1 - 1e-6))
+    answered, _ = baseline_where_better(layouts, Validation("reduced", 1, {3: better}, {3: triple}), hand)
+    assert answered[3] is layouts[3]
 
     # the largest found layout replaced: the smaller ones it held keep their choices, restated in the largest left
     # (here found_k3 = (C, A, B) held found_k1 = A as its F2 and found_k2 = (B, A) as F3F2; in found_k2 A is F2, B F1)

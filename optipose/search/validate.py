@@ -182,13 +182,16 @@ def indices_in(layout: Layout, big: Layout) -> list[int]:
     return [next(i for i, P in enumerate(big.poses) if np.allclose(T, P)) for T in layout.poses]
 
 
+_TIE = 1e-9  # relative: scores this close are one
+
+
 def baseline_where_better(
     layouts: dict[int, Layout], validation: Validation, baseline: Layout
 ) -> tuple[dict[int, Layout], Validation]:
-    """In a real cell, the search's answer for each k whose found layout the baseline's choice of k sensors beat on
-    the validation's draw (a lower score): that choice's own sensors (the baseline's names and poses, in a layout
-    ``found_k<k>``), with the baseline's choice restated in it (the inputs themselves where no k is replaced).
-    There is nothing to buy there, and the verdict pairs the baseline's evaluation with itself: an exact TIE, the
+    """In a real cell, the search's answer for each k whose found layout the baseline's choice of k sensors beat or
+    tied on the validation's draw (a score as low, to rounding): that choice's own sensors (the baseline's names and
+    poses, in a layout ``found_k<k>``), with the baseline's choice restated in it (the inputs themselves where no k is
+    replaced). There is nothing to buy there, and the verdict pairs the baseline's evaluation with itself: an exact TIE, the
     baseline's sensors staying in their brackets (docs/method.md, "The verdict with confidence"). The found layouts
     that stay keep their choices, restated in the largest of them that holds them where the one they were validated
     inside was replaced. In the ideal cell the validation's draw is the race's first and is not also used to choose
@@ -196,7 +199,9 @@ def baseline_where_better(
     out, found, replaced = dict(layouts), dict(validation.found), set()
     for k, h in validation.baseline.items():
         f = found.get(k)
-        if f is None or k not in out or not h.score < f.score:
+        # a tie did not beat it either: the same sensors in a sub-layout and in the whole one can differ in the last
+        # bits of a statistic (the order of a sum)
+        if f is None or k not in out or not h.score <= f.score * (1.0 + _TIE):
             continue
         replaced.add(k)
         why = (
