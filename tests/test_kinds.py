@@ -58,6 +58,27 @@ def test_the_line_says_a_buy_holds_in_every_kind_or_on_which_it_depends():
     assert "holds in" not in nowhere and "not in linear-axis (KEEP" in nowhere
 
 
+def test_at_a_ranges_ends_the_line_says_where_the_cell_must_lie():
+    ends = {"cobot:low": _verdicts({1: 1.4}, 1), "cobot:high": _verdicts({1: 0.95}, 2)}
+    line = kinds_line(1, ends)
+    assert line.startswith("  k=1 the BUY depends on where your cell lies in its ranges: holds at cobot:low 1.4")
+    assert "not at cobot:high (" in line and "optipose calibrate" in line
+    both = {"cobot:low": _verdicts({1: 1.4}, 1), "cobot:high": _verdicts({1: 1.3}, 2)}
+    assert kinds_line(1, both).startswith("  k=1 the BUY holds at both ends of the cell's ranges: cobot:low 1.4")
+
+
+def test_the_cells_a_search_checks_its_buys_in():
+    from optipose.cell.config import load_cell
+    from optipose.cli.search import _checked_in
+
+    assert _checked_in(None, load_cell("ur10e")) == COMMON_KINDS  # named none: the objective's cell of points
+    assert _checked_in("ur10e", load_cell("ur10e")) == ()  # named it: that cell's answer
+    assert _checked_in("cobot", load_cell("cobot")) == ("cobot:low", "cobot:high")
+    assert _checked_in("cobot:zeroed", load_cell("cobot:zeroed")) == ("cobot:zeroed:low", "cobot:zeroed:high")
+    assert load_cell("cobot:zeroed:low").calibration.zeroed and not load_cell("cobot:zeroed:low").ranges
+    assert _checked_in(None, load_cell("ideal")) == ()
+
+
 def test_kinds_csv_reads_back_as_written(tmp_path):
     kinds = {"cobot": _verdicts({1: 1.5, 3: 0.9}, 1), "industrial-arm": _verdicts({1: 1.2}, 2)}
     SearchFolder(tmp_path).kinds(kinds)

@@ -118,7 +118,6 @@ def search_command(
     from optipose.io.folders import RESULTS_DIR, make_result_dir
     from optipose.model.part import load_part
     from optipose.search.budgets import config_from_budget
-    from optipose.search.kinds import COMMON_KINDS
 
     console = make_console(stderr=True)
     jobs = jobs or os.cpu_count() or 1
@@ -131,14 +130,12 @@ def search_command(
             units = saved_units or units
     else:
         the_objective = load_objective(objective).in_cell(cell)
-        # a user who named no cell gets the objective's, one cell's points: its BUYs are raced again in the common kinds
-        unnamed = cell is None and not the_objective.cell.ideal and not the_objective.cell.ranges
         search_config = config_from_budget(
             budget,
             _parse_sensors(sensors),
             _overrides(config),
             cell=not the_objective.cell.ideal,
-            kinds=COMMON_KINDS if unnamed else (),
+            kinds=_checked_in(cell, the_objective.cell),
         )
     if max_time:  # the user's clock on the whole search (a resumed search takes it anew)
         search_config = replace(search_config, time_limit=max_time)
@@ -166,12 +163,12 @@ def search_command(
     print_answer(
         Console(), searched, the_part, unchecked, ideal=the_objective.cell.ideal, time_limit=search_config.time_limit
     )
-    if cell is None and searched.validated and not the_objective.cell.ideal and not the_objective.cell.ranges:
-        from optipose.verdict.words import cell_advice, kinds_line
+    from optipose.verdict.words import cell_advice, kinds_line
 
-        for k in sorted(searched.confident.by_k):
-            if kinds_line(k, searched.kinds):
-                Console().print(kinds_line(k, searched.kinds), highlight=False)
+    for k in sorted(searched.confident.by_k):  # each BUY raced again where the user's cell may lie
+        if kinds_line(k, searched.kinds):
+            Console().print(kinds_line(k, searched.kinds), highlight=False)
+    if cell is None and searched.validated and not the_objective.cell.ideal and not the_objective.cell.ranges:
         Console().print(cell_advice(the_objective.cell.name), style="yellow", highlight=False)
     ready = pictures.join if pictures is not None else None
     if searched.outcome.interrupted:
@@ -255,6 +252,19 @@ def _parse_sensors(text: str) -> tuple[int, ...]:
     if not values:
         raise ConfigError("--sensors: give at least one sensor count")
     return values
+
+
+def _checked_in(cell: str | None, the_cell) -> tuple[str, ...]:
+    """The cells a search's BUYs are raced again in (:mod:`optipose.search.kinds`): the common kinds where the user
+    named no cell and the objective's is one of points; the ends of the ranges of a cell with ranges; else none."""
+    from optipose.search.kinds import COMMON_KINDS
+
+    if the_cell.ideal:
+        return ()
+    if the_cell.ranges:
+        name = cell if cell is not None else the_cell.name
+        return (f"{name}:low", f"{name}:high")
+    return COMMON_KINDS if cell is None else ()
 
 
 def _overrides(path: Path | None):

@@ -1,16 +1,19 @@
-"""Stage: a search's BUYs raced again in the common kinds of cell, for a user who named none.
+"""Stage: a search's BUYs raced again where the user's cell may lie: in the common kinds of cell, for a user who
+named none, or at the ends of the ranges of the cell the search ran in.
 
 A search runs in its objective's cell (the paper's, ``ur10e``: one cell's points, fitted on part A) unless the user
 names theirs. A BUY there is better in that cell; whether it is in the user's depends on magnitudes the user did not
 give (docs/results.md, "The answer across a cell's ranges": a BUY of part A's single sensor in one cell was a KEEP
 on a linear axis). So where the user named no cell, each BUY is raced again, with the choices of subsets the search
 made, in each cell of ``SearchConfig.verdict.kinds`` (the presets of the common kinds: a cobot, an industrial arm, a
-precision linear axis; each magnitude a range, each instance drawing its own), on draws of its own
+precision linear axis; each magnitude a range, each instance drawing its own). In a cell of ranges a BUY is better
+across the draws of its magnitudes, on average; where it holds at one end and not at the other it depends on where
+the user's cell lies, so there the kinds are the cell with every range at its low end and at its high end
+(``NAME:low``, ``NAME:high``: :meth:`optipose.cell.config.Cell.at`). Each race is on draws of its own
 (:func:`optipose.seeds.kind_seed`: none the search, its validation or its verdict saw), at most
 ``SearchConfig.verdict.kinds_draws`` of them (:func:`optipose.search.draws.confident_verdicts`, the same race). The
-answer then says, per BUY, that it holds in every kind, or on which it depends
-(:func:`optipose.verdict.words.kinds_line`). Nothing is raced for a TIE or a KEEP: there is nothing to buy, and the
-line under the answer names the kinds a user may name (:func:`optipose.verdict.words.cell_advice`).
+answer then says, per BUY, that it holds in each, or where it depends (:func:`optipose.verdict.words.kinds_line`).
+Nothing is raced for a TIE or a KEEP: there is nothing to buy.
 """
 
 from __future__ import annotations

@@ -237,25 +237,33 @@ def cell_advice(name: str) -> str:
 
 
 def kinds_line(k: int, kinds: dict) -> str:
-    """What a search's BUY at ``k`` (in a cell the user did not name) does in the common kinds of cell it was raced
-    again in: ``kinds`` cell → :class:`~optipose.verdict.confidence.Verdicts` (:mod:`optipose.search.kinds`); "" for
-    a k not raced there."""
+    """What a search's BUY at ``k`` does in the cells it was raced again in (:mod:`optipose.search.kinds`): the
+    common kinds of cell (a search in a cell the user did not name), or the ends of the search's cell's ranges
+    (``NAME:low``, ``NAME:high``); ``kinds`` cell → :class:`~optipose.verdict.confidence.Verdicts`; "" for a k not
+    raced there."""
     raced = {name: v.by_k[k] for name, v in kinds.items() if k in v.by_k}
     if not raced:
         return ""
+    ends = all(name.endswith((":low", ":high")) for name in raced)
     held = {name: v for name, v in raced.items() if v.decision == Decision.BUY}
-
-    most = max(v.n_draws for v in raced.values())
+    most = f"(at most {max(v.n_draws for v in raced.values())} draws each)"
     if len(held) == len(raced):
-        each = ", ".join(f"{name} {ratio_cell(v.score)}" for name, v in raced.items())
-        return f"  k={k} the BUY holds in every common kind of cell: {each} (at most {most} draws each)"
+        where = "at both ends of the cell's ranges" if ends else "in every common kind of cell"
+        return (
+            f"  k={k} the BUY holds {where}: {', '.join(f'{n} {ratio_cell(v.score)}' for n, v in raced.items())} {most}"
+        )
     holds = ", ".join(f"{name} {ratio_cell(v.score)}" for name, v in held.items())
     not_in = ", ".join(
         f"{name} ({v.decision.value} {ratio_cell(v.score)})" for name, v in raced.items() if name not in held
     )
+    if ends:
+        return (
+            f"  k={k} the BUY depends on where your cell lies in its ranges: {f'holds at {holds}; ' if holds else ''}"
+            f"not at {not_in} {most}: give your cell's magnitudes (a cell file, or optipose calibrate)"
+        )
     return (
-        f"  k={k} the BUY depends on your cell: {f'holds in {holds}; ' if holds else ''}not in {not_in} (at most "
-        f"{most} draws each): name yours with --cell NAME"
+        f"  k={k} the BUY depends on your cell: {f'holds in {holds}; ' if holds else ''}not in {not_in} {most}: name "
+        "yours with --cell NAME"
     )
 
 
