@@ -57,6 +57,7 @@ FLAT_DEFAULTS = dict(
     verdict_tolerance=0.10,
     verdict_failures=0.01,
     verdict_confidence=0.95,
+    select_scans=0,  # since the sections: the selection on a share of the reduced protocol's scans (0: all)
     verdict_kinds="",  # since the sections: the common kinds of cell a BUY is raced again in (none by default)
     verdict_kinds_draws=12,
 )

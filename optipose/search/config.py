@@ -108,9 +108,12 @@ class SelectionConfig:
     # kept (0: no confirmation)
     confirm_candidates: int = 0
     clear_ratio: float = 0.4
+    scans: int = 0  # of the reduced protocol's scans, this many, drawn by the selection's seed (0: all)
 
     def __post_init__(self) -> None:
         algorithm_code(self.polish_algorithm)  # raises ConfigError for an unknown name
+        if self.scans < 0:
+            raise ConfigError(f"search selection scans must be 0 (all) or more, not {self.scans}")
 
 
 @dataclass(frozen=True)
@@ -163,6 +166,7 @@ class SearchConfig:
 _RENAMED = {
     "select_candidates": ("selection", "candidates"),
     "select_time": ("selection", "time"),
+    "select_scans": ("selection", "scans"),
     "validation": ("validation", "protocol"),
     "validation_scans": ("validation", "scans"),
     "verdict_draws": ("verdict", "draws"),
@@ -177,7 +181,7 @@ _RENAMED = {
 }
 FLAT_KEYS: dict[str, tuple[str, str]] = {
     **{f.name: (name, f.name) for name in ("surrogate", "constraints") for f in fields(SECTIONS[name])},
-    **{f.name: ("selection", f.name) for f in fields(SelectionConfig) if f.name not in ("candidates", "time")},
+    **{f.name: ("selection", f.name) for f in fields(SelectionConfig) if f.name not in ("candidates", "time", "scans")},
     **_RENAMED,
 }  # flat key → (section, field), for every field of every section
 

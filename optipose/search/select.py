@@ -72,7 +72,12 @@ def select_finalists(
         else None
     )
     with Evaluator(
-        part, stage_objective(objective, "selection"), seed=selection_seed(seed), jobs=jobs, quiet=True
+        part,
+        stage_objective(objective, "selection"),
+        seed=selection_seed(seed),
+        jobs=jobs,
+        quiet=True,
+        scans=config.selection.scans,
     ) as evaluator:
         baseline_result = evaluator(baseline(part)) if baseline(part) is not None else None
         ks = sorted(outcome.found)
