@@ -15,12 +15,12 @@ from optipose.model.layout import Layout, SensorPose
 from optipose.model.part import load_part
 from optipose.search.budgets import config_from_budget
 from optipose.search.config import SearchConfig, ValidationConfig
-from optipose.search.kinds import COMMON_KINDS, across_kinds, buys, kinds_of
+from optipose.search.kinds import COMMON_KINDS, across_kinds, buys, kinds_of, qualified
 from optipose.search.validate import validate
 from optipose.seeds import kind_seed, verdict_seed
 from optipose.verdict.confidence import Decision, PairedDraw, Verdicts, compare_draws
 from optipose.verdict.rules import Rules, VerdictConfig
-from optipose.verdict.words import confident_line, kinds_line
+from optipose.verdict.words import confident_line, kinds_line, open_line
 
 FAST = Rules(replicates=400)
 
@@ -65,6 +65,19 @@ def test_at_a_ranges_ends_the_line_says_where_the_cell_must_lie():
     assert "not at cobot:high (" in line and "optipose calibrate" in line
     both = {"cobot:low": _verdicts({1: 1.4}, 1), "cobot:high": _verdicts({1: 1.3}, 2)}
     assert kinds_line(1, both).startswith("  k=1 the BUY holds at both ends of the cell's ranges: cobot:low 1.4")
+
+
+def test_a_buy_not_borne_out_at_its_ranges_ends_is_open_and_one_in_the_common_kinds_stays():
+    said = _verdicts({1: 1.5, 2: 1.5, 3: 0.7})
+    ends = {"cobot:low": _verdicts({1: 1.4, 2: 1.4}, 1), "cobot:high": _verdicts({1: 0.95, 2: 1.3}, 2)}
+    assert ends["cobot:high"].by_k[1].decision != Decision.BUY
+    settled = qualified(said, ends)
+    one = settled.by_k[1]
+    assert (one.decision, one.ended) == (Decision.UNDECIDED, "ends") and one.score == said.by_k[1].score
+    assert settled.by_k[2] is said.by_k[2] and settled.by_k[3] is said.by_k[3]  # borne out; not a BUY
+    assert open_line(one).startswith("  k=1 open: 1.49x") and "depends on where your cell lies" in open_line(one)
+    kinds = {"cobot": ends["cobot:low"], "linear-axis": ends["cobot:high"]}
+    assert qualified(said, kinds) is said and qualified(said, {}) is said  # the kinds answer for the cell of points
 
 
 def test_the_cells_a_search_checks_its_buys_in():

@@ -24,7 +24,7 @@ from optipose.search.draws import confident_verdicts
 from optipose.seeds import kind_seed
 from optipose.verdict.confidence import Decision, Verdicts
 
-__all__ = ["COMMON_KINDS", "kinds_of", "buys", "across_kinds"]
+__all__ = ["COMMON_KINDS", "kinds_of", "buys", "across_kinds", "at_ends", "qualified"]
 
 COMMON_KINDS = ("cobot", "industrial-arm", "linear-axis")  # cells/*.toml: the presets of the common kinds
 
@@ -62,3 +62,23 @@ def across_kinds(
             part, objective.in_cell(name), layouts, bought, {}, kind_seed(seed, i), raced, jobs
         )
     return out
+
+
+def at_ends(kinds) -> bool:
+    """Whether the cells raced in are the ends of a cell's ranges (``NAME:low``, ``NAME:high``), not other kinds."""
+    return bool(kinds) and all(str(name).endswith((":low", ":high")) for name in kinds)
+
+
+def qualified(verdicts: Verdicts, kinds: dict[str, Verdicts]) -> Verdicts:
+    """The search's verdicts, each BUY that its races at the ends of the cell's ranges did not bear out made
+    UNDECIDED (``ended = "ends"``): better across the ranges' draws on average, not shown at an end of them, it
+    depends on where the user's cell lies, which its line says (:func:`optipose.verdict.words.kinds_line`). BUYs
+    raced in the common kinds of cell stay BUYs: they answer for the objective's cell of points, and their line says
+    whether they hold in the kinds."""
+    if not at_ends(kinds):
+        return verdicts
+    by_k = dict(verdicts.by_k)
+    for k in buys(verdicts):
+        if any(k in v.by_k and v.by_k[k].decision != Decision.BUY for v in kinds.values()):
+            by_k[k] = replace(by_k[k], decision=Decision.UNDECIDED, ended="ends")
+    return replace(verdicts, by_k=by_k)

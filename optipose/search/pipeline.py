@@ -341,7 +341,7 @@ def _verdict(ctx: SearchContext) -> None:
 
 def _kinds(ctx: SearchContext) -> None:
     """The BUYs raced again in the common kinds of cell, where the user named none (``verdict.kinds``)."""
-    from optipose.search.kinds import across_kinds, buys, kinds_of
+    from optipose.search.kinds import across_kinds, buys, kinds_of, qualified
 
     report, verdict = ctx.report, ctx.config.verdict
     kinds = kinds_of(ctx.config)
@@ -353,6 +353,10 @@ def _kinds(ctx: SearchContext) -> None:
         ctx.part, ctx.objective, report.layouts, report.validation, report.confident, ctx.seed, raced, ctx.jobs
     )
     ctx.sink.kinds(report.kinds)
+    settled = qualified(report.confident, report.kinds)  # a BUY not borne out at its cell's ranges' ends is open
+    if settled is not report.confident:
+        report.confident = settled
+        ctx.sink.verdict(report.confident)
 
 
 def _study(ctx: SearchContext, resume: bool, on_eval) -> SurrogateStudy:

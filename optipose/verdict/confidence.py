@@ -216,8 +216,8 @@ class ConfidentVerdict:
     kept: bool = (
         False  # the found side is the baseline's own choice, the search's answer where it beat the found layout
     )
-    # how a race left it UNDECIDED: "draws" (its budget's draws ran out), "clock" (a user's clock ended it), ""
-    # (decided, or not raced)
+    # how a race left it UNDECIDED: "draws" (its budget's draws ran out), "clock" (a user's clock ended it), "ends" (a
+    # BUY across a cell's ranges not shown at their ends: optipose.search.kinds), "" (decided, or not raced)
     ended: str = ""
     ruling: Ruling | None = None  # in a cell of ranges: the range whose magnitude decides which layout is better
 

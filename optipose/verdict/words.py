@@ -178,6 +178,11 @@ def open_line(v: ConfidentVerdict, most: int = 0) -> str:
     decided verdict."""
     if v.decision != Decision.UNDECIDED:
         return ""
+    if v.ended == "ends":  # better across the cell's ranges, not shown at an end of them (optipose.search.kinds)
+        return (
+            f"  k={v.k} open: {ratio_cell(v.score)} across the cell's ranges, not shown at both of their ends: it "
+            "depends on where your cell lies"
+        )
     floor = 1.0 / (1.0 + v.tolerance)
     spans = [f"the sum {ratio_cell(v.score)} spans 1"] if v.score.low <= 1.0 <= v.score.high else []
     spans += [
