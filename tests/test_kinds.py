@@ -69,12 +69,20 @@ def test_at_a_ranges_ends_the_line_says_where_the_cell_must_lie():
 
 def test_a_buy_not_borne_out_at_its_ranges_ends_is_open_and_one_in_the_common_kinds_stays():
     said = _verdicts({1: 1.5, 2: 1.5, 3: 0.7})
+    rng = np.random.default_rng(5)  # one found sensor better than the hand's three, on the same draws
+    said = replace(
+        said, fewer=compare_draws(_draws(rng, 1.5), FAST, k=1, found_name="F1", baseline_name="S1S2S3", baseline_k=3)
+    )
     ends = {"cobot:low": _verdicts({1: 1.4, 2: 1.4}, 1), "cobot:high": _verdicts({1: 0.95, 2: 1.3}, 2)}
     assert ends["cobot:high"].by_k[1].decision != Decision.BUY
     settled = qualified(said, ends)
     one = settled.by_k[1]
     assert (one.decision, one.ended) == (Decision.UNDECIDED, "ends") and one.score == said.by_k[1].score
     assert settled.by_k[2] is said.by_k[2] and settled.by_k[3] is said.by_k[3]  # borne out; not a BUY
+    assert said.fewer.decision == Decision.BUY and (settled.fewer.decision, settled.fewer.ended) == (
+        Decision.UNDECIDED,
+        "ends",
+    )  # its one sensor is k = 1's
     assert open_line(one).startswith("  k=1 open: 1.49x") and "depends on where your cell lies" in open_line(one)
     kinds = {"cobot": ends["cobot:low"], "linear-axis": ends["cobot:high"]}
     assert qualified(said, kinds) is said and qualified(said, {}) is said  # the kinds answer for the cell of points

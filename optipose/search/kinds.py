@@ -77,8 +77,10 @@ def qualified(verdicts: Verdicts, kinds: dict[str, Verdicts]) -> Verdicts:
     whether they hold in the kinds."""
     if not at_ends(kinds):
         return verdicts
-    by_k = dict(verdicts.by_k)
+    by_k, fewer = dict(verdicts.by_k), verdicts.fewer
     for k in buys(verdicts):
         if any(k in v.by_k and v.by_k[k].decision != Decision.BUY for v in kinds.values()):
             by_k[k] = replace(by_k[k], decision=Decision.UNDECIDED, ended="ends")
-    return replace(verdicts, by_k=by_k)
+    if fewer is not None and fewer.decision == Decision.BUY and by_k.get(1) is not verdicts.by_k.get(1):
+        fewer = replace(fewer, decision=Decision.UNDECIDED, ended="ends")  # its one sensor is k = 1's, not borne out
+    return replace(verdicts, by_k=by_k, fewer=fewer)
