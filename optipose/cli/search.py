@@ -166,8 +166,8 @@ def search_command(
     from optipose.verdict.words import cell_advice, kinds_line
 
     for k in sorted(searched.confident.by_k):  # each BUY raced again where the user's cell may lie
-        if kinds_line(k, searched.kinds):
-            Console().print(kinds_line(k, searched.kinds), highlight=False)
+        if line := kinds_line(k, searched.kinds):
+            Console().print(line, highlight=False)
     if cell is None and searched.validated and not the_objective.cell.ideal and not the_objective.cell.ranges:
         Console().print(cell_advice(the_objective.cell.name), style="yellow", highlight=False)
     ready = pictures.join if pictures is not None else None

@@ -256,16 +256,9 @@ def evaluate_many(items: list[tuple]) -> list[EvaluationResult]:
     work = []
     for evaluator, layout, subsets in items:
         layout = _as_layout(layout)
-        work.append(
-            (
-                evaluator,
-                layout,
-                [
-                    (evaluator.setup, layout, _checked(layout, subsets), c)
-                    for c in _chunks(evaluator.tasks(), evaluator.jobs)
-                ],
-            )
-        )
+        subsets = _checked(layout, subsets)
+        chunks = _chunks(evaluator.tasks(), evaluator.jobs)
+        work.append((evaluator, layout, [(evaluator.setup, layout, subsets, c) for c in chunks]))
     if not work:
         return []
     t0 = time.perf_counter()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
-from optipose.verdict.confidence import Decision, Verdicts
+from optipose.verdict.confidence import Decision, Verdicts, raced_in
 from optipose.verdict.words import (
     IDEAL_CELL,
     confident_line,
@@ -49,7 +49,7 @@ def confident_blocks(
     blocks += [Paragraph(line.strip(), "verdict info") for v in ordered if (line := ruling_line(v))]
     for v in ordered:  # a BUY raced again in the common kinds of cell: good where it holds in every one
         if line := kinds_line(v.k, kinds or {}):
-            held = all(vs.by_k[v.k].decision == Decision.BUY for vs in kinds.values() if v.k in vs.by_k)
+            held = all(r.decision == Decision.BUY for r in raced_in(v.k, kinds).values())
             blocks.append(Paragraph(line.strip(), "verdict good" if held else "verdict mixed"))
     blocks += [
         Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), baseline))

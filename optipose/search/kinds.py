@@ -22,9 +22,9 @@ from dataclasses import replace
 
 from optipose.search.draws import confident_verdicts
 from optipose.seeds import kind_seed
-from optipose.verdict.confidence import Decision, Verdicts
+from optipose.verdict.confidence import Decision, Verdicts, at_ends, raced_in
 
-__all__ = ["COMMON_KINDS", "kinds_of", "buys", "across_kinds", "at_ends", "qualified"]
+__all__ = ["COMMON_KINDS", "kinds_of", "buys", "across_kinds", "qualified"]
 
 COMMON_KINDS = ("cobot", "industrial-arm", "linear-axis")  # cells/*.toml: the presets of the common kinds
 
@@ -64,11 +64,6 @@ def across_kinds(
     return out
 
 
-def at_ends(kinds) -> bool:
-    """Whether the cells raced in are the ends of a cell's ranges (``NAME:low``, ``NAME:high``), not other kinds."""
-    return bool(kinds) and all(str(name).endswith((":low", ":high")) for name in kinds)
-
-
 def qualified(verdicts: Verdicts, kinds: dict[str, Verdicts]) -> Verdicts:
     """The search's verdicts, each BUY that its races at the ends of the cell's ranges did not bear out made
     UNDECIDED (``ended = "ends"``): better across the ranges' draws on average, not shown at an end of them, it
@@ -77,10 +72,9 @@ def qualified(verdicts: Verdicts, kinds: dict[str, Verdicts]) -> Verdicts:
     whether they hold in the kinds."""
     if not at_ends(kinds):
         return verdicts
-    by_k, fewer = dict(verdicts.by_k), verdicts.fewer
-    for k in buys(verdicts):
-        if any(k in v.by_k and v.by_k[k].decision != Decision.BUY for v in kinds.values()):
-            by_k[k] = replace(by_k[k], decision=Decision.UNDECIDED, ended="ends")
-    if fewer is not None and fewer.decision == Decision.BUY and by_k.get(1) is not verdicts.by_k.get(1):
-        fewer = replace(fewer, decision=Decision.UNDECIDED, ended="ends")  # its one sensor is k = 1's, not borne out
+    open_ = [k for k in buys(verdicts) if any(v.decision != Decision.BUY for v in raced_in(k, kinds).values())]
+    by_k = verdicts.by_k | {k: replace(verdicts.by_k[k], decision=Decision.UNDECIDED, ended="ends") for k in open_}
+    fewer = verdicts.fewer
+    if fewer is not None and fewer.decision == Decision.BUY and 1 in open_:  # its one sensor is k = 1's
+        fewer = replace(fewer, decision=Decision.UNDECIDED, ended="ends")
     return replace(verdicts, by_k=by_k, fewer=fewer)

@@ -80,6 +80,8 @@ __all__ = [
     "paired_draw",
     "paired_draws",
     "compare_draws",
+    "raced_in",
+    "at_ends",
 ]
 
 
@@ -251,6 +253,19 @@ class Verdicts:
     def in_order(self) -> tuple[ConfidentVerdict, ...]:
         """Every verdict: by k, then ``fewer`` (the rows of ``verdict.csv``)."""
         return (*self.by_k.values(), *([self.fewer] if self.fewer is not None else []))
+
+
+def raced_in(k: int, kinds: dict[str, Verdicts]) -> dict[str, ConfidentVerdict]:
+    """Cell → k's verdict there, of the cells a search's BUYs were raced again in (``kinds``: cell → their
+    :class:`Verdicts`, :mod:`optipose.search.kinds`) that raced k; empty where none did."""
+    return {name: v.by_k[k] for name, v in kinds.items() if k in v.by_k}
+
+
+def at_ends(names) -> bool:
+    """Whether the cells a search's BUYs were raced again in are the ends of a cell's ranges (``NAME:low``,
+    ``NAME:high``), not other kinds of cell."""
+    names = list(names)
+    return bool(names) and all(str(name).endswith((":low", ":high")) for name in names)
 
 
 def compare_draws(

@@ -21,7 +21,7 @@ from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, Cho
 from optipose.model.layout import kept_sensors
 from optipose.transforms import xyz_rpy
 from optipose.verdict.compare import Verdict
-from optipose.verdict.confidence import ConfidentVerdict, Decision, Interval
+from optipose.verdict.confidence import ConfidentVerdict, Decision, Interval, at_ends, raced_in
 from optipose.verdict.ruling import FIELDS
 
 __all__ = [
@@ -246,10 +246,10 @@ def kinds_line(k: int, kinds: dict) -> str:
     common kinds of cell (a search in a cell the user did not name), or the ends of the search's cell's ranges
     (``NAME:low``, ``NAME:high``); ``kinds`` cell → :class:`~optipose.verdict.confidence.Verdicts`; "" for a k not
     raced there."""
-    raced = {name: v.by_k[k] for name, v in kinds.items() if k in v.by_k}
+    raced = raced_in(k, kinds)
     if not raced:
         return ""
-    ends = all(name.endswith((":low", ":high")) for name in raced)
+    ends = at_ends(raced)
     held = {name: v for name, v in raced.items() if v.decision == Decision.BUY}
     most = f"(at most {max(v.n_draws for v in raced.values())} draws each)"
     if len(held) == len(raced):
