@@ -509,6 +509,9 @@ BAD_CELLS = {
     "step.toml": ("[robot]\nstep = 0.5\n", "step = 0.5 is more than any cell has (at most 0.1)"),
     "empty.toml": ("", "no [robot], [calibration], [part] or [material] table"),
     "name_only.toml": ('name = "mine"\n', "an empty cell file; the cell without error sources is --cell ideal"),
+    # a table that sets nothing is not a cell either (it ran a whole evaluation as the ideal cell)
+    "robot_only.toml": ("[robot]\n", "its tables set no magnitude or switch"),
+    "scale.toml": ("[part]\nas_made = true\nprocess_scale = 50\n", "process_scale = 50 is more than any cell has"),
 }
 
 

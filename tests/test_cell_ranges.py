@@ -4,21 +4,15 @@ ranges are one line, and the shipped presets load and are listed."""
 
 from __future__ import annotations
 
-import ast
 import dataclasses
-import os
-import shutil
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from cli_checks import assert_one_line_error
 from scipy import stats
 
-from cli_checks import assert_one_line_error
 from optipose.cell.config import CELLS_DIR, Cell, cell_from_table, cell_names, load_cell
 from optipose.cell.ranges import draws, middle
 from optipose.cell.scans import CellSetup, LiveCell
@@ -36,40 +30,18 @@ MAGNITUDES = {
     "robot": ("path_mm", "path_rotation_deg", "path_correlation_mm", "step", "orientation_deg"),
     "calibration": ("sensor_translation_mm", "sensor_rotation_deg", "frame_translation_mm", "frame_rotation_deg"),
 }
-# part B's S2 on two orientations (roll and pitch at 1 deg): per-scan errors as repr floats, run as a script so the
-# same code runs on another tree (main's) in a subprocess
-EVALUATION = textwrap.dedent(
-    """
-    import dataclasses, sys
-    import numpy as np
-    from optipose.evaluate.evaluator import Evaluator
-    from optipose.evaluate.objective import load_objective
-    from optipose.model.layout import Layout
-    from optipose.model.part import load_part
 
+
+def _per_scan(cell, seed: int) -> list:
+    """Part B's S2 on two orientations (roll and pitch at 1 deg) in ``cell`` at ``seed``: the per-scan errors."""
     part = load_part("part_b")
     layout = Layout((part.layouts["hand"].sensors[1],), name="S2")
     o = load_objective("paper")
-    p = dataclasses.replace(o.protocol, sequences=("R", "P"), start=np.pi / 180, stop=np.pi / 180)
-    o = dataclasses.replace(o, protocol=p).in_cell(sys.argv[1])
-    with Evaluator(part, o, seed=int(sys.argv[2])) as ev:
+    p = dataclasses.replace(o.protocol, sequences=("R", "P"), start=DEG, stop=DEG)
+    with Evaluator(part, dataclasses.replace(o, protocol=p).in_cell(cell), seed=seed) as ev:
         r = ev(layout)
     cols = ["err_roll", "err_pitch", "err_yaw", "err_x", "err_y", "err_z", "rmse", "iterations"]
-    print(repr(r.per_scan[cols].to_numpy(float).tolist()))
-    """
-)
-
-
-def _run_evaluation(tree: Path, scripts: Path, cell: str, seed: int) -> list:
-    """The per-scan errors of :data:`EVALUATION` run on the code of ``tree`` in a fresh interpreter."""
-    script = scripts / "evaluation.py"
-    script.write_text(EVALUATION)
-    env = {**os.environ, "PYTHONPATH": str(tree)}
-    out = subprocess.run(
-        [sys.executable, str(script), cell, str(seed)], capture_output=True, text=True, env=env, timeout=900
-    )
-    assert out.returncode == 0, out.stderr
-    return ast.literal_eval(out.stdout)
+    return r.per_scan[cols].to_numpy(float).tolist()
 
 
 # -- a cell of points is today's cell, bit for bit ------------------------------------------------------------
@@ -83,26 +55,18 @@ def test_a_point_cells_instance_and_middle_are_itself():
     assert setup.instance(3) is setup and setup.middle() is setup
 
 
-@pytest.fixture(scope="module")
-def main_tree(tmp_path_factory):
-    """The ``main`` branch's tree (git archive): the code before ranges, to evaluate in a subprocess."""
-    if shutil.which("git") is None:
-        pytest.skip("git is not installed")
-    listed = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--verify", "main"], capture_output=True)
-    if listed.returncode:
-        pytest.skip("no main branch in this clone")
-    tree = tmp_path_factory.mktemp("main")
-    archive = subprocess.run(["git", "-C", str(REPO), "archive", "main"], capture_output=True, check=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
-    return tree
-
-
-def test_an_evaluation_in_ur10e_is_mains_bit_for_bit(main_tree, tmp_path):
-    """The per-scan errors in the paper's cell (points only) equal those of the code before ranges: no draw of a
-    magnitude shifts any realisation."""
-    mine, before = _run_evaluation(REPO, tmp_path, "ur10e", 5), _run_evaluation(main_tree, tmp_path, "ur10e", 5)
+@pytest.mark.parametrize("preset", ["cobot", "linear-axis"])
+def test_a_ranged_cells_draw_is_the_point_cell_of_its_magnitudes_bit_for_bit(preset):
+    """A draw of a cell of ranges at a seed gives the per-scan errors of the cell of points holding that draw's
+    magnitudes, at the same seed, float for float: drawing the magnitudes shifts no realisation (the part as made,
+    the calibration, the path, the material's draws), so a cell of points is the cell it was before ranges."""
+    ranged = load_cell(preset)
+    point = ranged.instance(5)
+    assert ranged.ranges and point.ranges == () and point != ranged.middle()
+    mine, pointwise = _per_scan(ranged, 5), _per_scan(point, 5)
     assert len(mine) == 2 and np.isfinite(mine).all()
-    assert mine == before  # float for float
+    assert mine == pointwise  # float for float
+    assert mine != _per_scan(ranged.middle(), 5)  # and the magnitudes drawn do matter
 
 
 # -- the draws --------------------------------------------------------------------------------------------
@@ -184,8 +148,9 @@ def test_the_surrogate_scores_the_middle():
 
 
 def test_a_saved_cell_keeps_its_ranges():
-    import tomli_w
     import tomllib
+
+    import tomli_w
 
     objective = load_objective("paper").in_cell("industrial-arm")
     saved = tomllib.loads(tomli_w.dumps({"objective": objective.to_dict()}))["objective"]

@@ -53,6 +53,8 @@ _MM, _DEG = 1e-3, np.pi / 180
 # ±2° protocol itself) is not scanned and registered but lost; a scan step 10 % off is no calibrated axis. Beyond
 # them a cell file holds a typo, not a cell (a path error of 50 mm ran for minutes without an end).
 _LENGTH, _ANGLE, _SHARE = 10.0, 5.0, 0.1
+# a process ten times worse than its preset: bent sheet's 0.3° face tilt becomes 3°, beyond the protocol's ±2°
+_PROCESS_SCALE = 10.0
 
 _ROBOT = {
     "path_mm": ("path", _MM, _LENGTH),
@@ -205,7 +207,8 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
             "error sources is --cell ideal)"
         )
     ranges: dict[str, tuple[float, float]] = {}
-    robot = RobotErrors(**_numbers(table.get("robot", {}), _ROBOT, f"{where} [robot]", ranges, "robot."))
+    robot_table = _table(table.get("robot", {}), f"{where} [robot]")
+    robot = RobotErrors(**_numbers(robot_table, _ROBOT, f"{where} [robot]", ranges, "robot."))
     if min(robot.path_correlation, *ranges.get("robot.path_correlation", (1.0,))) <= 0:
         raise ConfigError(f"{where} [robot]: path_correlation_mm must be > 0")
     calibration_table = dict(_table(table.get("calibration", {}), f"{where} [calibration]"))
@@ -222,9 +225,15 @@ def cell_from_table(table: dict, where: str, default_name: str = "cell", source_
     as_made, effects = part.get("as_made", False), material.get("effects", False)
     if not isinstance(as_made, bool) or not isinstance(effects, bool):
         raise ConfigError(f"{where}: [part] as_made and [material] effects must be true or false")
-    scale = magnitude(part.get("process_scale", 1.0), "process_scale", 1.0, 1e3, f"{where} [part]")
+    scale = magnitude(part.get("process_scale", 1.0), "process_scale", 1.0, _PROCESS_SCALE, f"{where} [part]")
     if isinstance(scale, tuple):
         ranges["process_scale"], scale = scale, middle(*scale)
+    if not any(
+        k for t in (robot_table, table.get("calibration", {}), part, material) for k in t if not k.endswith("source")
+    ):
+        raise ConfigError(
+            f"{where}: its tables set no magnitude or switch (the cell without error sources is --cell ideal)"
+        )
     default_process = str(part.get("default_process", "cad"))
     load_process(default_process)  # an unknown name fails here, with the file named
     return Cell(
