@@ -104,7 +104,7 @@ def holdout(args) -> None:
     from optipose.search.config import Preset, SearchConfig, saved_table, search_preset
     from optipose.search.validate import validate
     from optipose.search.draws import choice_draw_counts, confident_verdicts
-    from optipose.verdict.words import confident_line
+    from optipose.verdict.words import confident_line, ruling_line
 
     wanted = set(args.parts.split(","))
     for folder, cell in ((f, c) for f in sorted(_folders(args.out, wanted).values()) for c in _in_cells(args)):
@@ -139,6 +139,8 @@ def holdout(args) -> None:
             + "; ".join(confident_line(v) for v in verdicts.by_k.values()),
             flush=True,
         )
+        for line in filter(None, (ruling_line(v) for v in verdicts.by_k.values())):
+            print(line, flush=True)
 
 
 def _in_cells(args) -> list:

@@ -20,7 +20,8 @@ from optipose.search.validate import validate
 from optipose.seeds import kind_seed, verdict_seed
 from optipose.verdict.confidence import Decision, PairedDraw, Verdicts, compare_draws
 from optipose.verdict.rules import Rules, VerdictConfig
-from optipose.verdict.words import confident_line, kinds_line, open_line
+from optipose.verdict.ruling import Ruling
+from optipose.verdict.words import confident_line, kinds_line, open_line, ruling_line
 
 FAST = Rules(replicates=400)
 
@@ -67,7 +68,7 @@ def test_at_a_ranges_ends_the_line_says_where_the_cell_must_lie():
     assert kinds_line(1, both).startswith("  k=1 the BUY holds at both ends of the cell's ranges: cobot:low 1.4")
 
 
-def test_a_buy_not_borne_out_at_its_ranges_ends_is_open_and_one_in_the_common_kinds_stays():
+def test_a_buy_not_borne_out_at_its_ranges_ends_or_in_the_common_kinds_is_open():
     said = _verdicts({1: 1.5, 2: 1.5, 3: 0.7})
     rng = np.random.default_rng(5)  # one found sensor better than the hand's three, on the same draws
     said = replace(
@@ -84,8 +85,18 @@ def test_a_buy_not_borne_out_at_its_ranges_ends_is_open_and_one_in_the_common_ki
         "ends",
     )  # its one sensor is k = 1's
     assert open_line(one).startswith("  k=1 open: 1.49x") and "depends on where your cell lies" in open_line(one)
+    assert one.ruling is None and "no one range decides it" in open_line(one)  # no range of the draws rules it
+    ruled = replace(one, ruling=Ruling("robot.path", 5e-5, True, 0.4))
+    assert "no one range" not in open_line(ruled) and "robot path error: found better above 0.05 mm" in ruling_line(
+        ruled
+    )
+    assert qualified(said, {}) is said  # nothing raced again: nothing to qualify
+    # in the common kinds (a user who named no cell): a BUY not borne out in every kind is open as well
     kinds = {"cobot": ends["cobot:low"], "linear-axis": ends["cobot:high"]}
-    assert qualified(said, kinds) is said and qualified(said, {}) is said  # the kinds answer for the cell of points
+    in_kinds = qualified(said, kinds)
+    assert (in_kinds.by_k[1].decision, in_kinds.by_k[1].ended) == (Decision.UNDECIDED, "kinds")
+    assert in_kinds.by_k[2] is said.by_k[2] and in_kinds.fewer.ended == "kinds"
+    assert "depends on your kind of cell" in open_line(in_kinds.by_k[1])
 
 
 def test_the_cells_a_search_checks_its_buys_in():

@@ -12,8 +12,9 @@ the user's cell lies, so there the kinds are the cell with every range at its lo
 (``NAME:low``, ``NAME:high``: :meth:`optipose.cell.config.Cell.at`). Each race is on draws of its own
 (:func:`optipose.seeds.kind_seed`: none the search, its validation or its verdict saw), at most
 ``SearchConfig.verdict.kinds_draws`` of them (:func:`optipose.search.draws.confident_verdicts`, the same race). The
-answer then says, per BUY, that it holds in each, or where it depends (:func:`optipose.verdict.words.kinds_line`).
-Nothing is raced for a TIE or a KEEP: there is nothing to buy.
+answer then says, per BUY, that it holds in each, or where it depends (:func:`optipose.verdict.words.kinds_line`);
+a BUY not borne out in every one of them is UNDECIDED (:func:`qualified`): a user who names no cell is bought only
+what holds across the common kinds. Nothing is raced for a TIE or a KEEP: there is nothing to buy.
 """
 
 from __future__ import annotations
@@ -65,16 +66,18 @@ def across_kinds(
 
 
 def qualified(verdicts: Verdicts, kinds: dict[str, Verdicts]) -> Verdicts:
-    """The search's verdicts, each BUY that its races at the ends of the cell's ranges did not bear out made
-    UNDECIDED (``ended = "ends"``): better across the ranges' draws on average, not shown at an end of them, it
-    depends on where the user's cell lies, which its line says (:func:`optipose.verdict.words.kinds_line`). BUYs
-    raced in the common kinds of cell stay BUYs: they answer for the objective's cell of points, and their line says
-    whether they hold in the kinds."""
-    if not at_ends(kinds):
+    """The search's verdicts, each BUY that its races again did not bear out made UNDECIDED: at the ends of the
+    cell's ranges (``ended = "ends"``: better across the ranges' draws on average, not shown at an end of them, it
+    depends on where the user's cell lies) or in the common kinds of cell (``ended = "kinds"``: better in the
+    objective's cell of points, which the user did not name, not in every kind: it depends on the user's kind of
+    cell, and ``--cell`` answers for theirs). Their lines say where it holds
+    (:func:`optipose.verdict.words.kinds_line`)."""
+    if not kinds:
         return verdicts
+    ended = "ends" if at_ends(kinds) else "kinds"
     open_ = [k for k in buys(verdicts) if any(v.decision != Decision.BUY for v in raced_in(k, kinds).values())]
-    by_k = verdicts.by_k | {k: replace(verdicts.by_k[k], decision=Decision.UNDECIDED, ended="ends") for k in open_}
+    by_k = verdicts.by_k | {k: replace(verdicts.by_k[k], decision=Decision.UNDECIDED, ended=ended) for k in open_}
     fewer = verdicts.fewer
     if fewer is not None and fewer.decision == Decision.BUY and 1 in open_:  # its one sensor is k = 1's
-        fewer = replace(fewer, decision=Decision.UNDECIDED, ended="ends")
+        fewer = replace(fewer, decision=Decision.UNDECIDED, ended=ended)
     return replace(verdicts, by_k=by_k, fewer=fewer)

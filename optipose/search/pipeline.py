@@ -353,7 +353,7 @@ def _kinds(ctx: SearchContext) -> None:
         ctx.part, ctx.objective, report.layouts, report.validation, report.confident, ctx.seed, raced, ctx.jobs
     )
     ctx.sink.kinds(report.kinds)
-    settled = qualified(report.confident, report.kinds)  # a BUY not borne out at its cell's ranges' ends is open
+    settled = qualified(report.confident, report.kinds)  # a BUY not borne out where it was raced again is open
     if settled is not report.confident:
         report.confident = settled
         ctx.sink.verdict(report.confident)

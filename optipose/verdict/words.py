@@ -182,6 +182,12 @@ def open_line(v: ConfidentVerdict, most: int = 0) -> str:
         return (
             f"  k={v.k} open: {ratio_cell(v.score)} across the cell's ranges, not shown at both of their ends: it "
             "depends on where your cell lies"
+            + ("" if v.ruling is not None else ", and no one range decides it on the race's draws")
+        )
+    if v.ended == "kinds":  # better in the objective's cell, which the user did not name, not in every kind
+        return (
+            f"  k={v.k} open: {ratio_cell(v.score)} in the objective's cell, not shown in every common kind of cell: "
+            "it depends on your kind of cell"
         )
     floor = 1.0 / (1.0 + v.tolerance)
     spans = [f"the sum {ratio_cell(v.score)} spans 1"] if v.score.low <= 1.0 <= v.score.high else []
