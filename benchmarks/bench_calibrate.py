@@ -3,6 +3,8 @@ and C's 24 real figures the calibrated cell's predicted intervals cover, and how
 
     .venv/bin/python benchmarks/bench_calibrate.py paper [--cell cobot] [--icp 4] [--seeds 10] [--jobs 2] [--out DIR]
     .venv/bin/python benchmarks/bench_calibrate.py roundtrip [--part part_a] [--cell cobot] [--hidden 8] [--icp 4] [--jobs 2]
+    .venv/bin/python benchmarks/bench_calibrate.py found [--part part_a] [--cell cobot] [--hidden 8] [--instances 5]
+        [--found results/reference/PART/layouts] [--k 1 2 3] [--prior-too] [--jobs 2]
 
 Calibrates ``--cell`` on part A's rows of docs/figures/paper_table1.csv (``optipose calibrate``'s library call, timed),
 writes the cell to DIR/part_a-calibrated.toml, then predicts B's and C's figures of the paper's subsets, each as the
@@ -23,16 +25,26 @@ width: 95 % / 5 %. Tables to stdout and DIR/paper.txt.
 instances between), each the hand layout's Table 1 by ICP (a seed of its own), calibrated on it with one emulator and
 one set of ICP runs for all; each hidden magnitude against the calibrated file's range, and the hand layout's medians
 by ICP in the calibrated cell (a seed the fit never saw) against the hidden cell's. To DIR/roundtrip-PART.txt.
+
+``found``: the same hidden cells, each with the cell ``roundtrip`` calibrated for it (DIR/roundtrip-<i>.toml, read, not
+remade); the search's found layouts (``--found``: found_k<k>.toml, the shipped reference search's by default) evaluated
+by ICP at ``--instances`` N seeds of the calibrated cell (400 + 10 i + j) and at one of the hidden cell (500 + i). Per
+axis a layout's error is the median of the subset its Table 1 chooses at its full k. Predicted per (k, axis): the
+log-normal 90 % prediction interval of one new instance from the N values (mean ± t(0.95, N − 1) · sd · √(1 + 1/N) of
+the logs), and their plain min-max; covered: the hidden cell's error inside. An axis no subset measures (unobservable,
+or its registrations failed) in any of those evaluations gets no interval and is counted apart. ``--prior-too``: the
+same intervals from N instances of the uncalibrated ``--cell`` (seeds 600 + j, one set for all hidden cells). To
+DIR/found-PART.txt.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
 from bench_cell import PAPER
 
 FIGURES = Path(__file__).resolve().parents[1] / "docs" / "figures" / "paper_table1.csv"
@@ -67,9 +79,8 @@ def surrogate_intervals(
 ) -> np.ndarray:
     """(figures, 2) degrees: 5 % and 95 % of each of the part's paper figures over ``n`` instances of ``cell``, each
     times exp(shift + ε), ε ~ N(0, spread² + the figure's finite-scan variance) when ``spread`` > 0 (the predictive)."""
-    from optipose.calibrate.summaries import PAPER_SCANS, Figure, Summaries
-
     from optipose.calibrate.emulator import Emulator
+    from optipose.calibrate.summaries import PAPER_SCANS, Figure, Summaries
     from optipose.model.part import load_part
 
     part = load_part(part_name)
@@ -238,6 +249,117 @@ def roundtrip(args) -> None:
     (out / f"roundtrip-{args.part}.txt").write_text("\n".join(say) + "\n")
 
 
+def found(args) -> None:
+    """The found layouts' predicted intervals from the calibrated cell of each hidden cell against their errors in the
+    hidden cell (``roundtrip``'s hidden cells and calibrated files); optionally the prior's intervals beside them."""
+    from scipy.stats import t
+
+    from optipose.cell.config import load_cell
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.evaluate.objective import load_objective
+    from optipose.model.layout import load_layout
+    from optipose.model.part import load_part
+
+    out = Path(args.out)
+    folder = Path(args.found or f"results/reference/{args.part}/layouts")
+    paths = [out / f"roundtrip-{i}.toml" for i in range(args.hidden)]
+    paths += [folder / f"found_k{k}.toml" for k in args.k]
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        print(f"missing (run roundtrip first, or give --found): {', '.join(missing)}", file=sys.stderr)
+        sys.exit(2)
+    say = _Lines()
+
+    part, prior = load_part(args.part), load_cell(args.cell)
+    objective = load_objective(args.objective).in_cell(prior)
+    layouts = {k: load_layout(folder / f"found_k{k}.toml") for k in args.k}
+    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
+    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
+    hidden = hidden[: args.hidden]
+    times = []
+
+    def errors(cell, seed: int) -> dict[int, np.ndarray]:
+        """Per found layout k, (3,) degrees: each axis's median in the subset Table 1 chooses at k (NaN: none)."""
+        row = {}
+        with Evaluator(part, objective.in_cell(cell), seed=seed, jobs=args.jobs, quiet=True) as evaluator:
+            for k, layout in layouts.items():
+                start = time.perf_counter()
+                result = evaluator(layout)
+                times.append((len(layout), time.perf_counter() - start))
+                axes = result.table[-1].axes
+                row[k] = np.array([np.rad2deg(a.median) if a.observable else np.nan for a in axes])
+                blind = [f"{a.axis} {a.label}" for a in axes if not a.observable]
+                if blind:
+                    say(f"  seed {seed} k={k}: not measured: {', '.join(blind)}")
+        return row
+
+    def intervals(rows: list[dict]) -> dict[int, np.ndarray]:
+        """Per k, (3 axes, 4): the log-normal prediction interval's ends, then the min and the max (NaN: an axis
+        some evaluation did not measure)."""
+        n, q = len(rows), t.ppf(0.95, len(rows) - 1)
+        out = {}
+        for k in layouts:
+            values = np.array([r[k] for r in rows])  # (n, 3)
+            logs = np.log(values)
+            half = q * logs.std(axis=0, ddof=1) * np.sqrt(1 + 1 / n)
+            mean = logs.mean(axis=0)
+            out[k] = np.column_stack([np.exp(mean - half), np.exp(mean + half), values.min(0), values.max(0)])
+        return out
+
+    start = time.perf_counter()
+    say(
+        f"{args.part} in '{args.cell}': found layouts {', '.join(f'k={k}' for k in layouts)} from {folder}; "
+        f"{args.instances} instances per calibrated cell"
+    )
+    kinds = ["log-normal", "min-max"] + ["prior log-normal", "prior min-max"] * args.prior_too
+    from_prior = intervals([errors(prior, 600 + j) for j in range(args.instances)]) if args.prior_too else {}
+    tally = {kind: [] for kind in kinds}  # (covered, width) per measured (cell, k, axis) and kind
+    unmeasured = []
+    for i, (name, cell) in enumerate(hidden):
+        calibrated = load_cell(out / f"roundtrip-{i}.toml")
+        predicted = intervals([errors(calibrated, 400 + 10 * i + j) for j in range(args.instances)])
+        truth = errors(cell, 500 + i)
+        for k in layouts:
+            by_kind = np.hstack([predicted[k]] + ([from_prior[k]] if from_prior else []))  # (3, 2 per kind)
+            words = []
+            for a, axis in enumerate(AXES):
+                value, ends = truth[k][a], by_kind[a].reshape(-1, 2)
+                if not np.isfinite(value) or not np.all(np.isfinite(ends)):
+                    unmeasured.append(f"{name} k={k} {axis}")
+                    words.append(f"{axis} not measured (hidden {value:.4f}; predicted {_span(ends[0])})")
+                    continue
+                hits = (ends[:, 0] <= value) & (value <= ends[:, 1])
+                for kind, (lo, hi), hit in zip(kinds, ends, hits):
+                    tally[kind].append((hit, hi / lo))
+                words.append(
+                    f"{axis} {value:.4f} in " + " ".join(f"{_span(e)}{'*' if h else ' '}" for e, h in zip(ends, hits))
+                )
+            say(f"{name:13s} k={k}: " + "; ".join(words))
+    say()
+    say(f"intervals per axis: {' / '.join(kinds)} ('*': the hidden cell's median inside); degrees")
+    total = len(hidden) * len(layouts) * len(AXES)
+    for kind, rows in tally.items():
+        hits, widths = np.array([h for h, _ in rows], bool), np.array([w for _, w in rows])
+        say(
+            f"{kind:16s}: covers {int(hits.sum())} of {total} (cell, k, axis)"
+            + (f" ({hits.mean():.0%} of the {len(rows)} measured)" if len(rows) else "")
+            + (f"; width median {np.median(widths):.2f}x, largest {widths.max():.2f}x" if len(rows) else "")
+        )
+    say(
+        f"not measured (no interval or no hidden value): {len(unmeasured)}{': ' if unmeasured else ''}{', '.join(unmeasured)}"
+    )
+    seconds = np.array([s for _, s in times])
+    for n in sorted({n for n, _ in times}):
+        mine = np.array([s for m, s in times if m == n])
+        say(f"ICP evaluation of {n} sensor(s): {mine.mean():.1f} s mean ({len(mine)} evaluations)")
+    say(f"{len(seconds)} ICP evaluations {seconds.sum():.0f} s; wall {time.perf_counter() - start:.0f} s")
+    (out / f"found-{args.part}.txt").write_text("\n".join(say) + "\n")
+
+
+def _span(ends) -> str:
+    return f"{ends[0]:.4f}-{ends[1]:.4f}"
+
+
 def _ratios(stats, other, only=None) -> np.ndarray:
     """max(a / b, b / a) of two evaluations' medians per (subset, axis) (``only``: those (subset, axis) pairs)."""
     out = []
@@ -255,16 +377,26 @@ def main() -> None:
     both = argparse.ArgumentParser(add_help=False)  # the options both modes take
     both.add_argument("--cell", default="cobot")
     both.add_argument("--objective", default="paper")
-    both.add_argument("--icp", type=int, default=4)
     both.add_argument("--jobs", type=int, default=2)
     both.add_argument("--out", default="benchmarks/results/calibrate")
     p = sub.add_parser("paper", parents=[both])
+    p.add_argument("--icp", type=int, default=4)
     p.add_argument("--seeds", type=int, default=0)
     r = sub.add_parser("roundtrip", parents=[both])
+    r.add_argument("--icp", type=int, default=4)
     r.add_argument("--part", default="part_a")
     r.add_argument("--hidden", type=int, default=8)
+    f = sub.add_parser("found", parents=[both])
+    f.add_argument("--part", default="part_a")
+    f.add_argument("--hidden", type=int, default=8)
+    f.add_argument("--instances", type=int, default=5, help="seeds of the calibrated cell per hidden cell (2-10)")
+    f.add_argument("--found", default=None, help="folder of found_k<k>.toml (default results/reference/PART/layouts)")
+    f.add_argument("--k", type=int, nargs="+", default=[1, 2, 3], help="the found layouts to evaluate")
+    f.add_argument("--prior-too", action="store_true", help="also the uncalibrated --cell's intervals")
     args = parser.parse_args()
-    {"paper": paper, "roundtrip": roundtrip}[args.what](args)
+    if args.what == "found" and not 2 <= args.instances <= 10:
+        parser.error("--instances: 2 to 10 (a prediction interval needs two; seeds 400 + 10 i + j stay apart)")
+    {"paper": paper, "roundtrip": roundtrip, "found": found}[args.what](args)
 
 
 if __name__ == "__main__":
