@@ -3,6 +3,7 @@ and C's 24 real figures the calibrated cell's predicted intervals cover, and how
 
     .venv/bin/python benchmarks/bench_calibrate.py paper [--cell cobot] [--icp 4] [--seeds 10] [--jobs 2] [--out DIR]
     .venv/bin/python benchmarks/bench_calibrate.py roundtrip [--part part_a] [--cell cobot] [--hidden 8] [--icp 4] [--jobs 2]
+    .venv/bin/python benchmarks/bench_calibrate.py medians [--part part_a] [--cell cobot] [--hidden 8] [--instances 4] [--jobs 2]
     .venv/bin/python benchmarks/bench_calibrate.py found [--part part_a] [--cell cobot] [--hidden 8] [--instances 5]
         [--found results/reference/PART/layouts] [--k 1 2 3] [--prior-too] [--jobs 2]
 
@@ -35,6 +36,11 @@ the logs), and their plain min-max; covered: the hidden cell's error inside. An 
 or its registrations failed) in any of those evaluations gets no interval and is counted apart. ``--prior-too``: the
 same intervals from N instances of the uncalibrated ``--cell`` (seeds 600 + j, one set for all hidden cells). To
 DIR/found-PART.txt.
+
+``medians``: the hand layout's 21 medians (every subset and axis) as each calibrated cell predicts them, the geometric
+mean over ``--instances`` N ICP instances (seeds 700 + 10 i + j), against the hidden cell's over N instances (800 +
+10 i + j), and, for what no calibration can beat with N instances, the hidden cell's over N others (900 + 10 i + j):
+how many within 1.5×. To DIR/medians-PART.txt.
 """
 
 from __future__ import annotations
@@ -356,6 +362,62 @@ def found(args) -> None:
     (out / f"found-{args.part}.txt").write_text("\n".join(say) + "\n")
 
 
+def medians(args) -> None:
+    """The hand layout's medians per (subset, axis) as a cell predicts them, not one instance: the geometric mean over
+    ``--instances`` N ICP instances of each calibrated cell (DIR/roundtrip-<i>.toml) against the same over N instances
+    of its hidden cell, and, for the floor, over N more instances of the hidden cell itself."""
+    from optipose.cell.config import load_cell
+    from optipose.evaluate.evaluator import Evaluator
+    from optipose.evaluate.objective import load_objective
+    from optipose.model.part import load_part
+
+    out = Path(args.out)
+    paths = [out / f"roundtrip-{i}.toml" for i in range(args.hidden)]
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        print(f"missing (run roundtrip first): {', '.join(missing)}", file=sys.stderr)
+        sys.exit(2)
+    say = _Lines()
+    part, prior = load_part(args.part), load_cell(args.cell)
+    layout, objective = part.layouts["hand"], load_objective(args.objective).in_cell(prior)
+    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
+    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
+    hidden = hidden[: args.hidden]
+
+    def mean_medians(cell, seeds) -> dict:
+        """(subset, axis) → the geometric mean of its median (degrees) over the seeds' instances."""
+        logs: dict = {}
+        for seed in seeds:
+            with Evaluator(part, objective.in_cell(cell), seed=seed, jobs=args.jobs, quiet=True) as evaluator:
+                stats = evaluator(layout).stats
+            for row in stats.itertuples(index=False):
+                logs.setdefault((row.subset, row.axis), []).append(np.log(np.rad2deg(row.median)))
+        return {key: float(np.exp(np.mean(v))) for key, v in logs.items()}
+
+    def within(a: dict, b: dict) -> np.ndarray:
+        return np.array([max(a[key] / b[key], b[key] / a[key]) for key in a])
+
+    start, n = time.perf_counter(), args.instances
+    say(f"{args.part}'s hand layout in '{args.cell}': geometric means over {n} ICP instances per cell")
+    close, floor, total = 0, 0, 0
+    for i, (name, cell) in enumerate(hidden):
+        predicted = mean_medians(load_cell(out / f"roundtrip-{i}.toml"), [700 + 10 * i + j for j in range(n)])
+        truth = mean_medians(cell, [800 + 10 * i + j for j in range(n)])
+        again = mean_medians(cell, [900 + 10 * i + j for j in range(n)])
+        ratios, own = within(predicted, truth), within(again, truth)
+        close, floor, total = close + int(np.sum(ratios <= 1.5)), floor + int(np.sum(own <= 1.5)), total + len(ratios)
+        worst = max(predicted, key=lambda key: max(predicted[key] / truth[key], truth[key] / predicted[key]))
+        say(
+            f"{name:13s} calibrated within 1.5x: {int(np.sum(ratios <= 1.5))} of {len(ratios)} (median ratio "
+            f"{np.median(ratios):.2f}x, worst {ratios.max():.2f}x: {worst[0]} {worst[1]} {predicted[worst]:.4f} vs "
+            f"{truth[worst]:.4f}); the hidden cell's other {n} instances {int(np.sum(own <= 1.5))}"
+        )
+    say(f"the calibrated cell's mean medians within 1.5x of the hidden cell's: {close} of {total}")
+    say(f"the hidden cell's own other {n} instances within 1.5x: {floor} of {total}")
+    say(f"wall {time.perf_counter() - start:.0f} s")
+    (out / f"medians-{args.part}.txt").write_text("\n".join(say) + "\n")
+
+
 def _span(ends) -> str:
     return f"{ends[0]:.4f}-{ends[1]:.4f}"
 
@@ -393,10 +455,16 @@ def main() -> None:
     f.add_argument("--found", default=None, help="folder of found_k<k>.toml (default results/reference/PART/layouts)")
     f.add_argument("--k", type=int, nargs="+", default=[1, 2, 3], help="the found layouts to evaluate")
     f.add_argument("--prior-too", action="store_true", help="also the uncalibrated --cell's intervals")
+    m = sub.add_parser("medians", parents=[both])
+    m.add_argument("--part", default="part_a")
+    m.add_argument("--hidden", type=int, default=8)
+    m.add_argument("--instances", type=int, default=4, help="ICP instances per cell (2-10)")
     args = parser.parse_args()
+    if args.what == "medians" and not 2 <= args.instances <= 10:
+        parser.error("--instances: 2 to 10 (seeds 700/800/900 + 10 i + j stay apart)")
     if args.what == "found" and not 2 <= args.instances <= 10:
         parser.error("--instances: 2 to 10 (a prediction interval needs two; seeds 400 + 10 i + j stay apart)")
-    {"paper": paper, "roundtrip": roundtrip, "found": found}[args.what](args)
+    {"paper": paper, "roundtrip": roundtrip, "found": found, "medians": medians}[args.what](args)
 
 
 if __name__ == "__main__":

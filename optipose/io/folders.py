@@ -83,9 +83,11 @@ def write_config(folder: Path, table: dict) -> Path:
 
 
 def part_table(name: str, source: str, units: str = "auto") -> dict:
-    """``[part]`` of a config: its name, the file it was loaded from and, when given, its units (``--units``
-    that the part must be loaded with again)."""
-    return {"name": name, "source": source, **({"units": units} if units and units != "auto" else {})}
+    """``[part]`` of a config: its name, the file it was loaded from (relative to the repository's root when inside
+    it) and, when given, its units (``--units`` that the part must be loaded with again)."""
+    from optipose.model.part import repo_relative
+
+    return {"name": name, "source": repo_relative(source), **({"units": units} if units and units != "auto" else {})}
 
 
 def write_csv(frame, path: Path) -> Path:

@@ -52,7 +52,16 @@ from optipose.model.mesh import load_mesh
 from optipose.model.motion import ScanMotion
 from optipose.model.sensor import load_sensor
 
-__all__ = ["Part", "Keepout", "load_part", "list_parts", "PARTS_DIR", "DEFAULT_MATERIAL", "DEFAULT_SENSOR"]
+__all__ = [
+    "Part",
+    "Keepout",
+    "load_part",
+    "list_parts",
+    "repo_relative",
+    "PARTS_DIR",
+    "DEFAULT_MATERIAL",
+    "DEFAULT_SENSOR",
+]
 
 PARTS_DIR = Path(__file__).resolve().parents[2] / "parts"
 DEFAULT_MATERIAL = "milled-aluminium-ra1.6"
@@ -129,6 +138,25 @@ def list_parts() -> list[str]:
     return sorted(p.name for p in PARTS_DIR.iterdir() if (p / "part.toml").is_file())
 
 
+def repo_relative(source: str | Path) -> str:
+    """A part's source as a result folder's config records it: a file inside the repository relative to its root
+    (``parts/part_a/part.toml``), so that the folder reads back on another clone; any other path as given."""
+    if not str(source):
+        return ""
+    try:
+        return Path(source).resolve().relative_to(PARTS_DIR.parent).as_posix()
+    except ValueError:
+        return str(source)
+
+
+def _in_repo(path: Path) -> Path:
+    """A relative path that names no file from here but one from the repository's root (a result folder's
+    :func:`repo_relative` source, read from another folder): that one; else the path as given."""
+    if not path.is_absolute() and not path.exists() and (PARTS_DIR.parent / path).exists():
+        return PARTS_DIR.parent / path
+    return path
+
+
 def load_part(spec: str | Path, units: str = "auto") -> Part:
     """A part from a shipped name (``part_a``), a part file (``.toml``) or a mesh file.
 
@@ -136,7 +164,7 @@ def load_part(spec: str | Path, units: str = "auto") -> Part:
     Raises :class:`ConfigError` for a bad name or part file, :class:`MeshError` for a bad mesh.
     """
     text = str(spec)
-    path = Path(spec)
+    path = _in_repo(Path(spec))
     if text in list_parts():
         part = _from_part_file(PARTS_DIR / text / "part.toml", units)
     elif path.suffix.lower() == ".toml":
