@@ -11,6 +11,11 @@ for the budget's draws (``--draws``) as the search plans them, up to the draws s
 
     .venv/bin/python benchmarks/bench_verdict_reread.py FOLDER [FOLDER ...] [--confidence 0.95,0.90]
     .venv/bin/python benchmarks/bench_verdict_reread.py FOLDER [FOLDER ...] --rho 3,2 [--draws 40]
+    .venv/bin/python benchmarks/bench_verdict_reread.py FOLDER [FOLDER ...] --ranges cobot
+
+``--ranges CELL``: per k, for each range of the cell the folders' draws were drawn in, the t statistic of the slope and
+the share of the draws' log-ratio variance the ruling's fit (:mod:`optipose.verdict.ruling`) explains: why a decision
+has, or has not, a range that rules it.
 """
 
 from __future__ import annotations
@@ -62,13 +67,44 @@ def reraced(result, draws: list[dict], confidence: float, rho: float = SPENDING,
         return race_many(next_draws, rules, min_draws=3, max_draws=len(draws), rho=rho)
 
 
+def ranges_spread(folder: Path, result, cell: str) -> None:
+    """Per k, each range of ``cell``: the slope's t statistic and the share of the draws' log-ratio variance that its
+    magnitude's place explains (:mod:`optipose.verdict.ruling`'s fit, on the folder's stored draws)."""
+    import numpy as np
+
+    from optipose.cell.config import load_cell
+    from optipose.cell.ranges import draws as cell_draws
+    from optipose.verdict.ruling import draw_ratio, place
+
+    ranges = load_cell(cell).ranges
+    s = objective_from_table(tomllib.loads(result.config.objective_file)).statistic
+    stored = stored_draws(folder, result)
+    for k in sorted(stored[0]):
+        pairs = [d[k] for d in stored if k in d]
+        y = np.log([draw_ratio(p, s.weights, s.median_weight, s.p75_weight) for p in pairs])
+        cells = []
+        for key, low, high in ranges:
+            u = np.array([place(cell_draws(ranges, p.seed)[key], low, high) for p in pairs])
+            slope, intercept = np.polyfit(u, y, 1)
+            res = y - (intercept + slope * u)
+            share = 1 - np.sum(res**2) / np.sum((y - y.mean()) ** 2)
+            se = np.sqrt(np.sum(res**2) / (len(y) - 2) / np.sum((u - u.mean()) ** 2))
+            cells.append(f"{key.split('.')[-1]} t {slope / se:+.1f} {100 * share:.0f} %")
+        print(f"{folder} k={k} ({len(y)} draws, sd of the log-ratio {y.std():.2f}): " + "; ".join(cells))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folders", nargs="+", type=Path)
+    ap.add_argument("--ranges", default="", help="a cell of ranges: per k and range, the t and share of the ruling fit")
     ap.add_argument("--confidence", default="0.95,0.90")
     ap.add_argument("--rho", default="", help="spendings to compare at 95 %%, e.g. 3,2 (instead of --confidence)")
     ap.add_argument("--draws", type=int, default=40, help="with --rho: the budget's draws the looks are planned for")
     args = ap.parse_args()
+    if args.ranges:
+        for folder in args.folders:
+            ranges_spread(folder, load_result(folder), args.ranges)
+        return
     if args.rho:
         runs = [(0.95, float(r), args.draws) for r in args.rho.split(",")]
         heads = [f"ρ = {rho:g}" for _, rho, _ in runs]
