@@ -31,8 +31,8 @@ by ICP in the calibrated cell (a seed the fit never saw) against the hidden cell
 remade); the search's found layouts (``--found``: found_k<k>.toml, the shipped reference search's by default) evaluated
 by ICP at ``--instances`` N seeds of the calibrated cell (400 + 10 i + j) and at one of the hidden cell (500 + i). Per
 axis a layout's error is the median of the subset its Table 1 chooses at its full k. Predicted per (k, axis): the
-log-normal 90 % prediction interval of one new instance from the N values (mean ± t(0.95, N − 1) · sd · √(1 + 1/N) of
-the logs), and their plain min-max; covered: the hidden cell's error inside. An axis no subset measures (unobservable,
+the verdict's interval of one cell from the N values (:func:`optipose.verdict.confidence.one_cell`: the log-normal
+90 % prediction interval of one new instance, mean ± t(0.95, N − 1) · sd · √(1 + 1/N) of the logs), and their plain min-max; covered: the hidden cell's error inside. An axis no subset measures (unobservable,
 or its registrations failed) in any of those evaluations gets no interval and is counted apart. ``--prior-too``: the
 same intervals from N instances of the uncalibrated ``--cell`` (seeds 600 + j, one set for all hidden cells). To
 DIR/found-PART.txt.
@@ -258,7 +258,7 @@ def roundtrip(args) -> None:
 def found(args) -> None:
     """The found layouts' predicted intervals from the calibrated cell of each hidden cell against their errors in the
     hidden cell (``roundtrip``'s hidden cells and calibrated files); optionally the prior's intervals beside them."""
-    from scipy.stats import t
+    from optipose.verdict.confidence import one_cell
 
     from optipose.cell.config import load_cell
     from optipose.evaluate.evaluator import Evaluator
@@ -302,14 +302,11 @@ def found(args) -> None:
     def intervals(rows: list[dict]) -> dict[int, np.ndarray]:
         """Per k, (3 axes, 4): the log-normal prediction interval's ends, then the min and the max (NaN: an axis
         some evaluation did not measure)."""
-        n, q = len(rows), t.ppf(0.95, len(rows) - 1)
         out = {}
         for k in layouts:
             values = np.array([r[k] for r in rows])  # (n, 3)
-            logs = np.log(values)
-            half = q * logs.std(axis=0, ddof=1) * np.sqrt(1 + 1 / n)
-            mean = logs.mean(axis=0)
-            out[k] = np.column_stack([np.exp(mean - half), np.exp(mean + half), values.min(0), values.max(0)])
+            cells = [one_cell(values[:, a]) for a in range(len(AXES))]  # the verdict's own interval of one cell
+            out[k] = np.column_stack([[c.low for c in cells], [c.high for c in cells], values.min(0), values.max(0)])
         return out
 
     start = time.perf_counter()

@@ -507,3 +507,38 @@ def test_each_way_a_race_ends_open_says_what_keeps_it_open_and_what_would_settle
     # a clock that ended the race, and a decided verdict
     assert "the clock ended the race at 8 draws (without --max-time" in open_line(replace(equal, ended="clock"), 30)
     assert open_line(replace(equal, decision=Decision.BUY), 30) == ""
+
+
+def test_one_cells_interval_holds_a_new_instance_as_often_as_it_says():
+    """:func:`one_cell` from n draws of a log-normal instance spread holds a further instance in 90 % of races, at
+    any n, and needs two draws; a penalty (an axis not measured) gives no interval."""
+    from optipose.evaluate.statistics import FAILED_ERROR
+    from optipose.verdict.confidence import ONE_CELL, one_cell
+
+    rng = np.random.default_rng(11)
+    for n in (3, 5, 12):
+        held = []
+        for _ in range(4000):
+            x = np.exp(rng.normal(np.log(0.05), 0.6, n + 1))  # degrees: n draws and the user's cell
+            iv = one_cell(x[:n])
+            held.append(iv.low <= x[n] <= iv.high)
+        assert abs(np.mean(held) - ONE_CELL) < 0.015, (n, np.mean(held))
+    iv = one_cell([0.01, 0.04])
+    assert iv.estimate == pytest.approx(0.02) and iv.low < 0.01 and iv.high > 0.04
+    assert np.isnan(one_cell([0.02]).low) and np.isnan(one_cell([0.02, np.degrees(FAILED_ERROR)]).low)
+
+
+def test_a_verdicts_one_cell_interval_is_of_its_draws_medians():
+    """Each axis's one-cell interval is :func:`one_cell` of the draws' medians of that layout's per-scan errors."""
+    from optipose.verdict.confidence import one_cell
+
+    rng = np.random.default_rng(2)
+    draws = [
+        PairedDraw(s, np.abs(rng.normal(0, 1e-3 * (1 + s % 3), (20, 3))), np.abs(rng.normal(0, 2e-3, (20, 3))))
+        for s in range(6)
+    ]
+    v = compare_draws(draws, Rules(replicates=200))
+    for j, (found, hand) in enumerate(zip(v.found, v.baseline)):
+        assert found.one_cell == one_cell([np.degrees(np.median(d.found[:, j])) for d in draws])
+        assert hand.one_cell == one_cell([np.degrees(np.median(d.baseline[:, j])) for d in draws])
+        assert found.one_cell.low < found.median_deg.low  # one cell spreads wider than the expected median

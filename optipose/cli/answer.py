@@ -96,17 +96,17 @@ def _narrow_table(title: str, columns: list[tuple[str, str]]):
 
 def _confident_table(confident: dict, part):
     """Per k (``confident``: k → its verdict with confidence), found and the baseline: the predicted median |error|
-    per axis in the cell with its interval (mdeg)."""
-    from optipose.verdict.words import interval_cell
+    per axis that one cell gives, with the interval 90 % of the cell's instances fall in (mdeg)."""
+    from optipose.verdict.confidence import ONE_CELL
+    from optipose.verdict.words import one_cell_cell
 
-    v = next(iter(confident.values()))
     table = _narrow_table(
-        f"{part.name}: predicted median |error| in the cell, mdeg [{100 * v.confidence:.1f} % interval]",
+        f"{part.name}: predicted median |error| in one cell, mdeg [{100 * ONE_CELL:.0f} % of its instances]",
         [("k", "right"), ("sensors", "left"), ("roll", "right"), ("pitch", "right"), ("yaw", "right")],
     )
     for k, v in sorted(confident.items()):
         for name, axes in ((v.found_name, v.found), (v.baseline_name, v.baseline)):
-            table.add_row(str(k), name, *(interval_cell(a.median_deg, digits=2) for a in axes))
+            table.add_row(str(k), name, *(one_cell_cell(a) for a in axes))
     return table
 
 

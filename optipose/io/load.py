@@ -24,7 +24,15 @@ from optipose.files import reading
 from optipose.io.choices import axis_choice, choices_from_comparison
 from optipose.io.config import RunConfig, given
 from optipose.io.folders import read_config
-from optipose.verdict.confidence import AxisError, AxisRatio, ConfidentVerdict, Decision, Interval, Verdicts
+from optipose.verdict.confidence import (
+    NOT_GIVEN,
+    AxisError,
+    AxisRatio,
+    ConfidentVerdict,
+    Decision,
+    Interval,
+    Verdicts,
+)
 from optipose.verdict.ruling import Ruling
 
 __all__ = ["load_result", "load_search", "load_history", "load_selection", "load_surrogate_scores"]
@@ -133,6 +141,8 @@ def _verdicts_of(rows: pd.DataFrame) -> Verdicts:
         score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
 
         def iv(row, name):
+            if name not in row.index:  # a folder from before the column (the one-cell interval): not given
+                return NOT_GIVEN
             return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
 
         more = int(score["more_draws"])
@@ -148,10 +158,12 @@ def _verdicts_of(rows: pd.DataFrame) -> Verdicts:
                 for _, r in axes.iterrows()
             ),
             found=tuple(
-                AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg")) for _, r in axes.iterrows()
+                AxisError(r.axis, iv(r, "found_median_deg"), iv(r, "found_p75_deg"), iv(r, "found_cell_median_deg"))
+                for _, r in axes.iterrows()
             ),
             baseline=tuple(
-                AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg")) for _, r in axes.iterrows()
+                AxisError(r.axis, iv(r, "hand_median_deg"), iv(r, "hand_p75_deg"), iv(r, "hand_cell_median_deg"))
+                for _, r in axes.iterrows()
             ),
             found_score_deg=iv(score, "found_median_deg"),
             baseline_score_deg=iv(score, "hand_median_deg"),

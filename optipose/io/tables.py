@@ -171,6 +171,8 @@ VERDICT_COLUMNS = (
     "found_p75_deg",
     "hand_median_deg",
     "hand_p75_deg",
+    "found_cell_median_deg",
+    "hand_cell_median_deg",
 )
 
 
@@ -206,7 +208,15 @@ def verdict_frame(verdicts) -> pd.DataFrame:
             "ruling_above": bool(v.ruling and v.ruling.above),
             "ruling_share": v.ruling.share if v.ruling else np.nan,
         }
-        empty = {"median_ratio": None, "p75_ratio": None, "failed": None, "found_p75_deg": None, "hand_p75_deg": None}
+        empty = {
+            "median_ratio": None,
+            "p75_ratio": None,
+            "failed": None,
+            "found_p75_deg": None,
+            "hand_p75_deg": None,
+            "found_cell_median_deg": None,
+            "hand_cell_median_deg": None,
+        }
         score = {
             "ratio": v.score,
             "found_median_deg": v.found_score_deg,
@@ -224,6 +234,9 @@ def verdict_frame(verdicts) -> pd.DataFrame:
                 "found_p75_deg": found.p75_deg,
                 "hand_median_deg": baseline.median_deg,
                 "hand_p75_deg": baseline.p75_deg,
+                # what one instance of the cell gives (optipose.verdict.confidence.one_cell)
+                "found_cell_median_deg": found.one_cell,
+                "hand_cell_median_deg": baseline.one_cell,
             }
             rows.append({**head, "axis": ratio.axis, **_intervals(cells)})
     return pd.DataFrame(rows)

@@ -1,8 +1,9 @@
-"""The verdict with confidence (issue #33): one table and one picture, the first thing a purchaser reads.
+"""The verdict with confidence (issue #33): two tables and one picture, the first thing a purchaser reads.
 
 Per k: the decision (BUY, KEEP, TIE, UNDECIDED), the found choice and the baseline's, baseline / found in sum
-with its interval, and each layout's predicted median |error| per axis in the cell with its interval; the
-picture draws the same medians per axis. Reads :class:`~optipose.verdict.confidence.ConfidentVerdict`
+with its interval, and each layout's predicted median |error| per axis in the cell with its interval; then what one
+cell gives (the interval of one instance's median, :func:`~optipose.verdict.confidence.one_cell`); the picture draws
+the expected medians per axis. Reads :class:`~optipose.verdict.confidence.ConfidentVerdict`
 records only; the lines and cells are :mod:`optipose.verdict.words`', the ones the terminal prints.
 """
 
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
-from optipose.verdict.confidence import Decision, Verdicts, raced_in
+from optipose.verdict.confidence import ONE_CELL, Decision, Verdicts, raced_in
 from optipose.verdict.words import (
     IDEAL_CELL,
     confident_line,
@@ -18,6 +19,7 @@ from optipose.verdict.words import (
     interval_cell,
     kinds_line,
     mount_line,
+    one_cell_cell,
     open_line,
     ruling_line,
     ratio_cell,
@@ -88,6 +90,22 @@ def confident_blocks(
             tuple(rows),
             caption,
             anchor="confident-verdict",
+        )
+    )
+    blocks.append(
+        Table(
+            ("k", "layout", "roll", "pitch", "yaw"),
+            tuple(
+                (f"k={v.k}" if side == "found" else "", f"{side if side == 'found' else label} {name}", *cells)
+                for v in ordered
+                for side, name, axes in (("found", v.found_name, v.found), ("baseline", v.baseline_name, v.baseline))
+                for cells in [tuple(one_cell_cell(a) for a in axes)]
+            ),
+            f"What one {cell} cell gives: the median |error| per axis (mdeg) of one instance of the cell (its part as "
+            "made, its calibration and, in a cell of ranges, its magnitudes), and the interval "
+            f"{100 * ONE_CELL:.0f} % of the instances fall in, from the spread of the draws (each draw one instance); "
+            "yours is one of them. The table above gives the median expected over instances, with its interval.",
+            anchor="one-cell",
         )
     )
     blocks.append(

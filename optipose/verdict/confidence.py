@@ -42,6 +42,11 @@ Each test reads one side of a two-sided interval, so at 95 % a BUY or a KEEP is 
 :mod:`optipose.verdict.racing` adds draws until the decision is not UNDECIDED or a budget ends. The same
 draws and :class:`Rules` give the same verdict. The bootstrap is :mod:`optipose.verdict.bootstrap`'s; a search's
 verdicts together are one :class:`Verdicts`; their lines are :mod:`optipose.verdict.words`'.
+
+What one cell gives (:func:`one_cell`): each draw is one instance of the cell (its part as made, its calibration, in a
+cell of ranges its magnitudes), and a user's cell is one instance, not their average; so beside the interval of the
+expected median, each axis's median carries the interval that one new instance's falls in (90 %, from the draws'
+spread: :data:`ONE_CELL`).
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ from enum import StrEnum
 from typing import Sequence
 
 import numpy as np
+from scipy.stats import t as stats_t
 
 from optipose.evaluate.assignment import UNOBSERVABLE_PENALTY, Choice, not_measured
 from optipose.evaluate.objective import AXES, StatisticConfig
@@ -80,6 +86,9 @@ __all__ = [
     "paired_draw",
     "paired_draws",
     "compare_draws",
+    "one_cell",
+    "ONE_CELL",
+    "NOT_GIVEN",
     "raced_in",
     "at_ends",
 ]
@@ -162,14 +171,34 @@ class Interval:
         return low <= self.low and self.high <= high
 
 
+NOT_GIVEN = Interval(float("nan"), float("nan"), float("nan"))
+ONE_CELL = 0.90  # the share of a cell's instances :func:`one_cell`'s interval holds
+
+
+def one_cell(values_deg, share: float = ONE_CELL) -> Interval:
+    """What one instance of the cell gives, from the draws' values (degrees, one per draw, each an instance): the
+    geometric mean, and the log-normal prediction interval of one new instance, mean ± t(n − 1) · sd · √(1 + 1/n)
+    of the logs at ``share``. :data:`NOT_GIVEN` from fewer than two draws, or where a draw's value is a penalty
+    (an axis not measured, or registrations that failed on half its scans)."""
+    x = np.asarray(values_deg, float)
+    if len(x) < 2 or not np.all(np.isfinite(x)) or np.any(x <= 0) or np.any(x >= np.degrees(FAILED_ERROR)):
+        return NOT_GIVEN
+    logs = np.log(x)
+    half = stats_t.ppf((1.0 + share) / 2.0, len(x) - 1) * logs.std(ddof=1) * math.sqrt(1.0 + 1.0 / len(x))
+    mean = float(logs.mean())
+    return Interval(math.exp(mean), math.exp(mean - half), math.exp(mean + half))
+
+
 @dataclass(frozen=True)
 class AxisError:
     """A layout's predicted error on one axis in the cell (degrees): the median and p75 over a draw's scans,
-    expected over draws, with intervals."""
+    expected over draws, with intervals; and ``one_cell``, the median one instance of the cell gives, with the
+    interval of :func:`one_cell` (:data:`NOT_GIVEN` where unknown)."""
 
     axis: str
     median_deg: Interval
     p75_deg: Interval
+    one_cell: Interval = NOT_GIVEN
 
 
 @dataclass(frozen=True)
@@ -296,8 +325,15 @@ def compare_draws(
     iv += [Interval(*log_interval(point[i], samples[:, i], widen[i], c, degrees)) for i in range(10, 24)]
     failed = [Interval(*f) for f in failed_shares(draws, c)]
     axes = tuple(AxisRatio(axis, iv[1 + j], iv[4 + j], iv[7 + j], failed[j]) for j, axis in enumerate(AXES))
-    found = tuple(AxisError(axis, iv[10 + j], iv[13 + j]) for j, axis in enumerate(AXES))
-    baseline = tuple(AxisError(axis, iv[16 + j], iv[19 + j]) for j, axis in enumerate(AXES))
+    cells = {  # each draw's median per axis, degrees: what one instance gives
+        side: np.degrees([np.median(getattr(d, side), axis=0) for d in draws]) for side in ("found", "baseline")
+    }
+    found = tuple(
+        AxisError(axis, iv[10 + j], iv[13 + j], one_cell(cells["found"][:, j])) for j, axis in enumerate(AXES)
+    )
+    baseline = tuple(
+        AxisError(axis, iv[16 + j], iv[19 + j], one_cell(cells["baseline"][:, j])) for j, axis in enumerate(AXES)
+    )
     # one found sensor against more hand ones asks whether it matches them, not whether it is worth buying
     futility = baseline_k in (0, k)
     decision, more = _decide(iv[0], axes, rules.tolerance, rules.failures, len(draws), futility)

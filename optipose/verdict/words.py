@@ -31,6 +31,7 @@ __all__ = [
     "mdeg_text",
     "mdeg_compact",
     "mdeg_column",
+    "one_cell_cell",
     "interval_cell",
     "ratio_cell",
     "xyz_rpy_text",
@@ -100,6 +101,17 @@ def interval_cell(interval: Interval, scale: float = 1e3, digits: int = 3) -> st
     # rounded to ``digits`` significant ones but written out (110, not 1.1e+02: a column of mdeg reads at a glance)
     e, lo, hi = (f"{float(f'{scale * x:.{digits}g}'):g}" for x in (interval.estimate, interval.low, interval.high))
     return f"{e} [{lo}, {hi}]" if digits > 2 else f"{e} [{lo}-{hi}]"
+
+
+def one_cell_cell(error) -> str:
+    """``120 [60-400]``: the median one instance of the cell gives on an axis and the interval it falls in
+    (an :class:`~optipose.verdict.confidence.AxisError`'s ``one_cell``, mdeg), "not measured" for an axis no draw
+    measured, and the expected median alone where no interval is given (a single draw)."""
+    if not_measured(error.median_deg):
+        return "not measured"
+    if not math.isfinite(error.one_cell.low):
+        return f"{float(f'{1e3 * error.median_deg.estimate:.2g}'):g}"
+    return interval_cell(error.one_cell, digits=2)
 
 
 def ratio_cell(interval: Interval) -> str:
