@@ -121,7 +121,7 @@ CellOption = Annotated[
     Optional[str],
     typer.Option(
         "--cell",
-        help="The cell the layouts are evaluated in: a name in cells/ (`optipose cells`: ideal, ur10e, cobot, industrial-arm, linear-axis), NAME:zeroed for it zeroed on a master part, or a TOML path; default: the objective's.",
+        help="The cell the layouts are evaluated in: a name in cells/ (`optipose cells` lists them), NAME:zeroed for it zeroed on a master part, or a TOML path; default: the objective's.",
     ),
 ]
 Seed = Annotated[
