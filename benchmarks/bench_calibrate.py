@@ -457,6 +457,8 @@ def main() -> None:
     m.add_argument("--hidden", type=int, default=8)
     m.add_argument("--instances", type=int, default=4, help="ICP instances per cell (2-10)")
     args = parser.parse_args()
+    if args.what in ("found", "medians") and not 1 <= args.hidden <= 9:
+        parser.error("--hidden: 1 to 9 (each hidden cell's seeds stay apart from the next block's)")
     if args.what == "medians" and not 2 <= args.instances <= 10:
         parser.error("--instances: 2 to 10 (seeds 700/800/900 + 10 i + j stay apart)")
     if args.what == "found" and not 2 <= args.instances <= 10:

@@ -74,7 +74,7 @@ def ranges_spread(folder: Path, result, cell: str) -> None:
 
     from optipose.cell.config import load_cell
     from optipose.cell.ranges import draws as cell_draws
-    from optipose.verdict.ruling import draw_ratio, place
+    from optipose.verdict.ruling import draw_ratio, line_fit, place
 
     ranges = load_cell(cell).ranges
     s = objective_from_table(tomllib.loads(result.config.objective_file)).statistic
@@ -85,10 +85,9 @@ def ranges_spread(folder: Path, result, cell: str) -> None:
         cells = []
         for key, low, high in ranges:
             u = np.array([place(cell_draws(ranges, p.seed)[key], low, high) for p in pairs])
-            slope, intercept = np.polyfit(u, y, 1)
-            res = y - (intercept + slope * u)
-            share = 1 - np.sum(res**2) / np.sum((y - y.mean()) ** 2)
-            se = np.sqrt(np.sum(res**2) / (len(y) - 2) / np.sum((u - u.mean()) ** 2))
+            if len(y) < 3 or np.ptp(u) == 0:
+                continue
+            slope, _, share, se = line_fit(u, y)
             cells.append(f"{key.split('.')[-1]} t {slope / se:+.1f} {100 * share:.0f} %")
         print(f"{folder} k={k} ({len(y)} draws, sd of the log-ratio {y.std():.2f}): " + "; ".join(cells))
 

@@ -159,20 +159,35 @@ def test_the_verdict_table_reads_back_as_written(tmp_path):
         )
         assert read.ruling == v.ruling
         assert read.score.low == pytest.approx(v.score.low, rel=1e-12) and read.more_draws == v.more_draws
+        for a, b in zip((*read.found, *read.baseline), (*v.found, *v.baseline)):  # what one cell gives, read back
+            assert np.allclose(
+                [a.one_cell.estimate, a.one_cell.low, a.one_cell.high],
+                [b.one_cell.estimate, b.one_cell.low, b.one_cell.high],
+                rtol=1e-12,
+                equal_nan=True,
+            )
+    assert any(np.isfinite(a.one_cell.low) for a in back.by_k[1].found)  # several draws: an interval to read
     assert read_verdicts(tmp_path / "none.csv") == Verdicts()
     # a verdict.csv from before the failures' rule: its failed shares and tolerance unknown (NaN), not taken as applied
     old = pd.read_csv(tmp_path / "verdict.csv").drop(
         columns=["failed", "failed_low", "failed_high", "failures", "kept"]
+        + [f"{s}_cell_median_deg{e}" for s in ("found", "hand") for e in ("", "_low", "_high")]
     )
     old.to_csv(tmp_path / "old.csv", index=False)
     before = read_verdicts(tmp_path / "old.csv")
     assert all(np.isnan(v.failures) and np.isnan(v.axes[0].failed.high) and not v.kept for v in before.in_order())
     assert [confident_line(v) for v in before.in_order()] == [confident_line(v) for v in back.in_order()]
+    assert all(np.isnan(a.one_cell.low) for v in before.in_order() for a in v.found)  # not given, not made up
     from optipose.report.confidence import confident_blocks
     from optipose.report.document import Table
 
     captions = [[b.caption for b in confident_blocks(v, "ur10e") if isinstance(b, Table)][0] for v in (back, before)]
     assert "failing its registration on more than 1 %" in captions[0] and "failing" not in captions[1]
+    one_cell = [
+        [b for b in confident_blocks(v, "ur10e") if isinstance(b, Table) and b.anchor == "one-cell"]
+        for v in (back, before)
+    ]
+    assert len(one_cell[0]) == 1 and not one_cell[1]  # an older folder has no one-cell table to show
 
 
 def test_a_draw_of_fewer_scans_keeps_the_protocols_orientations_in_proportion():

@@ -25,7 +25,6 @@ from optipose.io.choices import axis_choice, choices_from_comparison
 from optipose.io.config import RunConfig, given
 from optipose.io.folders import read_config
 from optipose.verdict.confidence import (
-    NOT_GIVEN,
     AxisError,
     AxisRatio,
     ConfidentVerdict,
@@ -134,15 +133,14 @@ def _verdicts_of(rows: pd.DataFrame) -> Verdicts:
         ("kept", False),
         ("ended", ""),
         ("ruling", ""),
+        *((f"{side}_cell_median_deg{end}", np.nan) for side in ("found", "hand") for end in ("", "_low", "_high")),
     ):
-        if name not in rows:  # a folder from before the failures' rule (NaN: not applied) and the hand choice's answer
-            rows[name] = value
+        if name not in rows:  # a folder from before the failures' rule (NaN: not applied), the hand choice's answer,
+            rows[name] = value  # the one-cell interval (NaN: not given)
     for (k, baseline_k), group in rows.groupby(["k", "hand_k"], sort=True):
         score, axes = group[group.axis == "score"].iloc[0], group[group.axis != "score"]
 
         def iv(row, name):
-            if name not in row.index:  # a folder from before the column (the one-cell interval): not given
-                return NOT_GIVEN
             return Interval(float(row[name]), float(row[f"{name}_low"]), float(row[f"{name}_high"]))
 
         more = int(score["more_draws"])

@@ -141,10 +141,11 @@ def list_parts() -> list[str]:
 def repo_relative(source: str | Path) -> str:
     """A part's source as a result folder's config records it: a file inside the repository relative to its root
     (``parts/part_a/part.toml``), so that the folder reads back on another clone; any other path as given."""
-    if not str(source):
-        return ""
+    path = Path(source)
+    if not str(source) or not path.is_file():  # a shipped part's name, or nothing: as given
+        return str(source)
     try:
-        return Path(source).resolve().relative_to(PARTS_DIR.parent).as_posix()
+        return path.resolve().relative_to(PARTS_DIR.parent).as_posix()
     except ValueError:
         return str(source)
 

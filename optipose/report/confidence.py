@@ -9,6 +9,8 @@ records only; the lines and cells are :mod:`optipose.verdict.words`', the ones t
 
 from __future__ import annotations
 
+import math
+
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
 from optipose.verdict.confidence import ONE_CELL, Decision, Verdicts, raced_in
@@ -92,7 +94,8 @@ def confident_blocks(
             anchor="confident-verdict",
         )
     )
-    blocks.append(
+    given = any(math.isfinite(a.one_cell.low) for v in ordered for a in (*v.found, *v.baseline))
+    blocks += [  # a folder from before the one-cell interval has none to show
         Table(
             ("k", "layout", "roll", "pitch", "yaw"),
             tuple(
@@ -107,7 +110,7 @@ def confident_blocks(
             "yours is one of them. The table above gives the median expected over instances, with its interval.",
             anchor="one-cell",
         )
-    )
+    ][:given]
     blocks.append(
         Figure(
             verdict_intervals(ordered),

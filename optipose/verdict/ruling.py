@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FIELDS", "Ruling", "ruling", "draw_ratio", "place"]
+__all__ = ["FIELDS", "Ruling", "ruling", "draw_ratio", "place", "line_fit"]
 
 # a cell file's ranged field: what a verdict's line calls it, its unit, SI → that unit (optipose.verdict.words)
 FIELDS = {
@@ -69,6 +69,16 @@ def draw_ratio(draw, weights, median_weight: float, p75_weight: float) -> float:
     return score(draw.baseline) / max(score(draw.found), 1e-300)
 
 
+def line_fit(u: np.ndarray, y: np.ndarray) -> tuple[float, float, float, float]:
+    """Least squares of ``y`` on ``u`` (at least three points, ``u`` not constant): slope, intercept, the share of
+    y's variance the line explains, and the slope's standard error."""
+    slope, intercept = np.polyfit(u, y, 1)
+    fitted = intercept + slope * u
+    share = 1.0 - float(np.sum((y - fitted) ** 2) / np.sum((y - y.mean()) ** 2))
+    se = float(np.sqrt(np.sum((y - fitted) ** 2) / (len(y) - 2) / np.sum((u - u.mean()) ** 2)))
+    return float(slope), float(intercept), share, se
+
+
 def ruling(ratios, magnitudes: list[dict[str, float]], ranges) -> Ruling | None:
     """The :class:`Ruling` of the draws (``ratios``: each draw's hand / found ratio; ``magnitudes``: each draw's cell
     instance, field → SI value; ``ranges``: ``(field, low, high)`` rows), or None when no range rules them."""
@@ -80,10 +90,7 @@ def ruling(ratios, magnitudes: list[dict[str, float]], ranges) -> Ruling | None:
         u = np.array([place(m[key], low, high) for m in magnitudes])
         if np.ptp(u) == 0:
             continue
-        slope, intercept = np.polyfit(u, y, 1)
-        fitted = intercept + slope * u
-        share = 1.0 - float(np.sum((y - fitted) ** 2) / np.sum((y - y.mean()) ** 2))
-        se = np.sqrt(np.sum((y - fitted) ** 2) / (len(y) - 2) / np.sum((u - u.mean()) ** 2))
+        slope, intercept, share, se = line_fit(u, y)
         cross = -intercept / slope if slope else np.nan
         if abs(slope) < MIN_T * se or share < MIN_SHARE or not 0.0 < cross < 1.0:
             continue

@@ -22,7 +22,7 @@ from optipose.model.layout import kept_sensors
 from optipose.transforms import xyz_rpy
 from optipose.verdict.compare import Verdict
 from optipose.verdict.confidence import ConfidentVerdict, Decision, Interval, at_ends, raced_in
-from optipose.verdict.ruling import FIELDS
+from optipose.verdict.ruling import FIELDS, MIN_DRAWS
 
 __all__ = [
     "IDEAL_CELL",
@@ -194,7 +194,11 @@ def open_line(v: ConfidentVerdict, most: int = 0) -> str:
         return (
             f"  k={v.k} open: {ratio_cell(v.score)} across the cell's ranges, not shown at both of their ends: it "
             "depends on where your cell lies"
-            + ("" if v.ruling is not None else ", and no one range decides it on the race's draws")
+            + (
+                ", and no one range decides it on the race's draws"
+                if v.ruling is None and v.n_draws >= MIN_DRAWS
+                else ""
+            )
         )
     if v.ended == "kinds":  # better in the objective's cell, which the user did not name, not in every kind
         return (
