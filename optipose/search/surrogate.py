@@ -223,8 +223,9 @@ class Surrogate:
 
         turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
         v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
-        # searched, not guessed from the faces the scan hit: where a mesh holds overlapping faces of one plane (part A
-        # does) a kept guess is another face than the search's, its plane a rounding apart, and the search moves
+        # searched, not guessed from the faces the scan hit: a centroid on a crease's edge (part A's scans put some there)
+        # lies at distance 0 from both faces; a kept guess is the other face than the search's (the lowest id), with
+        # another normal, and the search moves
         q, n, face = self._reference.nearest(v)
         return v, n, np.einsum("ij,ij->i", v - q, n), np.hstack([np.cross(v - self.centre, n), n]), face
 
