@@ -119,6 +119,14 @@ def icp_intervals(part_name: str, cell, objective, seeds: int, jobs: int) -> np.
     return np.percentile(np.array(values), [5, 95], axis=0).T
 
 
+def hidden_cells(prior, n: int) -> list:
+    """The round trip's ``n`` hidden cells of ``prior``, (name, cell): every range at its low end, at its high end,
+    then instances 1000, 1001, ..."""
+    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
+    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + n - 2)]
+    return hidden[:n]
+
+
 def score(intervals: np.ndarray, real: np.ndarray) -> tuple[int, float, float]:
     """Covered figures, the median and the largest width (high / low)."""
     covered = int(np.sum((real >= intervals[:, 0]) & (real <= intervals[:, 1])))
@@ -218,8 +226,7 @@ def roundtrip(args) -> None:
     emulator = Emulator(part, layout, objective)
     runs = icp_runs(part, layout, objective, emulator, args.icp, 0, args.jobs)
     say(f"{args.part} in '{args.cell}': emulator and {args.icp} ICP runs {time.perf_counter() - start:.0f} s")
-    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
-    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
+    hidden = hidden_cells(prior, args.hidden)
     inside, total, close, medians, same, t1, t1_all = 0, 0, 0, 0, 0, 0, 0
     for i, (name, cell) in enumerate(hidden):
         measured = table1(cell, 100 + i)
@@ -279,9 +286,7 @@ def found(args) -> None:
     part, prior = load_part(args.part), load_cell(args.cell)
     objective = load_objective(args.objective).in_cell(prior)
     layouts = {k: load_layout(folder / f"found_k{k}.toml") for k in args.k}
-    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
-    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
-    hidden = hidden[: args.hidden]
+    hidden = hidden_cells(prior, args.hidden)
     times = []
 
     def errors(cell, seed: int) -> dict[int, np.ndarray]:
@@ -377,9 +382,7 @@ def medians(args) -> None:
     say = _Lines()
     part, prior = load_part(args.part), load_cell(args.cell)
     layout, objective = part.layouts["hand"], load_objective(args.objective).in_cell(prior)
-    hidden = [("low", prior.at("low")), ("high", prior.at("high"))]
-    hidden += [(f"instance {s}", prior.instance(s)) for s in range(1000, 1000 + args.hidden - 2)]
-    hidden = hidden[: args.hidden]
+    hidden = hidden_cells(prior, args.hidden)
 
     def mean_medians(cell, seeds) -> dict:
         """(subset, axis) → the geometric mean of its median (degrees) over the seeds' instances."""
