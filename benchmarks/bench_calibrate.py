@@ -119,6 +119,14 @@ def icp_intervals(part_name: str, cell, objective, seeds: int, jobs: int) -> np.
     return np.percentile(np.array(values), [5, 95], axis=0).T
 
 
+def _require(paths: list[Path], hint: str) -> None:
+    """Exit 2 with one line naming the files of ``paths`` that are missing (``hint``: how to make them)."""
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        print(f"missing ({hint}): {', '.join(missing)}", file=sys.stderr)
+        sys.exit(2)
+
+
 def hidden_cells(prior, n: int) -> list:
     """The round trip's ``n`` hidden cells of ``prior``, (name, cell): every range at its low end, at its high end,
     then instances 1000, 1001, ..."""
@@ -275,12 +283,10 @@ def found(args) -> None:
 
     out = Path(args.out)
     folder = Path(args.found or f"results/reference/{args.part}/layouts")
-    paths = [out / f"roundtrip-{i}.toml" for i in range(args.hidden)]
-    paths += [folder / f"found_k{k}.toml" for k in args.k]
-    missing = [str(p) for p in paths if not p.is_file()]
-    if missing:
-        print(f"missing (run roundtrip first, or give --found): {', '.join(missing)}", file=sys.stderr)
-        sys.exit(2)
+    _require(
+        [out / f"roundtrip-{i}.toml" for i in range(args.hidden)] + [folder / f"found_k{k}.toml" for k in args.k],
+        "run roundtrip first, or give --found",
+    )
     say = _Lines()
 
     part, prior = load_part(args.part), load_cell(args.cell)
@@ -374,11 +380,7 @@ def medians(args) -> None:
     from optipose.model.part import load_part
 
     out = Path(args.out)
-    paths = [out / f"roundtrip-{i}.toml" for i in range(args.hidden)]
-    missing = [str(p) for p in paths if not p.is_file()]
-    if missing:
-        print(f"missing (run roundtrip first): {', '.join(missing)}", file=sys.stderr)
-        sys.exit(2)
+    _require([out / f"roundtrip-{i}.toml" for i in range(args.hidden)], "run roundtrip first")
     say = _Lines()
     part, prior = load_part(args.part), load_cell(args.cell)
     layout, objective = part.layouts["hand"], load_objective(args.objective).in_cell(prior)
