@@ -13,7 +13,7 @@ import math
 
 from optipose.report.document import Block, Figure, Paragraph, Table
 from optipose.report.figures import verdict_intervals
-from optipose.verdict.confidence import ONE_CELL, Decision, Verdicts, raced_in
+from optipose.verdict.confidence import ONE_CELL, Decision, Verdicts, borne_out
 from optipose.verdict.words import (
     IDEAL_CELL,
     confident_line,
@@ -53,8 +53,7 @@ def confident_blocks(
     blocks += [Paragraph(line.strip(), "verdict info") for v in ordered if (line := ruling_line(v))]
     for v in ordered:  # a BUY raced again in the common kinds of cell: good where it holds in every one
         if line := kinds_line(v.k, kinds or {}):
-            held = all(r.decision == Decision.BUY for r in raced_in(v.k, kinds).values())
-            blocks.append(Paragraph(line.strip(), "verdict good" if held else "verdict mixed"))
+            blocks.append(Paragraph(line.strip(), "verdict good" if borne_out(v.k, kinds) else "verdict mixed"))
     blocks += [
         Paragraph(line, "verdict good") for v in ordered if (line := mount_line(v, (layouts or {}).get(v.k), baseline))
     ]
@@ -94,23 +93,18 @@ def confident_blocks(
             anchor="confident-verdict",
         )
     )
-    given = any(math.isfinite(a.one_cell.low) for v in ordered for a in (*v.found, *v.baseline))
-    blocks += [  # a folder from before the one-cell interval has none to show
-        Table(
-            ("k", "layout", "roll", "pitch", "yaw"),
-            tuple(
-                (f"k={v.k}" if side == "found" else "", f"{side if side == 'found' else label} {name}", *cells)
-                for v in ordered
-                for side, name, axes in (("found", v.found_name, v.found), ("baseline", v.baseline_name, v.baseline))
-                for cells in [tuple(one_cell_cell(a) for a in axes)]
-            ),
+    if any(math.isfinite(a.one_cell.low) for v in ordered for a in (*v.found, *v.baseline)):
+        rows = []  # a folder from before the one-cell interval has none to show
+        for v in ordered:
+            rows.append((f"k={v.k}", f"found {v.found_name}", *(one_cell_cell(a) for a in v.found)))
+            rows.append(("", f"{label} {v.baseline_name}", *(one_cell_cell(a) for a in v.baseline)))
+        caption = (
             f"What one {cell} cell gives: the median |error| per axis (mdeg) of one instance of the cell (its part as "
             "made, its calibration and, in a cell of ranges, its magnitudes), and the interval "
             f"{100 * ONE_CELL:.0f} % of the instances fall in, from the spread of the draws (each draw one instance); "
-            "yours is one of them. The table above gives the median expected over instances, with its interval.",
-            anchor="one-cell",
+            "yours is one of them. The table above gives the median expected over instances, with its interval."
         )
-    ][:given]
+        blocks.append(Table(("k", "layout", "roll", "pitch", "yaw"), tuple(rows), caption, anchor="one-cell"))
     blocks.append(
         Figure(
             verdict_intervals(ordered),

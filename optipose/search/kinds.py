@@ -23,7 +23,7 @@ from dataclasses import replace
 
 from optipose.search.draws import confident_verdicts
 from optipose.seeds import kind_seed
-from optipose.verdict.confidence import Decision, Verdicts, at_ends, raced_in
+from optipose.verdict.confidence import Decision, Verdicts, at_ends, borne_out
 
 __all__ = ["COMMON_KINDS", "kinds_of", "buys", "across_kinds", "qualified"]
 
@@ -75,7 +75,7 @@ def qualified(verdicts: Verdicts, kinds: dict[str, Verdicts]) -> Verdicts:
     if not kinds:
         return verdicts
     ended = "ends" if at_ends(kinds) else "kinds"
-    open_ = [k for k in buys(verdicts) if any(v.decision != Decision.BUY for v in raced_in(k, kinds).values())]
+    open_ = [k for k in buys(verdicts) if not borne_out(k, kinds)]
     by_k = verdicts.by_k | {k: replace(verdicts.by_k[k], decision=Decision.UNDECIDED, ended=ended) for k in open_}
     fewer = verdicts.fewer
     if fewer is not None and fewer.decision == Decision.BUY and 1 in open_:  # its one sensor is k = 1's

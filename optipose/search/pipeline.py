@@ -340,7 +340,8 @@ def _verdict(ctx: SearchContext) -> None:
 
 
 def _kinds(ctx: SearchContext) -> None:
-    """The BUYs raced again in the common kinds of cell, where the user named none (``verdict.kinds``)."""
+    """The BUYs raced again where the user's cell may lie (``verdict.kinds``: the common kinds of cell where the user
+    named none, the ends of the ranges of a cell of ranges), and the verdicts they did not bear out opened."""
     from optipose.search.kinds import across_kinds, buys, kinds_of, qualified
 
     report, verdict = ctx.report, ctx.config.verdict

@@ -90,6 +90,7 @@ __all__ = [
     "ONE_CELL",
     "NOT_GIVEN",
     "raced_in",
+    "borne_out",
     "at_ends",
 ]
 
@@ -248,7 +249,8 @@ class ConfidentVerdict:
         False  # the found side is the baseline's own choice, the search's answer where it beat the found layout
     )
     # how a race left it UNDECIDED: "draws" (its budget's draws ran out), "clock" (a user's clock ended it), "ends" (a
-    # BUY across a cell's ranges not shown at their ends: optipose.search.kinds), "" (decided, or not raced)
+    # BUY across a cell's ranges not shown at their ends) or "kinds" (a BUY in a cell the user did not name, not shown
+    # in every common kind: both optipose.search.kinds), "" (decided, or not raced)
     ended: str = ""
     ruling: Ruling | None = None  # in a cell of ranges: the range whose magnitude decides which layout is better
 
@@ -288,6 +290,12 @@ def raced_in(k: int, kinds: dict[str, Verdicts]) -> dict[str, ConfidentVerdict]:
     """Cell → k's verdict there, of the cells a search's BUYs were raced again in (``kinds``: cell → their
     :class:`Verdicts`, :mod:`optipose.search.kinds`) that raced k; empty where none did."""
     return {name: v.by_k[k] for name, v in kinds.items() if k in v.by_k}
+
+
+def borne_out(k: int, kinds: dict[str, Verdicts]) -> bool:
+    """Whether k's BUY was a BUY again in every cell it was raced again in (:func:`raced_in`; True where none raced
+    it): what keeps a search's BUY one (:func:`optipose.search.kinds.qualified`) and its line's colour."""
+    return all(v.decision == Decision.BUY for v in raced_in(k, kinds).values())
 
 
 def at_ends(names) -> bool:

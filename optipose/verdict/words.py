@@ -18,7 +18,7 @@ import math
 from optipose.evaluate.assignment import UNOBSERVABLE, UNOBSERVABLE_PENALTY, Choice
 from optipose.model.layout import kept_sensors
 from optipose.verdict.compare import Verdict
-from optipose.verdict.confidence import ConfidentVerdict, Decision, at_ends, raced_in
+from optipose.verdict.confidence import ConfidentVerdict, Decision, at_ends, borne_out, raced_in
 from optipose.verdict.numbers import (  # noqa: F401  (given under this module's name too)
     sig_mdeg,
     interval_cell,
@@ -216,7 +216,7 @@ def kinds_line(k: int, kinds: dict) -> str:
     ends = at_ends(raced)
     held = {name: v for name, v in raced.items() if v.decision == Decision.BUY}
     most = f"(at most {max(v.n_draws for v in raced.values())} draws each)"
-    if len(held) == len(raced):
+    if borne_out(k, kinds):
         where = "at both ends of the cell's ranges" if ends else "in every common kind of cell"
         return (
             f"  k={k} the BUY holds {where}: {', '.join(f'{n} {ratio_cell(v.score)}' for n, v in raced.items())} {most}"
