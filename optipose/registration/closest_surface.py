@@ -77,6 +77,23 @@ def _project(p, i, f, planes, plane_c, q):
     return inset > 2.0 * abs(h0), inset >= 0.0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _keeps(p, i, f, planes, plane_c, q, exact):
+    """:func:`_project`'s keep of face f, and, when ``exact``, p[i] off f's edges by more than rounding (as
+    :func:`_in_plane` asks): a point on an edge lies as near the face across it, and the search's lowest id
+    decides which face answers, not the guess."""
+    if not _project(p, i, f, planes, plane_c, q)[0]:
+        return False
+    if not exact:
+        return True
+    h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
+    for k in range(1, 4):
+        hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
+        if hk * hk <= 1e-6 * h0 * h0 + 1e-18:
+            return False
+    return True
+
+
 @njit(cache=True, nogil=True)
 def _in_plane(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
     """For a point that :func:`_project` does not keep on face f: whether it projects into f and, within
@@ -185,7 +202,7 @@ def _inset2(p, i, f, planes, plane_c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
+def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen, exact):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
     the first face that keeps it (:func:`_project`, :func:`_in_plane`; its projection in q[i]), or -1."""
@@ -201,7 +218,7 @@ def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _project(p, i, g, planes, plane_c, q)[0] or _in_plane(
+        if _keeps(p, i, g, planes, plane_c, q, exact) or _in_plane(
             p, i, g, planes, plane_c, tri, adjacent, paired, plane_id, q, seen
         ):
             return g
@@ -228,6 +245,7 @@ def nearest_into(
     start,
     faces,
     box32,
+    exact,
 ):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
@@ -250,7 +268,10 @@ def nearest_into(
     same whichever face it is). Points left to the global search (outside the grid or farther than the reach from
     the surface) are marked in ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer
     its face than any face not adjacent to it (true near a part's surface; not for a point past the middle of a thin
-    sheet, or in a slot narrower than twice its distance): the search's answer otherwise.
+    sheet, or in a slot narrower than twice its distance): the search's answer otherwise. ``exact``: a guess is
+    kept only off its face's edges by more than rounding (:func:`_keeps`), so that the answer is the search's whatever
+    the guess, also for a point on a crease's edge (at distance 0 from both faces, whose normals differ); without
+    it such a point keeps its guess, as an ICP's step keeps the last step's face.
     """
     n = p.shape[0]
     margin = reach * cell
@@ -262,10 +283,10 @@ def nearest_into(
         f = ids[i]
         if f >= 0:
             g = f
-            if not _project(p, i, f, planes, plane_c, q)[0] and not _in_plane(
+            if not _keeps(p, i, f, planes, plane_c, q, exact) and not _in_plane(
                 p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen
             ):
-                g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen)
+                g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen, exact)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]
