@@ -325,3 +325,37 @@ def test_the_heap_thresholds_reach_this_process_and_the_ones_it_starts_unless_th
     assert took is glibc and seen == {k: str(v) if glibc else None for k, v in HEAP_VARIABLES.items()}
     took, seen = run(plain | {"MALLOC_TRIM_THRESHOLD_": "1000"})
     assert took is False and seen == {"MALLOC_MMAP_THRESHOLD_": None, "MALLOC_TRIM_THRESHOLD_": "1000"}
+
+
+def test_a_subset_registered_before_is_looked_up_to_the_bit(plate, objective, monkeypatch):
+    """An evaluator that registered a sensor at a place takes that sensor's rows for the next layout with the
+    same sensor at the same place (a hand-anchored candidate, a finalist plus one): the next layout's tables are
+    a fresh evaluator's, float for float, with one registration fewer per scan; the same sensor at another place
+    has other draws (its index keys its noise and brackets) and is registered again."""
+    import optipose.evaluate.subset_errors as subset_errors
+
+    moved = TILTED.copy()
+    moved[0, 3] += 0.002
+    first = _layout(None, None)
+    anchored = Layout((first.sensors[0], SensorPose("S2", moved)), name="anchored")
+    swapped = Layout((SensorPose("S1", moved), SensorPose("S2", DOWN)), name="swapped")
+    fresh = {}
+    for layout in (anchored, swapped):
+        with Evaluator(plate, objective, seed=2, executor=SerialExecutor()) as ev:
+            fresh[layout.name] = ev(layout)
+    registered, original = [], subset_errors.register_subset
+    monkeypatch.setattr(subset_errors, "register_subset", lambda *a, **k: registered.append(a[2]) or original(*a, **k))
+    with Evaluator(plate, objective, seed=2, executor=SerialExecutor()) as ev:
+        ev(first)
+        scans, counts = len(ev.tasks()), {}
+        for layout in (anchored, swapped):
+            before = len(registered)
+            result = ev(layout)
+            counts[layout.name] = len(registered) - before
+            pd.testing.assert_frame_equal(result.per_scan, fresh[layout.name].per_scan, check_exact=True)
+            pd.testing.assert_frame_equal(result.points, fresh[layout.name].points, check_exact=True)
+        again = ev(anchored)  # wholly known: nothing scanned or registered
+    assert counts == {"anchored": 2 * scans, "swapped": 3 * scans}
+    assert len(registered) == 3 * scans + 2 * scans + 3 * scans
+    pd.testing.assert_frame_equal(again.per_scan, fresh["anchored"].per_scan, check_exact=True)
+    pd.testing.assert_frame_equal(again.points, fresh["anchored"].points, check_exact=True)

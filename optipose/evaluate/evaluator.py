@@ -31,6 +31,7 @@ from optipose.parallel.executors import Executor, make_executor
 from optipose.evaluate.objective import Objective, load_objective
 from optipose.evaluate.protocol import Perturbations, perturbations
 from optipose.evaluate.statistics import summarize
+from optipose.evaluate.memo import Registered
 from optipose.evaluate.worker import WorkerSetup, record_chunk, run_chunk, run_item
 from optipose.model.layout import Layout, SensorPose
 from optipose.scan.scanner import registered_motion
@@ -158,6 +159,7 @@ class Evaluator:
             if reference_dir is None:  # with workers in other processes, the CAD-surface reference is built here once
                 self._shared, reference_dir = shared.acquire(self.setup.vertices, self.setup.faces)
             self.setup = replace(self.setup, reference_dir=reference_dir)
+        self._registered = Registered(self.setup)  # what it registered, for the layouts sharing those sensors
 
     def __enter__(self):
         return self
@@ -197,11 +199,15 @@ class Evaluator:
         subsets = _checked(layout, subsets)
         first, every = share
         tasks = self.tasks()[first::every]
+        todo, known, scanned = self._registered.plan(layout, subsets, [task[0] for task in tasks])
         t0 = time.perf_counter()
-        outputs = self.executor.map(
-            functools.partial(run_chunk, self.setup, layout, subsets=subsets), _chunks(tasks, self.jobs)
+        outputs = (
+            self.executor.map(functools.partial(run_chunk, self.setup, layout, subsets=todo), _chunks(tasks, self.jobs))
+            if scanned
+            else []
         )
-        return outputs, time.perf_counter() - t0
+        self._registered.add(layout, outputs)
+        return [*outputs, *([known] if known else [])], time.perf_counter() - t0
 
     def record(self, layout: Layout | list[np.ndarray], write) -> list[list]:
         """Scan ``layout`` at every orientation of the protocol as :meth:`__call__` scans it (the cell's sources,
@@ -256,17 +262,20 @@ def evaluate_many(items: list[tuple]) -> list[EvaluationResult]:
     work = []
     for evaluator, layout, subsets in items:
         layout = _as_layout(layout)
-        subsets = _checked(layout, subsets)
-        chunks = _chunks(evaluator.tasks(), evaluator.jobs)
-        work.append((evaluator, layout, [(evaluator.setup, layout, subsets, c) for c in chunks]))
+        tasks = evaluator.tasks()
+        todo, known, scanned = evaluator._registered.plan(layout, _checked(layout, subsets), [t[0] for t in tasks])
+        chunks = [(evaluator.setup, layout, todo, c) for c in _chunks(tasks, evaluator.jobs)] if scanned else []
+        work.append((evaluator, layout, chunks, [known] if known else []))
     if not work:
         return []
     t0 = time.perf_counter()
-    outputs = work[0][0].executor.map(run_item, [item for _, _, chunks in work for item in chunks])
+    outputs = work[0][0].executor.map(run_item, [item for _, _, chunks, _ in work for item in chunks])
     wall = time.perf_counter() - t0
     results, at = [], 0
-    for evaluator, layout, chunks in work:
-        results.append(evaluator.result(layout, [(list(outputs[at : at + len(chunks)]), wall)]))
+    for evaluator, layout, chunks, known in work:
+        mine = list(outputs[at : at + len(chunks)])
+        evaluator._registered.add(layout, mine)
+        results.append(evaluator.result(layout, [(mine + known, wall)]))
         at += len(chunks)
     return results
 

@@ -1,0 +1,91 @@
+"""What an evaluator has registered already, looked up for the next layout that has the same sensors in the same
+places.
+
+A sensor's scan at an orientation is a function of the evaluator's seed, the scan, the sensor's model and pose and its
+place in the layout (its index and its place in its model's group: its noise key, its bracket's calibration draw and
+the material's key follow them, :mod:`optipose.evaluate.worker`, :mod:`optipose.cell.scans`), never of the layout's
+other sensors. So is a subset's registration on the part's reference, started from identity. The selection's
+hand-anchored layouts keep hand sensors in their places, a (k−1) finalist plus one keeps the finalist's, and a
+verdict's draw evaluates a found layout beside the hand one that may share them: their subsets' rows are taken from
+the first evaluation that registered them, to the bit, instead of being scanned and registered again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from optipose.evaluate.assignment import all_subsets, subset_name
+from optipose.evaluate.worker import WorkerSetup, sensor_groups
+from optipose.model.layout import Layout
+
+__all__ = ["Registered", "sensor_keys"]
+
+_NO_TIME = {"scan": 0.0, "register": 0.0}
+
+
+def sensor_keys(layout: Layout, default) -> list[tuple]:
+    """Per sensor of ``layout``, what its scans depend on besides the scan: its index, its model's group and its
+    place there (:func:`~optipose.evaluate.worker.sensor_groups`; ``default`` the part's model), the model and
+    the pose's bytes."""
+    models = [s.sensor for s in layout.sensors]
+    keys: list = [None] * len(models)
+    for g, (model, indices) in enumerate(sensor_groups(models, default)):
+        for place, j in enumerate(indices):
+            keys[j] = (j, g, place, str(model), np.asarray(layout.poses[j], dtype=float).tobytes())
+    return keys
+
+
+class Registered:
+    """One evaluator's registered rows, per (scan, subset's sensor keys), and its sensors' point counts, per (scan,
+    sensor key). Off (every subset registered again) where a subset's rows would depend on more than its own
+    sensors' scans: a subset started where its sensors' own registrations put it (``subset_start = "combined"``),
+    whose rows are its singles' too."""
+
+    def __init__(self, setup: WorkerSetup):
+        self.default = setup.sensor
+        self.on = setup.registration.subset_start != "combined"
+        self._rows: dict = {}
+        self._points: dict = {}
+
+    def plan(self, layout: Layout, subsets: list[tuple] | None, scans: list[int]) -> tuple:
+        """(subsets to register, or ``None`` for every one; the known rows as one worker output, or ``None``;
+        whether the workers have anything to do) for ``layout`` at the scans ``scans`` (indices), ``subsets``
+        the wanted ones (``None``: every one)."""
+        if not self.on or not self._rows:
+            return subsets, None, True
+        every = all_subsets(len(layout))
+        wanted = every if subsets is None else subsets
+        keys = sensor_keys(layout, self.default)
+        known = [s for s in wanted if all((i, tuple(keys[j] for j in s)) in self._rows for i in scans)]
+        if not known:
+            return subsets, None, True
+        names = list(layout.names)
+        rows = [
+            self._rows[(i, tuple(keys[j] for j in s))]
+            | {"subset_index": every.index(s), "subset": subset_name(s, names)}
+            for i in scans
+            for s in known
+        ]
+        todo = [s for s in wanted if s not in known]
+        counted = all((i, key) in self._points for i in scans for key in keys)
+        points = []
+        if not todo and counted:  # nothing to scan: the point counts come from here too
+            points = [
+                self._points[(i, key)] | {"sensor_index": j, "sensor": names[j]}
+                for i in scans
+                for j, key in enumerate(keys)
+            ]
+        return todo, (rows, points, dict(_NO_TIME)), bool(todo) or not counted
+
+    def add(self, layout: Layout, outputs: list[tuple]) -> None:
+        """Keep the rows and point counts of the workers' ``outputs`` of ``layout``."""
+        if not self.on:
+            return
+        every = all_subsets(len(layout))
+        keys = sensor_keys(layout, self.default)
+        for rows, points, _ in outputs:
+            for row in rows:
+                subset = every[row["subset_index"]]
+                self._rows[(row["scan"], tuple(keys[j] for j in subset))] = row
+            for row in points:
+                self._points[(row["scan"], keys[row["sensor_index"]])] = row
