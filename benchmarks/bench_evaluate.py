@@ -211,7 +211,7 @@ def main() -> None:
         tasks = [one.tasks()[i] for i in picks]
         run_chunk(one.setup, layout, tasks[:1])  # build the scanner and reference
         t0 = time.perf_counter()
-        _, _, timing = run_chunk(one.setup, layout, tasks)
+        _, _, timing, _ = run_chunk(one.setup, layout, tasks)
         own = (time.perf_counter() - t0) / len(picks)
     print(
         f"optipose, one process, same orientations: {own:.2f} s per orientation "

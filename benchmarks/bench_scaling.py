@@ -66,7 +66,7 @@ def rung(axis: str, value: float) -> dict:
         run_chunk(ev.setup, layout, tasks[:1])  # builds the scanner and the reference
         setup = time.perf_counter() - t0
         t1 = time.perf_counter()
-        rows, points, timing = run_chunk(ev.setup, layout, tasks)
+        rows, points, timing, _ = run_chunk(ev.setup, layout, tasks)
         per = (time.perf_counter() - t1) / len(tasks)
     n_points = sum(r["n_points"] for r in points) / len(tasks)
     return {

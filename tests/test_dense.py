@@ -204,7 +204,7 @@ def test_the_evaluation_of_a_metre_long_part_casts_bounded_rays(tmp_path):
     part = load_part(path)  # a metre-long bar, with the conventional placement
     with Evaluator(part, reduced_objective(load_objective("paper").in_cell("ideal")), seed=0, jobs=1, quiet=True) as ev:
         assert ev.setup.motion.n_profiles <= SCAN_PROFILES
-        _, points, _ = run_chunk(ev.setup, part.layouts["conventional"], ev.tasks()[:1])
+        _, points, _, _ = run_chunk(ev.setup, part.layouts["conventional"], ev.tasks()[:1])
     columns = 3200  # the keyence-lj-x8080's points per profile
     assert 0 < max(p["n_points"] for p in points) <= SCAN_PROFILES * columns
     surrogate = Surrogate(part, turns=np.zeros((0, 3)))

@@ -149,7 +149,7 @@ def test_a_given_executor_is_used_and_left_open(plate, objective, serial):
     with Evaluator(plate, objective, seed=2, executor=executor) as ev:
         result = ev(_layout(None, None))
         tasks = ev.tasks()
-    assert [[t[0] for t in chunk] for chunk in executor.chunks] == [
+    assert [[t[0] for t in item[3]] for item in executor.chunks] == [
         [0, 4],
         [1, 5],
         [2],
@@ -330,7 +330,8 @@ def test_the_heap_thresholds_reach_this_process_and_the_ones_it_starts_unless_th
 def test_a_subset_registered_before_is_looked_up_to_the_bit(plate, objective, monkeypatch):
     """An evaluator that registered a sensor at a place takes that sensor's rows for the next layout with the
     same sensor at the same place (a hand-anchored candidate, a finalist plus one): the next layout's tables are
-    a fresh evaluator's, float for float, with one registration fewer per scan; the same sensor at another place
+    a fresh evaluator's, float for float, with one registration and one sensor's scan fewer per scan (the known
+    sensor's down-sampled cloud is registered with the new one's); the same sensor at another place
     has other draws (its index keys its noise and brackets) and is registered again."""
     import optipose.evaluate.subset_errors as subset_errors
 
@@ -345,6 +346,10 @@ def test_a_subset_registered_before_is_looked_up_to_the_bit(plate, objective, mo
             fresh[layout.name] = ev(layout)
     registered, original = [], subset_errors.register_subset
     monkeypatch.setattr(subset_errors, "register_subset", lambda *a, **k: registered.append(a[2]) or original(*a, **k))
+    scanned, clouds = [], subset_errors.scan_clouds
+    monkeypatch.setattr(
+        subset_errors, "scan_clouds", lambda cfg, scans, seed: scanned.append(len(scans)) or clouds(cfg, scans, seed)
+    )
     with Evaluator(plate, objective, seed=2, executor=SerialExecutor()) as ev:
         ev(first)
         scans, counts = len(ev.tasks()), {}
@@ -356,6 +361,7 @@ def test_a_subset_registered_before_is_looked_up_to_the_bit(plate, objective, mo
             pd.testing.assert_frame_equal(result.points, fresh[layout.name].points, check_exact=True)
         again = ev(anchored)  # wholly known: nothing scanned or registered
     assert counts == {"anchored": 2 * scans, "swapped": 3 * scans}
+    assert sum(scanned) == 2 * scans + 1 * scans + 2 * scans  # the anchored layout's first sensor is not scanned again
     assert len(registered) == 3 * scans + 2 * scans + 3 * scans
     pd.testing.assert_frame_equal(again.per_scan, fresh["anchored"].per_scan, check_exact=True)
     pd.testing.assert_frame_equal(again.points, fresh["anchored"].points, check_exact=True)

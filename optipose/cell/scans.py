@@ -163,7 +163,7 @@ class LiveCell:
         shifts = np.ascontiguousarray(shifts, dtype=float)
         out = [list(level) for level in levels]
         for j, scan in enumerate(levels[0]):
-            if not len(scan.points):
+            if scan is None or not len(scan.points):  # not scanned here (its cloud is known), or nothing seen
                 continue
             T = scan.T_O_S
             apex = (

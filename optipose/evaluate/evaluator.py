@@ -199,10 +199,17 @@ class Evaluator:
         subsets = _checked(layout, subsets)
         first, every = share
         tasks = self.tasks()[first::every]
-        todo, known, scanned = self._registered.plan(layout, subsets, [task[0] for task in tasks])
+        todo, known, scanned, given = self._registered.plan(layout, subsets, [task[0] for task in tasks])
+        keep = self._registered.on
         t0 = time.perf_counter()
         outputs = (
-            self.executor.map(functools.partial(run_chunk, self.setup, layout, subsets=todo), _chunks(tasks, self.jobs))
+            self.executor.map(
+                run_item,
+                [
+                    (self.setup, layout, todo, chunk, {t[0]: given[t[0]] for t in chunk if t[0] in given}, keep)
+                    for chunk in _chunks(tasks, self.jobs)
+                ],
+            )
             if scanned
             else []
         )
@@ -263,8 +270,15 @@ def evaluate_many(items: list[tuple]) -> list[EvaluationResult]:
     for evaluator, layout, subsets in items:
         layout = _as_layout(layout)
         tasks = evaluator.tasks()
-        todo, known, scanned = evaluator._registered.plan(layout, _checked(layout, subsets), [t[0] for t in tasks])
-        chunks = [(evaluator.setup, layout, todo, c) for c in _chunks(tasks, evaluator.jobs)] if scanned else []
+        todo, known, scanned, given = evaluator._registered.plan(
+            layout, _checked(layout, subsets), [t[0] for t in tasks]
+        )
+        # a draw's layouts are scanned in one map, not one after another: no cloud is kept for the next
+        chunks = [
+            (evaluator.setup, layout, todo, c, {t[0]: given[t[0]] for t in c if t[0] in given})
+            for c in _chunks(tasks, evaluator.jobs)
+        ]
+        chunks = chunks if scanned else []
         work.append((evaluator, layout, chunks, [known] if known else []))
     if not work:
         return []

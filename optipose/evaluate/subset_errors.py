@@ -45,21 +45,46 @@ def register_subset(worker, clouds, subset, reference, initial=None, start=None)
 
 
 def subset_rows(
-    worker, setup, scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label, point_rows
+    worker,
+    setup,
+    scans,
+    seed,
+    subsets,
+    numbers,
+    references,
+    zeros,
+    names,
+    i,
+    rpy,
+    offset,
+    label,
+    point_rows,
+    given=None,
+    kept=None,
 ) -> list[dict]:
     """The rows of scan ``i`` (set at ``rpy`` rad, ``offset`` m; noise seed ``seed``), one per subset of
     ``subsets`` (numbered ``numbers`` among them all), each registered on its reference and its cell's
-    ``zero`` taken off; each sensor's point counts are appended to ``point_rows``."""
+    ``zero`` taken off; each sensor's point counts are appended to ``point_rows``. ``given``: sensor index ->
+    (down-sampled cloud, point count) of the sensors not scanned (``None`` in ``scans``); ``kept``: a dict that
+    gets the scanned sensors' (i, j) -> (cloud, point count)."""
     cfg = setup.registration
-    clouds = scan_clouds(cfg, scans, seed)
-    for j, (scan, cloud) in enumerate(zip(scans, clouds)):
+    given = given or {}
+    down = scan_clouds(cfg, [s for s in scans if s is not None], seed)[::-1]
+    clouds, counts = [], []
+    for j, scan in enumerate(scans):
+        cloud, count = given[j] if scan is None else (down.pop(), len(scan.points))
+        if kept is not None and scan is not None:
+            kept[(i, j)] = (cloud, count)
+        clouds.append(cloud)
+        counts.append(count)
+    for j, (count, cloud) in enumerate(zip(counts, clouds)):
         point_rows.append(
             {
                 "scan": i,
                 "label": label,
                 "sensor_index": j,
                 "sensor": names[j],
-                "n_points": len(scan.points),
+                "n_points": count,
                 "n_points_down": len(cloud),
             }
         )

@@ -144,11 +144,13 @@ class _Worker:
         exact=False,
         noise=True,
         raw=False,
+        skip=(),
     ) -> list:
         """One scan per sensor (in the layout's order), each with its model (``None``: the part's), at
         orientation ``rpy`` (rad) and ``offset`` (m), in the cell; ``seed`` is the orientation's noise seed;
         ``exact``: as if the cell were ideal; ``noise=False``: exact surface points; ``raw``: keep each scan's raw
-        profiles, the heights the device reports."""
+        profiles, the heights the device reports; ``skip``: the indices of sensors not scanned (``None`` in their
+        place; the others' scans are those of the whole layout)."""
         groups = sensor_groups(models, self.setup.sensor)
         nominal, cell, mounted = poses, self.cell, False
         if (
@@ -157,7 +159,8 @@ class _Worker:
             poses, mounted, rpy = cell.poses(poses), True, cell.rpy(rpy, seed)
         scans = [None] * len(poses)
         for g, (model, idx) in enumerate(groups):
-            if not idx:
+            only = [place for place, j in enumerate(idx) if j not in skip]
+            if not only:
                 continue
             scanner = self._scanner(model)
             (out,) = scanner.scan_levels(
@@ -169,10 +172,11 @@ class _Worker:
                 noise=noise,
                 raw=raw,
                 built=[nominal[j] for j in idx] if mounted else None,
+                only=only if len(only) < len(idx) else None,
             )  # ... and the cell builds its cloud with the drawn pose
-            for j, scan in zip(idx, out):
-                scans[j] = scan
-        if cell is not None and not exact:
+            for place, scan in zip(only, out):
+                scans[idx[place]] = scan
+        if cell is not None and not exact and any(scan is not None for scan in scans):
             scans = self._in_cell(models, [scans], seed)[0]
         return scans
 
@@ -183,7 +187,8 @@ class _Worker:
         apex = [sc.sensor.apex_z for sc in scanners]
         motion = self.setup.motion
         lines = [sc.lines for sc in scanners]
-        return self.cell.perturb(scans, normals, apex, motion.offsets(), scans[0][0].T_O_P, motion.step, seed, lines)
+        T_O_P = next(scan.T_O_P for scan in scans[0] if scan is not None)
+        return self.cell.perturb(scans, normals, apex, motion.offsets(), T_O_P, motion.step, seed, lines)
 
     def zero(self, models: list, poses: list[np.ndarray], subsets, references) -> list[np.ndarray]:
         """Per subset, the constant bias Z (4, 4) a cell zeroed on a master part takes off, so that a later
@@ -262,14 +267,17 @@ def worker_for(setup: WorkerSetup) -> "_Worker":
 
 
 def run_chunk(
-    setup: WorkerSetup, layout: Layout, tasks: list[tuple], subsets=None, read=None
-) -> tuple[list[dict], list[dict], dict]:
+    setup: WorkerSetup, layout: Layout, tasks: list[tuple], subsets=None, read=None, given=None, keep=False
+) -> tuple[list[dict], list[dict], dict, dict]:
     """Scan and register a list of orientations of ``layout``.
 
     tasks : (scan index, rpy (3,) rad, offset (3,) m, noise seed, label) per orientation. subsets : the sensor
     subsets to register (index tuples; default every one), each row keeping its index among them all. read :
-    instead of scanning, ``read(i)`` gives scan ``i``'s scans, one per sensor (recorded ones).
-    Returns rows per (scan, subset), rows per (scan, sensor) and the seconds spent ("scan", "register").
+    instead of scanning, ``read(i)`` gives scan ``i``'s scans, one per sensor (recorded ones). given : scan index ->
+    {sensor index: (its down-sampled cloud, its point count)} known already (not scanned again); keep : return the
+    clouds of the sensors scanned here.
+    Returns rows per (scan, subset), rows per (scan, sensor), the seconds spent ("scan", "register") and the kept
+    clouds, (scan index, sensor index) -> (cloud, point count).
     """
     worker = worker_for(setup)
     poses, names, models = layout.poses, layout.names, [s.sensor for s in layout.sensors]
@@ -280,24 +288,40 @@ def run_chunk(
     numbers = [every.index(s) for s in subsets]
     references = worker.references(models, poses, subsets)
     zeros = worker.zero(models, poses, subsets, references)
-    rows, point_rows, timing = [], [], {"scan": 0.0, "register": 0.0}
+    rows, point_rows, timing, kept = [], [], {"scan": 0.0, "register": 0.0}, {}
     for i, rpy, offset, seed, label in tasks:
         t0 = time.perf_counter()
-        scans = read(i) if read else worker.scan(models, poses, seed, rpy=rpy, offset=offset)
+        known = (given or {}).get(i, {})
+        scans = read(i) if read else worker.scan(models, poses, seed, rpy=rpy, offset=offset, skip=known)
         t1 = time.perf_counter()
         rows += subset_rows(
-            worker, setup, scans, seed, subsets, numbers, references, zeros, names, i, rpy, offset, label, point_rows
+            worker,
+            setup,
+            scans,
+            seed,
+            subsets,
+            numbers,
+            references,
+            zeros,
+            names,
+            i,
+            rpy,
+            offset,
+            label,
+            point_rows,
+            known,
+            kept if keep else None,
         )
         timing["scan"] += t1 - t0
         timing["register"] += time.perf_counter() - t1
-    return rows, point_rows, timing
+    return rows, point_rows, timing, kept
 
 
 def run_item(item: tuple) -> tuple[list[dict], list[dict], dict]:
-    """:func:`run_chunk` of ``item``: (setup, layout, subsets, tasks), one of several layouts' or evaluators'
+    """:func:`run_chunk` of ``item``: (setup, layout, subsets, tasks[, given, keep]), one of several layouts' or evaluators'
     chunks in one map (:func:`optipose.evaluate.evaluator.evaluate_many`)."""
-    setup, layout, subsets, tasks = item
-    return run_chunk(setup, layout, tasks, subsets=subsets)
+    setup, layout, subsets, tasks, *known = item
+    return run_chunk(setup, layout, tasks, subsets, None, *known)
 
 
 def record_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple], write) -> list:

@@ -161,6 +161,7 @@ class Scanner:
         noise: bool = True,
         raw: bool = True,
         built: list[np.ndarray] | None = None,
+        only: list[int] | None = None,
     ) -> list[list[Scan]]:
         """:meth:`scan_many` at several noise levels at once: one list of scans per scale of ``noise_scales``,
         each as a scanner whose sensor's ``noise_sigma`` is that many times this one's would take it. The
@@ -170,13 +171,21 @@ class Scanner:
         built : per sensor, the pose (4×4 ``T_O_S``) its cloud is built with when it is not the pose it scans
             from — a bracket off its drawing: the device measures in its own frame and the cell turns that into
             O with the pose it believes (:func:`optipose.scan.cloud.rebuilt_with` of the scan, without the round
-            trip through the true pose); each scan's ``T_O_S`` is then that pose."""
+            trip through the true pose); each scan's ``T_O_S`` is then that pose.
+        only : the indices of ``poses`` to scan (default every one), each as it is scanned among them all (its noise
+            key is its index's): the scans of these alone."""
         if not isinstance(part_pose, PartPose):  # a caller of the old (rpy, centre, offset) arguments
             raise TypeError(f"part_pose must be a PartPose, not {type(part_pose).__name__}")
         poses = [validate_pose(T, f"sensor pose {i + 1}") for i, T in enumerate(poses)]
         seed = int(rng.integers(2**63)) if isinstance(rng, np.random.Generator) else int(rng or 0)
         T_O_P = part_pose.T_O_P
         shifts = motion.offsets()
+        # one nonzero 64-bit noise key per sensor of this scan (0 means no noise)
+        keys = [np.uint64(int(k) | 1) for k in np.random.default_rng([seed, 0x5CA7]).integers(1, 2**63, len(poses))]
+        keys = keys if noise else [np.uint64(0)] * len(poses)
+        if only is not None:
+            poses, keys = [poses[i] for i in only], [keys[i] for i in only]
+            built = None if built is None else [built[i] for i in only]
         views = [self._view(T, T_O_P) for T in poses]
         blocks = [
             (j, k0, min(k0 + self._block, len(shifts)))
@@ -185,9 +194,6 @@ class Scanner:
         ]
 
         run = self._pool.map if self._pool else map
-        # one nonzero 64-bit noise key per sensor of this scan (0 means no noise)
-        keys = [np.uint64(int(k) | 1) for k in np.random.default_rng([seed, 0x5CA7]).integers(1, 2**63, len(poses))]
-        keys = keys if noise else [np.uint64(0)] * len(poses)
         hits = list(run(lambda blk: self._block_hits(views[blk[0]], shifts, blk[1], blk[2]), blocks))
         built = poses if built is None else [validate_pose(T, f"built pose {i + 1}") for i, T in enumerate(built)]
         return [
