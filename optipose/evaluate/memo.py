@@ -24,7 +24,7 @@ from optipose.model.layout import Layout
 __all__ = ["Registered", "sensor_keys"]
 
 _NO_TIME = {"scan": 0.0, "register": 0.0}
-CLOUD_BYTES = 256 * 2**20  # the clouds one evaluator keeps: a selection's 18 layouts of 14 scans of part B take 110 MB
+CLOUD_BYTES = 256 * 2**20  # the clouds one evaluator keeps: all of a selection's on a part like B
 
 
 def sensor_keys(layout: Layout, default) -> list[tuple]:
