@@ -30,6 +30,20 @@ from optipose.verdict.confidence import Verdicts
 
 __all__ = ["SearchFolder", "save_cache", "load_cache"]
 
+# what a search writes from its surrogate's results on, each anew (the report's names: optipose.report.build)
+_REWRITTEN = (
+    "surrogate_scores.csv",
+    "selection.csv",
+    "validation",
+    "comparison.csv",
+    "verdict",
+    "verdict.csv",
+    "kinds.csv",
+    "report.html",
+    "report.md",
+    "report_figures",
+)
+
 
 class SearchFolder:
     """A search's result folder as the pipeline's sink (:class:`optipose.search.pipeline.ResultSink`):
@@ -40,7 +54,20 @@ class SearchFolder:
         self.folder.mkdir(parents=True, exist_ok=True)
 
     def start(self, part, objective, config, budget: str, seed: int, validation_seed: int) -> None:
-        """``config.toml``."""
+        """``config.toml``, after what an earlier search wrote here from its surrogate's results on is taken away
+        (:data:`_REWRITTEN`): this search writes its own, and a folder must not show another run's draws, kinds or
+        report beside this one's config. Its history and cache stay until this search writes its own (a resumed
+        search starts from the cache)."""
+        import shutil
+
+        for name in _REWRITTEN:
+            path = self.folder / name
+            if path.is_dir():
+                shutil.rmtree(path)
+            elif path.exists():
+                path.unlink()
+        for old in (self.folder / "layouts").glob("found_k*"):
+            old.unlink()
         _write_search_config(self.folder, part, objective, config, budget, seed, validation_seed)
 
     def load_cache(self, space_version: int) -> dict:
