@@ -430,26 +430,36 @@ def test_search_resume_with_a_damaged_cache_is_one_line_and_keeps_it(tmp_path):
 
 
 def test_a_search_into_a_used_folder_leaves_none_of_the_earlier_runs_results_but_its_cache(tmp_path):
-    """A search started in a folder an earlier one wrote (its 40 draws, kinds, report, found layouts) leaves there
-    only what it writes itself: a folder never shows another run's draws or kinds beside this run's config. The
-    history and the cache stay (a resumed search starts from the cache; this run rewrites both)."""
+    """A search started in a folder an earlier search wrote (its config says so; its 40 draws, kinds, report) leaves
+    there only what it writes itself: a folder never shows another run's draws or kinds beside this run's config.
+    The history, the cache and the layouts stay (a resumed search starts from the cache; the layouts are an
+    interrupted run's best so far, until this run writes its own). A folder no search wrote keeps everything."""
     from optipose.evaluate.objective import load_objective
     from optipose.io.search import SearchFolder
     from optipose.model.part import load_part
     from optipose.search.budgets import config_from_budget
 
-    earlier = ["verdict/draw-40/hand/per_scan.csv", "validation/hand/per_scan.csv", "layouts/found_k3.toml"]
-    earlier += ["layouts/found_k3.png", "kinds.csv", "verdict.csv", "report.md", "report_figures/a.png"]
-    for name in [*earlier, "layouts/hand.toml", "history.csv", "cache.npz"]:
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text("earlier")
-    SearchFolder(tmp_path).start(
-        load_part("part_b"), load_objective("paper").in_cell("ideal"), config_from_budget("quick", (1,)), "quick", 0, 1
-    )
-    assert not any((tmp_path / name).exists() for name in earlier)
-    assert not (tmp_path / "verdict").exists() and not (tmp_path / "report_figures").exists()
-    assert all((tmp_path / name).read_text() == "earlier" for name in ("layouts/hand.toml", "history.csv", "cache.npz"))
-    assert (tmp_path / "config.toml").exists()
+    earlier = ["verdict/draw-40/hand/per_scan.csv", "validation/hand/per_scan.csv", "kinds.csv", "verdict.csv"]
+    earlier += ["report.md", "report_figures/a.png", "selection.csv"]
+    kept = ["layouts/hand.toml", "layouts/found_k3.toml", "history.csv", "cache.npz"]
+    for folder, command in ((tmp_path / "search", "search"), (tmp_path / "other", "evaluate")):
+        for name in [*earlier, *kept]:
+            (folder / name).parent.mkdir(parents=True, exist_ok=True)
+            (folder / name).write_text("earlier")
+        (folder / "config.toml").write_text(f'command = "{command}"\n')
+        SearchFolder(folder).start(
+            load_part("part_b"),
+            load_objective("paper").in_cell("ideal"),
+            config_from_budget("quick", (1,)),
+            "quick",
+            0,
+            1,
+        )
+        assert all((folder / name).read_text() == "earlier" for name in kept)
+        assert 'command = "search"' in (folder / "config.toml").read_text()
+    assert not any((tmp_path / "search" / name).exists() for name in earlier)
+    assert not (tmp_path / "search" / "verdict").exists() and not (tmp_path / "search" / "report_figures").exists()
+    assert all((tmp_path / "other" / name).read_text() == "earlier" for name in earlier)  # not a search's folder
 
 
 # -- a mesh in inches, a mesh that is not a solid -------------------------------------------------------------

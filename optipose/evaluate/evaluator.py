@@ -273,7 +273,8 @@ def evaluate_many(items: list[tuple]) -> list[EvaluationResult]:
         todo, known, scanned, given = evaluator._registered.plan(
             layout, _checked(layout, subsets), [t[0] for t in tasks]
         )
-        # a draw's layouts are scanned in one map, not one after another: no cloud is kept for the next
+        # a draw's layouts are scanned in one map, not one after another, and each draw is an evaluator of its own:
+        # nothing is kept for another, what the evaluator kept before is taken
         chunks = [
             (evaluator.setup, layout, todo, c, {t[0]: given[t[0]] for t in c if t[0] in given})
             for c in _chunks(tasks, evaluator.jobs)
@@ -288,7 +289,6 @@ def evaluate_many(items: list[tuple]) -> list[EvaluationResult]:
     results, at = [], 0
     for evaluator, layout, chunks, known in work:
         mine = list(outputs[at : at + len(chunks)])
-        evaluator._registered.add(layout, mine)
         results.append(evaluator.result(layout, [(mine + known, wall)]))
         at += len(chunks)
     return results

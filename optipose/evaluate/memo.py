@@ -5,10 +5,10 @@ A sensor's scan at an orientation is a function of the evaluator's seed, the sca
 place in the layout (its index and its place in its model's group: its noise key, its bracket's calibration draw and
 the material's key follow them, :mod:`optipose.evaluate.worker`, :mod:`optipose.cell.scans`), never of the layout's
 other sensors. So is a subset's registration on the part's reference, started from identity. The selection's
-hand-anchored layouts keep hand sensors in their places, a (k−1) finalist plus one keeps the finalist's, and a
-verdict's draw evaluates a found layout beside the hand one that may share them: their subsets' rows are taken from
-the first evaluation that registered them, to the bit, instead of being registered again, and a subset with another
-sensor registers the known sensors' down-sampled clouds instead of scanning them again.
+hand-anchored layouts keep hand sensors in their places, and a (k−1) finalist plus one keeps the finalist's: their
+subsets' rows are taken from the first evaluation that registered them, to the bit, instead of being registered
+again, and a subset with another sensor registers the known sensors' down-sampled clouds instead of scanning them
+again. (A verdict's draw evaluates its layouts together in one map, an evaluator of its own: it takes nothing.)
 """
 
 from __future__ import annotations

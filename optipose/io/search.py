@@ -54,20 +54,24 @@ class SearchFolder:
         self.folder.mkdir(parents=True, exist_ok=True)
 
     def start(self, part, objective, config, budget: str, seed: int, validation_seed: int) -> None:
-        """``config.toml``, after what an earlier search wrote here from its surrogate's results on is taken away
-        (:data:`_REWRITTEN`): this search writes its own, and a folder must not show another run's draws, kinds or
-        report beside this one's config. Its history and cache stay until this search writes its own (a resumed
-        search starts from the cache)."""
+        """``config.toml``; in a folder an earlier search wrote (its ``config.toml`` says so), after what that search
+        wrote from its surrogate's results on is taken away (:data:`_REWRITTEN`): this search writes its own, and a
+        folder must not show another run's draws, kinds or report beside this one's config. Its history, cache and
+        layouts stay until this search writes its own (a resumed search starts from the cache; the layouts are the
+        best so far of an interrupted one). A folder no search wrote is left as it is."""
         import shutil
+        import tomllib
 
-        for name in _REWRITTEN:
+        try:
+            earlier = tomllib.loads((self.folder / "config.toml").read_text()).get("command") == "search"
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            earlier = False
+        for name in _REWRITTEN if earlier else ():
             path = self.folder / name
             if path.is_dir():
                 shutil.rmtree(path)
             elif path.exists():
                 path.unlink()
-        for old in (self.folder / "layouts").glob("found_k*"):
-            old.unlink()
         _write_search_config(self.folder, part, objective, config, budget, seed, validation_seed)
 
     def load_cache(self, space_version: int) -> dict:

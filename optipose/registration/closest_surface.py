@@ -24,6 +24,8 @@ _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
 _KEEP_NEAR = 0.25e-3
 _PATCH = 16  # faces of one plane a point's disc may cover before the search decides instead
 _FOLD = 1e-8  # m: how far off a face's plane the face across an edge must reach to turn away from it
+# m: a point this near a face's plane lies on it (rounding of points computed on it; far below any feature of a part)
+_ON_FACE = 1e-12
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -78,19 +80,20 @@ def _project(p, i, f, planes, plane_c, q):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _keeps(p, i, f, planes, plane_c, q, exact):
-    """:func:`_project`'s keep of face f, and, when ``exact``, p[i] off f's edges by more than rounding (as
-    :func:`_in_plane` asks): a point on an edge lies as near the face across it, and the search's lowest id
-    decides which face answers, not the guess."""
-    if not _project(p, i, f, planes, plane_c, q)[0]:
-        return False
-    if not exact:
-        return True
+def _on_face(p, i, f, planes, plane_c, q):
+    """Whether p[i] lies on face f (within ``_ON_FACE`` of its plane) and inside its edges by more than rounding
+    (a nanometre); then it is its own closest point on the mesh, whatever the mesh around it (no face but one through
+    the point can be as near), and its projection goes into q[i]. A point on an edge lies as near the face across
+    it, and the search's lowest id decides which answers."""
     h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
+    if abs(h0) > _ON_FACE:
+        return False
     for k in range(1, 4):
         hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
-        if hk * hk <= 1e-6 * h0 * h0 + 1e-18:
+        if hk <= 0.0 or hk * hk <= 1e-18:
             return False
+    for j in range(3):
+        q[i, j] = p[i, j] - h0 * planes[f, 0, j]
     return True
 
 
@@ -202,7 +205,7 @@ def _inset2(p, i, f, planes, plane_c):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen, exact):
+def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen):
     """From face f toward the face p[i] projects into: across the edge it lies farthest outside of, to the
     face on the other side (``adjacent`` (f, 3): across edge k, -1 for none), at most ``_WALK`` faces. Returns
     the first face that keeps it (:func:`_project`, :func:`_in_plane`; its projection in q[i]), or -1."""
@@ -218,7 +221,7 @@ def _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen, ex
         g = adjacent[g, k_out]
         if g < 0:
             return -1
-        if _keeps(p, i, g, planes, plane_c, q, exact) or _in_plane(
+        if _project(p, i, g, planes, plane_c, q)[0] or _in_plane(
             p, i, g, planes, plane_c, tri, adjacent, paired, plane_id, q, seen
         ):
             return g
@@ -269,9 +272,10 @@ def nearest_into(
     the surface) are marked in ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer
     its face than any face not adjacent to it (true near a part's surface; not for a point past the middle of a thin
     sheet, or in a slot narrower than twice its distance): the search's answer otherwise. ``exact``: a guess is
-    kept only off its face's edges by more than rounding (:func:`_keeps`), so that the answer is the search's whatever
-    the guess, also for a point on a crease's edge (at distance 0 from both faces, whose normals differ); without
-    it such a point keeps its guess, as an ICP's step keeps the last step's face.
+    kept only for a point on the face, off its edges (:func:`_on_face`: the surrogate's voxel centroids of one face of
+    a noise-free scan), and every other point is searched, so that the answer is the search's whatever the guess and
+    whatever the mesh: also a point on a crease's edge (at distance 0 from both faces, whose normals differ), which
+    the tests above keep on its guess, as an ICP's step keeps the last step's face.
     """
     n = p.shape[0]
     margin = reach * cell
@@ -281,12 +285,14 @@ def nearest_into(
     seen = np.empty(_PATCH, np.int64)  # the plane test's faces, one buffer for every point
     for i in range(n):
         f = ids[i]
-        if f >= 0:
+        if f >= 0 and exact:
+            g = f if _on_face(p, i, f, planes, plane_c, q) else -1
+        elif f >= 0:
             g = f
-            if not _keeps(p, i, f, planes, plane_c, q, exact) and not _in_plane(
+            if not _project(p, i, f, planes, plane_c, q)[0] and not _in_plane(
                 p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen
             ):
-                g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen, exact)
+                g = _walk(p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen)
             if g >= 0:
                 ids[i] = g
                 nrm[i, 0], nrm[i, 1], nrm[i, 2] = planes[g, 0, 0], planes[g, 0, 1], planes[g, 0, 2]

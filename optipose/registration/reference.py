@@ -160,9 +160,10 @@ class SurfaceReference:
         """Closest surface points (n, 3), face normals (n, 3) and face ids (n,), searching globally only
         where it must.
 
-        ids : a guess of each point's face, if known (-1: not known); the answer is the search's whatever the guess
-        (an ICP's steps keep the last step's face also on an edge: :meth:`nearest_into`). A point that lies
-        inside its face by more than twice its distance keeps it (:meth:`follow`), as does one whose disc of that radius
+        ids : a guess of each point's face, if known (-1: not known): kept for a point that lies on it, off its edges,
+        every other point searched, so the answer is the search's whatever the guess. An ICP's step
+        (:meth:`nearest_into`) also keeps the last step's face for a point that lies
+        inside its face by more than twice its distance (:meth:`follow`), as for one whose disc of that radius
         the faces of its plane around it hold (within 0.25 mm of the plane). Any other point is searched exactly among
         the faces listed in the grid cells around it, out to a millimetre (two cells of 0.5 mm)
         (:func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
@@ -180,8 +181,8 @@ class SurfaceReference:
     ) -> None:
         """:meth:`nearest` into the caller's arrays: points (m, 3) float64 contiguous, ids (m,) int64 (the
         guesses, each -1 or a face, then the answer), q and n (m, 3), ``open_`` (m,) bool all False (and so
-        again on return). ``exact=False`` (an ICP's step): a point on the edge of its guessed face keeps it, where
-        the search would give the lowest id of the faces it ties."""
+        again on return). ``exact=False`` (an ICP's step): a point near its guessed face keeps it by the tests
+        :meth:`nearest` names, also on its edge, where the search would give the lowest id of the faces it ties."""
         from optipose.registration.closest_surface import nearest_into
 
         if nearest_into(
