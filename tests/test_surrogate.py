@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,8 +14,7 @@ from optipose.model.part import load_part
 from optipose.registration.reference import SurfaceReference
 from optipose.registration import register, voxel_down
 from optipose.scan.scanner import PartPose, part_scanner
-from optipose.search.space import PoseSpace
-from optipose.search.surrogate import Surrogate, SensorInfo, bias_rotation, predicted_stats, protocol_turns
+from optipose.search.surrogate import Surrogate, SensorInfo, bias_rotation, predicted_stats
 from optipose.transforms import invert_T, matrix_to_rpy
 
 # orientations of the part (deg): the protocol's ends and a few in between
@@ -231,51 +229,3 @@ def test_a_subset_met_before_is_looked_up_with_the_same_numbers():
             assert np.array_equal(getattr(looked_up, name), getattr(computed, name)), (order, name)
         assert looked_up.score == computed.score and looked_up.best_subset == computed.best_subset
     assert len(memo) == 3 + 2 + 2 + 1 + 0  # S1 S2 S1S2; S3 S1S3; S2S3 S1S2S3; S3S1 (another order); S2 met already
-
-
-def _same(a, b) -> bool:
-    """Two records of arrays (a :class:`SensorInfo`, its :class:`CellMaps`) equal to the last bit."""
-    from dataclasses import fields, is_dataclass
-
-    if is_dataclass(a):
-        return type(a) is type(b) and all(_same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
-    if isinstance(a, np.ndarray):
-        return isinstance(b, np.ndarray) and a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
-    return a == b
-
-
-@pytest.mark.parametrize("name", ["part_a", "part_b", "part_c"])
-def test_the_faces_the_scan_hit_only_speed_up_the_closest_points(name, monkeypatch):
-    """The voxel bias's closest points start from the face each voxel's first point hit: the same information, bias
-    and cell maps, to the last bit, as a search from no face, for the hand sensors and the found ones of the
-    reference run (whose views are oblique, edge-on, across the part's creases; part A's put voxel centroids on a
-    crease's edge, where a kept guess changed the answer)."""
-    from optipose.cell.scans import CellSetup
-    from optipose.model.layout import load_layout
-    from optipose.registration.reference import SurfaceReference as Reference
-
-    part = load_part(name)
-    objective = load_objective("paper")
-    surrogate = Surrogate(
-        part,
-        voxel=objective.registration.voxel_size,
-        turns=protocol_turns(objective),
-        cell=CellSetup.of(objective.cell, part),
-    )
-    found = load_layout(Path(__file__).parents[1] / "results" / "reference" / name / "layouts" / "found_k3.toml")
-    space = PoseSpace.around(np.asarray(part.mesh.bounds), 0.005, 60.0)
-    # and some of DIRECT's first centres, which on part A put voxel centroids on a crease's edge
-    direct = [space.to_pose(np.array(u) / 6) for u in ([1, 3, 3, 1, 3, 3], [3, 3, 3, 1, 3, 3], [3, 3, 5, 5, 3, 3])]
-    poses = [*part.layouts["hand"].poses, *found.poses, *direct]
-    guessed = [surrogate.info(T) for T in poses]
-    original, calls = Reference.nearest, []
-
-    def unguessed(self, points, ids=None):
-        calls.append(ids is not None and bool(np.any(np.asarray(ids) >= 0)))  # it was given faces
-        return original(self, points)
-
-    monkeypatch.setattr(Reference, "nearest", unguessed)
-    searched = [surrogate.info(T) for T in poses]
-    assert calls and all(calls)  # every closest-point search of the bias was given faces, and searched without
-    assert all(_same(g, s) for g, s in zip(guessed, searched))
-    assert all(g.cell is not None and len(g.G) for g in guessed[: -len(direct)])  # the hand's and found sensors see it

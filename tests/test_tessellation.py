@@ -189,39 +189,3 @@ def test_a_point_over_an_edge_inside_a_plane_gets_one_answer_whatever_its_guess(
         np.testing.assert_array_equal(ids, ids0)
         np.testing.assert_array_equal(q, q0)
         np.testing.assert_array_equal(n, n0)
-
-
-def test_a_point_on_a_crease_gets_the_searched_face_whatever_the_guess():
-    """A point on a crease's edge (a box's, at distance 0 from both faces, whose normals differ) gets from
-    ``nearest`` the face, point and normal of a search from no guess, whichever face it is guessed on (part A's
-    voxel centroids lie there, and a kept guess moved the surrogate's answer); an ICP's step
-    (``nearest_into``, not exact) keeps its guess there, so the two do differ on these points."""
-    rng = np.random.default_rng(5)
-    box = trimesh.creation.box((10 * MM, 10 * MM, 10 * MM))
-    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
-    mesh = trimesh.Trimesh(box.vertices @ rotation.T + 0.03, box.faces, process=False)
-    reference = SurfaceReference(mesh.vertices, mesh.faces)
-    adjacent, plane = reference.arrays()["adjacent"], reference.arrays()["plane_id"]
-    points, own, across = [], [], []
-    for f in range(len(mesh.faces)):
-        for k in range(3):
-            g = adjacent[f, k]
-            if g >= 0 and plane[g] != plane[f]:  # a crease
-                a, b = mesh.vertices[mesh.faces[f, k]], mesh.vertices[mesh.faces[f, (k + 1) % 3]]
-                for t in rng.uniform(0.2, 0.8, 4):
-                    points.append(a + t * (b - a))
-                    own.append(f)
-                    across.append(g)
-    points = np.array(points)
-    q0, n0, ids0 = reference.nearest(points)
-    kept = 0
-    for guess in (own, across):
-        guess = np.array(guess, dtype=np.int64)
-        q, n, ids = reference.nearest(points, guess)
-        np.testing.assert_array_equal(ids, ids0)
-        np.testing.assert_array_equal(q, q0)
-        np.testing.assert_array_equal(n, n0)
-        stepped, open_ = guess.copy(), np.zeros(len(points), dtype=bool)
-        reference.nearest_into(points, stepped, np.empty_like(points), np.empty_like(points), open_)
-        kept += int(np.sum(stepped != ids0))
-    assert kept > 0

@@ -24,8 +24,6 @@ _CREASE_COS = float(np.cos(np.deg2rad(CREASE_DEG)))
 _KEEP_NEAR = 0.25e-3
 _PATCH = 16  # faces of one plane a point's disc may cover before the search decides instead
 _FOLD = 1e-8  # m: how far off a face's plane the face across an edge must reach to turn away from it
-# m: a point this near a face's plane lies on it (rounding of points computed on it; far below any feature of a part)
-_ON_FACE = 1e-12
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -77,24 +75,6 @@ def _project(p, i, f, planes, plane_c, q):
     for j in range(3):
         q[i, j] = p[i, j] - h0 * planes[f, 0, j]
     return inset > 2.0 * abs(h0), inset >= 0.0
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _on_face(p, i, f, planes, plane_c, q):
-    """Whether p[i] lies on face f (within ``_ON_FACE`` of its plane) and inside its edges by more than rounding
-    (a nanometre); then it is its own closest point on the mesh, whatever the mesh around it (no face but one through
-    the point can be as near), and its projection goes into q[i]. A point on an edge lies as near the face across
-    it, and the search's lowest id decides which answers."""
-    h0 = planes[f, 0, 0] * p[i, 0] + planes[f, 0, 1] * p[i, 1] + planes[f, 0, 2] * p[i, 2] - plane_c[f, 0]
-    if abs(h0) > _ON_FACE:
-        return False
-    for k in range(1, 4):
-        hk = planes[f, k, 0] * p[i, 0] + planes[f, k, 1] * p[i, 1] + planes[f, k, 2] * p[i, 2] - plane_c[f, k]
-        if hk <= 0.0 or hk * hk <= 1e-18:
-            return False
-    for j in range(3):
-        q[i, j] = p[i, j] - h0 * planes[f, 0, j]
-    return True
 
 
 @njit(cache=True, nogil=True)
@@ -248,7 +228,6 @@ def nearest_into(
     start,
     faces,
     box32,
-    exact,
 ):
     """Closest points of p (n, 3) on a mesh into q (n, 3), their normals into ``nrm`` (n, 3); ``ids``
     (n,) holds a guess of each point's face (-1: none) and gets the answer. Returns how many points are
@@ -271,11 +250,7 @@ def nearest_into(
     same whichever face it is). Points left to the global search (outside the grid or farther than the reach from
     the surface) are marked in ``open``. The tests that keep a guess or a walked-to face trust a point to lie nearer
     its face than any face not adjacent to it (true near a part's surface; not for a point past the middle of a thin
-    sheet, or in a slot narrower than twice its distance): the search's answer otherwise. ``exact``: a guess is
-    kept only for a point on the face, off its edges (:func:`_on_face`: the surrogate's voxel centroids of one face of
-    a noise-free scan), and every other point is searched, so that the answer is the search's whatever the guess and
-    whatever the mesh: also a point on a crease's edge (at distance 0 from both faces, whose normals differ), which
-    the tests above keep on its guess, as an ICP's step keeps the last step's face.
+    sheet, or in a slot narrower than twice its distance): the search's answer otherwise.
     """
     n = p.shape[0]
     margin = reach * cell
@@ -285,9 +260,7 @@ def nearest_into(
     seen = np.empty(_PATCH, np.int64)  # the plane test's faces, one buffer for every point
     for i in range(n):
         f = ids[i]
-        if f >= 0 and exact:
-            g = f if _on_face(p, i, f, planes, plane_c, q) else -1
-        elif f >= 0:
+        if f >= 0:
             g = f
             if not _project(p, i, f, planes, plane_c, q)[0] and not _in_plane(
                 p, i, f, planes, plane_c, tri, adjacent, paired, plane_id, q, seen

@@ -160,10 +160,8 @@ class SurfaceReference:
         """Closest surface points (n, 3), face normals (n, 3) and face ids (n,), searching globally only
         where it must.
 
-        ids : a guess of each point's face, if known (-1: not known): kept for a point that lies on it, off its edges,
-        every other point searched, so the answer is the search's whatever the guess. An ICP's step
-        (:meth:`nearest_into`) also keeps the last step's face for a point that lies
-        inside its face by more than twice its distance (:meth:`follow`), as for one whose disc of that radius
+        ids : each point's face at the previous ICP step, if known (-1: not known). A point that lies
+        inside its face by more than twice its distance keeps it (:meth:`follow`), as does one whose disc of that radius
         the faces of its plane around it hold (within 0.25 mm of the plane). Any other point is searched exactly among
         the faces listed in the grid cells around it, out to a millimetre (two cells of 0.5 mm)
         (:func:`optipose.registration.closest_surface.nearest_into`): it gets the closest face's float64 projection,
@@ -173,16 +171,15 @@ class SurfaceReference:
         points = np.ascontiguousarray(points, dtype=np.float64)
         ids = _face_hints(ids, len(points), len(self.faces))
         q, n, open_ = np.empty((len(points), 3)), np.empty((len(points), 3)), np.zeros(len(points), dtype=bool)
-        self.nearest_into(points, ids, q, n, open_, exact=True)
+        self.nearest_into(points, ids, q, n, open_)
         return q, n, ids
 
     def nearest_into(
-        self, points: np.ndarray, ids: np.ndarray, q: np.ndarray, n: np.ndarray, open_: np.ndarray, exact: bool = False
+        self, points: np.ndarray, ids: np.ndarray, q: np.ndarray, n: np.ndarray, open_: np.ndarray
     ) -> None:
         """:meth:`nearest` into the caller's arrays: points (m, 3) float64 contiguous, ids (m,) int64 (the
         guesses, each -1 or a face, then the answer), q and n (m, 3), ``open_`` (m,) bool all False (and so
-        again on return). ``exact=False`` (an ICP's step): a point near its guessed face keeps it by the tests
-        :meth:`nearest` names, also on its edge, where the search would give the lowest id of the faces it ties."""
+        again on return)."""
         from optipose.registration.closest_surface import nearest_into
 
         if nearest_into(
@@ -199,7 +196,6 @@ class SurfaceReference:
             self._plane_id,
             *self._grid(),
             self._box32,
-            exact,
         ):
             far = np.flatnonzero(open_)
             q[far], n[far], ids[far] = self._far(points[far])

@@ -8,21 +8,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["voxel_centroids", "voxel_centroids_first"]
+__all__ = ["voxel_centroids"]
 
 
 @njit(cache=True, nogil=True)
 def voxel_centroids(points, size, origin):
     """Centroids (m, 3) of the points (n, 3) in each cube of side ``size`` of the grid whose corner is at
-    ``origin`` (3,), in the voxels' sorted key order: :func:`voxel_centroids_first` without the first points."""
-    return voxel_centroids_first(points, size, origin)[0]
-
-
-@njit(cache=True, nogil=True)
-def voxel_centroids_first(points, size, origin):
-    """Centroids (m, 3) of the points (n, 3) in each cube of side ``size`` of the grid whose corner is at
-    ``origin`` (3,), in the voxels' sorted key order, and the index (m,) of each voxel's first point (a guess of
-    its closest face, where the points carry the faces they hit).
+    ``origin`` (3,), in the voxels' sorted key order.
 
     Same sums in the same order as ``np.unique`` + ``np.bincount`` (each voxel adds its points in input
     order), so the result is bit-identical. A scan runs along its profiles, so consecutive points mostly
@@ -30,7 +22,7 @@ def voxel_centroids_first(points, size, origin):
     """
     n = points.shape[0]
     if n == 0:
-        return np.empty((0, 3), np.float64), np.empty(0, np.int64)
+        return np.empty((0, 3), np.float64)
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
     low = np.empty(3, np.float64)
@@ -63,7 +55,6 @@ def voxel_centroids_first(points, size, origin):
     keys = np.empty(runs, np.int64)  # voxel -> key
     sums = np.zeros((runs, 3), np.float64)
     counts = np.zeros(runs, np.int64)
-    first = np.empty(runs, np.int64)  # voxel -> its first point
     m = 0
     v = -1
     s0 = s1 = s2 = 0.0  # the current run's voxel sums, in registers: the same additions in the same order
@@ -80,7 +71,6 @@ def voxel_centroids_first(points, size, origin):
                     v = m
                     table[h] = v
                     keys[v] = key[i]
-                    first[v] = i
                     m += 1
                     break
                 if keys[v] == key[i]:
@@ -95,10 +85,8 @@ def voxel_centroids_first(points, size, origin):
     counts[v] = c
     order = np.argsort(keys[:m])
     out = np.empty((m, 3), np.float64)
-    at = np.empty(m, np.int64)
     for k in range(m):
         v = order[k]
-        at[k] = first[v]
         for j in range(3):
             out[k, j] = sums[v, j] / counts[v]
-    return out, at
+    return out

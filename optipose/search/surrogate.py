@@ -193,14 +193,13 @@ class Surrogate:
         # the number of points a full-fidelity scan puts there; its tangential spread does not matter
         var = self.full_sensor.noise_sigma**2 / inten / (counts * self.scale) + self.extra_variance
         J = np.hstack([np.cross(p, n), n]) / np.sqrt(var)[:, None]
-        A, G, turned = self._bias(scan.points, scan.face)
+        A, G, turned = self._bias(scan.points)
         cell = None if self.cell is None else sensor_maps(self.cell, turned, T_O_S, float(np.mean(counts)) * self.scale)
         return SensorInfo(J.T @ J, int(round(len(scan) * self.scale)), len(first), A, G, cell=cell)
 
-    def _bias(self, points: np.ndarray, faces: np.ndarray) -> tuple:
+    def _bias(self, points: np.ndarray) -> tuple:
         """ΣJᵀJ and, per turn, ΣJᵀr of the voxel centroids against the CAD surface (see module doc); and, for the
-        cell term, the centroids, normals, faces and turn at the nominal orientation and each turn. ``faces``: the
-        face each point hit."""
+        cell term, the centroids, normals, faces and turn at the nominal orientation and each turn."""
         if not len(self.motions):
             return None, None, []
         self.ready()
@@ -208,7 +207,7 @@ class Surrogate:
         for m, T in enumerate([np.eye(4), *self.motions]):  # the master scan's nominal orientation first
             if m == 0 and self.cell is None:
                 continue
-            v, n, r, J, face = self._turned(points, faces, T)
+            v, n, r, J, face = self._turned(points, T)
             if self.cell is not None:
                 turned.append((v, n, face, T[:3, :3]))
             if m > 0:
@@ -216,18 +215,18 @@ class Surrogate:
                 A += J.T @ J / len(self.motions)
         return A, G, turned
 
-    def _turned(self, points: np.ndarray, faces: np.ndarray, T: np.ndarray) -> tuple:
+    def _turned(self, points: np.ndarray, T: np.ndarray) -> tuple:
         """The points turned by ``T``, voxelised on the grid at O's origin and turned back: the voxel
         centroids v (in the part's frame), their surface normals n, signed distances r to the CAD surface,
-        point-to-plane rows J = [(v − c) × n, n] about the rotation centre c, and their closest faces (searched
-        from the face the voxel's first point hit: the search's answer, found several times sooner)."""
-        from optipose.registration.voxels import voxel_centroids_first
+        point-to-plane rows J = [(v − c) × n, n] about the rotation centre c, and their closest faces."""
+        from optipose.registration.voxels import voxel_centroids
 
-        turned, first = voxel_centroids_first(
-            np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3)
-        )
+        turned = voxel_centroids(np.ascontiguousarray(points @ T[:3, :3].T + T[:3, 3]), self.voxel, np.zeros(3))
         v = (turned - T[:3, 3]) @ T[:3, :3]  # back in the part's frame
-        q, n, face = self._reference.nearest(v, np.asarray(faces, dtype=np.int64)[first])
+        # searched, not guessed from the faces the scan hit: a centroid on a crease's edge (part A's scans put some there)
+        # lies at distance 0 from both faces; a kept guess is the other face than the search's (the lowest id), with
+        # another normal, and the search moves
+        q, n, face = self._reference.nearest(v)
         return v, n, np.einsum("ij,ij->i", v - q, n), np.hstack([np.cross(v - self.centre, n), n]), face
 
 
