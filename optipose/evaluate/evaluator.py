@@ -198,23 +198,22 @@ class Evaluator:
         layout = _as_layout(layout)
         subsets = _checked(layout, subsets)
         first, every = share
-        tasks = self.tasks()[first::every]
-        todo, known, scanned, given = self._registered.plan(layout, subsets, [task[0] for task in tasks])
-        keep = self._registered.on
+        items, known = self._items(layout, subsets, self.tasks()[first::every], keep=self._registered.on)
         t0 = time.perf_counter()
-        outputs = (
-            self.executor.map(
-                run_item,
-                [
-                    (self.setup, layout, todo, chunk, {t[0]: given[t[0]] for t in chunk if t[0] in given}, keep)
-                    for chunk in _chunks(tasks, self.jobs)
-                ],
-            )
-            if scanned
-            else []
-        )
+        outputs = self.executor.map(run_item, items) if items else []
         self._registered.add(layout, outputs)
-        return [*outputs, *([known] if known else [])], time.perf_counter() - t0
+        return [*outputs, *known], time.perf_counter() - t0
+
+    def _items(self, layout: Layout, subsets, tasks: list[tuple], keep: bool) -> tuple[list[tuple], list[tuple]]:
+        """The workers' items (:func:`~optipose.evaluate.worker.run_item`) of ``layout`` at ``tasks``, each with the
+        clouds this evaluator kept of its scans (``keep``: the workers return theirs), and what it registered
+        already as worker outputs (:class:`~optipose.evaluate.memo.Registered`); no item when that is all."""
+        todo, known, scanned, given = self._registered.plan(layout, subsets, [t[0] for t in tasks])
+        items = [
+            (self.setup, layout, todo, chunk, {t[0]: given[t[0]] for t in chunk if t[0] in given}, keep)
+            for chunk in (_chunks(tasks, self.jobs) if scanned else [])
+        ]
+        return items, [known] if known else []
 
     def record(self, layout: Layout | list[np.ndarray], write) -> list[list]:
         """Scan ``layout`` at every orientation of the protocol as :meth:`__call__` scans it (the cell's sources,
@@ -269,18 +268,10 @@ def evaluate_many(items: list[tuple]) -> list[EvaluationResult]:
     work = []
     for evaluator, layout, subsets in items:
         layout = _as_layout(layout)
-        tasks = evaluator.tasks()
-        todo, known, scanned, given = evaluator._registered.plan(
-            layout, _checked(layout, subsets), [t[0] for t in tasks]
-        )
         # a draw's layouts are scanned in one map, not one after another, and each draw is an evaluator of its own:
         # nothing is kept for another, what the evaluator kept before is taken
-        chunks = [
-            (evaluator.setup, layout, todo, c, {t[0]: given[t[0]] for t in c if t[0] in given})
-            for c in _chunks(tasks, evaluator.jobs)
-        ]
-        chunks = chunks if scanned else []
-        work.append((evaluator, layout, chunks, [known] if known else []))
+        chunks, known = evaluator._items(layout, _checked(layout, subsets), evaluator.tasks(), keep=False)
+        work.append((evaluator, layout, chunks, known))
     if not work:
         return []
     t0 = time.perf_counter()

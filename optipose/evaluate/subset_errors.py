@@ -68,16 +68,13 @@ def subset_rows(
     (down-sampled cloud, point count) of the sensors not scanned (``None`` in ``scans``); ``kept``: a dict that
     gets the scanned sensors' (i, j) -> (cloud, point count)."""
     cfg = setup.registration
-    given = given or {}
-    down = scan_clouds(cfg, [s for s in scans if s is not None], seed)[::-1]
-    clouds, counts = [], []
+    down = iter(scan_clouds(cfg, [s for s in scans if s is not None], seed))
+    clouds = []
     for j, scan in enumerate(scans):
-        cloud, count = given[j] if scan is None else (down.pop(), len(scan.points))
+        cloud, count = given[j] if scan is None else (next(down), len(scan.points))
         if kept is not None and scan is not None:
             kept[(i, j)] = (cloud, count)
         clouds.append(cloud)
-        counts.append(count)
-    for j, (count, cloud) in enumerate(zip(counts, clouds)):
         point_rows.append(
             {
                 "scan": i,

@@ -320,8 +320,8 @@ def run_chunk(
 def run_item(item: tuple) -> tuple[list[dict], list[dict], dict]:
     """:func:`run_chunk` of ``item``: (setup, layout, subsets, tasks[, given, keep]), one of several layouts' or evaluators'
     chunks in one map (:func:`optipose.evaluate.evaluator.evaluate_many`)."""
-    setup, layout, subsets, tasks, *known = item
-    return run_chunk(setup, layout, tasks, subsets, None, *known)
+    setup, layout, subsets, tasks, *given_keep = item
+    return run_chunk(setup, layout, tasks, subsets, None, *given_keep)
 
 
 def record_chunk(setup: WorkerSetup, layout: Layout, tasks: list[tuple], write) -> list:

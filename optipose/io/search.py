@@ -16,7 +16,7 @@ import pandas as pd
 
 from optipose.io.evaluation import write_evaluation
 from optipose.files import atomic_path, reading
-from optipose.io.folders import part_table, versions, write_config, write_csv
+from optipose.io.folders import part_table, read_config, versions, write_config, write_csv
 from optipose.io.tables import (
     comparison_frame,
     history_frame,
@@ -30,7 +30,7 @@ from optipose.verdict.confidence import Verdicts
 
 __all__ = ["SearchFolder", "save_cache", "load_cache"]
 
-# what a search writes from its surrogate's results on, each anew (the report's names: optipose.report.build)
+# what a search writes from its surrogate's results on, each anew (and its report: optipose.report.build's names)
 _REWRITTEN = (
     "surrogate_scores.csv",
     "selection.csv",
@@ -39,9 +39,6 @@ _REWRITTEN = (
     "verdict",
     "verdict.csv",
     "kinds.csv",
-    "report.html",
-    "report.md",
-    "report_figures",
 )
 
 
@@ -60,13 +57,15 @@ class SearchFolder:
         layouts stay until this search writes its own (a resumed search starts from the cache; the layouts are the
         best so far of an interrupted one). A folder no search wrote is left as it is."""
         import shutil
-        import tomllib
+
+        from optipose.errors import ConfigError
+        from optipose.report.build import FIGURE_DIR, REPORT_HTML, REPORT_MD
 
         try:
-            earlier = tomllib.loads((self.folder / "config.toml").read_text()).get("command") == "search"
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            earlier = read_config(self.folder).command == "search"
+        except ConfigError:  # none there, or not one of ours
             earlier = False
-        for name in _REWRITTEN if earlier else ():
+        for name in (*_REWRITTEN, REPORT_HTML, REPORT_MD, FIGURE_DIR) if earlier else ():
             path = self.folder / name
             if path.is_dir():
                 shutil.rmtree(path)
